@@ -1,0 +1,72 @@
+"""The paper's allowed actions, inferred from an allocation (Sec. IV-B).
+
+For every allocated pose and every unplaced block of its type, the actions
+(block, unit, cell, rotation) that put the block exactly into that pose; all
+units and all rotations that reproduce the pose (a symmetric block has several)
+are offered. A pose whose cells are no longer all free (it was filled, or another
+block took one of its cells) offers nothing: after a placement, the actions that
+would fill the same pose are gone. The guide is stateless: it reads the state.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from rad_core.allocation.placements import Placement
+from rad_core.blocks import canonical_shape
+from rad_core.errors import RadError
+from rad_core.mdp import Action, AssemblyEnv
+
+
+class AllocationGuide:
+    def __init__(self, env: AssemblyEnv, placements: tuple[Placement, ...] | list[Placement]):
+        self.env = env
+        self.placements = tuple(placements)
+        names = [t.name for t in env.scene.targets]
+        self.pose_cells: list[np.ndarray] = []
+        # Per pose: list of (block index, [actions]).
+        self._actions: list[list[tuple[int, list[Action]]]] = []
+        for p in self.placements:
+            if p.target not in names:
+                raise RadError(f'allocation names unknown target region {p.target!r}')
+            r = names.index(p.target)
+            ids = [env.grid.index(r, c) for c in p.cells]
+            if any(i is None for i in ids):
+                raise RadError(f'allocated pose of {p.type} has a cell outside region {p.target!r}')
+            self.pose_cells.append(np.asarray(ids, dtype=np.int64))
+            per_block = []
+            for b, block in enumerate(env.scene.blocks):
+                if block.type == p.type:
+                    per_block.append((b, self._actions_for(env, b, np.asarray(p.cells), r)))
+            self._actions.append(per_block)
+
+    @staticmethod
+    def _actions_for(env: AssemblyEnv, b: int, pose: np.ndarray, region: int) -> list[Action]:
+        btype, yaw0 = env.types[b], env.scene.blocks[b].yaw
+        want = canonical_shape(pose)
+        pose_sorted = sorted(map(tuple, pose))
+        out = []
+        for rot in range(4):
+            offs = btype.rotated((yaw0 + 90 * rot) % 360)
+            if canonical_shape(offs) != want:
+                continue
+            shift = np.asarray(pose_sorted[0]) - np.asarray(sorted(map(tuple, offs))[0])
+            cells = offs + shift
+            for u in range(btype.size):
+                out.append(Action(b, u, env.grid.index(region, cells[u]), rot))
+        return out
+
+    def open_poses(self) -> list[int]:
+        """Indices of allocated poses whose cells are all still free."""
+        occ = self.env.state.occupancy
+        return [k for k, cells in enumerate(self.pose_cells) if np.all(occ[cells] < 0)]
+
+    def allowed_actions(self) -> list[Action]:
+        """Allocation actions available now (the termination action is not included)."""
+        placed = self.env.state.placed
+        out = []
+        for k in self.open_poses():
+            for b, actions in self._actions[k]:
+                if b not in placed:
+                    out.extend(actions)
+        return out

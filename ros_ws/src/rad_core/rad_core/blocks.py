@@ -1,0 +1,106 @@
+"""Polycube block types and their four yaw rotations about +z.
+
+A block type is a list of integer unit offsets; the first unit is the anchor and
+sits at offset (0, 0, 0). Yaw rotates the offsets about +z around the anchor, in
+steps of 90 degrees, which keeps every unit on the integer lattice.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Iterable, Sequence
+
+import numpy as np
+
+YAWS = (0, 90, 180, 270)
+
+# Rotation matrices about +z for yaw = 0, 90, 180, 270 degrees (exact integers).
+_ROT_Z = {
+    0: np.array([[1, 0, 0], [0, 1, 0], [0, 0, 1]], dtype=np.int64),
+    90: np.array([[0, -1, 0], [1, 0, 0], [0, 0, 1]], dtype=np.int64),
+    180: np.array([[-1, 0, 0], [0, -1, 0], [0, 0, 1]], dtype=np.int64),
+    270: np.array([[0, 1, 0], [-1, 0, 0], [0, 0, 1]], dtype=np.int64),
+}
+
+
+def rotation_z(yaw_deg: int) -> np.ndarray:
+    """Integer 3x3 rotation about +z; yaw must be a multiple of 90 degrees."""
+    return _ROT_Z[int(yaw_deg) % 360]
+
+
+@dataclass(frozen=True)
+class BlockType:
+    """A polycube: unit offsets relative to the anchor (the first unit)."""
+
+    name: str
+    offsets: tuple[tuple[int, int, int], ...]
+
+    @classmethod
+    def from_cells(cls, name: str, cells: Iterable[Sequence[int]]) -> 'BlockType':
+        """Build from cells in any frame; they are shifted so the first is (0, 0, 0)."""
+        cells = [tuple(int(v) for v in c) for c in cells]
+        ax, ay, az = cells[0]
+        return cls(name, tuple((x - ax, y - ay, z - az) for x, y, z in cells))
+
+    @property
+    def size(self) -> int:
+        return len(self.offsets)
+
+    def rotated(self, yaw_deg: int) -> np.ndarray:
+        """Offsets rotated by yaw about the anchor, shape (n, 3), int64."""
+        return np.asarray(self.offsets, dtype=np.int64) @ rotation_z(yaw_deg).T
+
+    def distinct_yaws(self) -> tuple[int, ...]:
+        """Yaws that give pairwise different shapes (up to translation).
+
+        A cube has one, a flat I2 bar two, an L3 four. The allocation only needs
+        one representative per shape; the sequencing level still offers all four
+        rotations of a block.
+        """
+        seen, out = set(), []
+        for yaw in YAWS:
+            key = canonical_shape(self.rotated(yaw))
+            if key not in seen:
+                seen.add(key)
+                out.append(yaw)
+        return tuple(out)
+
+    def is_connected(self) -> bool:
+        """True when the units form one face-connected polycube."""
+        cells = set(self.offsets)
+        stack, seen = [self.offsets[0]], {self.offsets[0]}
+        while stack:
+            x, y, z = stack.pop()
+            for d in ((1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1)):
+                n = (x + d[0], y + d[1], z + d[2])
+                if n in cells and n not in seen:
+                    seen.add(n)
+                    stack.append(n)
+        return len(seen) == len(cells)
+
+
+def canonical_shape(cells: np.ndarray) -> tuple[tuple[int, int, int], ...]:
+    """Translation-invariant key of a set of cells: sorted, shifted to min corner."""
+    cells = np.asarray(cells, dtype=np.int64)
+    shifted = cells - cells.min(axis=0)
+    return tuple(sorted(tuple(int(v) for v in row) for row in shifted))
+
+
+def _lib(**types: list[list[int]]) -> dict[str, BlockType]:
+    return {name: BlockType.from_cells(name, cells) for name, cells in types.items()}
+
+
+# The block set of the paper's predecessor (Learn2Assemble). "_up" types stand
+# in the x-z plane; the others lie flat on the table.
+DEFAULT_LIBRARY: dict[str, BlockType] = _lib(
+    cube=[[0, 0, 0]],
+    I2=[[0, 0, 0], [1, 0, 0]],
+    I3=[[0, 0, 0], [1, 0, 0], [2, 0, 0]],
+    I2_up=[[0, 0, 0], [0, 0, 1]],
+    L3=[[0, 0, 0], [1, 0, 0], [0, 1, 0]],
+    L3_up=[[0, 0, 0], [1, 0, 0], [0, 0, 1]],
+    T4=[[0, 0, 0], [1, 0, 0], [2, 0, 0], [1, 1, 0]],
+    T4_up=[[0, 0, 0], [1, 0, 0], [2, 0, 0], [1, 0, 1]],
+    O4_up=[[0, 0, 0], [1, 0, 0], [0, 0, 1], [1, 0, 1]],
+    S4_up=[[0, 0, 0], [1, 0, 0], [1, 0, 1], [2, 0, 1]],
+)

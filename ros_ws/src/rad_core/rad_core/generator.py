@@ -1,0 +1,197 @@
+"""Random scenes like the paper's: polygon target shapes and a heap of blocks.
+
+Each side's target shape is a random planar polygon with 3 to 5 corners, at most
+g cells wide and g cells high, standing on the table in a vertical x-z plane (the
+predecessor's sampler). A cell is a target cell when its centre lies inside the
+polygon. One side gives one region g x 1 x g; two sides give the paper's two-sided
+structure: two such regions back to back, one cell deep each, so the structure is
+two cells deep with one polygon on its face towards the robot's left (+y) and one
+on its face towards the robot's right (-y).
+
+The blocks on the table are a random tiling of the target cells (so a perfect
+assembly exists) plus extras, laid out in rows on the robot's right.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from rad_core.blocks import DEFAULT_LIBRARY, BlockType
+from rad_core.errors import RadError
+from rad_core.scene import Block, Scene, TargetRegion
+
+# Types that fit a one-cell-deep region at yaw 0 or 180 (they lie in the x-z plane).
+PLANAR_TYPES = ('cube', 'I2', 'I3', 'I2_up', 'L3_up', 'T4_up', 'O4_up', 'S4_up')
+
+
+@dataclass(frozen=True)
+class GeneratorConfig:
+    """Scene generator parameters.
+
+    grid: g, the largest width and height of a target shape, in cells.
+    sides: 1 (one face) or 2 (the paper's two-sided structure).
+    unit: cube edge in metres (0.05, the predecessor's cubes).
+    structure_x: distance of the structure's centre from the robot base along +x.
+    min_cells_per_side: a face with fewer target cells is resampled.
+    min_cells: a scene with fewer target cells in all is resampled (tiny targets).
+    extra_fraction: extra blocks on the table, as a fraction of the blocks needed.
+    table_x: x range (m) of the rows of blocks on the table.
+    first_row_y: y (m) of the first row's near edge; rows go on towards -y.
+    gap: free space between neighbouring blocks on the table (m).
+    """
+
+    grid: int = 3
+    sides: int = 2
+    unit: float = 0.05
+    structure_x: float = 0.5
+    min_cells_per_side: int = 1
+    min_cells: int = 4
+    extra_fraction: float = 0.5
+    table_x: tuple[float, float] = (0.3, 0.75)
+    first_row_y: float = -0.12
+    gap: float = 0.03
+
+    def validate(self) -> None:
+        if not (isinstance(self.grid, int) and 1 <= self.grid <= 12):
+            raise RadError(f'grid must be an integer in 1..12, got {self.grid!r}')
+        if self.sides not in (1, 2):
+            raise RadError(f'sides must be 1 or 2, got {self.sides!r}')
+        if not 0.01 <= self.unit <= 0.2:
+            raise RadError(f'unit must be in 0.01..0.2 m, got {self.unit!r}')
+        if not 1 <= self.min_cells_per_side <= self.grid * self.grid:
+            raise RadError(f'min_cells_per_side must be in 1..{self.grid * self.grid}')
+
+
+def sample_polygon(g: int, rng: np.random.Generator) -> np.ndarray:
+    """Corners (x, z) in cell units of a random 3-5 corner shape standing on z = 0.
+
+    x spans [0, g] with the shape centred at g/2; heights are at most g. The
+    corners are in counter-clockwise order when seen with x right and z up.
+    """
+    c, half = g / 2, g / 2
+    n = int(rng.choice([3, 4, 5]))
+    left_bottom = (c - rng.uniform(0, half), 0.0)
+    right_bottom = (c + rng.uniform(0, half), 0.0)
+    if n == 3:
+        top = (rng.uniform(0, g), rng.uniform(0, g))
+        return np.array([left_bottom, right_bottom, top])
+    left_top = (c - rng.uniform(0, half), rng.uniform(0, g))
+    right_top = (c + rng.uniform(0, half), rng.uniform(0, g))
+    if n == 4:
+        return np.array([left_bottom, right_bottom, right_top, left_top])
+    # A fifth corner on top, between the two side edges.
+    for _ in range(100):
+        mid = (rng.uniform(left_top[0], right_top[0]), rng.uniform(0, g))
+        if _left_of(right_bottom, right_top, mid) and _left_of(left_top, left_bottom, mid):
+            return np.array([left_bottom, right_bottom, right_top, mid, left_top])
+    return np.array([left_bottom, right_bottom, right_top, left_top])
+
+
+def _left_of(a, b, p) -> bool:
+    return (b[0] - a[0]) * (p[1] - a[1]) - (b[1] - a[1]) * (p[0] - a[0]) > 0
+
+
+def inside_polygon(points: np.ndarray, poly: np.ndarray) -> np.ndarray:
+    """Even-odd point-in-polygon test for (n, 2) points."""
+    x, y = points[:, 0], points[:, 1]
+    inside = np.zeros(len(points), dtype=bool)
+    for k in range(len(poly)):
+        (x1, y1), (x2, y2) = poly[k], poly[(k + 1) % len(poly)]
+        crosses = (y1 > y) != (y2 > y)
+        with np.errstate(divide='ignore', invalid='ignore'):
+            xc = x1 + (y - y1) * (x2 - x1) / (y2 - y1)
+        inside ^= crosses & (x < xc)
+    return inside
+
+
+def sample_face(g: int, rng: np.random.Generator, min_cells: int) -> list[tuple[int, int]]:
+    """Target cells (i, k) of one face; resampled until it has min_cells cells."""
+    i, k = np.meshgrid(np.arange(g), np.arange(g), indexing='ij')
+    centres = np.stack([i.ravel() + 0.5, k.ravel() + 0.5], axis=1)
+    while True:
+        mask = inside_polygon(centres, sample_polygon(g, rng))
+        if mask.sum() >= min_cells:
+            return [(int(a), int(b)) for a, b in centres[mask] - 0.5]
+
+
+def tile_cells(cells: set[tuple[int, int, int]], rng: np.random.Generator,
+               library: dict[str, BlockType], type_names=PLANAR_TYPES) -> list[str]:
+    """Block types of a random exact tiling of the cells (bottom-up, greedy).
+
+    Falls back to a single cube where nothing bigger fits, so it always succeeds.
+    """
+    free = set(cells)
+    needed = []
+    while free:
+        seed_cell = min(free, key=lambda c: (c[2], c[0], c[1]))
+        options = []
+        for name in type_names:
+            for yaw in library[name].distinct_yaws():
+                offs = library[name].rotated(yaw)
+                for anchor_unit in range(len(offs)):
+                    placed = {tuple(int(v) for v in seed_cell + o - offs[anchor_unit]) for o in offs}
+                    if placed <= free:
+                        options.append((name, placed))
+        bigger = [o for o in options if len(o[1]) > 1]
+        pick = bigger if bigger and rng.random() < 0.85 else options
+        name, placed = pick[int(rng.integers(len(pick)))]
+        free -= placed
+        needed.append(name)
+    return needed
+
+
+def generate_scene(config: GeneratorConfig = GeneratorConfig(), seed: int = 0) -> Scene:
+    config.validate()
+    rng = np.random.default_rng(seed)
+    g, u = config.grid, config.unit
+    x0 = config.structure_x - u * (g - 1) / 2
+    faces = [('left', u / 2), ('right', -u / 2)] if config.sides == 2 else [('front', 0.0)]
+    while True:
+        shapes = [[(i, 0, k) for i, k in sample_face(g, rng, config.min_cells_per_side)] for _ in faces]
+        if sum(len(s) for s in shapes) >= min(config.min_cells, len(faces) * g * g):
+            break
+    targets, needed = [], []
+    for (name, y), cells in zip(faces, shapes):
+        targets.append(TargetRegion(name, (x0, y, u / 2), (g, 1, g), tuple(sorted(cells))))
+        needed += tile_cells(set(cells), rng, DEFAULT_LIBRARY)
+    n_extra = int(np.ceil(config.extra_fraction * len(needed)))
+    extras = [str(rng.choice(sorted(DEFAULT_LIBRARY))) for _ in range(n_extra)]
+    kinds = needed + extras
+    rng.shuffle(kinds)
+    blocks = _lay_out(kinds, config, rng)
+    used = sorted({b.type for b in blocks})
+    return Scene(u, {n: DEFAULT_LIBRARY[n] for n in used}, tuple(blocks), tuple(targets))
+
+
+def _lay_out(kinds: list[str], config: GeneratorConfig, rng: np.random.Generator) -> list[Block]:
+    """Rows of blocks on the table, each with a random yaw, at least `gap` apart."""
+    u = config.unit
+    blocks, x, row_y, row_depth = [], config.table_x[0], config.first_row_y, 0.0
+    for n, kind in enumerate(kinds):
+        yaw = int(rng.choice([0, 90, 180, 270]))
+        offs = DEFAULT_LIBRARY[kind].rotated(yaw)
+        lo, hi = offs.min(axis=0), offs.max(axis=0)
+        width, depth = u * (hi[0] - lo[0] + 1), u * (hi[1] - lo[1] + 1)
+        if x + width > config.table_x[1] and x > config.table_x[0]:
+            x, row_y, row_depth = config.table_x[0], row_y - row_depth - config.gap, 0.0
+        # Footprint spans x..x+width and row_y-depth..row_y.
+        pos = (x + u / 2 - lo[0] * u, row_y - depth + u / 2 - lo[1] * u, u / 2 - lo[2] * u)
+        blocks.append(Block(f'b{n}', kind, tuple(round(float(v), 6) for v in pos), yaw))
+        x += width + config.gap
+        row_depth = max(row_depth, depth)
+    return blocks
+
+
+def target_statistics(config: GeneratorConfig, n: int, seed: int = 0) -> dict:
+    """Mean / min / max target cells and blocks over n generated scenes."""
+    cells, blocks = [], []
+    for s in range(n):
+        scene = generate_scene(config, seed + s)
+        cells.append(scene.num_target_cells)
+        blocks.append(len(scene.blocks))
+    cells, blocks = np.array(cells), np.array(blocks)
+    return {'grid': config.grid, 'sides': config.sides, 'scenes': n,
+            'target_cells_mean': float(cells.mean()), 'target_cells_min': int(cells.min()),
+            'target_cells_max': int(cells.max()), 'blocks_mean': float(blocks.mean())}

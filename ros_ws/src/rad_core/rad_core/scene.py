@@ -1,0 +1,344 @@
+"""Scenes: the blocks on the table and the target regions, and the rad-scene/1 format.
+
+A scene is validated once, when it is built from a document (`Scene.from_dict`),
+so every other module can trust it. Validation errors name the offending field
+the way a user would find it in the JSON file, e.g. ``blocks[3].yaw``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+
+from rad_core import jsonfmt
+from rad_core.blocks import BlockType
+from rad_core.errors import SceneError
+
+FORMAT = 'rad-scene/1'
+
+# Hard limits: big enough for any table-top assembly a Panda can reach, small
+# enough that allocation and the MDP stay interactive. A scene beyond them is
+# rejected with a message instead of hanging a solver.
+MAX_REGION_AXIS = 24
+MAX_GRID_CELLS = 4096
+MAX_TARGETS = 16
+MAX_BLOCKS = 256
+MAX_BLOCK_TYPES = 64
+MAX_TYPE_UNITS = 16
+MAX_TYPE_EXTENT = 8
+UNIT_RANGE = (0.005, 1.0)
+MAX_COORD = 100.0
+# Fraction of a unit within which a block counts as sitting on a grid cell.
+GRID_SNAP_TOL = 0.1
+
+
+@dataclass(frozen=True)
+class Block:
+    id: str
+    type: str
+    position: tuple[float, float, float]
+    yaw: int
+
+    def to_dict(self) -> dict:
+        return {'id': self.id, 'type': self.type, 'position': list(self.position), 'yaw': self.yaw}
+
+
+@dataclass(frozen=True)
+class TargetRegion:
+    name: str
+    origin: tuple[float, float, float]
+    size: tuple[int, int, int]
+    filled: tuple[tuple[int, int, int], ...]
+
+    @property
+    def num_cells(self) -> int:
+        return self.size[0] * self.size[1] * self.size[2]
+
+    def contains_index(self, ijk) -> bool:
+        return all(0 <= int(ijk[a]) < self.size[a] for a in range(3))
+
+    def cell_center(self, ijk, unit: float) -> np.ndarray:
+        return np.asarray(self.origin) + unit * np.asarray(ijk, dtype=float)
+
+    def bounds(self, unit: float) -> tuple[np.ndarray, np.ndarray]:
+        """Axis-aligned box covered by the region's cells (lower, upper corner)."""
+        lo = np.asarray(self.origin) - unit / 2
+        return lo, lo + unit * np.asarray(self.size, dtype=float)
+
+    def to_dict(self) -> dict:
+        return {'name': self.name, 'origin': list(self.origin), 'size': list(self.size),
+                'filled': [list(c) for c in self.filled]}
+
+
+@dataclass(frozen=True)
+class Scene:
+    unit: float
+    block_types: Mapping[str, BlockType]
+    blocks: tuple[Block, ...]
+    targets: tuple[TargetRegion, ...]
+    _by_id: dict = field(default=None, repr=False, compare=False)
+
+    def __post_init__(self):
+        object.__setattr__(self, '_by_id', {b.id: b for b in self.blocks})
+
+    # ---- lookups ---------------------------------------------------------
+    def block(self, block_id: str) -> Block:
+        try:
+            return self._by_id[block_id]
+        except KeyError:
+            raise SceneError('block', f'unknown block id {block_id!r}') from None
+
+    def target(self, name: str) -> TargetRegion:
+        for t in self.targets:
+            if t.name == name:
+                return t
+        raise SceneError('target', f'unknown target region {name!r}')
+
+    def unit_positions(self, block: Block) -> np.ndarray:
+        """World centres of the block's unit cubes, shape (n, 3)."""
+        offsets = self.block_types[block.type].rotated(block.yaw)
+        return np.asarray(block.position) + self.unit * offsets
+
+    def type_counts(self) -> dict[str, int]:
+        counts = {name: 0 for name in self.block_types}
+        for b in self.blocks:
+            counts[b.type] += 1
+        return counts
+
+    @property
+    def num_target_cells(self) -> int:
+        return sum(len(t.filled) for t in self.targets)
+
+    # ---- serialisation ---------------------------------------------------
+    def to_dict(self) -> dict:
+        return {
+            'format': FORMAT,
+            'unit': self.unit,
+            'block_types': {n: [list(o) for o in t.offsets] for n, t in self.block_types.items()},
+            'blocks': [b.to_dict() for b in self.blocks],
+            'targets': [t.to_dict() for t in self.targets],
+        }
+
+    def dumps(self) -> str:
+        return jsonfmt.dumps(self.to_dict())
+
+    @classmethod
+    def loads(cls, text: str) -> 'Scene':
+        try:
+            doc = json.loads(text)
+        except json.JSONDecodeError as e:
+            raise SceneError('', f'not valid JSON: {e.msg} at line {e.lineno} column {e.colno}') from None
+        except RecursionError:
+            raise SceneError('', 'not valid JSON: nested too deeply') from None
+        return cls.from_dict(doc)
+
+    @classmethod
+    def load(cls, path: str | Path) -> 'Scene':
+        try:
+            text = Path(path).read_text()
+        except OSError as e:
+            raise SceneError('', f'cannot read scene file {str(path)!r}: {e.strerror}') from None
+        except UnicodeDecodeError:
+            raise SceneError('', f'scene file {str(path)!r} is not UTF-8 text') from None
+        return cls.loads(text)
+
+    @classmethod
+    def from_dict(cls, doc: Any) -> 'Scene':
+        return _parse_scene(doc)
+
+
+# ---- parsing and validation ---------------------------------------------
+
+def _expect(cond: bool, where: str, problem: str) -> None:
+    if not cond:
+        raise SceneError(where, problem)
+
+
+def _check_keys(obj: Mapping, where: str, required: set[str], optional: set[str] = frozenset()) -> None:
+    missing = sorted(required - obj.keys())
+    _expect(not missing, where, f'missing field {missing[0]!r}' if missing else '')
+    unknown = sorted(set(obj.keys()) - required - set(optional))
+    _expect(not unknown, where, f'unknown field {unknown[0]!r}' if unknown else '')
+
+
+def _number(v: Any, where: str) -> float:
+    _expect(isinstance(v, (int, float)) and not isinstance(v, bool), where,
+            f'expected a number, got {_show(v)}')
+    _expect(math.isfinite(v), where, f'must be finite, got {v}')
+    _expect(abs(v) <= MAX_COORD, where, f'{v} is out of range (|value| <= {MAX_COORD} m)')
+    return float(v)
+
+
+def _integer(v: Any, where: str) -> int:
+    if isinstance(v, float) and math.isfinite(v) and v.is_integer():
+        v = int(v)
+    _expect(isinstance(v, int) and not isinstance(v, bool), where, f'expected an integer, got {_show(v)}')
+    return v
+
+
+def _vec3(v: Any, where: str, conv) -> tuple:
+    _expect(isinstance(v, (list, tuple)) and len(v) == 3, where, f'expected a list of 3 numbers, got {_show(v)}')
+    return tuple(conv(x, f'{where}[{i}]') for i, x in enumerate(v))
+
+
+def _name(v: Any, where: str) -> str:
+    _expect(isinstance(v, str) and v.strip() != '', where, f'expected a non-empty string, got {_show(v)}')
+    _expect(len(v) <= 128, where, 'longer than 128 characters')
+    return v
+
+
+def _show(v: Any) -> str:
+    text = json.dumps(v) if isinstance(v, (dict, list, str, int, float, bool, type(None))) else repr(v)
+    return text if len(text) <= 40 else text[:37] + '...'
+
+
+def _parse_block_types(doc: Any) -> dict[str, BlockType]:
+    _expect(isinstance(doc, dict), 'block_types', 'expected an object mapping type names to cell lists')
+    _expect(0 < len(doc) <= MAX_BLOCK_TYPES, 'block_types', f'needs 1 to {MAX_BLOCK_TYPES} types, got {len(doc)}')
+    types = {}
+    for name, cells in doc.items():
+        where = f'block_types.{name}'
+        _name(name, where)
+        _expect(isinstance(cells, list) and 0 < len(cells) <= MAX_TYPE_UNITS, where,
+                f'expected a list of 1 to {MAX_TYPE_UNITS} cells [x, y, z]')
+        cells = [_vec3(c, f'{where}[{i}]', _integer) for i, c in enumerate(cells)]
+        _expect(len(set(cells)) == len(cells), where, 'lists the same cell twice')
+        t = BlockType.from_cells(name, cells)
+        extent = max(max(abs(v) for v in o) for o in t.offsets)
+        _expect(extent <= MAX_TYPE_EXTENT, where, f'cells reach {extent} units from the anchor (limit {MAX_TYPE_EXTENT})')
+        _expect(t.is_connected(), where, 'cells are not face-connected (a block must be one piece)')
+        types[name] = t
+    return types
+
+
+def _parse_block(doc: Any, i: int, types: Mapping[str, BlockType]) -> Block:
+    where = f'blocks[{i}]'
+    _expect(isinstance(doc, dict), where, 'expected an object')
+    _check_keys(doc, where, {'id', 'type', 'position', 'yaw'})
+    bid = _name(doc['id'], f'{where}.id')
+    btype = _name(doc['type'], f'{where}.type')
+    _expect(btype in types, f'{where}.type', f'unknown block type {btype!r} (not in block_types)')
+    pos = _vec3(doc['position'], f'{where}.position', _number)
+    yaw = doc['yaw']
+    _expect(isinstance(yaw, (int, float)) and not isinstance(yaw, bool) and math.isfinite(yaw), f'{where}.yaw',
+            f'expected degrees as a number, got {_show(yaw)}')
+    _expect(float(yaw) % 90 == 0, f'{where}.yaw', f'{yaw} is not a multiple of 90 degrees')
+    return Block(bid, btype, pos, int(yaw) % 360)
+
+
+def _parse_target(doc: Any, i: int) -> TargetRegion:
+    where = f'targets[{i}]'
+    _expect(isinstance(doc, dict), where, 'expected an object')
+    _check_keys(doc, where, {'name', 'origin', 'size', 'filled'})
+    name = _name(doc['name'], f'{where}.name')
+    origin = _vec3(doc['origin'], f'{where}.origin', _number)
+    size = _vec3(doc['size'], f'{where}.size', _integer)
+    for a, n in enumerate(size):
+        _expect(1 <= n <= MAX_REGION_AXIS, f'{where}.size[{a}]', f'{n} cells is outside 1..{MAX_REGION_AXIS}')
+    filled = doc['filled']
+    _expect(isinstance(filled, list), f'{where}.filled', 'expected a list of cells [i, j, k]')
+    _expect(len(filled) > 0, f'{where}.filled', 'is empty: a target region needs at least one target cell')
+    cells = []
+    for k, c in enumerate(filled):
+        cell = _vec3(c, f'{where}.filled[{k}]', _integer)
+        _expect(all(0 <= cell[a] < size[a] for a in range(3)), f'{where}.filled[{k}]',
+                f'cell {list(cell)} is outside the box of size {list(size)}')
+        cells.append(cell)
+    _expect(len(set(cells)) == len(cells), f'{where}.filled', 'lists the same cell twice')
+    return TargetRegion(name, origin, size, tuple(sorted(cells)))
+
+
+def _parse_scene(doc: Any) -> Scene:
+    _expect(isinstance(doc, dict), '', 'a scene must be a JSON object')
+    _check_keys(doc, '', {'format', 'unit', 'block_types', 'blocks', 'targets'})
+    _expect(doc['format'] == FORMAT, 'format', f'expected {FORMAT!r}, got {_show(doc["format"])}')
+    unit = _number(doc['unit'], 'unit')
+    _expect(UNIT_RANGE[0] <= unit <= UNIT_RANGE[1], 'unit', f'{unit} m is outside {UNIT_RANGE[0]}..{UNIT_RANGE[1]} m')
+    types = _parse_block_types(doc['block_types'])
+
+    blocks_doc = doc['blocks']
+    _expect(isinstance(blocks_doc, list), 'blocks', 'expected a list')
+    _expect(len(blocks_doc) <= MAX_BLOCKS, 'blocks', f'{len(blocks_doc)} blocks exceed the limit of {MAX_BLOCKS}')
+    blocks = tuple(_parse_block(b, i, types) for i, b in enumerate(blocks_doc))
+    seen = {}
+    for i, b in enumerate(blocks):
+        _expect(b.id not in seen, f'blocks[{i}].id', f'duplicate id {b.id!r} (also blocks[{seen.get(b.id)}])')
+        seen[b.id] = i
+
+    targets_doc = doc['targets']
+    _expect(isinstance(targets_doc, list) and len(targets_doc) > 0, 'targets', 'expected a non-empty list of regions')
+    _expect(len(targets_doc) <= MAX_TARGETS, 'targets', f'{len(targets_doc)} regions exceed the limit of {MAX_TARGETS}')
+    targets = tuple(_parse_target(t, i) for i, t in enumerate(targets_doc))
+    names = [t.name for t in targets]
+    for i, n in enumerate(names):
+        _expect(names.index(n) == i, f'targets[{i}].name', f'duplicate region name {n!r}')
+    total = sum(t.num_cells for t in targets)
+    _expect(total <= MAX_GRID_CELLS, 'targets', f'{total} grid cells exceed the limit of {MAX_GRID_CELLS}')
+
+    scene = Scene(unit, types, blocks, targets)
+    _check_geometry(scene)
+    return scene
+
+
+def _check_geometry(scene: Scene) -> None:
+    """Regions must not overlap; blocks must not overlap, sink into the table,
+    or sit in a region off its grid."""
+    u = scene.unit
+    boxes = [t.bounds(u) for t in scene.targets]
+    for a in range(len(boxes)):
+        for b in range(a + 1, len(boxes)):
+            overlap = np.all(boxes[a][0] < boxes[b][1] - 1e-9) and np.all(boxes[b][0] < boxes[a][1] - 1e-9)
+            _expect(not overlap, f'targets[{b}]', f'region {scene.targets[b].name!r} overlaps region '
+                    f'{scene.targets[a].name!r}')
+
+    centres, owner = [], []
+    for i, block in enumerate(scene.blocks):
+        pts = scene.unit_positions(block)
+        low = pts[:, 2].min()
+        _expect(low >= u / 2 - 0.25 * u, f'blocks[{i}].position',
+                f'block {block.id!r} reaches below the table top (lowest unit centre z={low:.4f} m, '
+                f'needs >= {u / 2:.4f})')
+        _check_block_vs_regions(scene, i, pts)
+        centres.append(pts)
+        owner.extend([i] * len(pts))
+    if not centres:
+        return
+    pts = np.concatenate(centres)
+    owner = np.asarray(owner)
+    # Axis-aligned unit cubes (yaw is a multiple of 90) overlap iff their centres
+    # are closer than one unit on every axis.
+    for k in range(len(pts)):
+        close = np.all(np.abs(pts[k + 1:] - pts[k]) < 0.99 * u, axis=1) & (owner[k + 1:] != owner[k])
+        if close.any():
+            j = owner[k + 1:][np.argmax(close)]
+            raise SceneError(f'blocks[{j}]', f'block {scene.blocks[j].id!r} overlaps block '
+                             f'{scene.blocks[owner[k]].id!r}')
+
+
+def _check_block_vs_regions(scene: Scene, i: int, pts: np.ndarray) -> None:
+    """A block lies either clear of every region box or with all units on grid cells.
+
+    Units may be spread over adjacent regions; a block half in a region and half
+    out, or inside one but off its grid, is rejected.
+    """
+    u = scene.unit
+    where, name = f'blocks[{i}].position', scene.blocks[i].id
+    in_some = np.zeros(len(pts), dtype=bool)
+    for t in scene.targets:
+        lo, hi = t.bounds(u)
+        inside = np.all((pts > lo + 0.01 * u) & (pts < hi - 0.01 * u), axis=1)
+        touching = np.all((pts + u / 2 > lo + 0.01 * u) & (pts - u / 2 < hi - 0.01 * u), axis=1)
+        _expect(not (touching & ~inside).any(), where,
+                f'block {name!r} sticks into target region {t.name!r} without being on its grid')
+        if inside.any():
+            idx = (pts[inside] - np.asarray(t.origin)) / u
+            _expect(np.all(np.abs(idx - np.round(idx)) <= GRID_SNAP_TOL), where,
+                    f'block {name!r} is inside target region {t.name!r} but not on its grid '
+                    f'(more than {GRID_SNAP_TOL:g} unit from a cell centre)')
+        in_some |= inside
+    _expect(in_some.all() or not in_some.any(), where, f'block {name!r} sticks out of the target regions')
