@@ -78,13 +78,36 @@ def build_model(candidates: list[Candidate], counts: dict[str, int]):
     return model, w
 
 
+def greedy(candidates: list[Candidate], counts: dict[str, int]) -> list[int]:
+    """A quick feasible allocation: best-value poses first, largest blocks on ties."""
+    order = sorted(range(len(candidates)),
+                   key=lambda n: (-candidates[n].value, -len(candidates[n].cell_ids), n))
+    used, left, chosen = set(), dict(counts), []
+    for n in order:
+        cand = candidates[n]
+        if left.get(cand.placement.type, 0) > 0 and used.isdisjoint(cand.cell_ids):
+            chosen.append(n)
+            used.update(cand.cell_ids)
+            left[cand.placement.type] -= 1
+    return chosen
+
+
 def solve(scene: Scene, params: AllocationParams = AllocationParams()) -> AllocationResult:
-    """Build and solve the allocation for a scene; never raises on solver trouble."""
+    """Build and solve the allocation for a scene; never raises on solver trouble.
+
+    Anytime: the greedy allocation is the solver's hint, and if the time limit
+    ends the search before CP-SAT reports a solution (it can, during presolve of a
+    big model), the greedy one is returned as FEASIBLE with the best known bound.
+    """
     params.validate()
     start = time.perf_counter()
     grid = Grid(scene)
     candidates = enumerate_candidates(scene, grid)
-    model, w = build_model(candidates, available_counts(scene, grid))
+    counts = available_counts(scene, grid)
+    model, w = build_model(candidates, counts)
+    incumbent = set(greedy(candidates, counts))
+    for n, var in enumerate(w):
+        model.add_hint(var, n in incumbent)
     solver = cp_model.CpSolver()
     solver.parameters.max_time_in_seconds = float(params.time_limit_s)
     solver.parameters.num_workers = params.num_workers
@@ -92,8 +115,20 @@ def solve(scene: Scene, params: AllocationParams = AllocationParams()) -> Alloca
     status = solver.solve(model)
     name = solver.status_name(status)
     elapsed = time.perf_counter() - start
-    if status not in (cp_model.OPTIMAL, cp_model.FEASIBLE):
-        return AllocationResult(name, 0.0, float(solver.best_objective_bound) if candidates else 0.0, elapsed)
-    chosen = tuple(c.placement for n, c in enumerate(candidates) if solver.boolean_value(w[n]))
-    return AllocationResult(name, float(solver.objective_value), float(solver.best_objective_bound),
-                            elapsed, chosen)
+    # c^T g can never exceed the number of free target cells.
+    free_targets = float(grid.is_target.sum() - _filled_targets(scene, grid))
+    if status in (cp_model.OPTIMAL, cp_model.FEASIBLE):
+        chosen = tuple(c.placement for n, c in enumerate(candidates) if solver.boolean_value(w[n]))
+        return AllocationResult(name, float(solver.objective_value),
+                                min(float(solver.best_objective_bound), free_targets), elapsed, chosen)
+    if status == cp_model.UNKNOWN:
+        # CP-SAT's bound means nothing without a status; only the cell count is proven.
+        value = float(sum(candidates[n].value for n in incumbent))
+        chosen = tuple(candidates[n].placement for n in sorted(incumbent))
+        return AllocationResult('OPTIMAL' if value >= free_targets else 'FEASIBLE', value, free_targets, elapsed,
+                                chosen)
+    return AllocationResult(name, 0.0, 0.0, elapsed)
+
+
+def _filled_targets(scene: Scene, grid: Grid) -> int:
+    return sum(int(grid.is_target[cells].sum()) for cells in blocks_on_grid(scene, grid).values())

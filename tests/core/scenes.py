@@ -1,0 +1,49 @@
+"""Small hand-made scenes for core tests."""
+
+from __future__ import annotations
+
+import copy
+
+from rad_core.scene import Scene
+
+U = 0.05
+
+
+def doc(blocks=None, targets=None, types=None, unit=U) -> dict:
+    """A valid rad-scene/1 document; pass parts to override."""
+    return {
+        'format': 'rad-scene/1',
+        'unit': unit,
+        'block_types': types if types is not None else {
+            'cube': [[0, 0, 0]], 'I2': [[0, 0, 0], [1, 0, 0]], 'L3_up': [[0, 0, 0], [1, 0, 0], [0, 0, 1]]},
+        'blocks': blocks if blocks is not None else [
+            {'id': 'c0', 'type': 'cube', 'position': [0.4, -0.2, U / 2], 'yaw': 0},
+            {'id': 'c1', 'type': 'cube', 'position': [0.5, -0.2, U / 2], 'yaw': 0},
+            {'id': 'i0', 'type': 'I2', 'position': [0.6, -0.2, U / 2], 'yaw': 90},
+        ],
+        'targets': targets if targets is not None else [
+            {'name': 'front', 'origin': [0.45, 0.1, U / 2], 'size': [3, 1, 2],
+             'filled': [[0, 0, 0], [1, 0, 0], [2, 0, 0], [0, 0, 1]]},
+        ],
+    }
+
+
+def scene(**kw) -> Scene:
+    return Scene.from_dict(doc(**kw))
+
+
+def mutated(path: str, value) -> dict:
+    """A copy of the default doc with one field (dotted path, [n] for lists) replaced."""
+    d = copy.deepcopy(doc())
+    keys = path.replace('[', '.').replace(']', '').split('.')
+    obj = d
+    for k in keys[:-1]:
+        obj = obj[int(k)] if isinstance(obj, list) else obj[k]
+    last = keys[-1]
+    if isinstance(obj, list):
+        obj[int(last)] = value
+    elif value is KeyError:
+        del obj[last]
+    else:
+        obj[last] = value
+    return d
