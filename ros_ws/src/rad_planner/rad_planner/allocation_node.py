@@ -1,0 +1,58 @@
+"""The /allocate service: CP-SAT allocation of a scene (the paper's Sec. IV-A).
+
+Every failure comes back as success=false with a reason; the node keeps serving.
+"""
+
+from __future__ import annotations
+
+import math
+
+from rclpy.node import Node
+
+from rad_core.allocation import AllocationParams, solve
+from rad_core.errors import RadError
+from rad_msgs.srv import Allocate
+from rad_ros.conversions import fill_allocation_response, scene_from_request
+from rad_ros.node_main import main_for
+
+
+class AllocationNode(Node):
+    def __init__(self):
+        super().__init__('allocation')
+        self.declare_parameter('time_limit_s', 10.0)
+        self.declare_parameter('seed', 0)
+        self.declare_parameter('num_workers', 1)
+        self.service = self.create_service(Allocate, 'allocate', self.allocate_callback)
+        self.get_logger().info('allocation service ready')
+
+    def params_for(self, request_time_limit: float) -> AllocationParams:
+        limit = request_time_limit
+        if not math.isfinite(limit) or limit < 0:
+            raise RadError(f'time_limit_s must be 0 (node default) or a positive number of seconds, got {limit}')
+        if limit == 0:
+            limit = self.get_parameter('time_limit_s').value
+        params = AllocationParams(time_limit_s=float(limit), seed=int(self.get_parameter('seed').value),
+                                  num_workers=int(self.get_parameter('num_workers').value))
+        params.validate()
+        return params
+
+    def allocate_callback(self, request, response):
+        try:
+            params = self.params_for(request.time_limit_s)
+            scene = scene_from_request(request.scene, request.scene_json)
+            result = solve(scene, params)
+        except RadError as e:
+            response.success, response.reason, response.status = False, str(e), 'INVALID_REQUEST'
+            self.get_logger().warning(f'allocate refused: {e}')
+            return response
+        except Exception as e:  # noqa: BLE001 - a service must answer, never die
+            self.get_logger().error(f'allocate failed: {type(e).__name__}: {e}')
+            response.success, response.reason, response.status = False, f'internal error: {e}', 'ERROR'
+            return response
+        fill_allocation_response(response, result)
+        self.get_logger().info(f'allocated {len(result.placements)} poses: {result.status}, '
+                               f'objective {result.objective:g}, {result.solve_time_s * 1e3:.1f} ms')
+        return response
+
+
+main = main_for(AllocationNode)

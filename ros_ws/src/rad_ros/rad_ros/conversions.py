@@ -1,0 +1,103 @@
+"""rad_msgs <-> rad_core conversions. Imports message types only, never rclpy.
+
+A scene message is turned into the rad-scene/1 document and parsed by the same
+validator the CLI uses, so a bad message gets the same field-naming errors.
+"""
+
+from __future__ import annotations
+
+from geometry_msgs.msg import Point
+from rad_msgs.msg import Block, BlockType, Cell, Placement, Scene as SceneMsg, TargetRegion
+
+from rad_core.allocation import AllocationResult
+from rad_core.allocation.placements import Placement as CorePlacement
+from rad_core.errors import RadError
+from rad_core.scene import FORMAT, Scene
+
+MAX_SCENE_JSON_BYTES = 10 * 1024 * 1024
+
+
+def _cells(cells) -> list:
+    return [Cell(i=int(c[0]), j=int(c[1]), k=int(c[2])) for c in cells]
+
+
+def _ijk(cells) -> list[list[int]]:
+    return [[c.i, c.j, c.k] for c in cells]
+
+
+def scene_to_msg(scene: Scene, frame_id: str = 'world') -> SceneMsg:
+    msg = SceneMsg()
+    msg.header.frame_id = frame_id
+    msg.unit = float(scene.unit)
+    msg.block_types = [BlockType(name=t.name, cells=_cells(t.offsets)) for t in scene.block_types.values()]
+    msg.blocks = [Block(id=b.id, type=b.type, position=Point(x=b.position[0], y=b.position[1], z=b.position[2]),
+                        yaw_deg=int(b.yaw)) for b in scene.blocks]
+    msg.targets = [TargetRegion(name=t.name, origin=Point(x=t.origin[0], y=t.origin[1], z=t.origin[2]),
+                                size=[int(v) for v in t.size], filled=_cells(t.filled)) for t in scene.targets]
+    return msg
+
+
+def scene_msg_to_dict(msg: SceneMsg) -> dict:
+    """The rad-scene/1 document a scene message stands for (not yet validated)."""
+    return {
+        'format': FORMAT,
+        'unit': msg.unit,
+        'block_types': {t.name: _ijk(t.cells) for t in msg.block_types},
+        'blocks': [{'id': b.id, 'type': b.type, 'position': [b.position.x, b.position.y, b.position.z],
+                    'yaw': b.yaw_deg} for b in msg.blocks],
+        'targets': [{'name': t.name, 'origin': [t.origin.x, t.origin.y, t.origin.z],
+                     'size': [int(v) for v in t.size], 'filled': _ijk(t.filled)} for t in msg.targets],
+    }
+
+
+def scene_from_msg(msg: SceneMsg) -> Scene:
+    doc = scene_msg_to_dict(msg)
+    names = [t.name for t in msg.block_types]
+    if len(set(names)) != len(names):
+        raise RadError('block_types: a type name appears twice')
+    return Scene.from_dict(doc)
+
+
+def scene_msg_is_empty(msg: SceneMsg) -> bool:
+    return not (msg.block_types or msg.blocks or msg.targets or msg.unit)
+
+
+def scene_from_request(msg: SceneMsg, scene_json: str) -> Scene:
+    """The scene of a request that carries it as a message or as JSON text, not both."""
+    has_msg, has_json = not scene_msg_is_empty(msg), bool(scene_json.strip())
+    if has_msg and has_json:
+        raise RadError('give the scene either as a message or as scene_json, not both')
+    if has_json:
+        size = len(scene_json.encode())
+        if size > MAX_SCENE_JSON_BYTES:
+            raise RadError(f'scene_json is {size} bytes, more than the limit of {MAX_SCENE_JSON_BYTES}')
+        return Scene.loads(scene_json)
+    if has_msg:
+        return scene_from_msg(msg)
+    raise RadError('no scene given: fill the scene message or scene_json')
+
+
+def placement_to_msg(p: CorePlacement) -> Placement:
+    return Placement(type=p.type, target=p.target, yaw_deg=int(p.yaw), cells=_cells(p.cells))
+
+
+def placement_from_msg(msg: Placement) -> CorePlacement:
+    return CorePlacement(msg.type, msg.target, int(msg.yaw_deg), tuple(tuple(c) for c in _ijk(msg.cells)))
+
+
+def fill_allocation_response(response, result: AllocationResult):
+    """Copy an allocation result into an Allocate response (or any with the same fields)."""
+    response.success = result.has_solution
+    response.reason = '' if result.has_solution else f'the solver found no allocation (status {result.status})'
+    response.status = result.status
+    response.objective = float(result.objective)
+    response.bound = float(result.bound)
+    response.solve_time_s = float(result.solve_time_s)
+    response.placements = [placement_to_msg(p) for p in result.placements]
+    return response
+
+
+def allocation_from_response(response) -> AllocationResult:
+    return AllocationResult(response.status, response.objective, response.bound, response.solve_time_s,
+                            tuple(placement_from_msg(p) for p in response.placements))
+

@@ -1,0 +1,59 @@
+"""Message conversions, on message types alone: no rclpy.init, no DDS."""
+
+import math
+
+import pytest
+
+from rad_core.allocation import solve
+from rad_core.errors import RadError
+from rad_core.generator import GeneratorConfig, generate_scene
+from rad_msgs.msg import Scene as SceneMsg
+from rad_msgs.srv import Allocate
+from rad_ros.conversions import (allocation_from_response, fill_allocation_response,
+                                 scene_from_msg, scene_from_request, scene_to_msg)
+
+from scenes import scene
+
+
+def test_scene_round_trips_through_the_message():
+    s = generate_scene(GeneratorConfig(grid=5), 4)
+    msg = scene_to_msg(s, frame_id='panda_link0')
+    assert msg.header.frame_id == 'panda_link0'
+    assert list(msg.targets[0].size) == [5, 1, 5]
+    assert scene_from_msg(msg).to_dict() == s.to_dict()
+
+
+def test_allocation_round_trips_through_the_response():
+    s = scene()
+    result = solve(s)
+    response = fill_allocation_response(Allocate.Response(), result)
+    assert response.success and response.reason == '' and response.status == 'OPTIMAL'
+    back = allocation_from_response(response)
+    assert back.placements == result.placements and back.objective == result.objective
+
+
+def test_bad_message_gets_the_json_field_names():
+    msg = scene_to_msg(scene())
+    msg.blocks[1].yaw_deg = 45
+    with pytest.raises(RadError, match=r'blocks\[1\].yaw: 45 is not a multiple of 90'):
+        scene_from_msg(msg)
+    msg = scene_to_msg(scene())
+    msg.blocks[0].position.y = math.nan
+    with pytest.raises(RadError, match=r'blocks\[0\].position\[1\]: must be finite'):
+        scene_from_msg(msg)
+    msg = scene_to_msg(scene())
+    msg.block_types.append(msg.block_types[0])
+    with pytest.raises(RadError, match='appears twice'):
+        scene_from_msg(msg)
+
+
+def test_request_takes_message_or_json_but_not_both_or_neither():
+    s = scene()
+    assert scene_from_request(scene_to_msg(s), '').to_dict() == s.to_dict()
+    assert scene_from_request(SceneMsg(), s.dumps()).to_dict() == s.to_dict()
+    with pytest.raises(RadError, match='not both'):
+        scene_from_request(scene_to_msg(s), s.dumps())
+    with pytest.raises(RadError, match='no scene given'):
+        scene_from_request(SceneMsg(), '  ')
+    with pytest.raises(RadError, match='bytes, more than the limit'):
+        scene_from_request(SceneMsg(), ' ' * (11 * 1024 * 1024) + '{}')
