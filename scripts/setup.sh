@@ -1,0 +1,93 @@
+#!/usr/bin/env bash
+# Set up rad from a fresh clone, or bring an existing checkout up to date:
+#   1. .venv at the repo root (python3.11), with requirements/ installed;
+#   2. the CMake path fix the ROS wheels need;
+#   3. colcon build of ros_ws/src into ros_ws/{build,install,log}.
+# Idempotent. Each step is skipped when its inputs have not changed, so a second
+# run takes well under a second. Quiet on success; on failure it prints the tail
+# of the step's log and exits non-zero.
+set -eo pipefail
+
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+cd "$ROOT"
+VENV="$ROOT/.venv"
+REQ="requirements/requirements.txt"
+CON="requirements/constraints.txt"
+
+fail() {  # fail MESSAGE [LOGFILE]
+    echo "setup.sh: $1" >&2
+    if [ -n "${2:-}" ] && [ -f "$2" ]; then
+        echo "--- last lines of $2 ---" >&2
+        tail -n 40 "$2" >&2
+    fi
+    exit 1
+}
+
+for tool in python3.11 cmake make c++; do
+    command -v "$tool" >/dev/null || fail "'$tool' not found; rad needs Python 3.11, CMake, make and a C++ compiler (Debian: apt-get install cmake g++)."
+done
+
+# --- 1. venv and Python dependencies ---------------------------------------------
+if [ ! -x "$VENV/bin/python" ]; then
+    python3.11 -m venv "$VENV" || fail "could not create $VENV"
+fi
+# Reinstall only when the requirement files change: their hash is the stamp.
+req_hash="$(cat "$REQ" "$CON" | sha256sum | cut -d' ' -f1)"
+pip_stamp="$VENV/.rad-requirements.sha256"
+if [ "$(cat "$pip_stamp" 2>/dev/null)" != "$req_hash" ]; then
+    echo "setup.sh: installing Python dependencies into .venv (cold: about 2 minutes)..." >&2
+    # torch==2.13.0 is pinned in $REQ and so is always in this same pip command.
+    "$VENV/bin/python" -m pip install -r "$REQ" -c "$CON" >"$VENV/pip-install.log" 2>&1 \
+        || fail "pip install failed" "$VENV/pip-install.log"
+    rm -f "$pip_stamp"   # the fix below must run before the stamp is written
+fi
+
+# --- 2. CMake path fix ---------------------------------------------------------------
+# ~20 exported *.cmake files of the ROS wheels carry the wheel build host's Python
+# and numpy include dirs; CMake rejects them ("includes non-existent path").
+# Rewrite them to this venv's. Idempotent: files without the old paths are untouched.
+if [ ! -f "$pip_stamp" ] || grep -rqs --include='*.cmake' /opt/python/cp311-cp311 "$VENV/share"; then
+    "$VENV/bin/python" - "$VENV/share" <<'EOF' || fail "CMake path fix failed"
+import pathlib, sys, sysconfig
+import numpy
+fixes = [  # numpy's first: it is the longer, more specific path
+    ("/opt/python/cp311-cp311/lib/python3.11/site-packages/numpy/_core/include", numpy.get_include()),
+    ("/opt/python/cp311-cp311/include/python3.11", sysconfig.get_paths()["include"]),
+]
+for path in pathlib.Path(sys.argv[1]).rglob("*.cmake"):
+    text = path.read_text()
+    new = text
+    for old, local in fixes:
+        new = new.replace(old, local)
+    if new != text:
+        path.write_text(new)
+EOF
+    echo "$req_hash" >"$pip_stamp"
+fi
+
+# rerun-sdk has no environment switch for its usage analytics: turn them off once in
+# its user config. CI=1 keeps this very invocation from starting the analytics pipeline.
+rerun_cfg="${XDG_CONFIG_HOME:-$HOME/.config}/rerun/analytics.json"
+if ! grep -qs '"analytics_enabled": *false' "$rerun_cfg"; then
+    CI=1 "$VENV/bin/rerun" analytics disable >/dev/null 2>&1 || fail "'rerun analytics disable' failed"
+fi
+
+# --- 3. colcon build ---------------------------------------------------------------------
+# Rebuild when anything under ros_ws/src (files or directories, so additions and
+# deletions count) or the venv is newer than the last successful build.
+build_stamp="ros_ws/install/.rad-build-stamp"
+if [ ! -f "$build_stamp" ] || [ "$pip_stamp" -nt "$build_stamp" ] \
+        || [ -n "$(find ros_ws/src -newer "$build_stamp" -print -quit)" ]; then
+    # The build needs the venv prefix on AMENT_PREFIX_PATH/CMAKE_PREFIX_PATH, but not
+    # this workspace's own previous install, hence RAD_ENV_NO_WORKSPACE.
+    RAD_ENV_NO_WORKSPACE=1 source "$ROOT/scripts/env.sh"
+    mkdir -p ros_ws/log
+    build_log="ros_ws/log/rad-setup-build.log"
+    colcon --log-base ros_ws/log build \
+        --base-paths ros_ws/src --build-base ros_ws/build --install-base ros_ws/install \
+        --symlink-install \
+        --cmake-args -DBUILD_TESTING=OFF -DPython3_EXECUTABLE="$VENV/bin/python" \
+        >"$build_log" 2>&1 \
+        || fail "colcon build failed (full log: $build_log, per package: ros_ws/log/latest_build/)" "$build_log"
+    touch "$build_stamp"
+fi
