@@ -1,4 +1,5 @@
 import dataclasses
+import json
 
 import numpy as np
 import pytest
@@ -155,3 +156,21 @@ def test_result_json_round_trip():
     assert doc_['format'] == 'rad-allocation/1'
     assert set(doc_) == {'format', 'status', 'objective', 'bound', 'solve_time_s', 'placements'}
     assert AllocationResult.from_dict(doc_).placements == a.placements
+
+
+def test_solving_leaves_the_process_sigint_handling_alone():
+    # CP-SAT's own SIGINT catcher used to leave SIGINT at its default action, so
+    # a node that had solved once died by Ctrl-C instead of shutting down.
+    import subprocess
+    import sys
+    code = ('import os, signal, time, json\n'
+            'from rad_core.allocation import solve\n'
+            'from rad_core.scene import Scene\n'
+            f'solve(Scene.loads({json.dumps(doc())!r}))\n'
+            'try:\n'
+            '    os.kill(os.getpid(), signal.SIGINT)\n'
+            '    time.sleep(2)\n'
+            'except KeyboardInterrupt:\n'
+            '    print("interrupted cleanly")\n')
+    r = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0 and 'interrupted cleanly' in r.stdout, (r.returncode, r.stderr)

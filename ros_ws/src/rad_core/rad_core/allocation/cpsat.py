@@ -112,6 +112,10 @@ def solve(scene: Scene, params: AllocationParams = AllocationParams()) -> Alloca
     solver.parameters.max_time_in_seconds = float(params.time_limit_s)
     solver.parameters.num_workers = params.num_workers
     solver.parameters.random_seed = params.seed
+    # CP-SAT would install its own SIGINT handler for the solve and leave SIGINT at
+    # the default action afterwards: a node then dies by the signal instead of
+    # shutting down. Signals belong to the process owner, not to a library call.
+    solver.parameters.catch_sigint_signal = False
     status = solver.solve(model)
     name = solver.status_name(status)
     elapsed = time.perf_counter() - start

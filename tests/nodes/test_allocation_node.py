@@ -1,0 +1,104 @@
+"""The /allocate service of the installed allocation_node, over real DDS on loopback."""
+
+import json
+import math
+import time
+
+import pytest
+
+from ros_harness import call_service, ros_args, wait_for_service
+from scenes import U, doc
+
+from rad_core.allocation import validate_allocation
+from rad_core.generator import GeneratorConfig, generate_scene
+from rad_core.scene import Scene
+
+
+@pytest.fixture
+def allocation(node_process, ros_node):
+    from rad_msgs.srv import Allocate
+    proc = node_process('rad_planner', 'allocation_node', *ros_args({'time_limit_s': 5.0, 'seed': 3}))
+    client = wait_for_service(ros_node, Allocate, 'allocate', timeout=20.0)
+
+    def call(scene_json='', scene_msg=None, time_limit_s=0.0):
+        request = Allocate.Request(scene_json=scene_json, time_limit_s=time_limit_s)
+        if scene_msg is not None:
+            request.scene = scene_msg
+        return call_service(ros_node, client, request, timeout=30.0)
+
+    yield proc, call
+    assert proc.stop() == 0, proc.output_tail()
+
+
+def test_allocates_from_json_and_from_message_alike(allocation):
+    from rad_ros.conversions import allocation_from_response, scene_to_msg
+    proc, call = allocation
+    scene = generate_scene(GeneratorConfig(grid=5), 7)
+    by_json = call(scene.dumps())
+    assert by_json.success, by_json.reason
+    assert by_json.status == 'OPTIMAL' and by_json.objective == scene.num_target_cells
+    assert by_json.bound == by_json.objective and by_json.solve_time_s > 0
+    by_msg = call(scene_msg=scene_to_msg(scene))
+    assert by_msg.success and by_msg.objective == by_json.objective
+    assert validate_allocation(scene, allocation_from_response(by_msg)) == []
+
+
+def _bad_cases():
+    big = doc(targets=[{'name': 't', 'origin': [0.3, 0.3, U / 2], 'size': [24, 24, 24], 'filled': [[0, 0, 0]]}])
+    overlapping = doc()
+    overlapping['blocks'][1]['position'] = overlapping['blocks'][0]['position']
+    return {
+        'malformed JSON': ('{"format": "rad-scene/1", "unit"', 'not valid JSON'),
+        'unknown block type': (json.dumps(doc()).replace('"type": "I2"', '"type": "Z7"'), 'unknown block type'),
+        'non-integer cell': (json.dumps(doc()).replace('[2, 0, 0]', '[2.5, 0, 0]'), 'expected an integer'),
+        'cell outside the box': (json.dumps(doc()).replace('[2, 0, 0]', '[7, 0, 0]'), 'outside the box'),
+        'yaw not a multiple of 90': (json.dumps(doc()).replace('"yaw": 90', '"yaw": 30'), 'not a multiple of 90'),
+        'overlapping blocks': (json.dumps(overlapping), 'overlaps block'),
+        'empty target': (json.dumps(doc()).replace(
+            '"filled": [[0, 0, 0], [1, 0, 0], [2, 0, 0], [0, 0, 1]]', '"filled": []'), 'is empty'),
+        'NaN': (json.dumps(doc()).replace('0.45,', 'NaN,'), 'must be finite'),
+        'Infinity': (json.dumps(doc()).replace('0.45,', 'Infinity,'), 'must be finite'),
+        'huge grid': (json.dumps(big), 'exceed the limit'),
+        'no scene': ('', 'no scene given'),
+    }
+
+
+def test_every_bad_input_gets_a_reason_and_the_node_keeps_serving(allocation):
+    proc, call = allocation
+    good = Scene.from_dict(doc()).dumps()
+    for name, (text, expected) in _bad_cases().items():
+        t0 = time.monotonic()
+        response = call(text)
+        assert not response.success, name
+        assert expected in response.reason, (name, response.reason)
+        assert response.status == 'INVALID_REQUEST' and not response.placements
+        assert time.monotonic() - t0 < 5.0, f'{name} took too long'
+        assert proc.is_running(), proc.output_tail()
+        assert call(good).success, f'node stopped serving after {name}'
+
+
+def test_message_and_json_together_and_bad_time_limits_are_refused(allocation):
+    from rad_ros.conversions import scene_to_msg
+    proc, call = allocation
+    scene = Scene.from_dict(doc())
+    assert 'not both' in call(scene.dumps(), scene_msg=scene_to_msg(scene)).reason
+    for bad in (-1.0, math.nan, math.inf):
+        response = call(scene.dumps(), time_limit_s=bad)
+        assert not response.success and 'time_limit_s' in response.reason
+    bad_msg = scene_to_msg(scene)
+    bad_msg.blocks[0].position.z = math.nan
+    assert 'must be finite' in call(scene_msg=bad_msg).reason
+    assert call(scene.dumps(), time_limit_s=1.0).success
+
+
+def test_node_parameters_are_used(node_process, ros_node):
+    from rad_msgs.srv import Allocate
+    proc = node_process('rad_planner', 'allocation_node', *ros_args({'time_limit_s': -2.0}))
+    client = wait_for_service(ros_node, Allocate, 'allocate', timeout=20.0)
+    request = Allocate.Request(scene_json=Scene.from_dict(doc()).dumps())
+    response = call_service(ros_node, client, request, timeout=30.0)
+    # A negative default from the parameter file is caught when used, with a reason.
+    assert not response.success and 'time_limit_s must be a positive' in response.reason
+    request.time_limit_s = 2.0
+    assert call_service(ros_node, client, request, timeout=30.0).success
+    assert proc.stop() == 0, proc.output_tail()
