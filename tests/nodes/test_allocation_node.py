@@ -102,3 +102,17 @@ def test_node_parameters_are_used(node_process, ros_node):
     request.time_limit_s = 2.0
     assert call_service(ros_node, client, request, timeout=30.0).success
     assert proc.stop() == 0, proc.output_tail()
+
+
+def test_ros2run_script_starts_the_node_with_a_params_file(process, ros_node, tmp_path):
+    from rad_msgs.srv import Allocate
+    from ros_harness import REPO_ROOT
+    params = REPO_ROOT / 'ros_ws/install/rad_planner/share/rad_planner/config/planner.yaml'
+    assert params.is_file()
+    proc = process([str(REPO_ROOT / 'scripts' / 'ros2run'), 'rad_planner', 'allocation_node',
+                    '--ros-args', '--params-file', str(params)], name='ros2run')
+    client = wait_for_service(ros_node, Allocate, 'allocate', timeout=20.0)
+    response = call_service(ros_node, client, Allocate.Request(scene_json=Scene.from_dict(doc()).dumps()),
+                            timeout=30.0)
+    assert response.success, response.reason
+    assert proc.stop() == 0, proc.output_tail()
