@@ -1,0 +1,349 @@
+"""Physical stability of a structure once a new block is added (PyBullet).
+
+The MDP asks this after its geometric prune (`support.any_support`): every
+placed block and the new one are put exactly at their grid poses, gravity acts,
+and we watch what moves. The placement is invalid when the new block moves or
+turns beyond a small tolerance (it slides, tips or falls), or when a block
+already in the structure does (it was knocked over or dragged along: the
+structure is destroyed, the predecessor's 1 cm rule).
+
+Verdict: the structure stands unless a tolerance breaks within ``max_steps``
+(1 s); stepping stops early once everything is at rest. Stable placements in
+the benchmark's random structures move at most 0.8 mm and turn at most 0.6 deg
+(p99 0.3 mm, 0.3 deg), against tolerances of 2.5 mm and 3 deg. A block whose
+centre of mass is outside its support can still stand by wedging or hooking
+against a neighbour (an S4 with its step around a column's top corner): rigid
+bodies with friction 1 do hold there, and so does this check.
+
+Choices, each measured (numbers at the default 5 cm unit; see
+``benchmarks/bench_physics.py`` and tests/core/test_physics.py):
+
+- Scale. Rigid blocks with Coulomb friction stand or fall whatever their size
+  (statics has no length scale), so every structure is simulated with
+  ``sim_unit`` cubes, where Bullet's contact tolerances are tuned, and lengths
+  are reported back in the caller's millimetres. Tolerances are fractions of a
+  unit for the same reason.
+- Bodies. One compound rigid body per block (unit boxes, maximal coordinates),
+  with its frame at the centre of mass along the principal axes and the exact
+  polycube inertia: Bullet would take the inertia of the bounding box, wrong
+  for an L.
+- Contact geometry. Bullet's box-box test reports nothing for boxes that only
+  touch or are apart, so a block placed a hair above its support first falls
+  into it (0.3-0.5 mm per layer: all eight cubes of a tower dropped 3.6 mm and
+  swayed). Boxes are therefore a hair taller than a unit (``overlap``) so each
+  layer starts in contact with the one below, and a hair narrower
+  (``side_gap``) so side-by-side neighbours start apart and cannot pin each
+  other by friction. The table is a big static box, not a plane: a box on a
+  plane starts with one contact point and spins on its first step. A centre
+  of mass exactly over an edge lies ``side_gap`` beyond the narrowed support
+  and tips (past 3 deg after about 0.3 s): counted as unstable, as a real
+  placement that precise would be.
+- Solver. With PyBullet's default 50 iterations and no friction anchors, a
+  load on one end of a balanced seesaw creeps at 2-3 mm/s; with 10 the seesaw
+  collapses. 100 iterations with friction anchors bring it to rest (under
+  0.05 mm/s).
+- Speed. One DIRECT client per instance, created on first use and kept: the
+  table stays, collision shapes are cached per block shape, and only block
+  bodies are created and removed per call (0.07 ms a block; resetSimulation
+  and rebuilding would cost about 0.4 ms more per call). Stepping stops as soon
+  as a tolerance breaks (plus ``explain_steps`` to word the reason), or once
+  every block has been at rest for a few checks.
+- Determinism. Overlapping pairs are sorted, bodies are created in argument
+  order and removed after each call, so no contact state survives a call: the
+  same question gets the bit-identical answer whatever was asked before.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+
+import numpy as np
+
+from rad_core.errors import RadError
+
+
+@dataclass(frozen=True)
+class PhysicsConfig:
+    """How the stability check simulates and what it tolerates.
+
+    Lengths are in units (fractions of a cube edge): at the default 5 cm unit,
+    0.01 unit is 0.5 mm.
+    """
+
+    time_step: float = 1.0 / 240.0
+    """Seconds per step; PyBullet's default, the rate its solver is tuned for."""
+    gravity: float = 9.81
+    """Magnitude of gravity along -z, m/s^2."""
+    cube_mass: float = 0.1
+    """Mass of one unit cube (kg); a block weighs its number of cubes times this."""
+    lateral_friction: float = 1.0
+    """Coulomb friction coefficient of blocks and table."""
+    sim_unit: float = 0.05
+    """Cube edge the structure is simulated at (m); the verdict does not depend on it."""
+    side_gap: float = 0.002
+    """Collision boxes are this much narrower on each side face (0.1 mm)."""
+    overlap: float = 0.0002
+    """...and this much taller on top and bottom (10 um): layers start in contact."""
+    solver_iterations: int = 100
+    """Constraint solver iterations per step; 50 lets off-centre loads creep."""
+    max_steps: int = 240
+    """Longest simulation (1 s). A centre of mass exactly over an edge, the slowest
+    fall, tips past ``new_tilt_deg`` after about 0.3 s."""
+    min_steps: int = 24
+    """No verdict of rest before this many steps (0.1 s): a block that has only
+    begun to tip still turns slower than ``rest_spin_deg`` in its first 10 steps."""
+    check_every: int = 4
+    """Poses and speeds are read every this many steps."""
+    rest_checks: int = 3
+    """At rest after this many checks in a row with every block below the rest speeds."""
+    rest_speed: float = 0.02
+    """Rest speed (units/s; 1 mm/s). Most stable structures get below it within
+    0.1-0.4 s; the rare tall stack that keeps buzzing runs to ``max_steps``."""
+    rest_spin_deg: float = 1.0
+    """Rest turning rate (deg/s)."""
+    new_move: float = 0.05
+    """The new block may move at most this far (2.5 mm, any of its cube centres)."""
+    new_tilt_deg: float = 3.0
+    """...and turn at most this much."""
+    placed_move: float = 0.2
+    """A placed block moving this far means the structure is destroyed (1 cm,
+    the predecessor's rule)."""
+    placed_tilt_deg: float = 3.0
+    """A placed block turning this much means the structure gave way."""
+    explain_steps: int = 24
+    """Once the new block has failed, keep stepping at most this long (0.1 s) to see
+    whether placed blocks go too, for the reason; the verdict is settled already,
+    so 0 saves a little time where nobody reads reasons."""
+
+    def __post_init__(self):
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
+                raise RadError(f'physics config {f.name}: expected a finite number >= 0, got {value!r}')
+        for name in ('time_step', 'gravity', 'cube_mass', 'sim_unit', 'solver_iterations',
+                     'max_steps', 'check_every', 'rest_checks'):
+            if getattr(self, name) <= 0:
+                raise RadError(f'physics config {name}: must be > 0')
+        if self.side_gap >= 0.25 or self.overlap >= 0.05:
+            raise RadError('physics config: side_gap and overlap are meant to be hairs (< 0.25, < 0.05 unit)')
+
+
+def polycube_inertia(offsets: np.ndarray, edge: float, cube_mass: float) -> tuple[np.ndarray, np.ndarray]:
+    """Centre of mass and inertia tensor about it of cubes at integer offsets (edge in m)."""
+    pts = np.asarray(offsets, dtype=float) * edge
+    com = pts.mean(axis=0)
+    d = pts - com
+    own = cube_mass * edge ** 2 / 6.0                     # a solid cube about its own centre
+    tensor = np.eye(3) * (own * len(d) + cube_mass * (d ** 2).sum()) - cube_mass * d.T @ d
+    return com, tensor
+
+
+@dataclass
+class _Shape:
+    collision: int            # PyBullet collision shape, shared by every body of this shape
+    mass: float
+    inertia: list[float]      # principal moments, kg m^2
+    com: np.ndarray           # centre of mass relative to the first cube, sim metres
+    quat: list[float]         # principal axes in the world as a quaternion (x, y, z, w)
+
+
+class PhysicsStability:
+    """The MDP's `StabilityCheck`, backed by PyBullet (see the module docstring).
+
+    ``check(unit, placed, new)`` returns (True, '') when the structure stands,
+    else (False, reason), e.g. 'new block tipped 4 deg' or 'placed block 1 moved
+    12 mm (structure destroyed)', where 1 indexes `placed`. Not thread-safe:
+    give each thread or process its own instance.
+    """
+
+    def __init__(self, config: PhysicsConfig = PhysicsConfig()):
+        self.config = config
+        self._p = None            # the pybullet module, imported on first use
+        self._client = -1
+        self._shapes: dict[tuple, _Shape] = {}
+        self._bodies: list[int] = []
+
+    # ---- lifetime --------------------------------------------------------
+    def __enter__(self) -> 'PhysicsStability':
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def __del__(self):
+        try:
+            self.close()
+        except Exception:         # at interpreter exit pybullet may be gone already
+            pass
+
+    def close(self) -> None:
+        """Disconnect the client; the next check connects a fresh one."""
+        if self._client >= 0:
+            self._p.disconnect(physicsClientId=self._client)
+        self._client = -1
+        self._shapes.clear()
+        self._bodies.clear()
+
+    def _connect(self) -> None:
+        import pybullet as p      # here, not at the top: importing it prints a banner on stdout
+        self._p = p
+        cfg = self.config
+        cid = p.connect(p.DIRECT)
+        if cid < 0:
+            raise RuntimeError('cannot start a PyBullet DIRECT client')
+        self._client = cid
+        p.setGravity(0, 0, -cfg.gravity, physicsClientId=cid)
+        p.setTimeStep(cfg.time_step, physicsClientId=cid)
+        p.setPhysicsEngineParameter(numSolverIterations=int(cfg.solver_iterations),
+                                    deterministicOverlappingPairs=1, physicsClientId=cid)
+        half = 100.0 * cfg.sim_unit
+        table = p.createCollisionShape(p.GEOM_BOX, halfExtents=[half, half, half], physicsClientId=cid)
+        ground = p.createMultiBody(0, table, basePosition=[0, 0, -half], physicsClientId=cid)
+        p.changeDynamics(ground, -1, lateralFriction=cfg.lateral_friction, frictionAnchor=1, physicsClientId=cid)
+
+    # ---- the check -------------------------------------------------------
+    def __call__(self, unit: float, placed: list[np.ndarray], new: np.ndarray) -> tuple[bool, str]:
+        if not (math.isfinite(unit) and unit > 0):
+            raise RadError(f'unit must be a positive length, got {unit!r}')
+        blocks = [np.asarray(b, dtype=float).reshape(-1, 3) for b in placed]
+        blocks.append(np.asarray(new, dtype=float).reshape(-1, 3))
+        if any(len(b) == 0 for b in blocks):
+            raise RadError('every block needs at least one unit cube')
+        if self._client < 0:
+            self._connect()
+        cubes = [b * (self.config.sim_unit / unit) for b in blocks]
+        try:
+            for c in cubes:
+                self._bodies.append(self._add_body(c))
+            return self._simulate(cubes, unit)
+        finally:
+            for body in self._bodies:
+                self._p.removeBody(body, physicsClientId=self._client)
+            self._bodies.clear()
+
+    def _shape(self, offsets: np.ndarray) -> _Shape:
+        key = tuple(map(tuple, offsets.tolist()))
+        shape = self._shapes.get(key)
+        if shape is None:
+            p, cfg, u = self._p, self.config, self.config.sim_unit
+            com, tensor = polycube_inertia(offsets, u, cfg.cube_mass)
+            moments, axes = np.linalg.eigh(tensor)
+            if np.linalg.det(axes) < 0:
+                axes[:, 2] = -axes[:, 2]
+            # Boxes in the principal frame, turned back so they are axis-aligned in the world.
+            local = (offsets * u - com) @ axes
+            side, height = u / 2 - cfg.side_gap * u, u / 2 + cfg.overlap * u
+            n = len(offsets)
+            collision = p.createCollisionShapeArray(
+                [p.GEOM_BOX] * n, halfExtents=[[side, side, height]] * n,
+                collisionFramePositions=local.tolist(), collisionFrameOrientations=[_quat(axes.T)] * n,
+                physicsClientId=self._client)
+            shape = _Shape(collision, cfg.cube_mass * n, moments.tolist(), com, _quat(axes))
+            self._shapes[key] = shape
+        return shape
+
+    def _add_body(self, cubes: np.ndarray) -> int:
+        """A block whose unit cubes have these world centres (simulation scale)."""
+        p, cid, cfg = self._p, self._client, self.config
+        shape = self._shape(np.round((cubes - cubes[0]) / cfg.sim_unit).astype(np.int64))
+        body = p.createMultiBody(shape.mass, shape.collision, basePosition=(cubes[0] + shape.com).tolist(),
+                                 baseOrientation=shape.quat, useMaximalCoordinates=True, physicsClientId=cid)
+        # mass is repeated on purpose: for a maximal-coordinates body, setting the inertia alone zeroes it.
+        p.changeDynamics(body, -1, mass=shape.mass, localInertiaDiagonal=shape.inertia,
+                         lateralFriction=cfg.lateral_friction, frictionAnchor=1,
+                         linearDamping=0.0, angularDamping=0.0, physicsClientId=cid)
+        return body
+
+    def _simulate(self, cubes: list[np.ndarray], unit: float) -> tuple[bool, str]:
+        p, cid, cfg = self._p, self._client, self.config
+        u, bodies = cfg.sim_unit, self._bodies
+        new = len(bodies) - 1
+        start = [p.getBasePositionAndOrientation(b, physicsClientId=cid) for b in bodies]
+        origin = [np.asarray(pos) for pos, _ in start]
+        arms = [c - o for c, o in zip(cubes, origin)]                  # cube centres from the COM
+        unturn = [_rotation(q).T for _, q in start]
+        rest_v, rest_w = cfg.rest_speed * u, math.radians(cfg.rest_spin_deg)
+        calm, failed, explain_until = 0, '', 0
+        for step in range(1, int(cfg.max_steps) + 1):
+            p.stepSimulation(physicsClientId=cid)
+            if step % cfg.check_every and step != cfg.max_steps:
+                continue
+            motion = []
+            for i, b in enumerate(bodies):
+                pos, q = p.getBasePositionAndOrientation(b, physicsClientId=cid)
+                turn = _rotation(q) @ unturn[i]
+                shift = arms[i] @ turn.T + (np.asarray(pos) - origin[i]) - arms[i]
+                motion.append((float(np.sqrt((shift ** 2).sum(axis=1)).max()), _angle_deg(turn)))
+            destroyed = self._destroyed(motion[:new], unit)
+            if destroyed:
+                return False, f'{failed}; {destroyed} too' if failed else f'{destroyed} (structure destroyed)'
+            if not failed:
+                failed = self._new_failed(motion[new], unit)
+                explain_until = step + cfg.explain_steps
+            if failed:
+                # The verdict is in; watch a little longer in case the structure goes too.
+                if step >= explain_until:
+                    return False, failed
+                continue
+            if all(math.hypot(*v) <= rest_v and math.hypot(*w) <= rest_w
+                   for v, w in (p.getBaseVelocity(b, physicsClientId=cid) for b in bodies)):
+                calm += 1
+                if calm >= cfg.rest_checks and step >= cfg.min_steps:
+                    return True, ''
+            else:
+                calm = 0
+        if failed:
+            return False, failed
+        # Still jittering (a tall stack can buzz at 1-3 mm/s for good), yet nothing broke a
+        # tolerance in max_steps: it stands.
+        return True, ''
+
+    def _destroyed(self, motion: list[tuple[float, float]], unit: float) -> str:
+        cfg = self.config
+        for i, (move, tilt) in enumerate(motion):
+            if tilt > cfg.placed_tilt_deg:
+                return f'placed block {i} tipped {tilt:.1f} deg'
+            if move >= cfg.placed_move * cfg.sim_unit:
+                return f'placed block {i} moved {move * unit / cfg.sim_unit * 1000:.1f} mm'
+        return ''
+
+    def _new_failed(self, motion: tuple[float, float], unit: float) -> str:
+        cfg = self.config
+        move, tilt = motion
+        if tilt > cfg.new_tilt_deg:
+            return f'new block tipped {tilt:.1f} deg'
+        if move > cfg.new_move * cfg.sim_unit:
+            return f'new block moved {move * unit / cfg.sim_unit * 1000:.1f} mm'
+        return ''
+
+
+def _quat(r: np.ndarray) -> list[float]:
+    """Quaternion (x, y, z, w) of a rotation matrix (Shepperd's method, safe near 180 deg)."""
+    t = np.trace(r)
+    if t > 0:
+        s = 2.0 * math.sqrt(1.0 + t)
+        q = [(r[2, 1] - r[1, 2]) / s, (r[0, 2] - r[2, 0]) / s, (r[1, 0] - r[0, 1]) / s, s / 4]
+    else:
+        i = int(np.argmax(np.diag(r)))
+        j, k = (i + 1) % 3, (i + 2) % 3
+        s = 2.0 * math.sqrt(max(0.0, 1.0 + r[i, i] - r[j, j] - r[k, k]))
+        q = [0.0, 0.0, 0.0, (r[k, j] - r[j, k]) / s]
+        q[i] = s / 4
+        q[j] = (r[j, i] + r[i, j]) / s
+        q[k] = (r[k, i] + r[i, k]) / s
+    return [float(v) for v in q]
+
+
+def _rotation(q) -> np.ndarray:
+    x, y, z, w = q
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+    ])
+
+
+def _angle_deg(r: np.ndarray) -> float:
+    """Angle of a rotation matrix, degrees."""
+    return math.degrees(math.acos(min(1.0, max(-1.0, (r[0, 0] + r[1, 1] + r[2, 2] - 1.0) / 2.0))))

@@ -1,0 +1,178 @@
+"""PyBullet stability check: verdicts on hand-made structures, reasons, determinism.
+
+Structures are given in integer cell coordinates; `at` turns them into world
+unit centres the way the MDP does (cell centre = origin + unit * [i, j, k],
+lowest layer resting on the table).
+"""
+
+import numpy as np
+import pytest
+
+from rad_core.errors import RadError
+from rad_core.mdp import Action, AssemblyEnv, EnvConfig, Outcome
+from rad_core.physics import PhysicsConfig, PhysicsStability, polycube_inertia
+
+from scenes import U, scene
+
+ORIGIN = np.array([0.4, 0.1, U / 2])
+
+
+def at(*cells, unit=U):
+    return ORIGIN * unit / U + unit * np.asarray(cells, dtype=float)
+
+
+def column(x, height, y=0):
+    """One cube per layer, each its own block (as a robot would stack them)."""
+    return [at((x, y, z)) for z in range(height)]
+
+
+@pytest.fixture(scope='module')
+def check():
+    with PhysicsStability() as c:
+        yield c
+
+
+def test_cube_on_the_table_stands(check):
+    assert check(U, [], at((0, 0, 0))) == (True, '')
+
+
+def test_cube_on_a_cube_stands(check):
+    assert check(U, column(0, 1), at((0, 0, 1))) == (True, '')
+
+
+def test_tall_tower_of_cubes_stands(check):
+    assert check(U, column(0, 7), at((0, 0, 7))) == (True, '')
+
+
+def test_bar_with_its_centre_of_mass_exactly_over_the_edge_falls(check):
+    # I2 along x, one unit on a 1-high column, the other over nothing: the centre
+    # of mass is exactly above the column's edge. Counted unstable (documented):
+    # no real placement is that exact, and the narrowed boxes put it just beyond.
+    ok, reason = check(U, column(0, 1), at((0, 0, 1), (1, 0, 1)))
+    assert not ok and reason.startswith('new block tipped')
+
+
+def test_l_with_its_centre_of_mass_over_the_support_stands(check):
+    # L3 flat with its corner on a column: centre of mass (1/3, 1/3) unit from the
+    # column's axis, inside its top face.
+    assert check(U, column(0, 1), at((0, 0, 1), (1, 0, 1), (0, 1, 1))) == (True, '')
+
+
+def test_l_with_its_centre_of_mass_clearly_outside_falls(check):
+    # The same L resting on one end unit: centre of mass 2/3 unit off the column's axis.
+    ok, reason = check(U, column(1, 1), at((0, 0, 1), (1, 0, 1), (0, 1, 1)))
+    assert not ok and reason.startswith('new block')
+
+
+def test_cantilever_on_its_end_cube_falls(check):
+    ok, reason = check(U, column(0, 2), at((0, 0, 2), (1, 0, 2), (2, 0, 2)))
+    assert not ok and reason.startswith('new block')
+
+
+def test_bridge_over_two_towers_stands(check):
+    towers = column(0, 2) + column(2, 2)
+    assert check(U, towers, at((0, 0, 2), (1, 0, 2), (2, 0, 2))) == (True, '')
+
+
+def test_block_floating_high_above_everything_falls(check):
+    ok, reason = check(U, column(0, 1), at((3, 0, 4)))
+    assert not ok and reason.startswith('new block moved')
+
+
+def test_pyramid_of_ten_bricks_stands(check):
+    layers = ((0, (0, 2, 4, 6)), (1, (1, 3, 5)), (2, (2, 4)))
+    bricks = [at((x, 0, z), (x + 1, 0, z)) for z, xs in layers for x in xs]
+    assert check(U, bricks, at((3, 0, 3), (4, 0, 3))) == (True, '')
+
+
+# A seesaw: an I3 balanced on a one-cube column; load on its end tips it.
+SEESAW = [at((0, 0, 0)), at((-1, 0, 1), (0, 0, 1), (1, 0, 1))]
+
+
+def test_light_load_on_the_seesaw_end_stands(check):
+    # Centre of mass of I3 + 2 cubes at x = 2/5 unit, inside the column's face.
+    assert check(U, SEESAW, at((1, 0, 2), (1, 0, 3))) == (True, '')
+
+
+def test_heavy_load_knocks_the_seesaw_over_and_the_reason_says_so(check):
+    # Four cubes on the end: centre of mass at x = 4/7 unit, beyond the column's edge.
+    ok, reason = check(U, SEESAW, at((1, 0, 2), (1, 0, 3), (1, 0, 4), (1, 0, 5)))
+    assert not ok
+    assert 'placed block 1' in reason
+
+
+def test_unstable_placed_structure_is_reported_as_destroyed(check):
+    # The placed bar already overhangs; the new cube far away is innocent.
+    ok, reason = check(U, column(0, 1) + [at((0, 0, 1), (1, 0, 1))], at((5, 0, 0)))
+    assert not ok
+    assert reason.startswith('placed block 1') and 'structure destroyed' in reason
+
+
+def test_same_question_same_answer_whatever_was_asked_before():
+    cases = [
+        (column(0, 2), at((0, 0, 2), (1, 0, 2), (2, 0, 2))),
+        (SEESAW, at((1, 0, 2), (1, 0, 3), (1, 0, 4), (1, 0, 5))),
+        (column(0, 3), at((0, 0, 3))),
+    ]
+    with PhysicsStability() as fresh:
+        first = [fresh(U, placed, new) for placed, new in cases]
+        again = [fresh(U, placed, new) for placed, new in reversed(cases)][::-1]
+    with PhysicsStability() as other:
+        other(U, column(4, 5), at((4, 0, 5)))
+        third = [other(U, placed, new) for placed, new in cases]
+    assert first == again == third
+    assert [ok for ok, _ in first] == [False, False, True]
+
+
+def test_verdict_does_not_depend_on_the_unit(check):
+    small, big = 0.02, 0.2
+    for unit in (small, big):
+        assert check(unit, [at((0, 0, 0), unit=unit)], at((0, 0, 1), unit=unit)) == (True, '')
+        ok, reason = check(unit, [at((0, 0, 0), unit=unit)], at((0, 0, 1), (1, 0, 1), unit=unit))
+        assert not ok
+    # Reasons are in the caller's millimetres: a floating block moves at least 5% of its unit.
+    for unit in (small, big):
+        ok, reason = check(unit, [], at((0, 0, 3), unit=unit))
+        mm = float(reason.split('moved ')[1].split(' mm')[0])
+        assert not ok and 0.05 * unit * 1000 <= mm <= 0.5 * unit * 1000
+
+
+def test_close_and_reuse():
+    c = PhysicsStability()
+    assert c(U, [], at((0, 0, 0)))[0]
+    c.close()
+    c.close()
+    assert c(U, [], at((0, 0, 0)))[0]
+    c.close()
+
+
+def test_bad_inputs_raise():
+    with pytest.raises(RadError):
+        PhysicsConfig(max_steps=0)
+    with pytest.raises(RadError):
+        PhysicsConfig(side_gap=-0.1)
+    with PhysicsStability() as c:
+        with pytest.raises(RadError):
+            c(0.0, [], at((0, 0, 0)))
+        with pytest.raises(RadError):
+            c(U, [], np.zeros((0, 3)))
+
+
+def test_polycube_inertia_matches_a_solid_box():
+    # An I3 is a 3x1x1 box: I = m (b^2 + c^2) / 12 about each axis.
+    com, tensor = polycube_inertia(np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0]]), 0.05, 0.1)
+    m, a, b = 0.3, 0.15, 0.05
+    assert com == pytest.approx([0.05, 0, 0])
+    assert np.diag(tensor) == pytest.approx([m * 2 * b * b / 12, m * (a * a + b * b) / 12, m * (a * a + b * b) / 12])
+    # An L3 has a product of inertia: its principal axes are diagonal in x-y.
+    _, tensor = polycube_inertia(np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]]), 1.0, 1.0)
+    assert tensor[0, 1] == pytest.approx(1 / 3)
+
+
+def test_mdp_uses_physics_by_default():
+    s = scene()                       # region 'front': 3 x 1 x 2 cells
+    env = AssemblyEnv(s, EnvConfig())
+    assert env.step(Action(0, 0, env.grid.index(0, (0, 0, 0)), 0)).outcome == Outcome.PLACED
+    # I2 (yaw 90) turned to lie along x on top of the cube, its second unit over nothing.
+    r = env.step(Action(2, 0, env.grid.index(0, (0, 0, 1)), 3))
+    assert r.outcome == Outcome.INVALID_UNSTABLE and r.reason.startswith('new block')
