@@ -35,7 +35,7 @@ fi
 req_hash="$(cat "$REQ" "$CON" | sha256sum | cut -d' ' -f1)"
 pip_stamp="$VENV/.rad-requirements.sha256"
 if [ "$(cat "$pip_stamp" 2>/dev/null)" != "$req_hash" ]; then
-    echo "setup.sh: installing Python dependencies into .venv (cold: about 2 minutes)..." >&2
+    echo "setup.sh: installing Python dependencies into .venv (cold: about 1.5 minutes)..." >&2
     # torch==2.13.0 is pinned in $REQ and so is always in this same pip command.
     "$VENV/bin/python" -m pip install -r "$REQ" -c "$CON" >"$VENV/pip-install.log" 2>&1 \
         || fail "pip install failed" "$VENV/pip-install.log"

@@ -7,6 +7,7 @@ cd "$ROOT"
 
 bash scripts/setup.sh
 source scripts/env.sh
+export RAD_TEST_HARNESS=1  # lets tests tell they run under this script
 
 start=$SECONDS
 status=0
