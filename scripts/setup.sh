@@ -74,10 +74,12 @@ fi
 
 # --- 3. colcon build ---------------------------------------------------------------------
 # Rebuild when anything under ros_ws/src (files or directories, so additions and
-# deletions count) or the venv is newer than the last successful build.
+# deletions count) or the venv is newer than the last successful build. Edits to
+# Python modules need no rebuild: --symlink-install links the sources into install/.
 build_stamp="ros_ws/install/.rad-build-stamp"
-if [ ! -f "$build_stamp" ] || [ "$pip_stamp" -nt "$build_stamp" ] \
-        || [ -n "$(find ros_ws/src -newer "$build_stamp" -print -quit)" ]; then
+changed="$(find ros_ws/src -newer "$build_stamp" ! -name '*.pyc' ! -name __pycache__ \
+    ! \( -name '*.py' ! -name setup.py \) -print -quit 2>/dev/null || true)"
+if [ ! -f "$build_stamp" ] || [ "$pip_stamp" -nt "$build_stamp" ] || [ -n "$changed" ]; then
     # The build needs the venv prefix on AMENT_PREFIX_PATH/CMAKE_PREFIX_PATH, but not
     # this workspace's own previous install, hence RAD_ENV_NO_WORKSPACE.
     RAD_ENV_NO_WORKSPACE=1 source "$ROOT/scripts/env.sh"
