@@ -62,25 +62,23 @@ class Grid:
 
     def cell_at(self, point) -> int | None:
         """Global index of the cell whose centre is within tolerance of a world point."""
-        point = np.asarray(point, dtype=float)
-        for r, t in enumerate(self.regions):
-            idx = (point - np.asarray(t.origin)) / self.unit
-            rounded = np.round(idx)
-            if np.all(np.abs(idx - rounded) <= GRID_SNAP_TOL):
-                found = self.index(r, rounded.astype(np.int64))
-                if found is not None:
-                    return found
-        return None
+        found = self.cells_at(np.asarray(point, dtype=float).reshape(1, 3))
+        return None if found is None else int(found[0])
 
     def cells_at(self, points: np.ndarray) -> np.ndarray | None:
         """Global indices for each point, or None if any point is off the grid."""
-        out = np.empty(len(points), dtype=np.int64)
-        for n, p in enumerate(points):
-            c = self.cell_at(p)
-            if c is None:
-                return None
-            out[n] = c
-        return out
+        points = np.asarray(points, dtype=float).reshape(-1, 3)
+        out = np.full(len(points), -1, dtype=np.int64)
+        for r, t in enumerate(self.regions):
+            idx = (points - np.asarray(t.origin)) / self.unit
+            rounded = np.round(idx)
+            size = np.asarray(t.size)
+            hit = (np.all(np.abs(idx - rounded) <= GRID_SNAP_TOL, axis=1)
+                   & np.all((rounded >= 0) & (rounded < size), axis=1) & (out < 0))
+            if hit.any():
+                ijk = rounded[hit].astype(np.int64)
+                out[hit] = self.offsets[r] + ijk[:, 0] + ijk[:, 1] * size[0] + ijk[:, 2] * size[0] * size[1]
+        return None if (out < 0).any() else out
 
     def region_cells(self, cell_ids) -> tuple[int, list[list[int]]]:
         """Region index and region-local [i, j, k] of cells that share one region."""
