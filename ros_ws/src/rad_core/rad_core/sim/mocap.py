@@ -1,0 +1,240 @@
+"""Motion-capture registration: the twin's scene from tracked rigid-body poses.
+
+A motion-capture system (OptiTrack-style) reports one pose per rigid body. Here
+a body's pose is the pose of its block's anchor unit: the centre of the block's
+first unit cube, with the block's yaw as orientation, in the scene frame (table
+top at z = ``table_z``). That is what `scene_to_bodies` emits and what the
+twin's World reports with ``block_pose``, so the twin can publish poses and
+registration rebuilds the scene it came from.
+
+Real measurements are noisy and real blocks are not exactly where a plan put
+them, so registration snaps each pose to what a scene can express, within
+tolerances, and refuses what it cannot express:
+
+- yaw to the nearest multiple of 90 degrees (the scene format only has those);
+  a block on its side or standing on an edge is rejected, not rounded;
+- height to a unit lattice above the table (blocks rest on the table or on
+  other blocks, so their anchor is at u/2 + k u);
+- x/y to the target grid when the block is inside a target region, so a placed
+  block registers exactly on its cells and the grid, the allocation and the MDP
+  see it as placed. Blocks elsewhere keep their measured x/y: the table is not a
+  lattice, and snapping there would invent collisions or gaps.
+
+Whatever survives is validated by `Scene.from_dict` (overlaps, blocks half in a
+region, blocks below the table), with errors translated to the body's name.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from rad_core.errors import RadError, SceneError
+from rad_core.scene import Scene
+
+# Quaternions from a tracker are normalised by the tracker; anything further off
+# than this is a corrupted message or a wrong field order, not rounding.
+QUAT_NORM_TOL = 1e-3
+# Snapped coordinates are rounded to a nanometre so that a round trip gives
+# bit-identical numbers for positions that were already on the lattice.
+_DECIMALS = 9
+
+
+@dataclass(frozen=True)
+class RigidBodyPose:
+    """One tracked rigid body: anchor-unit centre (m) and orientation (x, y, z, w)."""
+
+    name: str
+    position: tuple[float, float, float]
+    quaternion: tuple[float, float, float, float]
+    tracking_valid: bool = True
+
+
+@dataclass(frozen=True)
+class RegistrationConfig:
+    """How motion-capture bodies map to blocks and how far a pose may be off.
+
+    body_map: rigid-body name -> (block id, block type). Bodies not in it are
+        rejected: an unknown body in the capture volume is a set-up error worth
+        seeing, not something to ignore silently.
+    position_tol: how far (fraction of a unit) a pose may be off the height
+        lattice, or off the grid inside a target region. 0.25 unit (12.5 mm at
+        5 cm) is well above tracker noise (< 1 mm) and placement error of a
+        few mm, and well below half a unit, where snapping would become ambiguous.
+    tilt_tol_deg: the most a block may be tilted (roll/pitch) and still count as
+        lying flat. Blocks are rigid and rest on flat faces; 10 degrees allows
+        for tracker noise and a block leaning on a slightly uneven neighbour.
+    yaw_tol_deg: the most the yaw may be away from a multiple of 90 degrees.
+        A block turned 45 degrees cannot be expressed in a scene at all.
+    table_z: height of the table top in the motion-capture frame (m).
+    """
+
+    body_map: dict[str, tuple[str, str]] = field(default_factory=dict)
+    position_tol: float = 0.25
+    tilt_tol_deg: float = 10.0
+    yaw_tol_deg: float = 15.0
+    table_z: float = 0.0
+
+    def __post_init__(self):
+        if not (math.isfinite(self.position_tol) and 0 < self.position_tol < 0.5):
+            raise RadError(f'position_tol must be in (0, 0.5) units, got {self.position_tol!r}')
+        if not (math.isfinite(self.tilt_tol_deg) and 0 < self.tilt_tol_deg < 45):
+            raise RadError(f'tilt_tol_deg must be in (0, 45), got {self.tilt_tol_deg!r}')
+        if not (math.isfinite(self.yaw_tol_deg) and 0 < self.yaw_tol_deg < 45):
+            raise RadError(f'yaw_tol_deg must be in (0, 45), got {self.yaw_tol_deg!r}')
+        if not math.isfinite(self.table_z):
+            raise RadError(f'table_z must be finite, got {self.table_z!r}')
+        blocks = {}
+        for body, entry in self.body_map.items():
+            if not (isinstance(entry, (tuple, list)) and len(entry) == 2):
+                raise RadError(f'body_map[{body!r}]: expected (block id, block type), got {entry!r}')
+            if entry[0] in blocks:
+                raise RadError(f'rigid bodies {blocks[entry[0]]!r} and {body!r} are both mapped to '
+                               f'block {entry[0]!r}')
+            blocks[entry[0]] = body
+
+
+def body_map_for(scene: Scene, names: dict[str, str] | None = None) -> dict[str, tuple[str, str]]:
+    """The body_map that registers `scene_to_bodies(scene, names)` back to scene's blocks."""
+    names = names or {}
+    return {names.get(b.id, b.id): (b.id, b.type) for b in scene.blocks}
+
+
+def yaw_quaternion(yaw_deg: float) -> tuple[float, float, float, float]:
+    half = math.radians(yaw_deg) / 2
+    return (0.0, 0.0, math.sin(half), math.cos(half))
+
+
+def scene_to_bodies(scene: Scene, names: dict[str, str] | None = None,
+                    table_z: float = 0.0) -> list[RigidBodyPose]:
+    """What a motion-capture system would report for a scene, in block order.
+
+    names maps block id -> rigid-body name (default: the block id).
+    """
+    names = names or {}
+    out = []
+    for b in scene.blocks:
+        x, y, z = b.position
+        out.append(RigidBodyPose(names.get(b.id, b.id), (x, y, z + table_z), yaw_quaternion(b.yaw)))
+    return out
+
+
+def register_scene(bodies: list[RigidBodyPose], template: Scene, config: RegistrationConfig) -> Scene:
+    """The template's unit, block types and targets with one block per tracked body.
+
+    The template's own blocks are ignored: the bodies are the truth. Body map
+    entries without a reported body give no block (not seen, not there).
+    Raises RadError naming the body for anything that cannot be a scene.
+    """
+    seen_bodies: set[str] = set()
+    blocks, names = [], []
+    for body in bodies:
+        name = body.name
+        if name in seen_bodies:
+            raise RadError(f'rigid body {name!r} is reported twice')
+        seen_bodies.add(name)
+        if name not in config.body_map:
+            raise RadError(f'rigid body {name!r} is unknown (not in the body map; known: '
+                           f'{_listing(config.body_map)})')
+        block_id, block_type = config.body_map[name]
+        if block_type not in template.block_types:
+            raise RadError(f'rigid body {name!r}: block type {block_type!r} of block {block_id!r} is not '
+                           f'in the scene\'s block types ({_listing(template.block_types)})')
+        if not body.tracking_valid:
+            raise RadError(f'rigid body {name!r} (block {block_id!r}) is not tracked (tracking_valid is '
+                           f'false): its pose is unknown')
+        position, yaw = _snap(body, template, template.block_types[block_type], config)
+        blocks.append({'id': block_id, 'type': block_type, 'position': position, 'yaw': yaw})
+        names.append(name)
+    doc = template.to_dict()
+    doc['blocks'] = blocks
+    try:
+        return Scene.from_dict(doc)
+    except SceneError as e:
+        raise RadError(_translate(e, names, blocks)) from None
+
+
+def _snap(body: RigidBodyPose, template: Scene, block_type, config: RegistrationConfig) -> tuple[list[float], int]:
+    name, u = body.name, template.unit
+    pos = np.asarray(body.position, dtype=float).reshape(-1)
+    quat = np.asarray(body.quaternion, dtype=float).reshape(-1)
+    if pos.shape != (3,) or quat.shape != (4,):
+        raise RadError(f'rigid body {name!r}: expected a 3-vector position and a 4-vector quaternion')
+    if not (np.all(np.isfinite(pos)) and np.all(np.isfinite(quat))):
+        raise RadError(f'rigid body {name!r}: pose contains NaN or infinity '
+                       f'(position {pos.tolist()}, quaternion {quat.tolist()})')
+    norm = float(np.linalg.norm(quat))
+    if abs(norm - 1.0) > QUAT_NORM_TOL:
+        raise RadError(f'rigid body {name!r}: quaternion {quat.tolist()} is not unit length (norm {norm:.4f})')
+    r = _rotation(quat / norm)
+    tilt = math.degrees(math.acos(min(1.0, max(-1.0, r[2, 2]))))
+    if tilt > config.tilt_tol_deg:
+        raise RadError(f'rigid body {name!r} is tilted {tilt:.1f} deg from upright (limit '
+                       f'{config.tilt_tol_deg:g}): a block must lie flat, not on its side or an edge')
+    yaw = math.degrees(math.atan2(r[1, 0], r[0, 0]))
+    snapped_yaw = round(yaw / 90.0) * 90
+    if abs(yaw - snapped_yaw) > config.yaw_tol_deg:
+        raise RadError(f'rigid body {name!r}: yaw {yaw:.1f} deg is {abs(yaw - snapped_yaw):.1f} deg from a '
+                       f'multiple of 90 (limit {config.yaw_tol_deg:g})')
+    snapped_yaw %= 360
+
+    height = (pos[2] - config.table_z - u / 2) / u
+    level = round(height)
+    if abs(height - level) > config.position_tol:
+        raise RadError(f'rigid body {name!r}: height {pos[2]:.4f} m is {abs(height - level) * u * 1000:.1f} mm '
+                       f'off the unit lattice above the table (limit {config.position_tol * u * 1000:.1f} mm)')
+    out = [float(pos[0]), float(pos[1]), round(u / 2 + level * u, _DECIMALS)]
+
+    region = _region_of(template, snapped_yaw, block_type, np.array(out))
+    if region is not None:
+        origin = np.asarray(region.origin)
+        idx = (np.array(out[:2]) - origin[:2]) / u
+        off = np.abs(idx - np.round(idx))
+        if off.max() > config.position_tol:
+            raise RadError(f'rigid body {name!r} is in target region {region.name!r} but '
+                           f'{off.max() * u * 1000:.1f} mm off its grid (limit {config.position_tol * u * 1000:.1f} mm)')
+        for a in range(2):
+            out[a] = round(float(origin[a] + u * np.round(idx[a])), _DECIMALS)
+    return out, snapped_yaw
+
+
+def _region_of(scene: Scene, yaw: int, block_type, anchor: np.ndarray):
+    """The target region holding most of the block's units (by unit centre), or None."""
+    pts = anchor + scene.unit * block_type.rotated(yaw)
+    best, best_count = None, 0
+    for t in scene.targets:
+        lo, hi = t.bounds(scene.unit)
+        count = int(np.all((pts > lo) & (pts < hi), axis=1).sum())
+        if count > best_count:
+            best, best_count = t, count
+    return best
+
+
+def _translate(e: SceneError, names: list[str], blocks: list[dict]) -> str:
+    """Scene validation speaks of blocks[i]; the user knows rigid bodies."""
+    field_ = e.field
+    if field_.startswith('blocks['):
+        i = int(field_[len('blocks['):field_.index(']')])
+        problem = e.problem
+        for j, b in enumerate(blocks):
+            if j != i and repr(b['id']) in problem:
+                problem = problem.replace(repr(b['id']), f'{b["id"]!r} (rigid body {names[j]!r})')
+        return f'rigid body {names[i]!r} (block {blocks[i]["id"]!r}): {problem}'
+    return f'registered scene is invalid: {e}'
+
+
+def _listing(keys) -> str:
+    keys = sorted(keys)
+    text = ', '.join(repr(k) for k in keys[:8])
+    return text + (f', ... ({len(keys)} in all)' if len(keys) > 8 else '') if keys else 'none'
+
+
+def _rotation(q) -> np.ndarray:
+    x, y, z, w = q
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+    ])

@@ -1,0 +1,245 @@
+"""Motion-capture registration: round trips, noise, and every way a pose can be wrong."""
+
+import math
+
+import numpy as np
+import pytest
+
+from rad_core.errors import RadError
+from rad_core.generator import GeneratorConfig, generate_scene
+from rad_core.grid import Grid, blocks_on_grid
+from rad_core.scene import Block, Scene
+from rad_core.sim.mocap import (RegistrationConfig, RigidBodyPose, body_map_for, register_scene,
+                                scene_to_bodies, yaw_quaternion)
+
+from scenes import U, scene
+
+
+def with_placed(s: Scene, n: int = 3) -> Scene:
+    """The scene with its first n blocks moved onto the target grid (as if placed).
+
+    Each block goes to the first target cells where all its units fit at yaw 0 or
+    180, on the table or on cells filled already, without overlapping.
+    """
+    grid = Grid(s)
+    taken: set[int] = set()
+    blocks = list(s.blocks)
+    placed = 0
+    for i, b in enumerate(blocks):
+        if placed == n:
+            break
+        offs = s.block_types[b.type]
+        for yaw in (0, 180):
+            done = False
+            for c in np.flatnonzero(grid.is_target):
+                pts = grid.centres[c] + s.unit * offs.rotated(yaw)
+                cells = grid.cells_at(pts)
+                if cells is None or taken & set(cells.tolist()) or not grid.is_target[cells].all():
+                    continue
+                blocks[i] = Block(b.id, b.type, tuple(float(v) for v in grid.centres[c]), yaw)
+                taken |= set(cells.tolist())
+                placed += 1
+                done = True
+                break
+            if done:
+                break
+    doc = s.to_dict()
+    doc['blocks'] = [b.to_dict() for b in blocks]
+    return Scene.from_dict(doc)
+
+
+def assert_same_scene(got: Scene, want: Scene, atol=1e-9):
+    assert [(b.id, b.type, b.yaw) for b in got.blocks] == [(b.id, b.type, b.yaw) for b in want.blocks]
+    assert got.targets == want.targets and got.unit == want.unit
+    np.testing.assert_allclose([b.position for b in got.blocks], [b.position for b in want.blocks], atol=atol)
+
+
+def noisy(bodies, rng, pos_sigma=0.003, ang_sigma_deg=2.0):
+    out = []
+    for b in bodies:
+        roll, pitch, dyaw = np.radians(rng.normal(0, ang_sigma_deg, 3))
+        yaw = 2 * math.atan2(b.quaternion[2], b.quaternion[3]) + dyaw
+        q = _rpy_quat(roll, pitch, yaw)
+        out.append(RigidBodyPose(b.name, tuple(np.asarray(b.position) + rng.normal(0, pos_sigma, 3)), q))
+    return out
+
+
+def _rpy_quat(r, p, y):
+    cr, sr, cp, sp, cy, sy = (math.cos(r / 2), math.sin(r / 2), math.cos(p / 2), math.sin(p / 2),
+                              math.cos(y / 2), math.sin(y / 2))
+    return (sr * cp * cy - cr * sp * sy, cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy,
+            cr * cp * cy + sr * sp * sy)
+
+
+def config_for(s, **kw):
+    return RegistrationConfig(body_map=body_map_for(s), **kw)
+
+
+@pytest.mark.parametrize('seed', range(25))
+def test_round_trip_of_generated_scenes_is_exact(seed):
+    s = generate_scene(GeneratorConfig(grid=3 + seed % 3), seed)
+    assert_same_scene(register_scene(scene_to_bodies(s), s, config_for(s)), s)
+
+
+@pytest.mark.parametrize('seed', range(10))
+def test_round_trip_with_placed_blocks_keeps_them_on_the_grid(seed):
+    s = with_placed(generate_scene(GeneratorConfig(grid=4), seed))
+    placed = blocks_on_grid(s, Grid(s))
+    assert len(placed) >= 1
+    got = register_scene(scene_to_bodies(s), s, config_for(s))
+    assert_same_scene(got, s)
+    assert {k: v.tolist() for k, v in blocks_on_grid(got, Grid(got)).items()} == \
+        {k: v.tolist() for k, v in placed.items()}
+
+
+@pytest.mark.parametrize('seed', range(10))
+def test_noise_of_3mm_and_2deg_registers_the_same_scene(seed):
+    rng = np.random.default_rng(seed)
+    s = with_placed(generate_scene(GeneratorConfig(grid=4), seed))
+    got = register_scene(noisy(scene_to_bodies(s), rng), s, config_for(s))
+    # Yaws, heights and grid positions snap back exactly; table blocks keep their noisy x/y.
+    assert [(b.id, b.type, b.yaw) for b in got.blocks] == [(b.id, b.type, b.yaw) for b in s.blocks]
+    grid = Grid(s)
+    on_grid = blocks_on_grid(s, grid)
+    for i, (g, w) in enumerate(zip(got.blocks, s.blocks)):
+        assert g.position[2] == pytest.approx(w.position[2], abs=1e-9)
+        tol = 1e-9 if i in on_grid else 0.015
+        np.testing.assert_allclose(g.position[:2], w.position[:2], atol=tol)
+    assert blocks_on_grid(got, Grid(got)).keys() == on_grid.keys()
+
+
+def test_body_names_map_to_block_ids_and_template_blocks_are_ignored():
+    s = scene()
+    names = {b.id: f'rb_{b.id}' for b in s.blocks}
+    bodies = scene_to_bodies(s, names)
+    assert [b.name for b in bodies] == ['rb_c0', 'rb_c1', 'rb_i0']
+    got = register_scene(bodies[:2], s, RegistrationConfig(body_map=body_map_for(s, names)))
+    assert [b.id for b in got.blocks] == ['c0', 'c1']
+
+
+def test_table_height_offset_is_removed():
+    s = scene()
+    cfg = config_for(s, table_z=0.74)
+    assert_same_scene(register_scene(scene_to_bodies(s, table_z=0.74), s, cfg), s)
+
+
+def test_yaw_snaps_from_just_below_360():
+    s = scene()
+    bodies = scene_to_bodies(s)
+    bodies[2] = RigidBodyPose('i0', bodies[2].position, yaw_quaternion(-93))   # -> 270
+    assert register_scene(bodies, s, config_for(s)).block('i0').yaw == 270
+
+
+# ---- errors: each names the body -------------------------------------------
+
+def _err(s, bodies, cfg=None):
+    with pytest.raises(RadError) as e:
+        register_scene(bodies, s, cfg or config_for(s))
+    return str(e.value)
+
+
+def _with(s, k, **change):
+    bodies = scene_to_bodies(s)
+    b = bodies[k]
+    bodies[k] = RigidBodyPose(change.get('name', b.name), change.get('position', b.position),
+                              change.get('quaternion', b.quaternion), change.get('tracking_valid', True))
+    return bodies
+
+
+def test_unknown_body():
+    s = scene()
+    msg = _err(s, _with(s, 0, name='wand'))
+    assert "'wand'" in msg and 'unknown' in msg
+
+
+def test_untracked_body():
+    s = scene()
+    msg = _err(s, _with(s, 1, tracking_valid=False))
+    assert "'c1'" in msg and 'not tracked' in msg
+
+
+def test_block_on_its_side():
+    s = scene()
+    msg = _err(s, _with(s, 2, quaternion=_rpy_quat(math.pi / 2, 0, 0)))
+    assert "'i0'" in msg and 'tilted 90.0 deg' in msg
+
+
+def test_slightly_tilted_is_refused_beyond_the_tolerance():
+    s = scene()
+    bodies = _with(s, 0, quaternion=_rpy_quat(0, math.radians(12), 0))
+    assert "'c0'" in _err(s, bodies)
+    assert register_scene(bodies, s, config_for(s, tilt_tol_deg=15)).block('c0').yaw == 0
+
+
+def test_yaw_between_multiples_of_90():
+    s = scene()
+    msg = _err(s, _with(s, 2, quaternion=yaw_quaternion(135)))
+    assert "'i0'" in msg and 'yaw 135.0 deg is 45.0 deg from a multiple of 90' in msg
+
+
+def test_height_off_the_lattice():
+    s = scene()
+    msg = _err(s, _with(s, 0, position=(0.4, -0.2, U)))           # half a unit up: floating
+    assert "'c0'" in msg and 'off the unit lattice' in msg
+
+
+def test_pose_in_a_target_region_off_its_grid():
+    s = scene()
+    t = s.targets[0]
+    # 15 mm (0.3 unit) off the cell centre along x: inside the region, off its grid.
+    msg = _err(s, _with(s, 0, position=(t.origin[0] + 0.015, t.origin[1], U / 2)))
+    assert "'c0'" in msg and "target region 'front'" in msg and '15.0 mm off its grid' in msg
+
+
+def test_pose_in_a_target_region_near_the_grid_snaps_onto_it():
+    s = scene()
+    t = s.targets[0]
+    got = register_scene(_with(s, 0, position=(t.origin[0] + 0.006, t.origin[1] - 0.004, U / 2 + 0.003)),
+                         s, config_for(s))
+    assert got.block('c0').position == pytest.approx(t.origin, abs=1e-12)
+
+
+@pytest.mark.parametrize('position, quaternion', [((0.4, math.nan, U / 2), (0, 0, 0, 1)),
+                                                  ((0.4, -0.2, U / 2), (0, 0, math.nan, 1)),
+                                                  ((math.inf, -0.2, U / 2), (0, 0, 0, 1))])
+def test_nan_or_inf_in_a_pose(position, quaternion):
+    s = scene()
+    msg = _err(s, _with(s, 1, position=position, quaternion=quaternion))
+    assert "'c1'" in msg and 'NaN or infinity' in msg
+
+
+def test_quaternion_not_unit_length():
+    s = scene()
+    msg = _err(s, _with(s, 1, quaternion=(0, 0, 0, 2)))
+    assert "'c1'" in msg and 'not unit length' in msg
+    assert "'c1'" in _err(s, _with(s, 1, quaternion=(0, 0, 0, 0)))
+
+
+def test_two_bodies_mapped_to_the_same_block():
+    with pytest.raises(RadError, match=r"'rb1' and 'rb2' are both mapped to block 'c0'"):
+        RegistrationConfig(body_map={'rb1': ('c0', 'cube'), 'rb2': ('c0', 'cube')})
+
+
+def test_body_reported_twice():
+    s = scene()
+    bodies = scene_to_bodies(s)
+    assert "'c0' is reported twice" in _err(s, bodies + bodies[:1])
+
+
+def test_block_type_not_in_the_template():
+    s = scene()
+    cfg = RegistrationConfig(body_map={'c0': ('c0', 'T4'), 'c1': ('c1', 'cube'), 'i0': ('i0', 'I2')})
+    msg = _err(s, scene_to_bodies(s), cfg)
+    assert "'c0'" in msg and "'T4'" in msg
+
+
+def test_overlapping_bodies_are_named():
+    s = scene()
+    msg = _err(s, _with(s, 1, position=(0.4 + 0.01, -0.2, U / 2)))    # c1 onto c0
+    assert "rigid body 'c1'" in msg and 'overlaps' in msg and "(rigid body 'c0')" in msg
+
+
+def test_config_is_checked():
+    for bad in ({'position_tol': 0.6}, {'tilt_tol_deg': math.nan}, {'yaw_tol_deg': 0}, {'table_z': math.inf}):
+        with pytest.raises(RadError):
+            RegistrationConfig(**bad)
