@@ -1,0 +1,105 @@
+"""The Franka Panda of pybullet_data (franka_panda/panda.urdf) as rad uses it.
+
+Fixed base at the world origin, standing on the table top (z = 0). Joint limits
+and velocity limits are read from the URDF itself (plain XML, no pybullet
+import), so they always match the model that is simulated.
+
+Geometry worth knowing (measured in pybullet):
+- link indices: arm joints 0-6, fixed panda_joint8 (7) and panda_hand_joint (8),
+  fingers 9 and 10 (prismatic, 0..0.04 m each, so the hand opens 0.08 m),
+  panda_grasptarget 11, a frame 0.105 m below the hand between the fingertips;
+  it has no collision shape.
+- The fingers close along the hand's y axis. With the hand pointing straight
+  down (hand z = world -z) and hand yaw theta (hand x = (cos theta, sin theta)),
+  the closing axis points along theta - 90 deg: see `closing_yaw_to_hand_yaw`.
+- The hand is mounted 45 deg off the flange, so at HOME (joint 7 = 2.356 rad)
+  the fingers close along world x.
+"""
+
+from __future__ import annotations
+
+import math
+import xml.etree.ElementTree as ET
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+
+URDF_RELATIVE = 'franka_panda/panda.urdf'
+
+JOINT_NAMES = (
+    'panda_joint1', 'panda_joint2', 'panda_joint3', 'panda_joint4',
+    'panda_joint5', 'panda_joint6', 'panda_joint7',
+    'panda_finger_joint1', 'panda_finger_joint2',
+)
+ARM_JOINT_NAMES = JOINT_NAMES[:7]
+FINGER_JOINT_NAMES = JOINT_NAMES[7:]
+
+GRASP_TARGET_LINK = 'panda_grasptarget'
+HAND_LINK = 'panda_hand'
+FINGER_LINKS = ('panda_leftfinger', 'panda_rightfinger')
+
+FINGER_OPEN = 0.04
+"""Each finger's travel when open (m): the hand opens FINGER_OPEN * 2 = 0.08 m."""
+MAX_OPENING = 2 * FINGER_OPEN
+
+HOME = np.array([0.0, -0.215, 0.0, -2.57, 0.0, 2.356, 2.356, FINGER_OPEN, FINGER_OPEN])
+"""The predecessor's home pose, fingers open: hand above the table in front of the robot."""
+
+HAND_YAW_AT_HOME_OFFSET = math.pi / 4
+"""Top-down hand yaw ~= joint1 - joint7 + this (hand mounted 45 deg off the flange);
+used to predict joint 7 for a requested hand yaw."""
+
+
+def urdf_path() -> Path:
+    import pybullet_data      # a plain data package: no banner, unlike pybullet itself
+    return Path(pybullet_data.getDataPath()) / URDF_RELATIVE
+
+
+@lru_cache(maxsize=1)
+def _limits() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    root = ET.parse(urdf_path()).getroot()
+    by_name = {j.get('name'): j for j in root.iter('joint')}
+    lower, upper, velocity = [], [], []
+    for name in JOINT_NAMES:
+        limit = by_name[name].find('limit')
+        lower.append(float(limit.get('lower')))
+        upper.append(float(limit.get('upper')))
+        velocity.append(float(limit.get('velocity')))
+    return np.array(lower), np.array(upper), np.array(velocity)
+
+
+LOWER, UPPER, VELOCITY_LIMITS = (a.copy() for a in _limits())
+"""Joint limits (rad, or m for the fingers) and velocity limits, (9,) in JOINT_NAMES order."""
+for _a in (LOWER, UPPER, VELOCITY_LIMITS):
+    _a.setflags(write=False)
+
+
+def within_limits(q, tol: float = 1e-6) -> bool:
+    """True when every joint of a (9,) or (7,) vector is inside its URDF limits."""
+    q = np.asarray(q, dtype=float)
+    n = len(q)
+    return bool(np.all(q >= LOWER[:n] - tol) and np.all(q <= UPPER[:n] + tol))
+
+
+def closing_yaw_to_hand_yaw(closing_yaw: float) -> float:
+    """Hand yaw (rad) of a top-down hand whose fingers close along `closing_yaw`."""
+    return closing_yaw + math.pi / 2
+
+
+def top_down_quaternion(hand_yaw: float) -> np.ndarray:
+    """Quaternion (x, y, z, w) of the hand pointing down (z = world -z), x at hand_yaw.
+
+    R = Rz(hand_yaw) Rx(pi).
+    """
+    h = hand_yaw / 2
+    # Rz(a) = (0, 0, sin a/2, cos a/2); Rx(pi) = (1, 0, 0, 0); product Rz * Rx:
+    return np.array([math.cos(h), math.sin(h), 0.0, 0.0])
+
+
+def load_panda(client: int, base_position=(0.0, 0.0, 0.0)) -> int:
+    """Load the Panda into a client (fixed base, self-collision on); returns the body id."""
+    import pybullet as p
+    flags = p.URDF_USE_SELF_COLLISION | p.URDF_USE_SELF_COLLISION_EXCLUDE_ALL_PARENTS
+    return p.loadURDF(str(urdf_path()), basePosition=list(base_position), useFixedBase=True,
+                      flags=flags, physicsClientId=client)

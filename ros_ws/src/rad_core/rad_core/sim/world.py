@@ -1,0 +1,364 @@
+"""One PyBullet world: the table, the Franka Panda and a scene's blocks.
+
+Everything that moves the robot or the blocks (GAMP's collision probes, the
+digital twin, registration from motion capture) works on a `World` and passes
+its ``client`` explicitly; there is no global client.
+
+Frames and conventions:
+- World frame = scene frame: the table top is z = 0, the robot base is at the
+  origin, the structure lies in front of it along +x.
+- A block body's frame is the centre of its anchor unit (the type's first unit)
+  turned by the block's yaw about +z, so `block_pose` speaks the scene format
+  directly. The inertial frame is separate (at the centre of mass, along the
+  principal axes of the exact polycube inertia; Bullet would otherwise take the
+  bounding box's). PyBullet's base pose calls talk about the inertial frame;
+  this module converts, so nobody else has to.
+- Collision boxes are a hair narrower than a unit on the side faces and a hair
+  taller (the same choice and reasons as `rad_core.physics`): side-by-side
+  neighbours start apart, stacked layers start in contact instead of falling
+  into each other.
+
+Cost (measured, see tests/core/test_world.py): `preserved()` snapshots what it
+restores by hand (joint states, block poses and velocities, constraint ids) in
+tens of microseconds; saveState costs about 1-10 ms and is used only for
+``preserved(exact=True)``, which also restores Bullet's contact cache so a
+simulation replays bit-identically.
+"""
+
+from __future__ import annotations
+
+import math
+from contextlib import contextmanager
+from dataclasses import dataclass
+from typing import Iterator
+
+import numpy as np
+
+from rad_core.errors import RadError
+from rad_core.physics import polycube_inertia
+from rad_core.scene import Scene
+from rad_core.sim import panda
+from rad_core.sim.panda import JOINT_NAMES
+
+
+@dataclass(frozen=True)
+class WorldConfig:
+    """How the world is built and simulated."""
+
+    gravity: float = -9.81
+    """Gravity along z (m/s^2)."""
+    time_step: float = 1.0 / 240.0
+    """Seconds per `step`; PyBullet's default, the rate its solver is tuned for."""
+    block_mass_per_cube: float = 0.1
+    """Mass of one unit cube (kg), the predecessor's value."""
+    friction: float = 1.0
+    """Lateral friction of blocks and table."""
+    side_gap: float = 0.002
+    """Block collision boxes are this fraction of a unit narrower on each side face."""
+    overlap: float = 0.0002
+    """...and this fraction of a unit taller on top and bottom: stacked layers start in contact."""
+    solver_iterations: int = 100
+    """Constraint solver iterations per step (50 lets off-centre loads creep, see physics.py)."""
+    table_half_extents: tuple[float, float, float] = (1.2, 1.2, 0.025)
+    """Half size of the static table box (m); its top is z = 0, centred under `table_centre`."""
+    table_centre: tuple[float, float] = (0.3, 0.0)
+    """x, y of the table's centre (m); grown by `load_scene` if a scene reaches past it."""
+
+    def __post_init__(self):
+        for name in ('time_step', 'block_mass_per_cube', 'solver_iterations'):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise RadError(f'world config {name}: expected a positive number, got {v!r}')
+        if not (0 <= self.side_gap < 0.25 and 0 <= self.overlap < 0.05):
+            raise RadError('world config: side_gap and overlap are hairs (< 0.25, < 0.05 of a unit)')
+
+
+@dataclass
+class _BlockShape:
+    collision: int
+    visual: int
+    mass: float
+    inertia: list[float]          # principal moments
+    com: tuple[list, list]        # inertial frame in the body (anchor) frame: position, quaternion
+
+
+class World:
+    """Table, robot and blocks in a private DIRECT client.
+
+    Not thread-safe; one World per thread or process. Use as a context manager
+    or call `close`.
+    """
+
+    def __init__(self, scene: Scene | None = None, config: WorldConfig = WorldConfig()):
+        import pybullet as p      # here, not at module top: importing it prints a banner
+        self._p = p
+        self.config = config
+        self.client = p.connect(p.DIRECT)
+        if self.client < 0:
+            raise RuntimeError('cannot start a PyBullet DIRECT client')
+        cid = self.client
+        p.setGravity(0, 0, config.gravity, physicsClientId=cid)
+        p.setTimeStep(config.time_step, physicsClientId=cid)
+        p.setPhysicsEngineParameter(numSolverIterations=int(config.solver_iterations),
+                                    deterministicOverlappingPairs=1, physicsClientId=cid)
+        self.scene: Scene | None = None
+        self.blocks: dict[str, int] = {}
+        self._shapes: dict[tuple, _BlockShape] = {}
+        self._inertial: dict[int, tuple[list, list]] = {}   # body -> inertial frame in body frame
+        self.table = -1
+        self._table_box = (tuple(config.table_centre), tuple(config.table_half_extents))
+        self._make_table(*self._table_box)
+        self.robot = panda.load_panda(cid)
+        self.joint_index: dict[str, int] = {}
+        self.link_index: dict[str, int] = {}
+        for j in range(p.getNumJoints(self.robot, physicsClientId=cid)):
+            info = p.getJointInfo(self.robot, j, physicsClientId=cid)
+            self.joint_index[info[1].decode()] = j
+            self.link_index[info[12].decode()] = j
+        self.joints = [self.joint_index[n] for n in JOINT_NAMES]   # pybullet indices, JOINT_NAMES order
+        self.arm_joints = self.joints[:7]
+        self.finger_joints = self.joints[7:]
+        self.ee_link = self.link_index[panda.GRASP_TARGET_LINK]
+        self.hand_link = self.link_index[panda.HAND_LINK]
+        self.finger_links = tuple(self.link_index[n] for n in panda.FINGER_LINKS)
+        # The base stands on the table: that contact is by design, never a collision.
+        p.setCollisionFilterPair(self.robot, self.table, -1, -1, 0, physicsClientId=cid)
+        for link in (self.link_index['panda_link1'],):
+            p.setCollisionFilterPair(self.robot, self.table, link, -1, 0, physicsClientId=cid)
+        for link in self.finger_links:
+            p.changeDynamics(self.robot, link, lateralFriction=config.friction, physicsClientId=cid)
+        self.set_joint_positions(panda.HOME)
+        if scene is not None:
+            self.load_scene(scene)
+
+    # ---- lifetime --------------------------------------------------------
+    def close(self) -> None:
+        if self.client >= 0:
+            self._p.disconnect(physicsClientId=self.client)
+        self.client = -1
+
+    def __enter__(self) -> 'World':
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def __del__(self):
+        try:
+            self.close()
+        except Exception:         # at interpreter exit pybullet may be gone already
+            pass
+
+    # ---- building --------------------------------------------------------
+    def _make_table(self, centre, half) -> None:
+        p, cid = self._p, self.client
+        shape = p.createCollisionShape(p.GEOM_BOX, halfExtents=list(half), physicsClientId=cid)
+        visual = p.createVisualShape(p.GEOM_BOX, halfExtents=list(half), rgbaColor=[0.80, 0.76, 0.68, 1],
+                                     physicsClientId=cid)
+        self.table = p.createMultiBody(0, shape, visual, basePosition=[centre[0], centre[1], -half[2]],
+                                       physicsClientId=cid)
+        p.changeDynamics(self.table, -1, lateralFriction=self.config.friction, frictionAnchor=1,
+                         physicsClientId=cid)
+
+    def _fit_table(self, scene: Scene) -> None:
+        """Grow the table when a scene reaches past its edge (rare: the default is 2.4 m)."""
+        pts = [scene.unit_positions(b) for b in scene.blocks]
+        pts += [np.vstack(t.bounds(scene.unit)) for t in scene.targets]
+        pts = np.vstack(pts + [np.zeros((1, 3))])
+        (cx, cy), half = self._table_box
+        lo, hi = np.array([cx - half[0], cy - half[1]]), np.array([cx + half[0], cy + half[1]])
+        if np.all(pts[:, :2] > lo + 0.1) and np.all(pts[:, :2] < hi - 0.1):
+            return
+        lo = np.minimum(lo, pts[:, :2].min(axis=0) - 0.3)
+        hi = np.maximum(hi, pts[:, :2].max(axis=0) + 0.3)
+        centre, half = tuple((lo + hi) / 2), (*((hi - lo) / 2), half[2])
+        p, cid = self._p, self.client
+        p.removeBody(self.table, physicsClientId=cid)
+        self._table_box = (centre, half)
+        self._make_table(centre, half)
+        p.setCollisionFilterPair(self.robot, self.table, -1, -1, 0, physicsClientId=cid)
+        p.setCollisionFilterPair(self.robot, self.table, self.link_index['panda_link1'], -1, 0,
+                                 physicsClientId=cid)
+
+    def _shape(self, type_name: str, offsets: np.ndarray, unit: float) -> _BlockShape:
+        key = (type_name, tuple(map(tuple, offsets.tolist())), unit)
+        shape = self._shapes.get(key)
+        if shape is not None:
+            return shape
+        p, cid, cfg = self._p, self.client, self.config
+        from rad_core.render import type_colour
+        n = len(offsets)
+        centres = (offsets * unit).tolist()
+        side, height = unit / 2 - cfg.side_gap * unit, unit / 2 + cfg.overlap * unit
+        collision = p.createCollisionShapeArray([p.GEOM_BOX] * n, halfExtents=[[side, side, height]] * n,
+                                                collisionFramePositions=centres, physicsClientId=cid)
+        vis_half = unit / 2 * 0.98
+        visual = p.createVisualShapeArray([p.GEOM_BOX] * n, halfExtents=[[vis_half] * 3] * n,
+                                          visualFramePositions=centres, physicsClientId=cid)
+        mass = cfg.block_mass_per_cube * n
+        com, tensor = polycube_inertia(offsets, unit, cfg.block_mass_per_cube)
+        moments, axes = np.linalg.eigh(tensor)
+        if np.linalg.det(axes) < 0:
+            axes[:, 2] = -axes[:, 2]
+        shape = _BlockShape(collision, visual, mass, moments.tolist(), (com.tolist(), _quat_from_matrix(axes)))
+        shape.colour = [*type_colour(type_name), 1.0]
+        self._shapes[key] = shape
+        return shape
+
+    def load_scene(self, scene: Scene) -> None:
+        """(Re)create every block body at its scene pose and send the robot HOME.
+
+        Block bodies of the previous scene are removed; constraints on them go with them.
+        """
+        p, cid = self._p, self.client
+        for body in self.blocks.values():
+            p.removeBody(body, physicsClientId=cid)
+        self.blocks.clear()
+        self._inertial.clear()
+        self._fit_table(scene)
+        for block in scene.blocks:
+            offsets = np.asarray(scene.block_types[block.type].offsets, dtype=float)
+            shape = self._shape(block.type, offsets, scene.unit)
+            body = p.createMultiBody(shape.mass, shape.collision, shape.visual,
+                                     basePosition=list(block.position),
+                                     baseOrientation=_yaw_quat(block.yaw),
+                                     baseInertialFramePosition=shape.com[0],
+                                     baseInertialFrameOrientation=shape.com[1], physicsClientId=cid)
+            # mass repeated on purpose: setting the inertia alone may zero it (see physics.py).
+            p.changeDynamics(body, -1, mass=shape.mass, localInertiaDiagonal=shape.inertia,
+                             lateralFriction=self.config.friction, frictionAnchor=1, physicsClientId=cid)
+            p.changeVisualShape(body, -1, rgbaColor=shape.colour, physicsClientId=cid)
+            self._inertial[body] = shape.com
+            self.blocks[block.id] = body
+        self.scene = scene
+        self.set_block_velocities_zero()
+        self.set_joint_positions(panda.HOME)
+
+    # ---- blocks ----------------------------------------------------------
+    def _body(self, block_id: str) -> int:
+        try:
+            return self.blocks[block_id]
+        except KeyError:
+            raise RadError(f'unknown block id {block_id!r}') from None
+
+    def block_pose(self, block_id: str) -> tuple[np.ndarray, np.ndarray]:
+        """Anchor unit centre (3,) and orientation quaternion x, y, z, w (4,) in the world."""
+        p, cid = self._p, self.client
+        body = self._body(block_id)
+        pos, orn = p.getBasePositionAndOrientation(body, physicsClientId=cid)
+        ipos, iorn = p.invertTransform(*self._inertial[body])
+        pos, orn = p.multiplyTransforms(pos, orn, ipos, iorn)
+        return np.array(pos), np.array(orn)
+
+    def set_block_pose(self, block_id: str, position, quaternion=(0.0, 0.0, 0.0, 1.0)) -> None:
+        """Teleport a block (anchor pose) and stop it."""
+        p, cid = self._p, self.client
+        body = self._body(block_id)
+        pos, orn = p.multiplyTransforms(list(map(float, position)), list(map(float, quaternion)),
+                                        *self._inertial[body])
+        p.resetBasePositionAndOrientation(body, pos, orn, physicsClientId=cid)
+        p.resetBaseVelocity(body, [0, 0, 0], [0, 0, 0], physicsClientId=cid)
+
+    def set_block_velocities_zero(self) -> None:
+        for body in self.blocks.values():
+            self._p.resetBaseVelocity(body, [0, 0, 0], [0, 0, 0], physicsClientId=self.client)
+
+    # ---- robot -----------------------------------------------------------
+    def joint_positions(self) -> np.ndarray:
+        """(9,) joint positions in JOINT_NAMES order."""
+        states = self._p.getJointStates(self.robot, self.joints, physicsClientId=self.client)
+        return np.array([s[0] for s in states])
+
+    def joint_velocities(self) -> np.ndarray:
+        states = self._p.getJointStates(self.robot, self.joints, physicsClientId=self.client)
+        return np.array([s[1] for s in states])
+
+    def set_joint_positions(self, q, hold: bool = True) -> None:
+        """Teleport the robot to q, (9,) or (7,) arm only, with zero velocity.
+
+        hold: also make q the position-control target, so stepping keeps the
+        robot there instead of letting it sag under gravity.
+        """
+        p, cid = self._p, self.client
+        q = np.asarray(q, dtype=float).ravel()
+        if len(q) not in (7, 9) or not np.all(np.isfinite(q)):
+            raise RadError(f'expected 7 or 9 finite joint positions, got {len(q)}')
+        joints = self.joints[:len(q)]
+        for j, v in zip(joints, q):
+            p.resetJointState(self.robot, j, float(v), 0.0, physicsClientId=cid)
+        if hold:
+            p.setJointMotorControlArray(self.robot, joints, p.POSITION_CONTROL, targetPositions=q.tolist(),
+                                        physicsClientId=cid)
+
+    def link_pose(self, link: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """World pose of a robot link frame (default: the grasp target between the fingertips)."""
+        link = self.ee_link if link is None else link
+        state = self._p.getLinkState(self.robot, link, computeForwardKinematics=True,
+                                     physicsClientId=self.client)
+        return np.array(state[4]), np.array(state[5])
+
+    # ---- simulation ------------------------------------------------------
+    def step(self, n: int = 1) -> None:
+        for _ in range(int(n)):
+            self._p.stepSimulation(physicsClientId=self.client)
+
+    def _snapshot(self) -> tuple:
+        p, cid = self._p, self.client
+        n = p.getNumJoints(self.robot, physicsClientId=cid)
+        joints = [s[:2] for s in p.getJointStates(self.robot, range(n), physicsClientId=cid)]
+        bodies = {body: (p.getBasePositionAndOrientation(body, physicsClientId=cid),
+                         p.getBaseVelocity(body, physicsClientId=cid)) for body in self.blocks.values()}
+        constraints = {p.getConstraintUniqueId(i, physicsClientId=cid)
+                       for i in range(p.getNumConstraints(physicsClientId=cid))}
+        return joints, bodies, constraints
+
+    def _restore(self, snap: tuple) -> None:
+        p, cid = self._p, self.client
+        joints, bodies, constraints = snap
+        for j, (pos, vel) in enumerate(joints):
+            p.resetJointState(self.robot, j, pos, vel, physicsClientId=cid)
+        for body, ((pos, orn), (lin, ang)) in bodies.items():
+            p.resetBasePositionAndOrientation(body, pos, orn, physicsClientId=cid)
+            p.resetBaseVelocity(body, lin, ang, physicsClientId=cid)
+        now = {p.getConstraintUniqueId(i, physicsClientId=cid)
+               for i in range(p.getNumConstraints(physicsClientId=cid))}
+        for c in now - constraints:
+            p.removeConstraint(c, physicsClientId=cid)
+        if constraints - now:
+            raise RadError('a constraint was removed inside World.preserved(); it cannot be restored')
+
+    @contextmanager
+    def preserved(self, exact: bool = False) -> Iterator['World']:
+        """Everything in the block is undone on exit: joints, block poses and
+        velocities, constraints added inside.
+
+        The default restores by hand (cheap, tens of microseconds for a scene).
+        exact=True also uses saveState/restoreState (about 1-10 ms more) so
+        Bullet's contact cache is restored and a later simulation replays
+        bit-identically. Bodies must not be added or removed inside.
+        """
+        snap = self._snapshot()
+        state = self._p.saveState(physicsClientId=self.client) if exact else None
+        try:
+            yield self
+        finally:
+            self._restore(snap)
+            if state is not None:
+                self._p.restoreState(stateId=state, physicsClientId=self.client)
+                self._p.removeState(state, physicsClientId=self.client)
+
+
+def _yaw_quat(yaw_deg: float) -> list[float]:
+    h = math.radians(yaw_deg) / 2
+    return [0.0, 0.0, math.sin(h), math.cos(h)]
+
+
+def yaw_of_quaternion(q) -> float:
+    """Yaw (deg, in [0, 360)) of a quaternion x, y, z, w that turns about z only."""
+    x, y, z, w = q
+    return math.degrees(math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))) % 360
+
+
+def _quat_from_matrix(r: np.ndarray) -> list[float]:
+    from rad_core.physics import _quat
+    return _quat(r)

@@ -1,0 +1,114 @@
+"""sim.World: the scene's blocks at their scene poses, the Panda at HOME, cheap undo."""
+
+import math
+import time
+
+import numpy as np
+import pytest
+
+from rad_core.errors import RadError
+from rad_core.generator import GeneratorConfig, generate_scene
+from rad_core.sim import panda
+from rad_core.sim.world import World, yaw_of_quaternion
+
+
+@pytest.fixture(scope='module')
+def scene():
+    return generate_scene(GeneratorConfig(grid=4), seed=1)
+
+
+@pytest.fixture
+def world(scene):
+    with World(scene) as w:
+        yield w
+
+
+def test_panda_constants_come_from_the_urdf():
+    assert len(panda.JOINT_NAMES) == 9 and panda.ARM_JOINT_NAMES == panda.JOINT_NAMES[:7]
+    assert panda.LOWER.shape == panda.UPPER.shape == panda.VELOCITY_LIMITS.shape == (9,)
+    # pybullet_data's model: joint 4 in [-3.1416, 0], joint 6 in [-0.0873, 3.8223] (wider than a real Panda).
+    assert panda.LOWER[3] == pytest.approx(-3.1416) and panda.UPPER[5] == pytest.approx(3.8223)
+    assert panda.UPPER[7] == panda.UPPER[8] == 0.04
+    assert panda.within_limits(panda.HOME)
+
+
+def test_blocks_sit_at_their_scene_poses_and_the_robot_at_home(world, scene):
+    assert set(world.blocks) == {b.id for b in scene.blocks}
+    for b in scene.blocks:
+        pos, quat = world.block_pose(b.id)
+        assert np.allclose(pos, b.position, atol=1e-6)
+        assert yaw_of_quaternion(quat) == pytest.approx(b.yaw, abs=1e-4)
+    assert np.allclose(world.joint_positions(), panda.HOME, atol=1e-9)
+    assert world.joint_index['panda_finger_joint2'] == 10 and world.ee_link == 11
+    # The grasp target at HOME is in front of the robot, above the table.
+    pos, _ = world.link_pose()
+    assert 0.3 < pos[0] < 0.6 and 0.1 < pos[2] < 0.4
+
+
+def test_blocks_rest_and_robot_holds_when_stepped(world, scene):
+    world.step(240)
+    for b in scene.blocks:
+        assert np.linalg.norm(world.block_pose(b.id)[0] - b.position) < 1e-3, b.id
+    assert np.allclose(world.joint_positions(), panda.HOME, atol=1e-3)
+
+
+def test_block_mass_is_per_cube(world, scene):
+    import pybullet as p
+    for b in scene.blocks:
+        mass = p.getDynamicsInfo(world.blocks[b.id], -1, physicsClientId=world.client)[0]
+        assert mass == pytest.approx(0.1 * scene.block_types[b.type].size)
+
+
+def test_set_block_pose_round_trips_anchor_frame(world, scene):
+    b = scene.blocks[0]
+    q = [0, 0, math.sin(math.radians(45)), math.cos(math.radians(45))]
+    world.set_block_pose(b.id, [0.1, 0.4, 0.3], q)
+    pos, quat = world.block_pose(b.id)
+    assert np.allclose(pos, [0.1, 0.4, 0.3], atol=1e-6)
+    assert abs(abs(np.dot(quat, q)) - 1) < 1e-6
+    with pytest.raises(RadError, match='unknown block id'):
+        world.block_pose('nope')
+
+
+def test_preserved_undoes_joints_blocks_and_constraints(world, scene):
+    import pybullet as p
+    b = scene.blocks[0]
+    before_q, before_pose = world.joint_positions(), world.block_pose(b.id)
+    for exact in (False, True):
+        with world.preserved(exact=exact):
+            world.set_joint_positions(np.zeros(7))
+            world.set_block_pose(b.id, [0.0, 0.5, 0.5])
+            p.createConstraint(world.robot, world.ee_link, world.blocks[b.id], -1, p.JOINT_FIXED,
+                               [0, 0, 0], [0, 0, 0], [0, 0, 0], physicsClientId=world.client)
+            world.step(5)
+        assert np.allclose(world.joint_positions(), before_q)
+        assert np.allclose(world.block_pose(b.id)[0], before_pose[0])
+        assert p.getNumConstraints(physicsClientId=world.client) == 0
+
+
+def test_preserved_is_cheap(world):
+    t = time.perf_counter()
+    for _ in range(50):
+        with world.preserved():
+            world.set_joint_positions(np.zeros(9))
+    per_call = (time.perf_counter() - t) / 50
+    print(f'preserved(): {per_call * 1e6:.0f} us per use')
+    assert per_call < 2e-3
+
+
+def test_bad_joint_vectors_are_refused(world):
+    with pytest.raises(RadError):
+        world.set_joint_positions(np.zeros(5))
+    with pytest.raises(RadError):
+        world.set_joint_positions([np.nan] * 9)
+
+
+def test_load_scene_replaces_blocks_and_close_is_idempotent(scene):
+    w = World()
+    assert w.blocks == {}
+    w.load_scene(scene)
+    first = dict(w.blocks)
+    w.load_scene(scene)
+    assert set(w.blocks) == set(first)
+    w.close()
+    w.close()
