@@ -51,6 +51,11 @@ class Outcome(str, enum.Enum):
     INVALID_OFF_GRID = 'invalid_off_grid'
     INVALID_OVERLAP = 'invalid_overlap'
     INVALID_UNSTABLE = 'invalid_unstable'
+    # With the robot in the loop (the paper's Table II): no feasible grasp (f_g), a
+    # grasp but no feasible placement (f_p), or the motion moved another block.
+    INVALID_GRASP = 'invalid_grasp'
+    INVALID_PLACEMENT = 'invalid_placement'
+    INVALID_DISTURBED = 'invalid_disturbed'
 
     @property
     def is_invalid(self) -> bool:
