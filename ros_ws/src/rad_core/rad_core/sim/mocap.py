@@ -17,8 +17,8 @@ tolerances, and refuses what it cannot express:
   other blocks, so their anchor is at u/2 + k u);
 - x/y to the target grid when the block is inside a target region, so a placed
   block registers exactly on its cells and the grid, the allocation and the MDP
-  see it as placed. Blocks elsewhere keep their measured x/y: the table is not a
-  lattice, and snapping there would invent collisions or gaps.
+  see it as placed. Blocks elsewhere keep their measured x/y (to a micrometre):
+  the table is not a lattice, and snapping there would invent collisions or gaps.
 
 Whatever survives is validated by `Scene.from_dict` (overlaps, blocks half in a
 region, blocks below the table), with errors translated to the body's name.
@@ -40,6 +40,10 @@ QUAT_NORM_TOL = 1e-3
 # Snapped coordinates are rounded to a nanometre so that a round trip gives
 # bit-identical numbers for positions that were already on the lattice.
 _DECIMALS = 9
+# Measured coordinates (blocks on the table) are rounded to a micrometre: far
+# below any tracker's noise, and it keeps float32 artefacts of a simulator or
+# a message (-0.20000000298) out of the scenes users read.
+_MEASURED_DECIMALS = 6
 
 
 @dataclass(frozen=True)
@@ -185,7 +189,8 @@ def _snap(body: RigidBodyPose, template: Scene, block_type, config: Registration
     if abs(height - level) > config.position_tol:
         raise RadError(f'rigid body {name!r}: height {pos[2]:.4f} m is {abs(height - level) * u * 1000:.1f} mm '
                        f'off the unit lattice above the table (limit {config.position_tol * u * 1000:.1f} mm)')
-    out = [float(pos[0]), float(pos[1]), round(u / 2 + level * u, _DECIMALS)]
+    out = [round(float(pos[0]), _MEASURED_DECIMALS), round(float(pos[1]), _MEASURED_DECIMALS),
+           round(u / 2 + level * u, _DECIMALS)]
 
     region = _region_of(template, snapped_yaw, block_type, np.array(out))
     if region is not None:
