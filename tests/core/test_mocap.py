@@ -123,6 +123,14 @@ def test_table_height_offset_is_removed():
     assert_same_scene(register_scene(scene_to_bodies(s, table_z=0.74), s, cfg), s)
 
 
+def test_measured_positions_are_rounded_to_the_resolution():
+    s = scene()
+    bodies = _with(s, 0, position=(0.40004, -0.20000000298, U / 2))
+    assert register_scene(bodies, s, config_for(s)).block('c0').position == (0.4, -0.2, U / 2)
+    got = register_scene(bodies, s, config_for(s, resolution=0)).block('c0').position
+    assert got == (0.40004, -0.20000000298, U / 2)
+
+
 def test_yaw_snaps_from_just_below_360():
     s = scene()
     bodies = scene_to_bodies(s)
@@ -240,6 +248,6 @@ def test_overlapping_bodies_are_named():
 
 
 def test_config_is_checked():
-    for bad in ({'position_tol': 0.6}, {'tilt_tol_deg': math.nan}, {'yaw_tol_deg': 0}, {'table_z': math.inf}):
+    for bad in ({'resolution': -1e-4}, {'position_tol': 0.6}, {'tilt_tol_deg': math.nan}, {'yaw_tol_deg': 0}, {'table_z': math.inf}):
         with pytest.raises(RadError):
             RegistrationConfig(**bad)

@@ -259,3 +259,14 @@ def test_config_is_checked():
         TwinConfig(finger_force=math.nan)
     with pytest.raises(RadError):
         TwinConfig(arm_forces=(1.0,))
+
+
+@pytest.mark.parametrize('seed', [1, 3])
+def test_a_twin_at_rest_reports_the_scene_it_was_loaded_with(seed):
+    from rad_core.generator import GeneratorConfig, generate_scene
+    scene = generate_scene(GeneratorConfig(grid=4), seed)
+    with World() as world:
+        twin = Twin(world)
+        twin.load_scene(scene)
+        twin.settle(2.0)
+        assert twin.current_scene(scene).to_dict() == scene.to_dict()

@@ -17,8 +17,9 @@ tolerances, and refuses what it cannot express:
   other blocks, so their anchor is at u/2 + k u);
 - x/y to the target grid when the block is inside a target region, so a placed
   block registers exactly on its cells and the grid, the allocation and the MDP
-  see it as placed. Blocks elsewhere keep their measured x/y (to a micrometre):
-  the table is not a lattice, and snapping there would invent collisions or gaps.
+  see it as placed. Blocks elsewhere keep their measured x/y, rounded to the
+  config's ``resolution``: the table is not a lattice, and snapping there would
+  invent collisions or gaps.
 
 Whatever survives is validated by `Scene.from_dict` (overlaps, blocks half in a
 region, blocks below the table), with errors translated to the body's name.
@@ -40,10 +41,6 @@ QUAT_NORM_TOL = 1e-3
 # Snapped coordinates are rounded to a nanometre so that a round trip gives
 # bit-identical numbers for positions that were already on the lattice.
 _DECIMALS = 9
-# Measured coordinates (blocks on the table) are rounded to a micrometre: far
-# below any tracker's noise, and it keeps float32 artefacts of a simulator or
-# a message (-0.20000000298) out of the scenes users read.
-_MEASURED_DECIMALS = 6
 
 
 @dataclass(frozen=True)
@@ -73,6 +70,11 @@ class RegistrationConfig:
     yaw_tol_deg: the most the yaw may be away from a multiple of 90 degrees.
         A block turned 45 degrees cannot be expressed in a scene at all.
     table_z: height of the table top in the motion-capture frame (m).
+    resolution: measured x/y (blocks off the grid) are rounded to this (m).
+        0.1 mm is finer than a tracker's accuracy (0.1-0.5 mm), and it keeps
+        float32 artefacts (-0.20000000298) and the micrometre creep of resting
+        bodies in a simulator out of the scene, so a twin at rest reports the
+        scene it was loaded with. 0 keeps every digit.
     """
 
     body_map: dict[str, tuple[str, str]] = field(default_factory=dict)
@@ -80,6 +82,7 @@ class RegistrationConfig:
     tilt_tol_deg: float = 10.0
     yaw_tol_deg: float = 15.0
     table_z: float = 0.0
+    resolution: float = 1e-4
 
     def __post_init__(self):
         if not (math.isfinite(self.position_tol) and 0 < self.position_tol < 0.5):
@@ -90,6 +93,8 @@ class RegistrationConfig:
             raise RadError(f'yaw_tol_deg must be in (0, 45), got {self.yaw_tol_deg!r}')
         if not math.isfinite(self.table_z):
             raise RadError(f'table_z must be finite, got {self.table_z!r}')
+        if not (math.isfinite(self.resolution) and 0 <= self.resolution <= 0.01):
+            raise RadError(f'resolution must be in 0..0.01 m, got {self.resolution!r}')
         blocks = {}
         for body, entry in self.body_map.items():
             if not (isinstance(entry, (tuple, list)) and len(entry) == 2):
@@ -189,7 +194,7 @@ def _snap(body: RigidBodyPose, template: Scene, block_type, config: Registration
     if abs(height - level) > config.position_tol:
         raise RadError(f'rigid body {name!r}: height {pos[2]:.4f} m is {abs(height - level) * u * 1000:.1f} mm '
                        f'off the unit lattice above the table (limit {config.position_tol * u * 1000:.1f} mm)')
-    out = [round(float(pos[0]), _MEASURED_DECIMALS), round(float(pos[1]), _MEASURED_DECIMALS),
+    out = [_quantise(pos[0], config.resolution), _quantise(pos[1], config.resolution),
            round(u / 2 + level * u, _DECIMALS)]
 
     region = _region_of(template, snapped_yaw, block_type, np.array(out))
@@ -203,6 +208,10 @@ def _snap(body: RigidBodyPose, template: Scene, block_type, config: Registration
         for a in range(2):
             out[a] = round(float(origin[a] + u * np.round(idx[a])), _DECIMALS)
     return out, snapped_yaw
+
+
+def _quantise(x: float, step: float) -> float:
+    return float(x) if step == 0 else round(round(float(x) / step) * step, _DECIMALS)
 
 
 def _region_of(scene: Scene, yaw: int, block_type, anchor: np.ndarray):
