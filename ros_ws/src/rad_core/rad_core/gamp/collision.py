@@ -1,0 +1,156 @@
+"""Collision probes for GAMP: callables built over a World, as motion planners want them.
+
+`make_collision_fn(world, ...)` returns ``fn(q) -> reason`` ('' when free). It
+moves the robot (and the carried block) in the world, so call it only inside
+``world.preserved()``; the planner wraps a whole plan in one such block.
+
+What counts as a collision:
+- a robot link (base excluded: it stands on the table) closer than
+  ``robot_margin`` to the table or to any block not excluded;
+- two robot links that are not rigidly joined and closer than ``self_margin``;
+- the carried block penetrating another block or the table by more than
+  ``block_penetration``: its collision boxes are a hair narrower than a unit at
+  the sides and a hair taller (see sim.world), so face contact with a neighbour
+  or the block below reads as distance ~0, an overlap of a real cube as -unit.
+
+Candidates are pruned with Bullet's broadphase (getOverlappingObjects on each
+link's bounding box) and then measured exactly with getClosestPoints.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable, Iterable
+
+import numpy as np
+
+from rad_core.sim.world import World
+
+CollisionFn = Callable[[np.ndarray], str]
+
+# Links that move rigidly together (link7, link8, hand) and the fingers on the hand
+# are never checked against each other; nor are neighbours in the chain.
+_WRIST_GROUP = ('panda_link7', 'panda_link8', 'panda_hand', 'panda_leftfinger', 'panda_rightfinger')
+_LINK_LABEL = {'panda_hand': 'hand', 'panda_leftfinger': 'left finger', 'panda_rightfinger': 'right finger'}
+
+
+@dataclass(frozen=True)
+class CollisionConfig:
+    """Clearances of the collision probes (m)."""
+
+    robot_margin: float = 0.002
+    """The robot must keep this far from the table and from blocks."""
+    self_margin: float = 0.0
+    """Robot links must not touch each other."""
+    block_penetration: float = 0.002
+    """The carried block may touch others (face contact) but not sink in deeper than this:
+    room for the IK residual (accepted up to 2 mm, usually under 0.2 mm) that places
+    the held block; a real overlap of two cubes reads as a whole unit."""
+
+
+@dataclass(frozen=True)
+class Attachment:
+    """A block held in the hand: its anchor frame expressed in the grasp-target frame."""
+
+    block_id: str
+    position: tuple[float, float, float]
+    quaternion: tuple[float, float, float, float]
+
+
+def attachment_from_world(world: World, block_id: str) -> Attachment:
+    """The attachment that holds a block where it is now, relative to the grasp target now."""
+    p = world._p
+    ee_pos, ee_orn = world.link_pose()
+    b_pos, b_orn = world.block_pose(block_id)
+    inv_pos, inv_orn = p.invertTransform(ee_pos.tolist(), ee_orn.tolist())
+    pos, orn = p.multiplyTransforms(inv_pos, inv_orn, b_pos.tolist(), b_orn.tolist())
+    return Attachment(block_id, tuple(pos), tuple(orn))
+
+
+def place_attached(world: World, attachment: Attachment) -> None:
+    """Move the held block to where the hand holds it now."""
+    p = world._p
+    ee_pos, ee_orn = world.link_pose()
+    pos, orn = p.multiplyTransforms(ee_pos.tolist(), ee_orn.tolist(), attachment.position, attachment.quaternion)
+    world.set_block_pose(attachment.block_id, pos, orn)
+
+
+def robot_links(world: World) -> list[int]:
+    """Robot links that can hit something (base and shapeless links left out)."""
+    p, cid = world._p, world.client
+    names = {v: k for k, v in world.link_index.items()}
+    return [j for j in sorted(names) if names[j] != 'panda_link1' and names[j] != 'panda_grasptarget'
+            and p.getCollisionShapeData(world.robot, j, physicsClientId=cid)]
+
+
+def self_collision_pairs(world: World) -> list[tuple[int, int]]:
+    """Link pairs that can meet: not chain neighbours, not both in the wrist group."""
+    links = [-1, world.link_index['panda_link1']] + robot_links(world)
+    wrist = {world.link_index[n] for n in _WRIST_GROUP}
+    return [(a, b) for i, a in enumerate(links) for b in links[i + 1:]
+            if b - a >= 2 and not (a in wrist and b in wrist)]
+
+
+def make_collision_fn(world: World, exclude: Iterable[str] = (), attached: Attachment | None = None,
+                      config: CollisionConfig = CollisionConfig()) -> CollisionFn:
+    """fn(q) -> '' when configuration q (9,) is free, else what collides (one reason).
+
+    exclude: block ids the robot may touch (none, usually). The attached block is
+    never an obstacle of the robot (the fingers hold it), but it is checked
+    against every other block and the table.
+    """
+    p, cid, robot = world._p, world.client, world.robot
+    exclude = set(exclude)
+    if attached is not None:
+        exclude.add(attached.block_id)
+    names = {body: f'block {bid}' for bid, body in world.blocks.items()}
+    names[world.table] = 'the table'
+    obstacles = {body for bid, body in world.blocks.items() if bid not in exclude} | {world.table}
+    link_name = {v: _LINK_LABEL.get(k, k.replace('panda_', '')) for k, v in world.link_index.items()}
+    link_name[-1] = 'base'
+    links = robot_links(world)
+    pairs = self_collision_pairs(world)
+    carried = world.blocks[attached.block_id] if attached is not None else None
+    carried_obstacles = (obstacles - {carried}) if carried is not None else set()
+    m = config.robot_margin
+
+    def collision(q: np.ndarray) -> str:
+        world.set_joint_positions(q, hold=False)
+        if attached is not None:
+            place_attached(world, attached)
+        for link in links:
+            lo, hi = p.getAABB(robot, link, physicsClientId=cid)
+            near = p.getOverlappingObjects([v - m for v in lo], [v + m for v in hi], physicsClientId=cid) or ()
+            for body in {b for b, _ in near if b in obstacles}:
+                pts = p.getClosestPoints(robot, body, m, linkIndexA=link, physicsClientId=cid)
+                if any(pt[8] < m for pt in pts):
+                    return f'{link_name[link]} hits {names[body]}'
+        for a, b in pairs:
+            pts = p.getClosestPoints(robot, robot, config.self_margin, linkIndexA=a, linkIndexB=b,
+                                     physicsClientId=cid)
+            if any(pt[8] < config.self_margin for pt in pts):
+                return f'self-collision {link_name[a]} / {link_name[b]}'
+        if carried is not None:
+            lo, hi = p.getAABB(carried, -1, physicsClientId=cid)
+            near = p.getOverlappingObjects(lo, hi, physicsClientId=cid) or ()
+            for body in sorted({b for b, _ in near if b in carried_obstacles}):
+                pts = p.getClosestPoints(carried, body, 0.0, physicsClientId=cid)
+                if any(pt[8] < -config.block_penetration for pt in pts):
+                    return f'carried block hits {names[body]}'
+        return ''
+
+    return collision
+
+
+def check_path(collision_fn: CollisionFn, q_from: np.ndarray, q_to: np.ndarray,
+               max_step: float = 0.05) -> str:
+    """Probe the straight joint-space segment q_from -> q_to at intermediate points no
+    more than max_step (rad, or m for fingers) apart, end point included, start
+    excluded (it was checked as the previous waypoint). '' when free."""
+    q_from, q_to = np.asarray(q_from, dtype=float), np.asarray(q_to, dtype=float)
+    n = max(1, int(np.ceil(np.max(np.abs(q_to - q_from)) / max_step)))
+    for k in range(1, n + 1):
+        reason = collision_fn(q_from + (q_to - q_from) * (k / n))
+        if reason:
+            return reason
+    return ''

@@ -1,0 +1,88 @@
+"""The predefined top-down grasps of a block type (the paper's Sec. IV-C).
+
+A grasp is (unit, yaw): the hand points straight down, the grasp target (the
+point between the fingertips) sits at the centre of unit `unit`, and the
+fingers close along the block's own x axis (yaw 0) or y axis (yaw 90). 180 and
+270 are the same grasps: the Panda hand is symmetric under a half turn, and
+which of the two hand yaws is used is the IK's choice (joint 7's range).
+
+The rule, from the hand's geometry (pybullet_data's Panda, measured): the
+fingers open 0.08 m at most and their pads span from 11 mm below the grasp
+target to well above it, so they close on exactly one unit, 1 unit wide, around
+its centre height, and pass the levels above it on their way down. A grasp of
+unit u closing along axis d is offered when
+
+1. no unit of the same block lies above u (u is the top of its column: the
+   hand comes from above), and
+2. no unit of the same block lies in the two finger columns u + d and u - d at
+   u's height or above (a finger would land on it or hit it on the way down).
+
+Units below u's level are never touched (the fingertips stay within u). What
+the rule cannot see (the hand's palm, 0.21 x 0.07 m, passing 10 mm above u's
+top, or neighbouring blocks) is left to the collision checks of the planner,
+which probe the real geometry. Only units up to `MAX_GRASP_WIDTH` wide can be
+taken: the open hand must clear the unit by a few millimetres on each side.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from rad_core.blocks import BlockType
+from rad_core.sim import panda
+
+MAX_GRASP_WIDTH = panda.MAX_OPENING - 2 * 0.005
+"""Widest unit (m) the open hand can take: 0.08 m opening less 5 mm clearance per side."""
+
+GRASP_YAWS = (0, 90)
+
+
+@dataclass(frozen=True)
+class Grasp:
+    """Fingers close on unit `unit` (index into the type's offsets) along the
+    block's x axis (yaw 0) or y axis (yaw 90)."""
+
+    unit: int
+    yaw: int
+
+    def __str__(self) -> str:
+        return f'unit {self.unit} yaw {self.yaw}'
+
+
+def block_grasps(btype: BlockType, unit_size: float = 0.05) -> tuple[Grasp, ...]:
+    """Every grasp the rule of the module docstring allows, best first (`grasp_order`)."""
+    if unit_size > MAX_GRASP_WIDTH:
+        return ()
+    offsets = np.asarray(btype.offsets, dtype=np.int64)
+    cells = {tuple(o) for o in offsets.tolist()}
+    out = []
+    for u, (x, y, z) in enumerate(offsets.tolist()):
+        if any((x, y, z + k) in cells for k in range(1, _height(offsets) + 1)):
+            continue
+        for yaw in GRASP_YAWS:
+            dx, dy = (1, 0) if yaw == 0 else (0, 1)
+            blocked = any((x + s * dx, y + s * dy, z + k) in cells
+                          for s in (1, -1) for k in range(0, _height(offsets) + 1))
+            if not blocked:
+                out.append(Grasp(u, yaw))
+    return tuple(grasp_order(btype, out))
+
+
+def grasp_order(btype: BlockType, grasps) -> list[Grasp]:
+    """Heuristic order: units nearest (in plan) to the centre of mass first, so the
+    block hangs level and the fingers carry little torque; then the higher unit
+    (the hand stays farther from the table and neighbours); then yaw 0 before 90."""
+    offsets = np.asarray(btype.offsets, dtype=float)
+    com = offsets.mean(axis=0)
+
+    def key(g: Grasp):
+        o = offsets[g.unit]
+        return (round(float(np.hypot(*(o[:2] - com[:2]))), 6), -o[2], g.yaw, g.unit)
+
+    return sorted(grasps, key=key)
+
+
+def _height(offsets: np.ndarray) -> int:
+    return int(offsets[:, 2].max() - offsets[:, 2].min())

@@ -1,0 +1,224 @@
+"""Inverse kinematics of the Panda's grasp target for top-down hand poses.
+
+pybullet's calculateInverseKinematics is one damped-least-squares run, not a
+guaranteed solution: with null-space terms (joint limits, rest pose) it lands
+1-8 mm off because the rest-pose pull fights the target; without them it
+converges to < 0.1 mm in one or two calls but may leave the joint limits.
+So each attempt does both (measured, see benchmarks/bench_gamp.py):
+
+1. one null-space call from the seed, with limits and a rest pose whose joint 1
+   points at the target and whose joint 7 is the one the requested hand yaw
+   needs (this picks the arm's elbow-up, wrist-centred branch);
+2. up to `refine_calls` plain calls, each from the previous answer, until the
+   forward-kinematics residual is under a tenth of the tolerance;
+3. the answer is accepted only when the FK residual (position and orientation)
+   is within tolerance and every joint is within the URDF limits.
+
+Attempts are seeded in turn from the caller's seeds (e.g. the previous
+waypoint, so a path stays on one branch), from HOME turned towards the target,
+and from random configurations within the limits drawn from the caller's
+generator. Every call runs inside ``world.preserved()``: the world is unchanged.
+
+The Panda hand is symmetric under a 180 deg turn about its axis, so a grasp
+with closing direction phi can be taken with hand yaw phi + 90 or phi + 270 deg;
+`solve_top_down` tries first the one that keeps joint 7 near the middle of its
+range (+-166 deg), and the other if that fails.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+from rad_core.sim import panda
+from rad_core.sim.world import World
+
+
+SHOULDER = np.array([0.0, 0.0, 0.333])
+
+
+@dataclass(frozen=True)
+class IkConfig:
+    """Tolerances and effort of one IK solve."""
+
+    position_tol: float = 0.002
+    """Accepted FK position residual of the grasp target (m)."""
+    orientation_tol_deg: float = 2.0
+    """Accepted FK orientation residual (deg, angle of the relative rotation)."""
+    solver_iterations: int = 100
+    """maxNumIterations of each pybullet call."""
+    refine_calls: int = 6
+    """Plain (no null space) calls after the null-space one, per attempt."""
+    random_seeds: int = 4
+    """Random restarts after the caller's seeds and HOME."""
+    min_height: float = 0.005
+    """Targets lower than this (m above the table top) are refused at once: the
+    fingertips reach 11 mm below the grasp target, so lower means into the table."""
+    max_reach: float = 1.0
+    """Targets farther than this from the shoulder (joint 2, 0.333 m above the base)
+    are refused at once (the arm spans 0.86 m shoulder to flange, 1.07 m to the grasp
+    target; a top-down hand reaches about 0.8 m out)."""
+
+
+@dataclass
+class IkResult:
+    """A joint solution (9,) with the fingers as seeded, or why there is none."""
+
+    ok: bool
+    q: np.ndarray | None
+    position_error: float           # m, of the best attempt (accepted or not)
+    orientation_error_deg: float
+    reason: str = ''
+    calls: int = 0
+    seconds: float = 0.0
+    hand_yaw: float = 0.0            # rad, the hand yaw that was solved for
+
+
+def orientation_error_deg(q1, q2) -> float:
+    """Angle (deg) of the rotation between two quaternions x, y, z, w."""
+    d = abs(float(np.dot(q1, q2))) / (np.linalg.norm(q1) * np.linalg.norm(q2))
+    return math.degrees(2 * math.acos(min(1.0, d)))
+
+
+def predicted_joint7(position, hand_yaw: float) -> float:
+    """Joint 7 (rad, wrapped to +-pi) of a top-down pose, from the base yaw to the target."""
+    j1 = math.atan2(position[1], position[0])
+    return _wrap(j1 + panda.HAND_YAW_AT_HOME_OFFSET - hand_yaw)
+
+
+def hand_yaw_options(position, closing_yaw: float) -> list[float]:
+    """The two hand yaws that close the fingers along closing_yaw, best wrist first."""
+    base = panda.closing_yaw_to_hand_yaw(closing_yaw)
+    options = [_wrap(base), _wrap(base + math.pi)]
+    return sorted(options, key=lambda y: abs(predicted_joint7(position, y)))
+
+
+def solve_pose(world: World, position, quaternion, seeds: Sequence[np.ndarray] = (),
+               config: IkConfig = IkConfig(), rng: np.random.Generator | None = None,
+               rest_joint7: float | None = None) -> IkResult:
+    """Joint positions putting the grasp target at (position, quaternion), or a failure.
+
+    seeds: (9,) or (7,) configurations tried first, in order. The fingers of the
+    answer are those of the first seed (HOME's when there is none).
+    """
+    start = time.perf_counter()
+    p, cid, robot = world._p, world.client, world.robot
+    position = np.asarray(position, dtype=float)
+    quaternion = np.asarray(quaternion, dtype=float)
+    rng = rng if rng is not None else np.random.default_rng(0)
+    fingers = panda.HOME[7:]
+    if len(seeds):
+        s0 = np.asarray(seeds[0], dtype=float)
+        fingers = s0[7:9] if len(s0) == 9 else fingers
+    rest = panda.HOME.copy()
+    rest[0] = math.atan2(position[1], position[0])
+    if rest_joint7 is not None:
+        rest[6] = rest_joint7
+    rest[7:] = fingers
+    candidates = [_full(s, fingers) for s in seeds] + [rest]
+    lo, hi = panda.LOWER, panda.UPPER
+    limits = dict(lowerLimits=lo.tolist(), upperLimits=hi.tolist(), jointRanges=(hi - lo).tolist(),
+                  restPoses=rest.tolist())
+    best = (math.inf, math.inf, None)
+    calls = 0
+    n_attempts = len(candidates) + config.random_seeds
+    with world.preserved():
+        for attempt in range(n_attempts):
+            seed = candidates[attempt] if attempt < len(candidates) else _random_q(rng, fingers)
+            world.set_joint_positions(seed, hold=False)
+            q = np.array(p.calculateInverseKinematics(
+                robot, world.ee_link, position.tolist(), quaternion.tolist(),
+                maxNumIterations=config.solver_iterations, residualThreshold=1e-6,
+                physicsClientId=cid, **limits))
+            calls += 1
+            for _ in range(config.refine_calls + 1):
+                q[7:] = fingers
+                world.set_joint_positions(q, hold=False)
+                pos_err, orn_err = _residual(world, position, quaternion)
+                if pos_err < config.position_tol / 10 and orn_err < config.orientation_tol_deg / 10:
+                    break
+                q = np.array(p.calculateInverseKinematics(
+                    robot, world.ee_link, position.tolist(), quaternion.tolist(),
+                    maxNumIterations=config.solver_iterations, residualThreshold=1e-6,
+                    physicsClientId=cid))
+                calls += 1
+            q[7:] = fingers
+            within = panda.within_limits(q)
+            if within and pos_err <= config.position_tol and orn_err <= config.orientation_tol_deg:
+                return IkResult(True, q, pos_err, orn_err, '', calls, time.perf_counter() - start)
+            score = pos_err + 0.001 * orn_err + (0.0 if within else 1.0)
+            if score < best[0] + 0.001 * best[1] + (0.0 if best[2] is None or best[2] else 1.0):
+                best = (pos_err, orn_err, within)
+    pos_err, orn_err, within = best
+    if within is False:
+        reason = (f'unreachable: every solution leaves the joint limits (best residual '
+                  f'{pos_err * 1000:.0f} mm, {orn_err:.1f} deg)')
+    else:
+        reason = f'unreachable: best residual {pos_err * 1000:.0f} mm, {orn_err:.1f} deg'
+    return IkResult(False, None, pos_err, orn_err, reason, calls, time.perf_counter() - start)
+
+
+def solve_top_down(world: World, position, closing_yaw: float, seeds: Sequence[np.ndarray] = (),
+                   config: IkConfig = IkConfig(), rng: np.random.Generator | None = None,
+                   hand_yaw: float | None = None) -> IkResult:
+    """IK for the hand pointing straight down with its fingers closing along closing_yaw (rad).
+
+    Both hand yaws of the symmetric hand are tried, the one with joint 7 nearer
+    the middle first, unless hand_yaw (rad) fixes one (e.g. a placement must keep
+    the hand yaw the grasp implied).
+    """
+    position = np.asarray(position, dtype=float)
+    refused = out_of_workspace(position, config)
+    if refused:
+        return IkResult(False, None, math.inf, math.inf, refused)
+    options = [hand_yaw] if hand_yaw is not None else hand_yaw_options(position, closing_yaw)
+    first, total_calls, total_s = None, 0, 0.0
+    for yaw in options:
+        result = solve_pose(world, position, panda.top_down_quaternion(yaw), seeds, config, rng,
+                            rest_joint7=predicted_joint7(position, yaw))
+        total_calls += result.calls
+        total_s += result.seconds
+        result.hand_yaw = yaw
+        if result.ok:
+            result.calls, result.seconds = total_calls, total_s
+            return result
+        if first is None or result.position_error < first.position_error:
+            first = result
+    first.calls, first.seconds = total_calls, total_s
+    return first
+
+
+def out_of_workspace(position: np.ndarray, config: IkConfig = IkConfig()) -> str:
+    """Why a grasp-target position cannot be reached whatever the joints, or ''."""
+    if not np.all(np.isfinite(position)):
+        return 'unreachable: target position is not finite'
+    if position[2] < config.min_height:
+        return f'unreachable: target z = {position[2]:.3f} m is below the table top'
+    reach = float(np.linalg.norm(position - SHOULDER))
+    if reach > config.max_reach:
+        return f'unreachable: target is {reach:.2f} m from the shoulder (reach < {config.max_reach:.2f} m)'
+    return ''
+
+
+def _residual(world: World, position: np.ndarray, quaternion: np.ndarray) -> tuple[float, float]:
+    pos, orn = world.link_pose(world.ee_link)
+    return float(np.linalg.norm(pos - position)), orientation_error_deg(orn, quaternion)
+
+
+def _full(q, fingers) -> np.ndarray:
+    q = np.asarray(q, dtype=float)
+    return np.concatenate([q[:7], fingers]) if len(q) == 7 else np.concatenate([q[:7], fingers])
+
+
+def _random_q(rng: np.random.Generator, fingers) -> np.ndarray:
+    q = rng.uniform(panda.LOWER, panda.UPPER)
+    q[7:] = fingers
+    return q
+
+
+def _wrap(a: float) -> float:
+    return (a + math.pi) % (2 * math.pi) - math.pi

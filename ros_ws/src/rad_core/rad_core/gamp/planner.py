@@ -1,0 +1,338 @@
+"""Grasp and motion planning for one assembly action (the paper's Sec. IV-C).
+
+Given the world as it is (blocks where they lie, robot at `start`) and an action
+(which block, its final anchor position and yaw), find a PAIR of feasible grasp
+and placement configurations, then the motion between them:
+
+    start -> above grasp -> (down) grasp -> close -> (up) lift -> above placement
+          -> (down) place -> open -> (up) retreat
+
+For each predefined grasp (`grasps.block_grasps`, best first) and each of the
+two hand yaws of the symmetric hand, the pick half is checked first: IK at the
+grasp and on every vertical waypoint up to the approach height, no collision of
+the robot (fingers open) with the table, any block (the grasped one included:
+the open fingers must clear it) or itself, at every waypoint and along every
+joint-space segment between them (`collision.check_path`), then the lift with
+the block held. Only then the placement half with the same grasp carried over:
+the hand yaw turned by the action's rotation, IK at the placement and on the
+vertical waypoints above it, the robot clear of everything and the carried
+block not penetrating anything beyond face contact, the transfer from lift to
+above placement, and the retreat with opened fingers from the placed block.
+
+Failure classes as the paper's: 'grasp' (f_g) when no grasp passes the pick
+half, 'placement' (f_p) when some grasp does but none of those also places the
+block. The reason lists, per grasp, the first thing that blocked it.
+
+Everything runs inside one ``world.preserved()``: the world is unchanged after.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from rad_core.errors import RadError
+from rad_core.gamp.collision import (Attachment, CollisionConfig, attachment_from_world, check_path,
+                                     make_collision_fn)
+from rad_core.gamp.grasps import MAX_GRASP_WIDTH, Grasp, block_grasps
+from rad_core.gamp.ik import IkConfig, hand_yaw_options, solve_top_down
+from rad_core.gamp.trajectory import TimingConfig, Trajectory, time_parameterize
+from rad_core.scene import Scene
+from rad_core.sim import panda
+from rad_core.sim.world import World, yaw_of_quaternion
+
+
+@dataclass(frozen=True)
+class GampConfig:
+    """Geometry of the motion and effort of the search."""
+
+    approach_height: float = 0.12
+    """The hand comes down on the grasp, lifts, and leaves the placement over this height (m)."""
+    cartesian_step: float = 0.04
+    """Vertical moves get an IK waypoint at least every this many metres, so they stay straight."""
+    finger_clearance: float = 0.01
+    """Open fingers stand this far off the unit's faces (not the full 0.08 m opening:
+    neighbours on the table are only a few cm away)."""
+    grip_squeeze: float = 0.001
+    """Closed fingers are commanded this far inside the unit's faces, so a position-
+    controlled gripper presses on the block."""
+    path_step: float = 0.05
+    """Largest joint step (rad) between collision probes along a segment."""
+    seed: int = 0
+    """Seed of the IK's random restarts: the same request gives the same plan."""
+    ik: IkConfig = field(default_factory=IkConfig)
+    collision: CollisionConfig = field(default_factory=CollisionConfig)
+    timing: TimingConfig = field(default_factory=TimingConfig)
+
+
+@dataclass
+class GampResult:
+    """What GAMP says about one action.
+
+    trajectory: all 9 joints; grasp_index is the point at which the fingers have
+    closed on the block (an executor attaches it there), release_index the point
+    at which they have opened again (detach). Timings in seconds.
+    """
+
+    success: bool
+    failure: str = ''                 # '' | 'grasp' | 'placement'
+    reason: str = ''
+    grasp: Grasp | None = None
+    hand_yaw_deg: float = 0.0         # hand yaw at the grasp
+    trajectory: Trajectory | None = None
+    grasp_index: int = -1
+    release_index: int = -1
+    timings: dict = field(default_factory=lambda: {'ik_s': 0.0, 'collision_s': 0.0, 'total_s': 0.0})
+    ik_calls: int = 0
+
+
+def placement_pose(scene: Scene, block_id: str, unit: int, cell_centre, rotation: int,
+                   current_yaw: float | None = None) -> tuple[np.ndarray, int]:
+    """Final anchor position and yaw (deg) of an MDP action: turn the block by
+    rotation * 90 deg, then put its unit `unit` on the cell centred at cell_centre."""
+    block = scene.block(block_id)
+    btype = scene.block_types[block.type]
+    if not 0 <= unit < btype.size:
+        raise RadError(f'unit {unit} is not a unit of block {block_id!r}')
+    yaw = int(round(((block.yaw if current_yaw is None else current_yaw) + 90 * rotation) / 90.0)) * 90 % 360
+    offset = btype.rotated(yaw)[unit] * scene.unit
+    return np.asarray(cell_centre, dtype=float) - offset, yaw
+
+
+def allocated_pose(scene: Scene, placement) -> tuple[np.ndarray, int]:
+    """Anchor position and yaw (deg) of an allocation `Placement`: its cells list the
+    units in type order, so the first cell is the anchor's."""
+    region = scene.target(placement.target)
+    return region.cell_center(placement.cells[0], scene.unit), int(placement.yaw)
+
+
+class _Clock:
+    """Accumulates the IK and collision time of one plan."""
+
+    def __init__(self):
+        self.ik_s = self.collision_s = 0.0
+        self.ik_calls = 0
+
+    def timed(self, fn):
+        def wrapped(q):
+            t = time.perf_counter()
+            try:
+                return fn(q)
+            finally:
+                self.collision_s += time.perf_counter() - t
+        return wrapped
+
+
+class _Blocked(Exception):
+    """One candidate failed; str() says where and why."""
+
+
+def plan_action(world: World, block_id: str, position, yaw_deg: float, start=None,
+                config: GampConfig = GampConfig()) -> GampResult:
+    """Plan picking `block_id` where it lies and placing its anchor at `position` with `yaw_deg`.
+
+    start: (9,) joints the motion starts from (default: the robot's joints now).
+    """
+    t0 = time.perf_counter()
+    if world.scene is None or block_id not in world.blocks:
+        raise RadError(f'unknown block id {block_id!r}')
+    position = np.asarray(position, dtype=float).ravel()
+    if position.shape != (3,) or not np.all(np.isfinite(position)) or not math.isfinite(yaw_deg):
+        raise RadError('the placement needs a finite position (3 numbers) and a finite yaw')
+    scene = world.scene
+    unit = scene.unit
+    btype = scene.block_types[scene.block(block_id).type]
+    clock = _Clock()
+    rng = np.random.default_rng(config.seed)
+    grasps = block_grasps(btype, unit)
+    result = GampResult(False)
+    if not grasps:
+        why = (f'{unit * 1000:.0f} mm units are wider than the hand takes ({MAX_GRASP_WIDTH * 1000:.0f} mm)'
+               if unit > MAX_GRASP_WIDTH else f'no unit of a {btype.name} is free from above')
+        return _finish(result, 'grasp', f'grasp: block {block_id} has no top-down grasp: {why}', clock, t0)
+
+    open_f = min(panda.FINGER_OPEN, unit / 2 + config.finger_clearance)
+    closed_f = max(0.0, unit / 2 - config.grip_squeeze)
+    pick_failures, place_failures = [], []
+    with world.preserved():
+        start = world.joint_positions() if start is None else _full(start)
+        block_pos, block_quat = world.block_pose(block_id)
+        block_yaw = math.radians(yaw_of_quaternion(block_quat))
+        rot = _rotation(block_quat)
+        turn = math.radians(yaw_deg) - block_yaw
+        final_rot = _rz(math.radians(yaw_deg))
+        for grasp in grasps:
+            offset = np.asarray(btype.offsets[grasp.unit], dtype=float) * unit
+            grasp_point = block_pos + rot @ offset
+            place_point = position + final_rot @ offset
+            closing = block_yaw + math.radians(grasp.yaw)
+            pick_reason = place_reason = ''
+            for hand_yaw in hand_yaw_options(grasp_point, closing):
+                try:
+                    pick = _plan_pick(world, block_id, grasp_point, hand_yaw, start, open_f, closed_f,
+                                      config, clock, rng)
+                except _Blocked as e:
+                    pick_reason = pick_reason or str(e)
+                    continue
+                try:
+                    place = _plan_place(world, block_id, pick, place_point, position, yaw_deg,
+                                        hand_yaw + turn, open_f, config, clock, rng)
+                except _Blocked as e:
+                    place_reason = place_reason or str(e)
+                    world.set_block_pose(block_id, block_pos, block_quat)
+                    continue
+                waypoints = pick['waypoints'] + place['waypoints']
+                stops = pick['stops'] + place['stops']
+                result.trajectory = time_parameterize(start, waypoints, stops, config.timing)
+                result.grasp_index = pick['grasp_index']
+                result.release_index = len(pick['waypoints']) + place['release_index']
+                result.grasp, result.hand_yaw_deg = grasp, math.degrees(hand_yaw)
+                result.success = True
+                return _finish(result, '', '', clock, t0)
+            if place_reason:
+                place_failures.append(f'{grasp}: {place_reason}')
+            else:
+                pick_failures.append(f'{grasp}: {pick_reason}')
+    if not place_failures:
+        reason = f'grasp: all {len(grasps)} grasps blocked: ' + '; '.join(pick_failures)
+        return _finish(result, 'grasp', reason, clock, t0)
+    n_ok = len(place_failures)
+    reason = (f'placement: {n_ok} of {len(grasps)} grasps feasible, none places the block: '
+              + '; '.join(place_failures))
+    return _finish(result, 'placement', reason, clock, t0)
+
+
+def _plan_pick(world, block_id, grasp_point, hand_yaw, start, open_f, closed_f, config, clock, rng) -> dict:
+    start_open = start.copy()
+    start_open[7:] = open_f
+    free = clock.timed(make_collision_fn(world, config=config.collision))
+    q_grasp = _ik(world, grasp_point, hand_yaw, [start_open, panda.HOME], open_f, config, clock, rng,
+                  'IK at the grasp')
+    _probe(free, q_grasp, 'at the grasp')
+    column = _vertical(world, grasp_point, q_grasp, hand_yaw, config, clock, rng, 'above the grasp')
+    q_prev = q_grasp
+    for q in column:                               # bottom up
+        _probe(free, q, 'above the grasp')
+        _segment(free, q_prev, q, config, 'on the approach')
+        q_prev = q
+    _segment(free, start, column[-1], config, 'on the way to the grasp')
+    # The hand holds the block from here on.
+    world.set_joint_positions(q_grasp, hold=False)
+    attachment = attachment_from_world(world, block_id)
+    carry = clock.timed(make_collision_fn(world, attached=attachment, config=config.collision))
+    q_closed = _with_fingers(q_grasp, closed_f)
+    lift = [_with_fingers(q, closed_f) for q in column]
+    q_prev = q_closed
+    for q in lift:
+        _probe(carry, q, 'lifting the block')
+        _segment(carry, q_prev, q, config, 'lifting the block')
+        q_prev = q
+    approach = column[::-1]
+    waypoints = approach + [q_grasp, q_closed] + lift
+    stops = [True] + [False] * (len(approach) - 1) + [True, True] + [False] * (len(lift) - 1) + [True]
+    return {'waypoints': waypoints, 'stops': stops, 'grasp_index': len(approach) + 1,
+            'attachment': attachment, 'carry': carry, 'top': lift[-1]}
+
+
+def _plan_place(world, block_id, pick, place_point, position, yaw_deg, hand_yaw, open_f, config, clock,
+                rng) -> dict:
+    carry, top = pick['carry'], pick['top']
+    closed_f = top[7]
+    q_place = _ik(world, place_point, hand_yaw, [top], closed_f, config, clock, rng, 'IK at the placement')
+    _probe(carry, q_place, 'at the placement')
+    column = _vertical(world, place_point, q_place, hand_yaw, config, clock, rng, 'above the placement')
+    q_prev = q_place
+    for q in column:
+        _probe(carry, q, 'above the placement')
+        _segment(carry, q_prev, q, config, 'on the descent')
+        q_prev = q
+    _segment(carry, top, column[-1], config, 'carrying the block over')
+    # Released: the block stays exactly at its final pose, the fingers open.
+    world.set_block_pose(block_id, position, _yaw_quat(yaw_deg))
+    after = clock.timed(make_collision_fn(world, config=config.collision))
+    q_open = _with_fingers(q_place, open_f)
+    _probe(after, q_open, 'opening the fingers')
+    retreat = [_with_fingers(q, open_f) for q in column]
+    q_prev = q_open
+    for q in retreat:
+        _probe(after, q, 'on the retreat')
+        _segment(after, q_prev, q, config, 'on the retreat')
+        q_prev = q
+    descent = column[::-1]
+    waypoints = descent + [q_place, q_open] + retreat
+    stops = [True] + [False] * (len(descent) - 1) + [True, True] + [False] * (len(retreat) - 1) + [True]
+    return {'waypoints': waypoints, 'stops': stops, 'release_index': len(descent) + 1}
+
+
+def _ik(world, point, hand_yaw, seeds, fingers, config, clock, rng, where) -> np.ndarray:
+    seeds = [_with_fingers(_full(s), fingers) for s in seeds]
+    r = solve_top_down(world, point, 0.0, seeds, config.ik, rng, hand_yaw=hand_yaw)
+    clock.ik_s += r.seconds
+    clock.ik_calls += r.calls
+    if not r.ok:
+        raise _Blocked(f'{where}: {r.reason}')
+    return r.q
+
+
+def _vertical(world, point, q_low, hand_yaw, config, clock, rng, where) -> list[np.ndarray]:
+    """IK waypoints straight above `point`, bottom up, each seeded from the one below."""
+    n = max(1, int(math.ceil(config.approach_height / config.cartesian_step)))
+    out, q = [], q_low
+    for k in range(1, n + 1):
+        target = np.asarray(point) + [0.0, 0.0, config.approach_height * k / n]
+        q = _ik(world, target, hand_yaw, [q], q_low[7], config, clock, rng, f'IK {where}')
+        out.append(q)
+    return out
+
+
+def _probe(fn, q, where) -> None:
+    reason = fn(q)
+    if reason:
+        raise _Blocked(f'{where}: {reason}')
+
+
+def _segment(fn, q_from, q_to, config, where) -> None:
+    reason = check_path(fn, q_from, q_to, config.path_step)
+    if reason:
+        raise _Blocked(f'{where}: {reason}')
+
+
+def _finish(result: GampResult, failure: str, reason: str, clock: _Clock, t0: float) -> GampResult:
+    result.failure, result.reason = failure, reason
+    result.timings = {'ik_s': clock.ik_s, 'collision_s': clock.collision_s,
+                      'total_s': time.perf_counter() - t0}
+    result.ik_calls = clock.ik_calls
+    return result
+
+
+def _full(q) -> np.ndarray:
+    q = np.asarray(q, dtype=float).ravel()
+    if len(q) == 7:
+        return np.concatenate([q, panda.HOME[7:]])
+    if len(q) != 9 or not np.all(np.isfinite(q)):
+        raise RadError(f'expected 7 or 9 finite joint positions, got {len(q)}')
+    return q.copy()
+
+
+def _with_fingers(q, f: float) -> np.ndarray:
+    q = np.array(q, dtype=float)
+    q[7:] = f
+    return q
+
+
+def _rz(a: float) -> np.ndarray:
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def _rotation(q) -> np.ndarray:
+    from rad_core.physics import _rotation as rotation
+    return rotation(q)
+
+
+def _yaw_quat(yaw_deg: float) -> list[float]:
+    h = math.radians(yaw_deg) / 2
+    return [0.0, 0.0, math.sin(h), math.cos(h)]
