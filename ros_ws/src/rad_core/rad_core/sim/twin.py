@@ -348,7 +348,7 @@ class Twin:
         return None if report is None else report.as_dict()
 
     def settle(self, seconds: float) -> None:
-        """Let physics run for `seconds` with the robot holding its command."""
+        """Let physics run for `seconds`: the robot holds its command (a running trajectory goes on)."""
         self.advance(seconds)
 
     def execute(self, trajectory, callback=None, callback_period: float = 0.02,
