@@ -117,7 +117,14 @@ def make_collision_fn(world: World, exclude: Iterable[str] = (), attached: Attac
     def collision(q: np.ndarray) -> str:
         world.set_joint_positions(q, hold=False)
         if attached is not None:
+            # The held block first: its overlap is the more telling reason at a placement.
             place_attached(world, attached)
+            lo, hi = p.getAABB(carried, -1, physicsClientId=cid)
+            near = p.getOverlappingObjects(lo, hi, physicsClientId=cid) or ()
+            for body in sorted({b for b, _ in near if b in carried_obstacles}):
+                pts = p.getClosestPoints(carried, body, 0.0, physicsClientId=cid)
+                if any(pt[8] < -config.block_penetration for pt in pts):
+                    return f'carried block hits {names[body]}'
         for link in links:
             lo, hi = p.getAABB(robot, link, physicsClientId=cid)
             near = p.getOverlappingObjects([v - m for v in lo], [v + m for v in hi], physicsClientId=cid) or ()
@@ -130,13 +137,6 @@ def make_collision_fn(world: World, exclude: Iterable[str] = (), attached: Attac
                                      physicsClientId=cid)
             if any(pt[8] < config.self_margin for pt in pts):
                 return f'self-collision {link_name[a]} / {link_name[b]}'
-        if carried is not None:
-            lo, hi = p.getAABB(carried, -1, physicsClientId=cid)
-            near = p.getOverlappingObjects(lo, hi, physicsClientId=cid) or ()
-            for body in sorted({b for b, _ in near if b in carried_obstacles}):
-                pts = p.getClosestPoints(carried, body, 0.0, physicsClientId=cid)
-                if any(pt[8] < -config.block_penetration for pt in pts):
-                    return f'carried block hits {names[body]}'
         return ''
 
     return collision

@@ -51,6 +51,11 @@ class GampConfig:
 
     approach_height: float = 0.12
     """The hand comes down on the grasp, lifts, and leaves the placement over this height (m)."""
+    transit_clearance: float = 0.04
+    """The hand rises before it moves over: until the carried block's bottom (or the empty
+    fingertips) clears the top of every other block by this much (m), at least to
+    ``approach_height``. A joint-space move between two such heights can still
+    sag a little, so the clearance is generous; the segment is probed anyway."""
     cartesian_step: float = 0.04
     """Vertical moves get an IK waypoint at least every this many metres, so they stay straight."""
     finger_clearance: float = 0.01
@@ -164,22 +169,28 @@ def plan_action(world: World, block_id: str, position, yaw_deg: float, start=Non
         rot = _rotation(block_quat)
         turn = math.radians(yaw_deg) - block_yaw
         final_rot = _rz(math.radians(yaw_deg))
+        tops = _tops(world, exclude=block_id)
         for grasp in grasps:
             offset = np.asarray(btype.offsets[grasp.unit], dtype=float) * unit
             grasp_point = block_pos + rot @ offset
             place_point = position + final_rot @ offset
+            # From the grasp point down to the held block's bottom.
+            hang = (offset[2] - min(o[2] for o in btype.offsets) * unit) + unit / 2
+            transit_z = tops + hang + config.transit_clearance
+            rise_pick = max(config.approach_height, transit_z - grasp_point[2])
+            rise_place = max(config.approach_height, transit_z - place_point[2])
             closing = block_yaw + math.radians(grasp.yaw)
             pick_reason = place_reason = ''
             for hand_yaw in hand_yaw_options(grasp_point, closing):
                 try:
                     pick = _plan_pick(world, block_id, grasp_point, hand_yaw, start, open_f, closed_f,
-                                      config, clock, rng)
+                                      rise_pick, config, clock, rng)
                 except _Blocked as e:
                     pick_reason = pick_reason or str(e)
                     continue
                 try:
                     place = _plan_place(world, block_id, pick, place_point, position, yaw_deg,
-                                        hand_yaw + turn, open_f, config, clock, rng)
+                                        hand_yaw + turn, open_f, rise_place, config, clock, rng)
                 except _Blocked as e:
                     place_reason = place_reason or str(e)
                     world.set_block_pose(block_id, block_pos, block_quat)
@@ -205,14 +216,15 @@ def plan_action(world: World, block_id: str, position, yaw_deg: float, start=Non
     return _finish(result, 'placement', reason, clock, t0)
 
 
-def _plan_pick(world, block_id, grasp_point, hand_yaw, start, open_f, closed_f, config, clock, rng) -> dict:
+def _plan_pick(world, block_id, grasp_point, hand_yaw, start, open_f, closed_f, rise, config, clock,
+               rng) -> dict:
     start_open = start.copy()
     start_open[7:] = open_f
     free = clock.timed(make_collision_fn(world, config=config.collision))
     q_grasp = _ik(world, grasp_point, hand_yaw, [start_open, panda.HOME], open_f, config, clock, rng,
                   'IK at the grasp')
     _probe(free, q_grasp, 'at the grasp')
-    column = _vertical(world, grasp_point, q_grasp, hand_yaw, config, clock, rng, 'above the grasp')
+    column = _vertical(world, grasp_point, q_grasp, hand_yaw, rise, config, clock, rng, 'above the grasp')
     q_prev = q_grasp
     for q in column:                               # bottom up
         _probe(free, q, 'above the grasp')
@@ -237,13 +249,13 @@ def _plan_pick(world, block_id, grasp_point, hand_yaw, start, open_f, closed_f, 
             'attachment': attachment, 'carry': carry, 'top': lift[-1]}
 
 
-def _plan_place(world, block_id, pick, place_point, position, yaw_deg, hand_yaw, open_f, config, clock,
-                rng) -> dict:
+def _plan_place(world, block_id, pick, place_point, position, yaw_deg, hand_yaw, open_f, rise, config,
+                clock, rng) -> dict:
     carry, top = pick['carry'], pick['top']
     closed_f = top[7]
     q_place = _ik(world, place_point, hand_yaw, [top], closed_f, config, clock, rng, 'IK at the placement')
     _probe(carry, q_place, 'at the placement')
-    column = _vertical(world, place_point, q_place, hand_yaw, config, clock, rng, 'above the placement')
+    column = _vertical(world, place_point, q_place, hand_yaw, rise, config, clock, rng, 'above the placement')
     q_prev = q_place
     for q in column:
         _probe(carry, q, 'above the placement')
@@ -277,15 +289,23 @@ def _ik(world, point, hand_yaw, seeds, fingers, config, clock, rng, where) -> np
     return r.q
 
 
-def _vertical(world, point, q_low, hand_yaw, config, clock, rng, where) -> list[np.ndarray]:
-    """IK waypoints straight above `point`, bottom up, each seeded from the one below."""
-    n = max(1, int(math.ceil(config.approach_height / config.cartesian_step)))
+def _vertical(world, point, q_low, hand_yaw, rise, config, clock, rng, where) -> list[np.ndarray]:
+    """IK waypoints straight above `point` up to `rise`, bottom up, each seeded from the one below."""
+    n = max(1, int(math.ceil(rise / config.cartesian_step)))
     out, q = [], q_low
     for k in range(1, n + 1):
-        target = np.asarray(point) + [0.0, 0.0, config.approach_height * k / n]
+        target = np.asarray(point) + [0.0, 0.0, rise * k / n]
         q = _ik(world, target, hand_yaw, [q], q_low[7], config, clock, rng, f'IK {where}')
         out.append(q)
     return out
+
+
+def _tops(world: World, exclude: str) -> float:
+    """Highest point of any block but one (m; 0 for the bare table)."""
+    p = world._p
+    tops = [p.getAABB(body, -1, physicsClientId=world.client)[1][2]
+            for bid, body in world.blocks.items() if bid != exclude]
+    return max(tops, default=0.0)
 
 
 def _probe(fn, q, where) -> None:

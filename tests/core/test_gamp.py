@@ -1,0 +1,206 @@
+"""GAMP: grasps, a real pick-and-place plan, and each failure class for the right reason."""
+
+import math
+
+import numpy as np
+import pytest
+
+from rad_core.allocation import AllocationParams, solve
+from rad_core.blocks import DEFAULT_LIBRARY
+from rad_core.errors import RadError
+from rad_core.gamp import GampResult, Grasp, allocated_pose, block_grasps, placement_pose, plan_action
+from rad_core.gamp.collision import attachment_from_world, place_attached
+from rad_core.generator import GeneratorConfig, generate_scene
+from rad_core.scene import Scene
+from rad_core.sim import panda
+from rad_core.sim.world import World, yaw_of_quaternion
+
+U = 0.05
+
+
+def _scene(blocks, unit=U, types=None):
+    """A hand-made scene: cubes (or given types) at free positions, a target region out of the way."""
+    types = types or {'cube': [[0, 0, 0]]}
+    return Scene.from_dict({
+        'format': 'rad-scene/1', 'unit': unit, 'block_types': types,
+        'blocks': [{'id': bid, 'type': t, 'position': list(pos), 'yaw': 0} for bid, t, pos in blocks],
+        'targets': [{'name': 't', 'origin': [0.4, 0.35, unit / 2], 'size': [2, 1, 2], 'filled': [[0, 0, 0]]}],
+    })
+
+
+def _yaw_quat(yaw):
+    return [0, 0, math.sin(math.radians(yaw) / 2), math.cos(math.radians(yaw) / 2)]
+
+
+# ---- grasps ----------------------------------------------------------------
+
+def test_grasp_rule_on_the_library():
+    lib = DEFAULT_LIBRARY
+    assert set(block_grasps(lib['cube'])) == {Grasp(0, 0), Grasp(0, 90)}
+    # A flat bar is taken across, never along (a finger would land on the next unit).
+    assert set(block_grasps(lib['I2'])) == {Grasp(0, 90), Grasp(1, 90)}
+    assert block_grasps(lib['I3'])[0] == Grasp(1, 90)          # the middle unit first
+    # Upright: only the top unit; the bottom one is covered.
+    assert {g.unit for g in block_grasps(lib['I2_up'])} == {1}
+    # L3_up: unit 1 (beside the column) only across, the column's top both ways.
+    assert set(block_grasps(lib['L3_up'])) == {Grasp(2, 0), Grasp(2, 90), Grasp(1, 90)}
+    for btype in lib.values():
+        assert block_grasps(btype), btype.name
+        assert not block_grasps(btype, unit_size=0.075)         # wider than the open hand
+
+
+# ---- a real action ---------------------------------------------------------
+
+@pytest.fixture(scope='module')
+def generated():
+    scene = generate_scene(GeneratorConfig(grid=4), seed=1)
+    alloc = solve(scene, AllocationParams(time_limit_s=5.0))
+    with World(scene) as world:
+        yield scene, alloc, world
+
+
+def _replay(world, result, block_id):
+    """Kinematic execution: joints to each point; the block rides with the hand between
+    grasp_index and release_index. Returns the block's final pose."""
+    with world.preserved():
+        attachment = None
+        for k, pt in enumerate(result.trajectory.points):
+            world.set_joint_positions(pt.positions)
+            if k == result.grasp_index:
+                attachment = attachment_from_world(world, block_id)
+            if attachment is not None and k < result.release_index:
+                place_attached(world, attachment)
+        return world.block_pose(block_id)
+
+
+def test_free_block_is_picked_and_placed_at_its_allocated_pose(generated):
+    scene, alloc, world = generated
+    placement = next(p for p in alloc.placements if p.type == 'I2_up')
+    block = next(b for b in scene.blocks if b.type == 'I2_up')
+    position, yaw = allocated_pose(scene, placement)
+    joints_before = world.joint_positions()
+    poses_before = {b: world.block_pose(b)[0] for b in world.blocks}
+
+    r = plan_action(world, block.id, position, yaw)
+    assert isinstance(r, GampResult)
+    assert r.success and r.failure == '' and r.reason == '', r.reason
+    traj = r.trajectory
+    assert traj.joint_names == panda.JOINT_NAMES and len(traj.joint_names) == 9
+    times = traj.times()
+    assert times[0] > 0 and np.all(np.diff(times) > 0)
+    q = traj.positions()
+    assert q.shape[1] == 9 and all(panda.within_limits(row) for row in q)
+    # Segments respect the velocity limits at the configured scale.
+    dq = np.abs(np.diff(np.vstack([joints_before, q]), axis=0))
+    dt = np.diff(np.concatenate([[0.0], times]))
+    assert np.all(dq / dt[:, None] <= panda.VELOCITY_LIMITS * 0.5 + 1e-9)
+    # Fingers: open before the grasp point, closed on the block from it to the release.
+    g, rel = r.grasp_index, r.release_index
+    assert 0 < g < rel < len(q) - 1
+    assert q[g - 1, 7] > q[g, 7] and q[g, 7] == pytest.approx(U / 2 - 0.001)
+    assert np.allclose(q[g, :7], q[g - 1, :7]) and np.allclose(q[rel, :7], q[rel - 1, :7])
+    assert q[rel, 7] > q[rel - 1, 7]
+    for k in (g - 1, g, rel - 1, rel, len(q) - 1):
+        assert not np.any(traj.points[k].velocities), k
+    # Executed kinematically, the block ends at the allocated pose.
+    final_pos, final_quat = _replay(world, r, block.id)
+    assert np.linalg.norm(final_pos - position) < 0.002
+    assert abs(((yaw_of_quaternion(final_quat) - yaw) + 180) % 360 - 180) < 2.0
+    # The result's dict form is the JointTrajectory shape result.json uses.
+    doc = traj.to_dict()
+    assert set(doc) == {'joint_names', 'points'}
+    assert set(doc['points'][0]) == {'positions', 'velocities', 'time_from_start'}
+    assert set(r.timings) == {'ik_s', 'collision_s', 'total_s'} and r.timings['total_s'] < 2.0
+    # Planning left the world as it was.
+    assert np.array_equal(world.joint_positions(), joints_before)
+    assert all(np.allclose(world.block_pose(b)[0], p) for b, p in poses_before.items())
+
+
+def test_planning_is_deterministic(generated):
+    scene, alloc, world = generated
+    placement = alloc.placements[0]
+    block = next(b for b in scene.blocks if b.type == placement.type)
+    position, yaw = allocated_pose(scene, placement)
+    a = plan_action(world, block.id, position, yaw)
+    b = plan_action(world, block.id, position, yaw)
+    assert a.success == b.success and a.reason == b.reason
+    if a.success:
+        assert a.trajectory.to_dict() == b.trajectory.to_dict()
+
+
+def test_placement_pose_of_an_mdp_action():
+    scene = generate_scene(GeneratorConfig(grid=3), seed=0)
+    block = next(b for b in scene.blocks if scene.block_types[b.type].size > 1)
+    centre = np.array([0.5, 0.025, 0.075])
+    pos, yaw = placement_pose(scene, block.id, 1, centre, rotation=1)
+    assert yaw == (block.yaw + 90) % 360
+    units = pos + U * scene.block_types[block.type].rotated(yaw)
+    assert np.allclose(units[1], centre)
+    with pytest.raises(RadError):
+        placement_pose(scene, block.id, 9, centre, 0)
+
+
+# ---- failures --------------------------------------------------------------
+
+def test_buried_block_fails_on_grasp():
+    c = (0.5, -0.2, U / 2)
+    around = [(c[0] + dx * U, c[1] + dy * U, U / 2) for dx, dy in ((1, 0), (-1, 0), (0, 1), (0, -1))]
+    scene = _scene([('target', 'cube', c)] + [(f'n{i}', 'cube', p) for i, p in enumerate(around)])
+    with World(scene) as world:
+        r = plan_action(world, 'target', [0.45, 0.2, U / 2], 0)
+    assert not r.success and r.failure == 'grasp' and r.trajectory is None
+    assert r.reason.startswith('grasp: all 2 grasps blocked') and 'hits block n' in r.reason, r.reason
+
+
+def test_block_under_another_fails_on_grasp():
+    scene = _scene([('low', 'cube', (0.5, -0.2, U / 2)), ('top', 'cube', (0.5, -0.2, 1.5 * U))])
+    with World(scene) as world:
+        r = plan_action(world, 'low', [0.45, 0.2, U / 2], 0)
+        assert r.failure == 'grasp' and 'block top' in r.reason, r.reason
+        assert plan_action(world, 'top', [0.45, 0.2, U / 2], 0).success
+
+
+def test_placement_between_tall_towers_fails_on_placement():
+    dest = np.array([0.5, 0.15, U / 2])
+    # Three-cube towers right against the destination on both sides along x.
+    towers = [(f't{"p" if side > 0 else "m"}{k}', 'cube', (dest[0] + side * U, dest[1], U / 2 + k * U))
+              for side in (1, -1) for k in range(3)]
+    scene = _scene([('free', 'cube', (0.45, -0.2, U / 2))] + towers)
+    with World(scene) as world:
+        r = plan_action(world, 'free', dest, 0)
+        assert not r.success and r.failure == 'placement', r.reason
+        assert r.reason.startswith('placement: 2 of 2 grasps feasible')
+        assert 'at the placement' in r.reason and 'hits block t' in r.reason, r.reason
+        # The same block goes to an open spot.
+        assert plan_action(world, 'free', [0.45, 0.3, U / 2], 90).success
+
+
+def test_placement_onto_an_occupied_pose_fails_on_placement():
+    scene = _scene([('free', 'cube', (0.45, -0.2, U / 2)), ('there', 'cube', (0.5, 0.15, U / 2))])
+    with World(scene) as world:
+        r = plan_action(world, 'free', [0.5, 0.15, U / 2], 0)
+    assert r.failure == 'placement' and 'carried block hits block there' in r.reason, r.reason
+
+
+def test_unreachable_placement_is_a_placement_failure_with_the_ik_reason():
+    scene = _scene([('free', 'cube', (0.45, -0.2, U / 2))])
+    with World(scene) as world:
+        r = plan_action(world, 'free', [1.6, 0.0, U / 2], 0)
+    assert r.failure == 'placement' and 'unreachable' in r.reason, r.reason
+
+
+def test_units_too_wide_for_the_hand_fail_on_grasp():
+    scene = _scene([('big', 'cube', (0.45, -0.2, 0.045))], unit=0.09)
+    with World(scene) as world:
+        r = plan_action(world, 'big', [0.45, 0.2, 0.045], 0)
+    assert r.failure == 'grasp' and 'no top-down grasp' in r.reason and '90 mm' in r.reason, r.reason
+
+
+def test_bad_requests_raise(generated):
+    scene, _, world = generated
+    with pytest.raises(RadError, match='unknown block id'):
+        plan_action(world, 'nope', [0.5, 0, 0.05], 0)
+    with pytest.raises(RadError, match='finite'):
+        plan_action(world, scene.blocks[0].id, [0.5, np.nan, 0.05], 0)
+    with pytest.raises(RadError):
+        plan_action(world, scene.blocks[0].id, [0.5, 0, 0.05], 0, start=np.zeros(4))
