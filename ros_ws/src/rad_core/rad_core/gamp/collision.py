@@ -20,7 +20,7 @@ link's bounding box) and then measured exactly with getClosestPoints.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable, Iterable
+from collections.abc import Callable, Iterable
 
 import numpy as np
 

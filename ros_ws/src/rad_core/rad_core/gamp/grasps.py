@@ -64,7 +64,7 @@ def block_grasps(btype: BlockType, unit_size: float = 0.05) -> tuple[Grasp, ...]
         for yaw in GRASP_YAWS:
             dx, dy = (1, 0) if yaw == 0 else (0, 1)
             blocked = any((x + s * dx, y + s * dy, z + k) in cells
-                          for s in (1, -1) for k in range(0, _height(offsets) + 1))
+                          for s in (1, -1) for k in range(_height(offsets) + 1))
             if not blocked:
                 out.append(Grasp(u, yaw))
     return tuple(grasp_order(btype, out))

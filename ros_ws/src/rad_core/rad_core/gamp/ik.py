@@ -30,7 +30,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -210,8 +210,8 @@ def _residual(world: World, position: np.ndarray, quaternion: np.ndarray) -> tup
 
 
 def _full(q, fingers) -> np.ndarray:
-    q = np.asarray(q, dtype=float)
-    return np.concatenate([q[:7], fingers]) if len(q) == 7 else np.concatenate([q[:7], fingers])
+    """A (7,) or (9,) seed as (9,) with the given fingers."""
+    return np.concatenate([np.asarray(q, dtype=float)[:7], fingers])
 
 
 def _random_q(rng: np.random.Generator, fingers) -> np.ndarray:

@@ -35,7 +35,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from rad_core.errors import RadError
-from rad_core.gamp.collision import (Attachment, CollisionConfig, attachment_from_world, check_path,
+from rad_core.gamp.collision import (CollisionConfig, attachment_from_world, check_path,
                                      make_collision_fn)
 from rad_core.gamp.grasps import MAX_GRASP_WIDTH, Grasp, block_grasps
 from rad_core.gamp.ik import IkConfig, hand_yaw_options, solve_top_down

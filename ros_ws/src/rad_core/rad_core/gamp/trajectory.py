@@ -21,7 +21,7 @@ default scale 0.5 keeps every joint under 75 % of its limit.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -60,7 +60,7 @@ class Trajectory:
         return {'joint_names': list(self.joint_names), 'points': [pt.to_dict() for pt in self.points]}
 
     @classmethod
-    def from_dict(cls, doc: dict) -> 'Trajectory':
+    def from_dict(cls, doc: dict) -> Trajectory:
         try:
             names = tuple(str(n) for n in doc['joint_names'])
             points = [TrajectoryPoint([float(v) for v in pt['positions']], [float(v) for v in pt['velocities']],

@@ -18,9 +18,10 @@ Frames and conventions:
   neighbours start apart, stacked layers start in contact instead of falling
   into each other.
 
-Cost (measured, see tests/core/test_world.py): `preserved()` snapshots what it
-restores by hand (joint states, block poses and velocities, constraint ids) in
-tens of microseconds; saveState costs about 1-10 ms and is used only for
+Cost (measured, see tests/core/test_world.py): `preserved()` snapshots and
+restores by hand what can change (joint states, block poses and velocities,
+constraint ids): about 0.07 ms for a 6-block scene. saveState costs about
+1.3 ms there (10 ms in bigger worlds) and is used only for
 ``preserved(exact=True)``, which also restores Bullet's contact cache so a
 simulation replays bit-identically.
 """
@@ -30,7 +31,7 @@ from __future__ import annotations
 import math
 from contextlib import contextmanager
 from dataclasses import dataclass
-from typing import Iterator
+from collections.abc import Iterator
 
 import numpy as np
 
@@ -137,7 +138,7 @@ class World:
             self._p.disconnect(physicsClientId=self.client)
         self.client = -1
 
-    def __enter__(self) -> 'World':
+    def __enter__(self) -> World:
         return self
 
     def __exit__(self, *exc) -> None:
@@ -328,7 +329,7 @@ class World:
             raise RadError('a constraint was removed inside World.preserved(); it cannot be restored')
 
     @contextmanager
-    def preserved(self, exact: bool = False) -> Iterator['World']:
+    def preserved(self, exact: bool = False) -> Iterator[World]:
         """Everything in the block is undone on exit: joints, block poses and
         velocities, constraints added inside.
 
