@@ -1,0 +1,74 @@
+"""The rad_gamp node's /plan_action service over real DDS."""
+
+import math
+
+import numpy as np
+import pytest
+
+from ros_harness import call_service, ros_args, wait_for_service
+
+from rad_core.allocation import solve
+from rad_core.generator import GeneratorConfig, generate_scene
+from rad_core.sim.panda import HOME, JOINT_NAMES, LOWER, UPPER
+
+
+@pytest.fixture
+def gamp(node_process, ros_node):
+    from rad_msgs.srv import PlanAction
+    proc = node_process('rad_gamp', 'gamp_node', *ros_args({'seed': 0}))
+    client = wait_for_service(ros_node, PlanAction, 'plan_action', timeout=30.0)
+
+    def plan(scene, block_id, unit, target, cell, rotation, start=(), execute=False):
+        req = PlanAction.Request(scene_json=scene.dumps(), start_positions=list(start), execute=execute)
+        req.action.block_id, req.action.unit, req.action.target, req.action.rotation = block_id, unit, target, rotation
+        req.action.cell.i, req.action.cell.j, req.action.cell.k = cell
+        return call_service(ros_node, client, req, timeout=60.0)
+
+    yield proc, plan
+    assert proc.stop() == 0, proc.output_tail()
+
+
+def first_action(scene):
+    """A block of the allocation's first pose, put there by its anchor with no turn."""
+    p = solve(scene).placements[0]
+    block = next(b for b in scene.blocks if b.type == p.type)
+    rotation = ((p.yaw - block.yaw) // 90) % 4
+    return block.id, 0, p.target, p.cells[0], rotation
+
+
+def test_plans_a_feasible_action_with_a_timed_nine_joint_trajectory(gamp):
+    proc, plan = gamp
+    scene = generate_scene(GeneratorConfig(grid=3), 5)
+    r = plan(scene, *first_action(scene))
+    assert r.success, r.reason
+    assert r.failure == '' and r.planning_time_s > 0
+    traj = r.trajectory
+    assert list(traj.joint_names) == list(JOINT_NAMES)
+    times = [p.time_from_start.sec + p.time_from_start.nanosec * 1e-9 for p in traj.points]
+    assert times[0] > 0 and all(b > a for a, b in zip(times, times[1:]))
+    q = np.array([p.positions for p in traj.points])
+    assert np.all(q >= LOWER - 1e-6) and np.all(q <= UPPER + 1e-6)
+    assert all(len(p.velocities) == 9 for p in traj.points)
+
+
+@pytest.mark.parametrize('change,expected', [
+    ({'block_id': 'nope'}, "unknown block id 'nope'"),
+    ({'target': 'roof'}, "unknown target region 'roof'"),
+    ({'cell': (9, 0, 0)}, 'outside target region'),
+    ({'rotation': 7}, 'rotation 7'),
+    ({'unit': 5}, 'is not a unit of block'),
+    ({'start': [0.0] * 5}, 'start_positions needs 0, 7 or 9'),
+    ({'start': [math.nan] * 9}, 'start_positions must be finite'),
+    ({'start': [9.0] * 9}, 'outside the joint limits'),
+])
+def test_bad_requests_get_a_reason_and_the_node_keeps_serving(gamp, change, expected):
+    proc, plan = gamp
+    scene = generate_scene(GeneratorConfig(grid=3), 5)
+    block_id, unit, target, cell, rotation = first_action(scene)
+    args = dict(block_id=block_id, unit=unit, target=target, cell=cell, rotation=rotation, start=())
+    args.update(change)
+    r = plan(scene, **args)
+    assert not r.success and r.failure == 'invalid_request'
+    assert expected in r.reason, r.reason
+    assert plan(scene, block_id, unit, target, cell, rotation, start=list(HOME)).success
+    assert proc.is_running()
