@@ -253,6 +253,17 @@ class AssemblyEnv:
             self._stability_cache[key] = self.stability(self.scene.unit, placed, centres[cells])
         return self._stability_cache[key]
 
+    def fail(self, outcome: Outcome, reason: str, cells: np.ndarray | None = None) -> StepResult:
+        """End the episode on an invalid action decided outside the bookkeeping
+        (by the robot or by the twin's physics): -1, done."""
+        if not outcome.is_invalid:
+            raise RadError(f'{outcome.value} is not a failure')
+        if self.state.done:
+            raise RadError('the episode is over; call reset()')
+        self.state.steps += 1
+        self.state.done = True
+        return StepResult(self.config.invalid_reward, True, outcome, reason, cells)
+
     def step(self, action: Action) -> StepResult:
         if self.state.done:
             raise RadError('the episode is over; call reset()')

@@ -1,0 +1,197 @@
+"""The assembly MDP with the robot in the loop (the paper's Sec. V-B setting).
+
+An action succeeds only if (1) the geometry allows it (on the grid, no overlap),
+(2) GAMP finds a feasible grasp and placement, (3) the twin executes the motion,
+and (4) afterwards the new block sits at its pose, the structure still stands and
+no other block was moved. Failures are classed as the paper's Table II needs:
+f_g (no feasible grasp), f_p (no feasible placement, or the motion knocked
+another block), and instability (the new block or the structure did not stay).
+
+Speed: one physics client for everything (GAMP probes the same World the twin
+steps, inside a restoring context); blocks that would rest on nothing fail by
+geometry without any physics; and `execution='teleport'` skips simulating the
+arm (the block is put in place and physics only settles the structure), the
+predecessor's shortcut, for training; 'simulate' runs the whole trajectory.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from rad_core import support
+from rad_core.errors import RadError
+from rad_core.gamp.planner import GampConfig, placement_pose, plan_action
+from rad_core.mdp import Action, AssemblyEnv, EnvConfig, Outcome, StepResult
+from rad_core.scene import Scene
+from rad_core.sim.twin import Twin, TwinConfig
+from rad_core.sim.world import World, yaw_of_quaternion
+
+# How each outcome counts in the paper's Table II.
+OUTCOME_CLASS = {
+    Outcome.INVALID_GRASP: 'f_g',
+    Outcome.INVALID_PLACEMENT: 'f_p',
+    Outcome.INVALID_DISTURBED: 'f_p',
+    Outcome.INVALID_UNSTABLE: 'unstable',
+    Outcome.INVALID_OVERLAP: 'invalid',
+    Outcome.INVALID_OFF_GRID: 'invalid',
+    Outcome.INVALID_BLOCK: 'invalid',
+}
+
+
+def outcome_class(outcome: Outcome) -> str:
+    """'success' for every non-failure outcome, else f_g / f_p / unstable / invalid."""
+    return OUTCOME_CLASS.get(outcome, 'success')
+
+
+@dataclass(frozen=True)
+class RobotEnvConfig:
+    """How the robot environment executes and judges an action.
+
+    execution: 'simulate' (the twin runs the whole trajectory with the arm) or
+        'teleport' (the block is put at its pose, only the settling is simulated).
+    settle_s: simulated seconds after the motion before poses are judged.
+    new_block_tol: the new block may end this far (fraction of a unit) from its pose.
+    structure_tol: a placed block moving this far (fraction of a unit; 0.2 = 1 cm
+        at 5 cm, the predecessor's "destroyed the structure") fails the action.
+    disturbed_tol: a block on the table moving this far fails it (f_p).
+    tilt_tol_deg: any block tilting more than this fails it.
+    """
+
+    env: EnvConfig = field(default_factory=lambda: EnvConfig(stability='none'))
+    execution: str = 'simulate'
+    settle_s: float = 0.5
+    new_block_tol: float = 0.1
+    structure_tol: float = 0.2
+    disturbed_tol: float = 0.1
+    tilt_tol_deg: float = 5.0
+    gamp: GampConfig = field(default_factory=GampConfig)
+    twin: TwinConfig = field(default_factory=TwinConfig)
+
+    def __post_init__(self):
+        if self.execution not in ('simulate', 'teleport'):
+            raise RadError(f"execution must be 'simulate' or 'teleport', got {self.execution!r}")
+        if self.env.stability != 'none':
+            # Stability is what the twin shows after executing; no second opinion.
+            object.__setattr__(self, 'env', replace(self.env, stability='none'))
+
+
+class RobotAssemblyEnv:
+    """The MDP of `AssemblyEnv` (same actions, rewards, termination) with the robot.
+
+    `env` is the bookkeeping AssemblyEnv (use it for the grid, state views, the
+    flat action index and an AllocationGuide); `world` and `twin` the simulation.
+    """
+
+    def __init__(self, scene: Scene, config: RobotEnvConfig = RobotEnvConfig()):
+        self.scene = scene
+        self.config = config
+        self.env = AssemblyEnv(scene, config.env)
+        self.world = World(scene)
+        self.twin = Twin(self.world, config.twin)
+        self.last_plan = None
+
+    def close(self) -> None:
+        self.world.close()
+
+    def __enter__(self) -> 'RobotAssemblyEnv':
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def reset(self):
+        self.twin.load_scene(self.scene)
+        self.last_plan = None
+        return self.env.reset()
+
+    # ---- one action ----------------------------------------------------------
+    def step(self, action: Action) -> StepResult:
+        env = self.env
+        if action.is_terminate or env.state.done:
+            return env.step(action)
+        outcome, reason, cells, yaw = env.evaluate(action)
+        if outcome is not None:
+            return env.step(action)   # the same geometric failure, booked as the MDP does
+        if not support.any_support(env.grid, env.state.occupancy, cells):
+            return env.fail(Outcome.INVALID_UNSTABLE, 'the block would rest on nothing and fall', cells)
+        block_id = self.scene.blocks[action.block].id
+        position, yaw = placement_pose(self.scene, block_id, action.unit, env.grid.centres[action.cell],
+                                       action.rotation)
+        plan = plan_action(self.world, block_id, position, yaw, start=self.world.joint_positions(),
+                           config=self.config.gamp)
+        self.last_plan = plan
+        if not plan.success:
+            failure = Outcome.INVALID_GRASP if plan.failure == 'grasp' else Outcome.INVALID_PLACEMENT
+            return env.fail(failure, plan.reason, cells)
+        before = {b: self.world.block_pose(b) for b in self.world.blocks}
+        self._execute(plan, block_id, position, yaw)
+        problem = self._judge(before, block_id, position, yaw)
+        if problem is not None:
+            return env.fail(problem[0], problem[1], cells)
+        result = env.step(action)
+        self._snap_placed()
+        result.info['timings'] = dict(plan.timings)
+        return result
+
+    def _execute(self, plan, block_id: str, position, yaw) -> None:
+        twin = self.twin
+        if self.config.execution == 'simulate':
+            twin.execute(plan.trajectory.to_dict())
+        else:
+            self.world.set_block_pose(block_id, position, _yaw_quat(yaw))
+            self.world.set_joint_positions(plan.trajectory.points[-1].positions)
+            twin.sync()
+        twin.settle(self.config.settle_s)
+
+    def _judge(self, before: dict, block_id: str, position, yaw) -> tuple[Outcome, str] | None:
+        """What went wrong physically, if anything (new block, structure, the rest)."""
+        u, cfg = self.scene.unit, self.config
+        p, q = self.world.block_pose(block_id)
+        moved = float(np.linalg.norm(p - np.asarray(position)))
+        turned = _yaw_gap(yaw_of_quaternion(q), yaw)
+        if moved > cfg.new_block_tol * u or _tilt_deg(q) > cfg.tilt_tol_deg or turned > cfg.tilt_tol_deg:
+            return Outcome.INVALID_UNSTABLE, (f'block {block_id} did not stay: {moved * 1e3:.1f} mm off its pose, '
+                                              f'tilted {_tilt_deg(q):.1f} deg')
+        placed = {self.scene.blocks[b].id for b in self.env.state.placed}
+        for other, (p0, q0) in before.items():
+            if other == block_id:
+                continue
+            p1, q1 = self.world.block_pose(other)
+            shift = float(np.linalg.norm(p1 - p0))
+            tilt = _tilt_deg(q1)
+            if other in placed and (shift >= cfg.structure_tol * u or tilt > cfg.tilt_tol_deg):
+                return Outcome.INVALID_UNSTABLE, (f'the structure did not stand: block {other} moved '
+                                                  f'{shift * 1e3:.1f} mm, tilted {tilt:.1f} deg')
+            if other not in placed and (shift > cfg.disturbed_tol * u or tilt > cfg.tilt_tol_deg):
+                return Outcome.INVALID_DISTURBED, f'the motion moved block {other} by {shift * 1e3:.1f} mm'
+        return None
+
+    def _snap_placed(self) -> None:
+        """Put placed blocks back on their exact grid poses, so drift never accumulates
+        and the world matches the MDP state the learner sees."""
+        for b, (cells, yaw) in self.env.state.placed.items():
+            # cells are in unit order: the first is the anchor's.
+            self.world.set_block_pose(self.scene.blocks[b].id, self.env.grid.centres[cells[0]], _yaw_quat(yaw))
+        self.world.set_block_velocities_zero()
+        self.twin.sync()
+
+    def current_scene(self) -> Scene:
+        return self.twin.current_scene(self.scene)
+
+
+def _yaw_quat(yaw_deg: float) -> list[float]:
+    half = np.radians(yaw_deg) / 2
+    return [0.0, 0.0, float(np.sin(half)), float(np.cos(half))]
+
+
+def _tilt_deg(q) -> float:
+    """Angle between the body's z axis and the world's z axis."""
+    x, y, z, w = q
+    zz = 1 - 2 * (x * x + y * y)
+    return float(np.degrees(np.arccos(np.clip(zz, -1.0, 1.0))))
+
+
+def _yaw_gap(a: float, b: float) -> float:
+    return abs((a - b + 180) % 360 - 180)
