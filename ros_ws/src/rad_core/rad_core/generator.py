@@ -51,7 +51,7 @@ class GeneratorConfig:
     extra_fraction: float = 0.5
     table_x: tuple[float, float] = (0.3, 0.75)
     first_row_y: float = -0.12
-    gap: float = 0.03
+    gap: float = 0.05
 
     def validate(self) -> None:
         if not (isinstance(self.grid, int) and 1 <= self.grid <= 12):
