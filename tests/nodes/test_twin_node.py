@@ -154,3 +154,38 @@ def test_load_scene_refuses_blocks_outside_the_workspace(twin):
     d['blocks'][0]['position'] = [3.0, 0.0, 0.025]
     response = twin.load(LoadScene.Request(scene_json=json.dumps(d)))
     assert not response.success and 'outside the workspace' in response.reason
+
+
+def test_registration_rebuilds_the_scene_from_published_motion_capture(twin):
+    from rad_core.sim.mocap import RegistrationConfig, RigidBodyPose, body_map_for, register_scene
+    from rad_ros.motion import pose_from_msg
+    twin.seen['bodies'].clear()
+    spin_until(twin.node, lambda: twin.seen['bodies'], timeout=5.0)
+    frame = twin.seen['bodies'][-1]
+    bodies = [RigidBodyPose(b.rigid_body_name, *pose_from_msg(b.pose), b.tracking_valid) for b in frame.rigidbodies]
+    rebuilt = register_scene(bodies, twin.scene, RegistrationConfig(body_map=body_map_for(twin.scene)))
+    assert rebuilt.to_dict() == twin.scene.to_dict()
+
+
+def test_latched_scene_topic_and_reset(twin, ros_node):
+    from geometry_msgs.msg import Pose
+    from rad_msgs.msg import Scene as SceneMsg
+    from rad_msgs.srv import SetBlockPose
+    from rad_ros.conversions import scene_from_msg
+    from rclpy.qos import DurabilityPolicy, QoSProfile
+    from std_srvs.srv import Trigger
+    got = []
+    # Subscribing late still gets the scene: the topic is latched (transient local).
+    ros_node.create_subscription(SceneMsg, 'scene', got.append,
+                                 QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
+    spin_until(ros_node, lambda: got, timeout=10.0)
+    assert scene_from_msg(got[-1]).to_dict() == twin.scene.to_dict()
+    mover = wait_for_service(ros_node, SetBlockPose, 'set_block_pose', timeout=10.0)
+    pose = Pose()
+    pose.position.x, pose.position.y, pose.position.z, pose.orientation.w = 0.3, -0.6, 0.025, 1.0
+    bid = twin.scene.blocks[0].id
+    assert call_service(ros_node, mover, SetBlockPose.Request(block_id=bid, pose=pose), timeout=10.0).success
+    assert Scene.loads(twin.state().scene_json).block(bid).position[1] == pytest.approx(-0.6, abs=1e-3)
+    reset = wait_for_service(ros_node, Trigger, 'reset', timeout=10.0)
+    assert call_service(ros_node, reset, Trigger.Request(), timeout=10.0).success
+    assert Scene.loads(twin.state().scene_json).to_dict() == twin.scene.to_dict()
