@@ -12,38 +12,18 @@ request's scene into it; the world is never stepped, only probed.
 
 from __future__ import annotations
 
-import math
 import time
 
 from rclpy.node import Node
 from trajectory_msgs.msg import JointTrajectory
 
 from rad_core.errors import RadError
-from rad_core.gamp.planner import GampConfig, plan_action, placement_pose
-from rad_core.sim import panda
-from rad_core.sim.world import World
+from rad_core.gamp.action import MotionPlanner, SceneAction
+from rad_core.gamp.planner import GampConfig
 from rad_msgs.srv import PlanAction
 from rad_ros.conversions import scene_from_request
 from rad_ros.motion import trajectory_to_msg
 from rad_ros.node_main import main_for
-
-
-def start_joints(positions) -> list[float] | None:
-    """The request's start_positions as 9 joints (7 arm + fingers, fingers open if
-    only the arm is given), or None for home."""
-    positions = list(positions)
-    if not positions:
-        return None
-    if len(positions) == 7:
-        positions += [panda.FINGER_OPEN, panda.FINGER_OPEN]
-    if len(positions) != 9:
-        raise RadError(f'start_positions needs 0, 7 or 9 joint values ({", ".join(panda.JOINT_NAMES)}), '
-                       f'got {len(positions)}')
-    if not all(math.isfinite(v) for v in positions):
-        raise RadError('start_positions must be finite')
-    if not panda.within_limits(positions, tol=1e-3):
-        raise RadError('start_positions are outside the joint limits')
-    return positions
 
 
 class GampNode(Node):
@@ -51,8 +31,7 @@ class GampNode(Node):
         super().__init__('gamp')
         self.declare_parameter('frame_id', 'world')
         self.declare_parameter('seed', 0)
-        self.config = GampConfig(seed=int(self.get_parameter('seed').value))
-        self.world = World()
+        self.planner = MotionPlanner(GampConfig(seed=int(self.get_parameter('seed').value)))
         self.trajectory_pub = self.create_publisher(
             JointTrajectory, 'joint_trajectory_controller/joint_trajectory', 10)
         self.create_service(PlanAction, 'plan_action', self.plan_action_callback)
@@ -60,22 +39,10 @@ class GampNode(Node):
 
     def plan(self, request):
         scene = scene_from_request(request.scene, request.scene_json)
-        action = request.action
-        try:
-            region = scene.target(action.target)
-        except RadError:
-            raise RadError(f'unknown target region {action.target!r}') from None
-        cell = (action.cell.i, action.cell.j, action.cell.k)
-        if not region.contains_index(cell):
-            raise RadError(f'cell {list(cell)} is outside target region {region.name!r} of size {list(region.size)}')
-        if action.rotation not in (0, 1, 2, 3):
-            raise RadError(f'rotation {action.rotation} is not one of 0, 1, 2, 3')
-        scene.block(action.block_id)   # names an unknown id clearly
-        position, yaw = placement_pose(scene, action.block_id, action.unit, region.cell_center(cell, scene.unit),
-                                       action.rotation)
-        start = start_joints(request.start_positions)
-        self.world.load_scene(scene)
-        return plan_action(self.world, action.block_id, position, yaw, start=start, config=self.config)
+        a = request.action
+        action = SceneAction(a.block_id, a.unit, a.target, (a.cell.i, a.cell.j, a.cell.k), a.rotation)
+        result, _, _ = self.planner(scene, action, start=request.start_positions)
+        return result
 
     def plan_action_callback(self, request, response):
         t0 = time.perf_counter()
