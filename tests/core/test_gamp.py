@@ -13,7 +13,8 @@ from rad_core.gamp.collision import attachment_from_world, place_attached
 from rad_core.generator import GeneratorConfig, generate_scene
 from rad_core.scene import Scene
 from rad_core.sim import panda
-from rad_core.sim.world import World, yaw_of_quaternion
+from rad_core.sim.world import World
+from rad_core.transforms import yaw_of_quaternion
 
 U = 0.05
 

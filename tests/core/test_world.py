@@ -9,7 +9,8 @@ import pytest
 from rad_core.errors import RadError
 from rad_core.generator import GeneratorConfig, generate_scene
 from rad_core.sim import panda
-from rad_core.sim.world import World, yaw_of_quaternion
+from rad_core.sim.world import World
+from rad_core.transforms import yaw_of_quaternion
 
 
 @pytest.fixture(scope='module')

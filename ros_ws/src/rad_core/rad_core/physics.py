@@ -61,6 +61,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from rad_core.errors import RadError
+from rad_core.transforms import matrix_from_quaternion, quaternion_from_matrix, rotation_angle_deg
 
 
 @dataclass(frozen=True)
@@ -236,10 +237,9 @@ class PhysicsStability:
             side, height = u / 2 - cfg.side_gap * u, u / 2 + cfg.overlap * u
             n = len(offsets)
             collision = p.createCollisionShapeArray(
-                [p.GEOM_BOX] * n, halfExtents=[[side, side, height]] * n,
-                collisionFramePositions=local.tolist(), collisionFrameOrientations=[_quat(axes.T)] * n,
-                physicsClientId=self._client)
-            shape = _Shape(collision, cfg.cube_mass * n, moments.tolist(), com, _quat(axes))
+                [p.GEOM_BOX] * n, halfExtents=[[side, side, height]] * n, collisionFramePositions=local.tolist(),
+                collisionFrameOrientations=[quaternion_from_matrix(axes.T)] * n, physicsClientId=self._client)
+            shape = _Shape(collision, cfg.cube_mass * n, moments.tolist(), com, quaternion_from_matrix(axes))
             self._shapes[key] = shape
         return shape
 
@@ -262,7 +262,7 @@ class PhysicsStability:
         start = [p.getBasePositionAndOrientation(b, physicsClientId=cid) for b in bodies]
         origin = [np.asarray(pos) for pos, _ in start]
         arms = [c - o for c, o in zip(cubes, origin)]                  # cube centres from the COM
-        unturn = [_rotation(q).T for _, q in start]
+        unturn = [matrix_from_quaternion(q).T for _, q in start]
         rest_v, rest_w = cfg.rest_speed * u, math.radians(cfg.rest_spin_deg)
         calm, failed, explain_until = 0, '', 0
         for step in range(1, int(cfg.max_steps) + 1):
@@ -272,9 +272,9 @@ class PhysicsStability:
             motion = []
             for i, b in enumerate(bodies):
                 pos, q = p.getBasePositionAndOrientation(b, physicsClientId=cid)
-                turn = _rotation(q) @ unturn[i]
+                turn = matrix_from_quaternion(q) @ unturn[i]
                 shift = arms[i] @ turn.T + (np.asarray(pos) - origin[i]) - arms[i]
-                motion.append((float(np.sqrt((shift ** 2).sum(axis=1)).max()), _angle_deg(turn)))
+                motion.append((float(np.sqrt((shift ** 2).sum(axis=1)).max()), rotation_angle_deg(turn)))
             destroyed = self._destroyed(motion[:new], unit)
             if destroyed:
                 return False, f'{failed}; {destroyed} too' if failed else f'{destroyed} (structure destroyed)'
@@ -316,34 +316,3 @@ class PhysicsStability:
         if move > cfg.new_move * cfg.sim_unit:
             return f'new block moved {move * unit / cfg.sim_unit * 1000:.1f} mm'
         return ''
-
-
-def _quat(r: np.ndarray) -> list[float]:
-    """Quaternion (x, y, z, w) of a rotation matrix (Shepperd's method, safe near 180 deg)."""
-    t = np.trace(r)
-    if t > 0:
-        s = 2.0 * math.sqrt(1.0 + t)
-        q = [(r[2, 1] - r[1, 2]) / s, (r[0, 2] - r[2, 0]) / s, (r[1, 0] - r[0, 1]) / s, s / 4]
-    else:
-        i = int(np.argmax(np.diag(r)))
-        j, k = (i + 1) % 3, (i + 2) % 3
-        s = 2.0 * math.sqrt(max(0.0, 1.0 + r[i, i] - r[j, j] - r[k, k]))
-        q = [0.0, 0.0, 0.0, (r[k, j] - r[j, k]) / s]
-        q[i] = s / 4
-        q[j] = (r[j, i] + r[i, j]) / s
-        q[k] = (r[k, i] + r[i, k]) / s
-    return [float(v) for v in q]
-
-
-def _rotation(q) -> np.ndarray:
-    x, y, z, w = q
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-    ])
-
-
-def _angle_deg(r: np.ndarray) -> float:
-    """Angle of a rotation matrix, degrees."""
-    return math.degrees(math.acos(min(1.0, max(-1.0, (r[0, 0] + r[1, 1] + r[2, 2] - 1.0) / 2.0))))

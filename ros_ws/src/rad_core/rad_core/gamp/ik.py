@@ -36,6 +36,7 @@ import numpy as np
 
 from rad_core.sim import panda
 from rad_core.sim.world import World
+from rad_core.transforms import quaternion_angle_deg
 
 
 SHOULDER = np.array([0.0, 0.0, 0.333])
@@ -76,12 +77,6 @@ class IkResult:
     calls: int = 0
     seconds: float = 0.0
     hand_yaw: float = 0.0            # rad, the hand yaw that was solved for
-
-
-def orientation_error_deg(q1, q2) -> float:
-    """Angle (deg) of the rotation between two quaternions x, y, z, w."""
-    d = abs(float(np.dot(q1, q2))) / (np.linalg.norm(q1) * np.linalg.norm(q2))
-    return math.degrees(2 * math.acos(min(1.0, d)))
 
 
 def predicted_joint7(position, hand_yaw: float) -> float:
@@ -206,7 +201,7 @@ def out_of_workspace(position: np.ndarray, config: IkConfig = IkConfig()) -> str
 
 def _residual(world: World, position: np.ndarray, quaternion: np.ndarray) -> tuple[float, float]:
     pos, orn = world.link_pose(world.ee_link)
-    return float(np.linalg.norm(pos - position)), orientation_error_deg(orn, quaternion)
+    return float(np.linalg.norm(pos - position)), quaternion_angle_deg(orn, quaternion)
 
 
 def _full(q, fingers) -> np.ndarray:

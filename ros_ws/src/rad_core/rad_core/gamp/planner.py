@@ -42,7 +42,8 @@ from rad_core.gamp.ik import IkConfig, hand_yaw_options, solve_top_down
 from rad_core.gamp.trajectory import TimingConfig, Trajectory, time_parameterize
 from rad_core.scene import Scene
 from rad_core.sim import panda
-from rad_core.sim.world import World, yaw_of_quaternion
+from rad_core.sim.world import World
+from rad_core.transforms import matrix_from_quaternion, yaw_matrix, yaw_of_quaternion, yaw_quaternion
 
 
 @dataclass(frozen=True)
@@ -166,9 +167,9 @@ def plan_action(world: World, block_id: str, position, yaw_deg: float, start=Non
         start = world.joint_positions() if start is None else _full(start)
         block_pos, block_quat = world.block_pose(block_id)
         block_yaw = math.radians(yaw_of_quaternion(block_quat))
-        rot = _rotation(block_quat)
+        rot = matrix_from_quaternion(block_quat)
         turn = math.radians(yaw_deg) - block_yaw
-        final_rot = _rz(math.radians(yaw_deg))
+        final_rot = yaw_matrix(yaw_deg)
         tops = _tops(world, exclude=block_id)
         for grasp in grasps:
             offset = np.asarray(btype.offsets[grasp.unit], dtype=float) * unit
@@ -263,7 +264,7 @@ def _plan_place(world, block_id, pick, place_point, position, yaw_deg, hand_yaw,
         q_prev = q
     _segment(carry, top, column[-1], config, 'carrying the block over')
     # Released: the block stays exactly at its final pose, the fingers open.
-    world.set_block_pose(block_id, position, _yaw_quat(yaw_deg))
+    world.set_block_pose(block_id, position, yaw_quaternion(yaw_deg))
     after = clock.timed(make_collision_fn(world, config=config.collision))
     q_open = _with_fingers(q_place, open_f)
     _probe(after, q_open, 'opening the fingers')
@@ -341,18 +342,3 @@ def _with_fingers(q, f: float) -> np.ndarray:
     q = np.array(q, dtype=float)
     q[7:] = f
     return q
-
-
-def _rz(a: float) -> np.ndarray:
-    c, s = math.cos(a), math.sin(a)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-
-
-def _rotation(q) -> np.ndarray:
-    from rad_core.physics import _rotation as rotation
-    return rotation(q)
-
-
-def _yaw_quat(yaw_deg: float) -> list[float]:
-    h = math.radians(yaw_deg) / 2
-    return [0.0, 0.0, math.sin(h), math.cos(h)]

@@ -34,6 +34,7 @@ import numpy as np
 
 from rad_core.errors import RadError, SceneError
 from rad_core.scene import Scene
+from rad_core.transforms import matrix_from_quaternion, yaw_quaternion
 
 # Quaternions from a tracker are normalised by the tracker; anything further off
 # than this is a corrupted message or a wrong field order, not rounding.
@@ -111,11 +112,6 @@ def body_map_for(scene: Scene, names: dict[str, str] | None = None) -> dict[str,
     return {names.get(b.id, b.id): (b.id, b.type) for b in scene.blocks}
 
 
-def yaw_quaternion(yaw_deg: float) -> tuple[float, float, float, float]:
-    half = math.radians(yaw_deg) / 2
-    return (0.0, 0.0, math.sin(half), math.cos(half))
-
-
 def scene_to_bodies(scene: Scene, names: dict[str, str] | None = None,
                     table_z: float = 0.0) -> list[RigidBodyPose]:
     """What a motion-capture system would report for a scene, in block order.
@@ -177,7 +173,7 @@ def _snap(body: RigidBodyPose, template: Scene, block_type, config: Registration
     norm = float(np.linalg.norm(quat))
     if abs(norm - 1.0) > QUAT_NORM_TOL:
         raise RadError(f'rigid body {name!r}: quaternion {quat.tolist()} is not unit length (norm {norm:.4f})')
-    r = _rotation(quat / norm)
+    r = matrix_from_quaternion(quat / norm)
     tilt = math.degrees(math.acos(min(1.0, max(-1.0, r[2, 2]))))
     if tilt > config.tilt_tol_deg:
         raise RadError(f'rigid body {name!r} is tilted {tilt:.1f} deg from upright (limit '
@@ -243,12 +239,3 @@ def _listing(keys) -> str:
     keys = sorted(keys)
     text = ', '.join(repr(k) for k in keys[:8])
     return text + (f', ... ({len(keys)} in all)' if len(keys) > 8 else '') if keys else 'none'
-
-
-def _rotation(q) -> np.ndarray:
-    x, y, z, w = q
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-    ])

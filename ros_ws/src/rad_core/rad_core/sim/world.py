@@ -40,6 +40,8 @@ from rad_core.physics import polycube_inertia
 from rad_core.scene import Scene
 from rad_core.sim import panda
 from rad_core.sim.panda import JOINT_NAMES
+from rad_core.transforms import quaternion_from_matrix, yaw_quaternion
+from rad_core.transforms import yaw_of_quaternion  # noqa: F401 - robot_env imports it from here
 
 
 @dataclass(frozen=True)
@@ -201,7 +203,7 @@ class World:
         moments, axes = np.linalg.eigh(tensor)
         if np.linalg.det(axes) < 0:
             axes[:, 2] = -axes[:, 2]
-        shape = _BlockShape(collision, visual, mass, moments.tolist(), (com.tolist(), _quat_from_matrix(axes)))
+        shape = _BlockShape(collision, visual, mass, moments.tolist(), (com.tolist(), quaternion_from_matrix(axes)))
         shape.colour = [*type_colour(type_name), 1.0]
         self._shapes[key] = shape
         return shape
@@ -222,7 +224,7 @@ class World:
             shape = self._shape(block.type, offsets, scene.unit)
             body = p.createMultiBody(shape.mass, shape.collision, shape.visual,
                                      basePosition=list(block.position),
-                                     baseOrientation=_yaw_quat(block.yaw),
+                                     baseOrientation=yaw_quaternion(block.yaw),
                                      baseInertialFramePosition=shape.com[0],
                                      baseInertialFrameOrientation=shape.com[1], physicsClientId=cid)
             # mass repeated on purpose: setting the inertia alone may zero it (see physics.py).
@@ -347,19 +349,3 @@ class World:
             if state is not None:
                 self._p.restoreState(stateId=state, physicsClientId=self.client)
                 self._p.removeState(state, physicsClientId=self.client)
-
-
-def _yaw_quat(yaw_deg: float) -> list[float]:
-    h = math.radians(yaw_deg) / 2
-    return [0.0, 0.0, math.sin(h), math.cos(h)]
-
-
-def yaw_of_quaternion(q) -> float:
-    """Yaw (deg, in [0, 360)) of a quaternion x, y, z, w that turns about z only."""
-    x, y, z, w = q
-    return math.degrees(math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))) % 360
-
-
-def _quat_from_matrix(r: np.ndarray) -> list[float]:
-    from rad_core.physics import _quat
-    return _quat(r)
