@@ -1,0 +1,168 @@
+"""Plan a whole assembly: allocate, sequence, plan every motion.
+
+`plan_assembly` knows nothing of ROS or of where its parts run: it takes the
+allocation and the motion planner as callables, so the /plan_assembly node passes
+DDS service clients and tests or `rad eval` pass the in-process functions.
+
+Each step: the policy ranks the allocation's allowed actions; the best one whose
+motion GAMP finds feasible from the current state is taken (so a plan never
+commands an action that fails in the planning copy); the planning copy of the
+scene then has that block at its allocated pose, and the next step starts from
+the last trajectory's final joints.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from rad_core.allocation.guide import AllocationGuide
+from rad_core.allocation.result import AllocationResult
+from rad_core.gamp.action import SceneAction
+from rad_core.mdp import AssemblyEnv, EnvConfig
+from rad_core.scene import Block, Scene
+from rad_core.sequencing.policy import Policy, ranked_actions
+
+
+@dataclass
+class MotionPlan:
+    """What a motion planner (in-process GAMP or the gamp node) answers."""
+
+    success: bool
+    failure: str = ''
+    reason: str = ''
+    grasp: tuple[int, int] = (0, 0)   # unit, yaw
+    trajectory: dict | None = None    # {"joint_names", "points": [...]}
+
+
+@dataclass
+class PlanStep:
+    block: str
+    type: str
+    target: str
+    yaw: int
+    cells: list[list[int]]
+    unit: int
+    cell: list[int]
+    rotation: int
+    grasp: tuple[int, int]
+    position: list[float]
+    trajectory: dict
+
+    def to_dict(self) -> dict:
+        return {'block': self.block, 'type': self.type, 'target': self.target, 'yaw': self.yaw,
+                'cells': self.cells, 'unit': self.unit, 'cell': self.cell, 'rotation': self.rotation,
+                'grasp': {'unit': self.grasp[0], 'yaw': self.grasp[1]}, 'position': self.position,
+                'trajectory': self.trajectory}
+
+
+@dataclass
+class AssemblyPlan:
+    success: bool
+    reason: str
+    scene: Scene
+    allocation: AllocationResult | None = None
+    steps: list[PlanStep] = field(default_factory=list)
+    predicted_coverage: float = 0.0
+    final_scene: Scene | None = None
+    timings: dict = field(default_factory=dict)
+
+
+Allocate = Callable[[Scene], AllocationResult]
+PlanMotion = Callable[[Scene, SceneAction, 'np.ndarray | None'], MotionPlan]
+
+
+def moved(scene: Scene, block_id: str, position, yaw: int) -> Scene:
+    """The scene with one block at a new pose (validated like any scene)."""
+    blocks = tuple(Block(b.id, b.type, tuple(round(float(v), 6) for v in position), int(yaw) % 360)
+                   if b.id == block_id else b for b in scene.blocks)
+    return Scene.from_dict(Scene(scene.unit, scene.block_types, blocks, scene.targets).to_dict())
+
+
+def plan_assembly(scene: Scene, allocate: Allocate, plan_motion: PlanMotion, policy: Policy, seed: int = 0,
+                  start=None, time_limit_s: float = 60.0) -> AssemblyPlan:
+    t0 = time.perf_counter()
+    timings = {'allocation': 0.0, 'sequencing': 0.0, 'motion': 0.0}
+    allocation = allocate(scene)
+    timings['allocation'] = time.perf_counter() - t0
+    plan = AssemblyPlan(False, '', scene, allocation, final_scene=scene, timings=timings)
+    if not allocation.has_solution:
+        plan.reason = f'allocation failed: {allocation.status}'
+        return _done(plan, t0)
+    env = AssemblyEnv(scene, EnvConfig(stability='none'))
+    guide = AllocationGuide(env, allocation.placements)
+    policy.reset(seed)
+    current, q = scene, start
+    while True:
+        if time.perf_counter() - t0 > time_limit_s:
+            plan.reason = f'time limit of {time_limit_s:g} s reached after {len(plan.steps)} steps'
+            break
+        allowed = guide.allowed_actions()
+        if not allowed:
+            break
+        ts = time.perf_counter()
+        ranked = ranked_actions(policy, env, allowed)
+        timings['sequencing'] += time.perf_counter() - ts
+        if not ranked:
+            plan.reason = (f'{len(guide.open_poses())} allocated poses left, none of them can be built next '
+                           f'(their blocks would not rest fully supported)')
+            break
+        step = _first_feasible(env, current, ranked, plan_motion, q, timings)
+        if isinstance(step, str):
+            plan.reason = step
+            break
+        action, step = step
+        plan.steps.append(step)
+        env.step(action)
+        current = moved(current, step.block, step.position, step.yaw)
+        q = np.asarray(step.trajectory['points'][-1]['positions'])
+    plan.final_scene = current
+    plan.predicted_coverage = env.coverage()
+    plan.success = not plan.reason and not guide.open_poses()
+    if not plan.success and not plan.reason:
+        plan.reason = 'allocated poses remain unbuilt'
+    return _done(plan, t0)
+
+
+def _first_feasible(env: AssemblyEnv, scene: Scene, ranked, plan_motion: PlanMotion, q, timings):
+    """(action, PlanStep) of the best-ranked action GAMP can execute, or why none."""
+    tried, failures = set(), []
+    for action in ranked:
+        cells, yaw = env.resulting_cells(action)
+        block = scene.blocks[action.block]
+        key = (block.id, tuple(sorted(int(c) for c in cells)), yaw)
+        if key in tried:   # another unit or rotation of the same motion
+            continue
+        tried.add(key)
+        region, ijk = env.grid.region_cells(cells)
+        cell = [int(v) for v in env.grid.ijk[action.cell]]
+        request = SceneAction(block.id, action.unit, scene.targets[region].name, tuple(cell), action.rotation)
+        ts = time.perf_counter()
+        motion = plan_motion(scene, request, q)
+        timings['motion'] += time.perf_counter() - ts
+        if motion.success:
+            anchor = env.grid.centres[cells[0]]
+            return action, PlanStep(block.id, block.type, request.target, int(yaw), ijk, action.unit, cell,
+                                    action.rotation, motion.grasp, [float(v) for v in anchor], motion.trajectory)
+        failures.append(f'{block.id}: {motion.reason}')
+    shown = '; '.join(failures[:3]) + (f'; and {len(failures) - 3} more' if len(failures) > 3 else '')
+    return f'no feasible next action ({len(failures)} tried): {shown}'
+
+
+def _done(plan: AssemblyPlan, t0: float) -> AssemblyPlan:
+    plan.timings['total'] = time.perf_counter() - t0
+    return plan
+
+
+def local_motion_planner(planner) -> PlanMotion:
+    """Adapt an in-process `gamp.action.MotionPlanner` to the PlanMotion signature."""
+    def plan_motion(scene: Scene, action: SceneAction, start) -> MotionPlan:
+        result, _, _ = planner(scene, action, start=start)
+        if not result.success:
+            return MotionPlan(False, result.failure, result.reason)
+        return MotionPlan(True, '', '', (int(result.grasp.unit), int(result.grasp.yaw)),
+                          result.trajectory.to_dict())
+    return plan_motion
