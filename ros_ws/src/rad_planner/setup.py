@@ -23,6 +23,7 @@ setup(
     entry_points={
         'console_scripts': [
             'allocation_node = rad_planner.allocation_node:main',
+            'assembly_node = rad_planner.assembly_node:main',
         ],
     },
 )

@@ -17,7 +17,7 @@ from rad_core.scene import FORMAT, Scene
 MAX_SCENE_JSON_BYTES = 10 * 1024 * 1024
 
 
-def _cells(cells) -> list:
+def cells_msg(cells) -> list:
     return [Cell(i=int(c[0]), j=int(c[1]), k=int(c[2])) for c in cells]
 
 
@@ -29,11 +29,11 @@ def scene_to_msg(scene: Scene, frame_id: str = 'world') -> SceneMsg:
     msg = SceneMsg()
     msg.header.frame_id = frame_id
     msg.unit = float(scene.unit)
-    msg.block_types = [BlockType(name=t.name, cells=_cells(t.offsets)) for t in scene.block_types.values()]
+    msg.block_types = [BlockType(name=t.name, cells=cells_msg(t.offsets)) for t in scene.block_types.values()]
     msg.blocks = [Block(id=b.id, type=b.type, position=Point(x=b.position[0], y=b.position[1], z=b.position[2]),
                         yaw_deg=int(b.yaw)) for b in scene.blocks]
     msg.targets = [TargetRegion(name=t.name, origin=Point(x=t.origin[0], y=t.origin[1], z=t.origin[2]),
-                                size=[int(v) for v in t.size], filled=_cells(t.filled)) for t in scene.targets]
+                                size=[int(v) for v in t.size], filled=cells_msg(t.filled)) for t in scene.targets]
     return msg
 
 
@@ -78,7 +78,7 @@ def scene_from_request(msg: SceneMsg, scene_json: str) -> Scene:
 
 
 def placement_to_msg(p: CorePlacement) -> Placement:
-    return Placement(type=p.type, target=p.target, yaw_deg=int(p.yaw), cells=_cells(p.cells))
+    return Placement(type=p.type, target=p.target, yaw_deg=int(p.yaw), cells=cells_msg(p.cells))
 
 
 def placement_from_msg(msg: Placement) -> CorePlacement:

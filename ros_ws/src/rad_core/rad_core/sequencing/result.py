@@ -1,0 +1,51 @@
+"""What an executed assembly produced: rad-result/1, measured coverage, deviations."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from rad_core.allocation.result import AllocationResult
+from rad_core.grid import Grid, blocks_on_grid
+from rad_core.scene import Scene
+
+FORMAT = 'rad-result/1'
+
+
+def measured_coverage(scene: Scene) -> float:
+    """Fraction of target cells that blocks of this (registered) scene fill."""
+    grid = Grid(scene)
+    filled = np.zeros(grid.num_cells, dtype=bool)
+    for cells in blocks_on_grid(scene, grid).values():
+        filled[cells] = True
+    total = int(grid.is_target.sum())
+    return float((filled & grid.is_target).sum() / total) if total else 1.0
+
+
+def deviation(expected: Scene, measured: Scene, tol: float) -> str | None:
+    """Why the measured world is not the expected one (a block off by more than tol
+    metres, or turned), or None when it matches."""
+    seen = {b.id: b for b in measured.blocks}
+    for block in expected.blocks:
+        other = seen.get(block.id)
+        if other is None:
+            return f'block {block.id} is not seen by motion capture'
+        off = float(np.linalg.norm(np.subtract(other.position, block.position)))
+        if off > tol:
+            return f'block {block.id} is {off * 1e3:.1f} mm from where the plan put it'
+        if other.yaw != block.yaw:
+            return f'block {block.id} is turned {other.yaw} deg, the plan has {block.yaw} deg'
+    return None
+
+
+def result_document(scene: Scene, allocation: AllocationResult | None, steps: list[dict], final: Scene | None,
+                    timings: dict) -> dict:
+    """The rad-result/1 document of a run (steps: PlanStep.to_dict() of executed steps)."""
+    return {
+        'format': FORMAT,
+        'scene': scene.to_dict(),
+        'allocation': allocation.to_dict() if allocation is not None else None,
+        'steps': steps,
+        'final_blocks': [b.to_dict() for b in final.blocks] if final is not None else [],
+        'coverage': measured_coverage(final) if final is not None else 0.0,
+        'timings': timings,
+    }

@@ -1,0 +1,306 @@
+"""/plan_assembly and /execute_assembly: the sequencer of the node graph.
+
+It knows the world only through the graph: the scene from the request or, if the
+request has none, registered from motion capture (`rigid_bodies`) against the task
+(`task_file` parameter, else the latched `scene` topic); the robot from
+`joint_states`; allocation from `/allocate`; motions from `/plan_action`. So the
+twin can be replaced by a real cell without touching this node.
+
+  srv  plan_assembly     rad_msgs/PlanAssembly
+  act  execute_assembly  rad_msgs/ExecuteAssembly: plan, execute step by step via the
+                         trajectory topic, re-register after each step, replan on deviation
+  pub  plan_json         std_msgs/String (latched): the latest plan, for the visualizer
+  pub  joint_trajectory_controller/joint_trajectory  the steps' trajectories
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import threading
+import time
+
+import numpy as np
+from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.callback_groups import ReentrantCallbackGroup
+from rclpy.executors import MultiThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, qos_profile_sensor_data
+from sensor_msgs.msg import JointState
+from std_msgs.msg import String
+from trajectory_msgs.msg import JointTrajectory
+
+from rad_core.errors import RadError
+from rad_core.scene import Scene
+from rad_core.sequencing import HeurPolicy
+from rad_core.sequencing.plan import MotionPlan, moved, plan_assembly
+from rad_core.sequencing.result import deviation, measured_coverage, result_document
+from rad_core.sim import panda
+from rad_core.sim.mocap import RegistrationConfig, RigidBodyPose, body_map_for, register_scene
+from rad_msgs.action import ExecuteAssembly
+from rad_msgs.msg import Scene as SceneMsg
+from rad_msgs.srv import Allocate, PlanAction, PlanAssembly
+from rad_ros.conversions import allocation_from_response, scene_from_msg, scene_from_request
+from rad_ros.node_main import run_node
+from rad_ros.plan_msgs import fill_plan_response, plan_json
+from rad_ros.motion import pose_from_msg, trajectory_from_msg, trajectory_to_msg
+
+LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+
+class AssemblyNode(Node):
+    def __init__(self):
+        super().__init__('assembly')
+        for name, value in (('time_limit_s', 120.0), ('allocation_time_limit_s', 10.0), ('seed', 0),
+                            ('task_file', ''), ('service_timeout_s', 60.0), ('stale_after_s', 2.0),
+                            ('settle_s', 0.5), ('position_tol', 0.005), ('max_replans', 3),
+                            ('step_timeout_factor', 3.0), ('frame_id', 'world')):
+            self.declare_parameter(name, value)
+        self.lock = threading.Lock()
+        self.joints: tuple[float, JointState] | None = None
+        self.bodies = None
+        self.task: Scene | None = None
+        path = self.get_parameter('task_file').value
+        if path:
+            self.task = Scene.load(path)
+        group = ReentrantCallbackGroup()
+        self.allocate_client = self.create_client(Allocate, 'allocate', callback_group=group)
+        self.plan_client = self.create_client(PlanAction, 'plan_action', callback_group=group)
+        self.create_subscription(JointState, 'joint_states', self.joint_states_callback, 10, callback_group=group)
+        self.create_subscription(self.rigid_bodies_type(), 'rigid_bodies', self.rigid_bodies_callback,
+                                 qos_profile_sensor_data, callback_group=group)
+        self.create_subscription(SceneMsg, 'scene', self.scene_callback, LATCHED, callback_group=group)
+        self.trajectory_pub = self.create_publisher(JointTrajectory, 'joint_trajectory_controller/joint_trajectory', 10)
+        self.plan_pub = self.create_publisher(String, 'plan_json', LATCHED)
+        self.create_service(PlanAssembly, 'plan_assembly', self.plan_assembly_callback, callback_group=group)
+        self.action_server = ActionServer(self, ExecuteAssembly, 'execute_assembly', self.execute_callback,
+                                          goal_callback=lambda goal: GoalResponse.ACCEPT,
+                                          cancel_callback=lambda goal: CancelResponse.ACCEPT,
+                                          callback_group=group)
+        self.get_logger().info('assembly planner ready')
+
+    @staticmethod
+    def rigid_bodies_type():
+        from rad_msgs.msg import RigidBodies
+        return RigidBodies
+
+    def param(self, name):
+        return self.get_parameter(name).value
+
+    # ---- what the graph tells us ------------------------------------------------
+    def joint_states_callback(self, msg: JointState) -> None:
+        with self.lock:
+            self.joints = (time.monotonic(), msg)
+
+    def rigid_bodies_callback(self, msg) -> None:
+        with self.lock:
+            self.bodies = (time.monotonic(), msg)
+
+    def scene_callback(self, msg: SceneMsg) -> None:
+        if not self.param('task_file'):
+            try:
+                self.task = scene_from_msg(msg)
+            except RadError as e:
+                self.get_logger().warning(f'ignoring an invalid scene on /scene: {e}')
+
+    def fresh(self, entry, what: str):
+        stale = float(self.param('stale_after_s'))
+        if entry is None:
+            raise RadError(f'no {what} received: is the robot (or the twin) running?')
+        age = time.monotonic() - entry[0]
+        if age > stale:
+            raise RadError(f'no {what} for {age:.1f} s: is the robot (or the twin) running?')
+        return entry[1]
+
+    def current_joints(self) -> np.ndarray:
+        with self.lock:
+            msg = self.fresh(self.joints, '/joint_states')
+        by_name = dict(zip(msg.name, msg.position))
+        missing = [n for n in panda.JOINT_NAMES if n not in by_name]
+        if missing:
+            raise RadError(f'/joint_states lacks {", ".join(missing)}')
+        return np.array([by_name[n] for n in panda.JOINT_NAMES])
+
+    def registered_scene(self) -> Scene:
+        if self.task is None:
+            raise RadError('no scene in the request and no task known: set the task_file parameter '
+                           'or publish the task on /scene')
+        with self.lock:
+            msg = self.fresh(self.bodies, 'motion capture on /rigid_bodies')
+        bodies = [RigidBodyPose(b.rigid_body_name, *pose_from_msg(b.pose), b.tracking_valid)
+                  for b in msg.rigidbodies]
+        return register_scene(bodies, self.task, RegistrationConfig(body_map=body_map_for(self.task)))
+
+    # ---- the two backends plan_assembly needs, over DDS ------------------------------
+    def call(self, client, request):
+        timeout = float(self.param('service_timeout_s'))
+        if not client.wait_for_service(timeout_sec=min(timeout, 5.0)):
+            raise RadError(f'service {client.srv_name} is not available')
+        done = threading.Event()
+        future = client.call_async(request)
+        future.add_done_callback(lambda _: done.set())
+        if not done.wait(timeout):
+            client.remove_pending_request(future)
+            raise RadError(f'{client.srv_name} did not answer within {timeout:g} s')
+        return future.result()
+
+    def allocate(self, scene: Scene):
+        response = self.call(self.allocate_client, Allocate.Request(
+            scene_json=scene.dumps(), time_limit_s=float(self.param('allocation_time_limit_s'))))
+        if response.status == 'INVALID_REQUEST':
+            raise RadError(response.reason)
+        return allocation_from_response(response)
+
+    def plan_motion(self, scene: Scene, action, start) -> MotionPlan:
+        request = PlanAction.Request(scene_json=scene.dumps(),
+                                     start_positions=[] if start is None else [float(v) for v in start])
+        a = request.action
+        a.block_id, a.unit, a.target, a.rotation = action.block_id, action.unit, action.target, action.rotation
+        a.cell.i, a.cell.j, a.cell.k = (int(v) for v in action.cell)
+        response = self.call(self.plan_client, request)
+        if response.failure in ('invalid_request', 'error'):
+            raise RadError(f'plan_action: {response.reason}')
+        if not response.success:
+            return MotionPlan(False, response.failure, response.reason)
+        return MotionPlan(True, '', '', (response.grasp.unit, response.grasp.yaw_deg),
+                          trajectory_from_msg(response.trajectory))
+
+    def plan(self, scene: Scene, time_limit: float, start):
+        plan = plan_assembly(scene, self.allocate, self.plan_motion, HeurPolicy(), seed=int(self.param('seed')),
+                             start=start, time_limit_s=time_limit)
+        self.plan_pub.publish(String(data=json.dumps(plan_json(plan))))
+        return plan
+
+    def time_limit(self, requested: float) -> float:
+        if not math.isfinite(requested) or requested < 0:
+            raise RadError(f'time_limit_s must be 0 (node default) or positive, got {requested}')
+        limit = requested or float(self.param('time_limit_s'))
+        if not limit > 0:
+            raise RadError(f'the time_limit_s parameter must be positive, got {limit}')
+        return limit
+
+    def start_joints(self, requested):
+        if len(requested):
+            return list(requested)
+        try:
+            return self.current_joints()
+        except RadError:
+            return None   # no robot heard from: plan from home
+
+    # ---- /plan_assembly ------------------------------------------------------------
+    def plan_assembly_callback(self, request, response):
+        t0 = time.perf_counter()
+        try:
+            limit = self.time_limit(request.time_limit_s)
+            if request.scene_json.strip() or request.scene.blocks or request.scene.targets or request.scene.unit:
+                scene, registration = scene_from_request(request.scene, request.scene_json), 0.0
+            else:
+                scene = self.registered_scene()
+                registration = time.perf_counter() - t0
+            plan = self.plan(scene, limit, self.start_joints(request.start_positions))
+        except RadError as e:
+            response.success, response.reason = False, str(e)
+            self.get_logger().warning(f'plan_assembly refused: {e}')
+            return response
+        except Exception as e:  # noqa: BLE001 - a service must answer, never die
+            self.get_logger().error(f'plan_assembly failed: {type(e).__name__}: {e}')
+            response.success, response.reason = False, f'internal error: {e}'
+            return response
+        timings = dict(plan.timings, registration=registration, total=time.perf_counter() - t0)
+        fill_plan_response(response, plan, timings, self.param('frame_id'))
+        self.get_logger().info(f'planned {len(plan.steps)} steps, coverage {plan.predicted_coverage:.2f} '
+                               f'in {timings["total"]:.2f} s' + (f': {plan.reason}' if plan.reason else ''))
+        return response
+
+    # ---- /execute_assembly -------------------------------------------------------------
+    def execute_callback(self, goal_handle):
+        goal = goal_handle.request
+        result = ExecuteAssembly.Result()
+        t0 = time.perf_counter()
+        feedback = ExecuteAssembly.Feedback()
+
+        def report(step, planned, block, phase, message=''):
+            feedback.step, feedback.steps_planned, feedback.block_id = step, planned, block
+            feedback.phase, feedback.message = phase, message
+            goal_handle.publish_feedback(feedback)
+
+        executed, allocation, scene, current = [], None, None, None
+        try:
+            limit = self.time_limit(goal.time_limit_s)
+            if goal.scene_json.strip() or goal.scene.blocks or goal.scene.targets or goal.scene.unit:
+                scene = scene_from_request(goal.scene, goal.scene_json)
+            else:
+                scene = self.registered_scene()
+            current = scene
+            while True:
+                report(len(executed), 0, '', 'planning')
+                plan = self.plan(current, limit, self.start_joints([]))
+                allocation = allocation or plan.allocation
+                outcome = self.execute_plan(goal_handle, plan, current, executed, report)
+                current = outcome['scene']
+                if outcome['deviation'] is None:
+                    result.success, result.reason = plan.success, plan.reason
+                    break
+                if not goal.replan or result.replans >= int(self.param('max_replans')):
+                    raise RadError(f'the world differs from the plan: {outcome["deviation"]}')
+                result.replans += 1
+                report(len(executed), len(plan.steps), '', 'replanning', outcome['deviation'])
+        except RadError as e:
+            result.success, result.reason = False, str(e)
+        except Exception as e:  # noqa: BLE001
+            self.get_logger().error(f'execute_assembly failed: {type(e).__name__}: {e}')
+            result.success, result.reason = False, f'internal error: {e}'
+        try:
+            final = self.registered_scene()
+        except RadError:
+            final = current
+        result.steps_executed = len(executed)
+        result.coverage = measured_coverage(final) if final is not None else 0.0
+        if scene is not None:
+            result.result_json = json.dumps(result_document(
+                scene, allocation, executed, final, {'total': time.perf_counter() - t0}))
+        report(len(executed), len(executed), '', 'done', result.reason)
+        (goal_handle.succeed if result.success else goal_handle.abort)()
+        return result
+
+    def execute_plan(self, goal_handle, plan, scene: Scene, executed: list, report) -> dict:
+        """Run the plan's steps; stop at the first step whose result deviates."""
+        for k, step in enumerate(plan.steps):
+            if goal_handle.is_cancel_requested:
+                raise RadError('cancelled')
+            report(len(executed), len(plan.steps), step.block, 'executing')
+            self.trajectory_pub.publish(trajectory_to_msg(step.trajectory, self.param('frame_id')))
+            self.wait_until_done(step.trajectory)
+            time.sleep(float(self.param('settle_s')))
+            report(len(executed), len(plan.steps), step.block, 'verifying')
+            expected = moved(scene, step.block, step.position, step.yaw)
+            measured = self.registered_scene()
+            executed.append(step.to_dict())
+            problem = deviation(expected, measured, float(self.param('position_tol')))
+            scene = measured
+            if problem is not None:
+                return {'scene': scene, 'deviation': problem}
+        return {'scene': scene, 'deviation': None}
+
+    def wait_until_done(self, trajectory: dict) -> None:
+        """Until the robot rests at the trajectory's last point; fails if the robot
+        goes quiet (joint states stop) or takes far longer than the trajectory."""
+        final = np.asarray(trajectory['points'][-1]['positions'])
+        names = list(trajectory['joint_names'])
+        duration = float(trajectory['points'][-1]['time_from_start'])
+        deadline = time.monotonic() + duration * float(self.param('step_timeout_factor')) + 10.0
+        index = [panda.JOINT_NAMES.index(n) for n in names]
+        while True:
+            q = self.current_joints()
+            with self.lock:
+                velocity = np.asarray(self.joints[1].velocity) if self.joints[1].velocity else np.zeros(9)
+            if np.all(np.abs(q[index] - final) < 0.01) and np.all(np.abs(velocity) < 0.02):
+                return
+            if time.monotonic() > deadline:
+                raise RadError(f'the robot did not reach the end of the step within {duration:.1f} s x '
+                               f'{self.param("step_timeout_factor")} + 10 s')
+            time.sleep(0.05)
+
+
+def main(args=None):
+    raise SystemExit(run_node(AssemblyNode, args, executor_factory=MultiThreadedExecutor))

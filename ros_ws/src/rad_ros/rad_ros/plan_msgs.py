@@ -1,0 +1,42 @@
+"""AssemblyPlan -> rad_msgs (PlanAssembly response, PlanStep) and the plan_json topic."""
+
+from __future__ import annotations
+
+from rad_msgs.msg import PlanStep, StageTiming
+
+from rad_core.sequencing.plan import AssemblyPlan
+from rad_core.sim.mocap import yaw_quaternion
+from rad_ros.conversions import cells_msg, placement_to_msg
+from rad_ros.motion import pose_msg, trajectory_to_msg
+
+
+def step_to_msg(step, frame_id: str) -> PlanStep:
+    msg = PlanStep(block_id=step.block, type=step.type, target=step.target, yaw_deg=int(step.yaw),
+                   cells=cells_msg(step.cells), unit=int(step.unit), rotation=int(step.rotation))
+    msg.cell.i, msg.cell.j, msg.cell.k = (int(v) for v in step.cell)
+    msg.grasp.unit, msg.grasp.yaw_deg = (int(v) for v in step.grasp)
+    msg.target_pose = pose_msg(step.position, yaw_quaternion(step.yaw))
+    msg.trajectory = trajectory_to_msg(step.trajectory, frame_id)
+    return msg
+
+
+def fill_plan_response(response, plan: AssemblyPlan, timings: dict, frame_id: str):
+    response.success, response.reason = plan.success, plan.reason
+    if plan.allocation is not None:
+        response.allocation_status = plan.allocation.status
+        response.allocation_objective = float(plan.allocation.objective)
+        response.allocation_bound = float(plan.allocation.bound)
+        response.allocation = [placement_to_msg(p) for p in plan.allocation.placements]
+    response.steps = [step_to_msg(s, frame_id) for s in plan.steps]
+    response.predicted_coverage = float(plan.predicted_coverage)
+    response.timings = [StageTiming(stage=k, seconds=float(v)) for k, v in timings.items()]
+    response.scene_json = plan.scene.dumps()
+    return response
+
+
+def plan_json(plan: AssemblyPlan) -> dict:
+    """What the visualizer reads from the latched plan_json topic."""
+    return {'allocation': plan.allocation.to_dict() if plan.allocation is not None else None,
+            'steps': [{k: v for k, v in s.to_dict().items() if k != 'trajectory'} for s in plan.steps],
+            'timings': plan.timings, 'predicted_coverage': plan.predicted_coverage,
+            'success': plan.success, 'reason': plan.reason}
