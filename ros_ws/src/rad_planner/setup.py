@@ -24,6 +24,8 @@ setup(
         'console_scripts': [
             'allocation_node = rad_planner.allocation_node:main',
             'assembly_node = rad_planner.assembly_node:main',
+            'graph = rad_planner.graph:main',
+            'demo = rad_planner.demo:main',
         ],
     },
 )

@@ -5,7 +5,7 @@
     rad scene render scene.json -o scene.png [--allocation allocation.json]
     rad scene stats --grid G --sides S --scenes N
     rad allocate scene.json [--time-limit S] [--seed N] [--workers W] [--solver cp-sat|highs]
-    rad demo [--scene FILE] --out DIR
+    rad demo [--scene FILE] [--out DIR] [--rtf X]
 
 Bad input ends with exit code 2 and one line on stderr naming the problem.
 """
@@ -95,30 +95,48 @@ def cmd_allocate(args) -> int:
 
 
 def cmd_demo(args) -> int:
-    from rad_core.allocation import solve, validate_allocation
-    from rad_core.generator import GeneratorConfig, generate_scene
-    out = Path(args.out)
+    """Hand over to rad_planner's demo, which brings up the whole node graph.
+
+    rad_core stays free of ROS: the demo is a separate installed executable.
+    """
+    import os
+    exe = next((Path(prefix) / 'lib' / 'rad_planner' / 'demo'
+                for prefix in os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep)
+                if prefix and (Path(prefix) / 'lib' / 'rad_planner' / 'demo').is_file()), None)
+    if exe is None:
+        raise RadError('rad_planner is not installed or not sourced: run scripts/setup.sh and '
+                       'source scripts/env.sh (rad allocate works without ROS)')
+    argv = [str(exe), '--out', args.out, '--rtf', str(args.rtf), '--time-limit', str(args.time_limit)]
+    if args.scene:
+        argv += ['--scene', args.scene]
+    os.execv(str(exe), argv)
+    return 1
+
+def cmd_eval(args) -> int:
+    from rad_core.evaluation import ProgressBar, evaluate, generated_scenes, scene_dir, uses_robot
+    robot = uses_robot(args.agent, args.robot)
+    if args.scene_dir:
+        scenes = scene_dir(args.scene_dir)
+        total, source = len(scenes), args.scene_dir
+    else:
+        if args.scenes < 1:
+            raise RadError(f'--scenes must be at least 1, got {args.scenes}')
+        scenes = generated_scenes(args.grid, args.sides, args.scenes, args.seed)
+        last = args.seed + args.scenes - 1
+        total, source = args.scenes, f'g={args.grid} sides={args.sides} seeds {args.seed}..{last}'
     t0 = time.perf_counter()
-    scene = _read_scene(args.scene) if args.scene else generate_scene(GeneratorConfig(grid=4, sides=2), seed=0)
-    result = solve(scene, _allocation_params(args))
-    problems = validate_allocation(scene, result)
-    _write_text(scene.dumps(), str(out / 'scene.json'))
-    _write_text(jsonfmt.dumps(result.to_dict()), str(out / 'allocation.json'))
-    try:
-        from rad_core.render import save_scene_png
-        save_scene_png(scene, out / 'scene.png', allocation=result)
-        picture = f'{out / "scene.png"}'
-    except ImportError:
-        picture = 'no picture (renderer not available)'
-    covered = sum(len(p.cells) for p in result.placements)
-    print(f'scene: {len(scene.blocks)} blocks, {len(scene.targets)} regions, '
-          f'{scene.num_target_cells} target cells')
-    print(f'allocation: {result.status}, objective {result.objective:g} (bound {result.bound:g}), '
-          f'{len(result.placements)} blocks filling {covered} cells, solved in {result.solve_time_s * 1e3:.1f} ms')
-    print(f'validator: {"ok" if not problems else "; ".join(problems)}')
-    print(f'wrote {out / "scene.json"}, {out / "allocation.json"}, {picture} '
-          f'({time.perf_counter() - t0:.2f} s)')
-    return 0 if result.has_solution and not problems else 1
+    result = evaluate(args.agent, scenes, robot, args.seed, progress=ProgressBar(total, args.agent),
+                      execution=args.execution)
+    elapsed = time.perf_counter() - t0
+    mode = f'robot ({args.execution})' if robot else 'no robot'
+    print(f'{args.agent} on {result["n"]} scenes ({source}), {mode}, {elapsed:.1f} s')
+    print(f'{"R":>13} {"d":>5} {"e":>5} {"f":>5} {"f_g":>5} {"f_p":>5} {"cov":>5} {"cov_rel":>7}')
+    print(f'{result["R"]:6.2f} ({result["R_std"]:.2f}) {result["d"]:5.2f} {result["e"]:5.2f} {result["f"]:5.2f} '
+          f'{result["f_g"]:5.2f} {result["f_p"]:5.2f} {result["coverage"]:5.2f} {result["coverage_rel"]:7.2f}')
+    if args.json:
+        _write_text(jsonfmt.dumps(result), args.json)
+        print(f'wrote {args.json}')
+    return 0
 
 
 def _add_solver_args(p: argparse.ArgumentParser) -> None:
@@ -164,11 +182,26 @@ def build_parser() -> argparse.ArgumentParser:
     _add_solver_args(p)
     p.set_defaults(func=cmd_allocate)
 
-    p = sub.add_parser('demo', help='run the main job on a default (or given) scene')
+    p = sub.add_parser('demo', help='bring up the node graph, plan and build a scene (the main job)')
     p.add_argument('--scene', help='scene file (default: a generated g=4 two-sided scene)')
     p.add_argument('--out', default='out/demo', help='output folder')
-    _add_solver_args(p)
+    p.add_argument('--rtf', type=float, default=5.0, help='twin speed, simulated s per wall s')
+    p.add_argument('--time-limit', type=float, default=120.0, help='planning time limit, s')
     p.set_defaults(func=cmd_demo)
+
+    p = sub.add_parser('eval', help="the paper's metrics (R, d, e, f, f_g, f_p, coverage) of a sequencer over scenes")
+    p.add_argument('--agent', choices=['heur', 'heur-verified', 'heur-norobot'], default='heur')
+    p.add_argument('--grid', type=int, default=4, help='g of generated scenes')
+    p.add_argument('--sides', type=int, default=2, help='1 or 2 target faces of generated scenes')
+    p.add_argument('--scenes', type=int, default=20, help='number of generated scenes')
+    p.add_argument('--seed', type=int, default=0, help='first generator seed; scene i seeds the policy with seed + i')
+    p.add_argument('--robot', action='store_true',
+                   help='robot in the loop (GAMP + twin) for heur; heur-verified always has it, heur-norobot never')
+    p.add_argument('--execution', choices=['teleport', 'simulate'], default='teleport',
+                   help='robot runs: put the block in place (fast) or simulate the whole arm motion')
+    p.add_argument('--scene-dir', metavar='DIR', help='evaluate every *.json scene in DIR instead of generating')
+    p.add_argument('--json', metavar='FILE', help='write the metrics and per-scene rows here')
+    p.set_defaults(func=cmd_eval)
     return parser
 
 
