@@ -1,0 +1,259 @@
+"""The paper's evaluation (Sec. V, Tables I and II) for any sequencer.
+
+An agent is a `Policy` (it scores the allocation's allowed actions) plus two
+choices that decide which row of Table II it reproduces:
+
+- where it acts: with the robot in the loop (`RobotAssemblyEnv`: GAMP decides
+  grasp and placement, the twin executes, physics judges) or without it
+  (`AssemblyEnv` with physical stability, the paper's "HEUR wo robot" oracle);
+- how the ranking becomes an action: the best-ranked one blindly (the paper's
+  HEUR, which therefore fails with f_g / f_p), or the best one GAMP finds
+  feasible from the current state (what /plan_assembly does: `heur-verified`).
+
+Nothing ranked means the termination action, as in the paper. Every episode
+starts from the scene with a fresh CP-SAT allocation (deterministic: one
+worker, fixed seed), and the policy is seeded with seed + i for scene i, so a
+run is reproducible from (agent, scenes, robot, seed).
+
+The learned sequencer of a later issue is one more `Agent` with its own policy.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable, Iterable, Iterator, TextIO
+
+import numpy as np
+
+from rad_core.allocation import AllocationParams, solve
+from rad_core.allocation.guide import AllocationGuide
+from rad_core.errors import RadError
+from rad_core.mdp import TERMINATE, Action, AssemblyEnv, EnvConfig, Outcome
+from rad_core.scene import Scene
+from rad_core.sequencing.policy import HeurPolicy, Policy, ranked_actions
+
+KEYS = ('R', 'R_std', 'd', 'e', 'f', 'f_g', 'f_p', 'coverage', 'coverage_rel', 'n', 'scenes')
+FAIL_GRASP = (Outcome.INVALID_GRASP,)
+FAIL_PLACE = (Outcome.INVALID_PLACEMENT, Outcome.INVALID_DISTURBED)
+
+
+@dataclass(frozen=True)
+class Agent:
+    """A sequencer under evaluation.
+
+    make_policy: a fresh policy per run (reset with each episode's seed).
+    robot: None follows `evaluate`'s robot flag; False never uses the robot
+        (the oracle), True always does (GAMP checks need the robot's world),
+        whatever the flag says.
+    verified: take the best-ranked action GAMP finds feasible, not the best one.
+    """
+
+    name: str
+    make_policy: Callable[[], Policy]
+    robot: bool | None = None
+    verified: bool = False
+
+
+AGENTS = {
+    'heur': Agent('heur', HeurPolicy),
+    'heur-verified': Agent('heur-verified', HeurPolicy, robot=True, verified=True),
+    'heur-norobot': Agent('heur-norobot', HeurPolicy, robot=False),
+}
+
+
+def get_agent(agent: str | Agent) -> Agent:
+    if isinstance(agent, Agent):
+        return agent
+    if agent not in AGENTS:
+        raise RadError(f'unknown agent {agent!r}; one of {", ".join(AGENTS)}')
+    return AGENTS[agent]
+
+
+def uses_robot(agent: str | Agent, robot: bool) -> bool:
+    """Whether the agent's episodes run with the robot, given the caller's flag."""
+    agent = get_agent(agent)
+    return robot if agent.robot is None else agent.robot
+
+
+def coverage_opt(env: AssemblyEnv, guide: AllocationGuide) -> float:
+    """Target coverage the allocation optimum achieves: target cells already
+    filled or covered by an allocated pose, over all target cells."""
+    filled = env.state.occupancy >= 0
+    for cells in guide.pose_cells:
+        filled[cells] = True
+    total = int(env.grid.is_target.sum())
+    return float((filled & env.grid.is_target).sum()) / total if total else 1.0
+
+
+def _gamp_feasible(renv, action: Action) -> bool:
+    from rad_core.gamp.planner import placement_pose, plan_action
+    env = renv.env
+    block_id = renv.scene.blocks[action.block].id
+    position, yaw = placement_pose(renv.scene, block_id, action.unit, env.grid.centres[action.cell],
+                                   action.rotation)
+    plan = plan_action(renv.world, block_id, position, yaw, start=renv.world.joint_positions(),
+                       config=renv.config.gamp)
+    return plan.success
+
+
+def _first_feasible(renv, ranked: list[Action]) -> Action:
+    """The best-ranked action GAMP can execute from the world as it is, or TERMINATE.
+
+    Ranked actions that only differ in the unit or rotation naming the same final
+    pose are one motion: planned once. (The chosen action is planned once more by
+    RobotAssemblyEnv.step; plan_action is seeded, so it gets the same answer.)
+    """
+    env, tried = renv.env, set()
+    for action in ranked:
+        cells, yaw = env.resulting_cells(action)
+        key = (action.block, tuple(sorted(int(c) for c in cells)), yaw)
+        if key in tried:
+            continue
+        tried.add(key)
+        if _gamp_feasible(renv, action):
+            return action
+    return TERMINATE
+
+
+def run_episode(agent: str | Agent, scene: Scene, robot: bool, seed: int, execution: str = 'teleport',
+                policy: Policy | None = None, allocation: AllocationParams = AllocationParams()) -> dict:
+    """One episode from the scene as given; the row `evaluate` reports for it."""
+    agent = get_agent(agent)
+    with_robot = uses_robot(agent, robot)
+    policy = policy if policy is not None else agent.make_policy()
+    policy.reset(seed)
+    placements = solve(scene, allocation).placements
+    renv = None
+    if with_robot:
+        from rad_core.robot_env import RobotAssemblyEnv, RobotEnvConfig
+        renv = RobotAssemblyEnv(scene, RobotEnvConfig(execution=execution))
+        env, step = renv.env, renv.step
+    else:
+        env = AssemblyEnv(scene, EnvConfig(stability='physics'))
+        step = env.step
+    try:
+        guide = AllocationGuide(env, placements)
+        opt = coverage_opt(env, guide)
+        ret, discount, result = 0.0, 1.0, None
+        while not env.state.done:
+            ranked = ranked_actions(policy, env, guide.allowed_actions())
+            if agent.verified:
+                action = _first_feasible(renv, ranked)
+            else:
+                action = ranked[0] if ranked else TERMINATE
+            result = step(action)
+            ret += discount * result.reward
+            discount *= env.config.gamma
+    finally:
+        if renv is not None:
+            renv.close()
+        elif hasattr(env.stability, 'close'):
+            env.stability.close()   # its own PyBullet client
+    row = {'return': ret, 'outcome': result.outcome.value, 'coverage': env.coverage(),
+           'coverage_opt': opt, 'steps': env.state.steps}
+    if with_robot:
+        row['reason'] = result.reason if result.outcome.is_invalid else ''
+    return row
+
+
+def summarize(rows: list[dict]) -> dict:
+    """The paper's numbers over episode rows (see `evaluate`)."""
+    n = len(rows)
+    if n == 0:
+        raise RadError('no scenes to evaluate')
+    returns = np.array([r['return'] for r in rows])
+    outcomes = [Outcome(r['outcome']) for r in rows]
+
+    def frac(pred) -> float:
+        return sum(1 for o in outcomes if pred(o)) / n
+
+    rel = [r['coverage'] / r['coverage_opt'] if r['coverage_opt'] > 0 else 1.0 for r in rows]
+    return {
+        'R': float(returns.mean()), 'R_std': float(returns.std()),
+        'd': frac(lambda o: o == Outcome.COMPLETED),
+        'e': frac(lambda o: o == Outcome.TERMINATED),
+        'f': frac(lambda o: o.is_invalid),
+        'f_g': frac(lambda o: o in FAIL_GRASP),
+        'f_p': frac(lambda o: o in FAIL_PLACE),
+        'coverage': float(np.mean([r['coverage'] for r in rows])),
+        'coverage_rel': float(np.mean(rel)),
+        'n': n,
+        'scenes': rows,
+    }
+
+
+def evaluate(agent: str | Agent, scenes: Iterable[tuple[str, Scene]], robot: bool, seed: int,
+             progress: Callable[[dict], None] | None = None, execution: str = 'teleport') -> dict:
+    """Run the agent once on every (name, scene); scene i seeds the policy with seed + i.
+
+    Returns exactly KEYS: R, R_std (mean and std of the discounted return), d, e, f
+    (fractions that ended completed / terminated / on an invalid action; the rest
+    ran out of blocks), f_g, f_p (grasp / placement failures with the robot; a
+    motion that moved another block counts as f_p), coverage (target-cell
+    coverage, the paper's a-bar), coverage_rel (coverage over the allocation
+    optimum's coverage, the paper's corrected a-bar), n, and scenes (one row each).
+    progress(row) is called after each episode.
+    """
+    agent = get_agent(agent)
+    rows = []
+    for i, (name, scene) in enumerate(scenes):
+        row = {'name': name, **run_episode(agent, scene, robot, seed + i, execution)}
+        rows.append(row)
+        if progress is not None:
+            progress(row)
+    return summarize(rows)
+
+
+# ---- where scenes come from, and progress ---------------------------------------
+def generated_scenes(grid: int, sides: int, n: int, seed: int) -> Iterator[tuple[str, Scene]]:
+    """n generator scenes with seeds seed .. seed + n - 1, made as they are needed."""
+    from rad_core.generator import GeneratorConfig, generate_scene
+    config = GeneratorConfig(grid=grid, sides=sides)
+    config.validate()
+    for s in range(seed, seed + n):
+        yield f'g{grid}-sides{sides}-seed{s}', generate_scene(config, s)
+
+
+def scene_dir(path: str | Path) -> list[tuple[str, Scene]]:
+    """Every *.json in a folder, sorted by name, all read before any episode runs,
+    so a bad file stops the run at once with its name."""
+    folder = Path(path)
+    if not folder.is_dir():
+        raise RadError(f'scene folder {str(folder)!r} does not exist or is not a folder')
+    files = sorted(folder.glob('*.json'))
+    if not files:
+        raise RadError(f'scene folder {str(folder)!r} holds no *.json files')
+    scenes = []
+    for f in files:
+        try:
+            scenes.append((f.stem, Scene.load(f)))
+        except RadError as e:
+            raise RadError(f'bad scene file {str(f)!r}: {e}') from None
+    return scenes
+
+
+class ProgressBar:
+    """A one-line bar on a terminal (nothing when the stream is not one), so a
+    long run shows it is alive without filling logs; no tqdm dependency."""
+
+    def __init__(self, total: int, label: str = '', stream: TextIO | None = None, width: int = 30):
+        self.total, self.label, self.width, self.done = max(total, 1), label, width, 0
+        self.stream = stream if stream is not None else sys.stderr
+        self.enabled = hasattr(self.stream, 'isatty') and self.stream.isatty()
+        self.t0 = time.perf_counter()
+
+    def __call__(self, row: dict | None = None) -> None:
+        self.done += 1
+        if not self.enabled:
+            return
+        filled = self.width * self.done // self.total
+        elapsed = time.perf_counter() - self.t0
+        eta = elapsed / self.done * (self.total - self.done)
+        self.stream.write(f'\r{self.label} [{"#" * filled}{"." * (self.width - filled)}] '
+                          f'{self.done}/{self.total} {elapsed:.0f}s, ~{eta:.0f}s left ')
+        if self.done >= self.total:
+            self.stream.write('\n')
+        self.stream.flush()
