@@ -9,8 +9,9 @@ import pytest
 from rad_core.errors import RadError
 from rad_core.scene import Scene
 from rad_core.sim import panda
-from rad_core.sim.twin import Twin, TwinConfig, parse_trajectory
+from rad_core.sim.twin import Twin, TwinConfig
 from rad_core.sim.world import World
+from rad_core.trajectory import Trajectory, TrajectoryPoint, parse_trajectory
 
 U = 0.05
 PICK = np.array([0.5, -0.2, U / 2])
@@ -197,8 +198,23 @@ def test_bad_trajectory_is_refused_and_nothing_moves(twin, traj, message):
 def test_positions_a_hair_past_a_limit_are_clipped_not_refused():
     lo = panda.LOWER[3] - 5e-4
     traj = parse_trajectory({'joint_names': ['panda_joint4'], 'points': [_pt([lo], 1)]})
-    assert traj.positions[0, 0] == panda.LOWER[3]
+    assert traj.positions()[0, 0] == panda.LOWER[3]
 
+
+
+def test_a_trajectory_object_is_taken_as_its_dict_form_is():
+    traj = Trajectory(panda.ARM_JOINT_NAMES, [TrajectoryPoint(list(panda.HOME[:7] + 0.2), [], 0.5),
+                                              TrajectoryPoint(list(panda.HOME[:7] + 0.3), [], 1.0)])
+    finals = []
+    for form in (traj, traj.to_dict()):
+        with World() as world:
+            twin = Twin(world)
+            assert twin.start(form) == {'joints': list(panda.ARM_JOINT_NAMES), 'points': 2, 'duration': 1.0}
+            finals.append(twin.execute(form).final_positions)
+    assert np.array_equal(finals[0], finals[1])
+    bad = Trajectory(('panda_joint1',), [TrajectoryPoint([0.1], [], 1.0), TrajectoryPoint([math.nan], [], 2.0)])
+    with pytest.raises(RadError, match='trajectory point 1 positions: contains NaN or infinity'):
+        parse_trajectory(bad)
 
 # ---- grasping ---------------------------------------------------------------------
 

@@ -39,10 +39,11 @@ from rad_core.gamp.collision import (CollisionConfig, attachment_from_world, che
                                      make_collision_fn)
 from rad_core.gamp.grasps import MAX_GRASP_WIDTH, Grasp, block_grasps
 from rad_core.gamp.ik import IkConfig, hand_yaw_options, solve_top_down
-from rad_core.gamp.trajectory import TimingConfig, Trajectory, time_parameterize
+from rad_core.gamp.trajectory import TimingConfig, time_parameterize
 from rad_core.scene import Scene
 from rad_core.sim import panda
 from rad_core.sim.world import World
+from rad_core.trajectory import Trajectory
 from rad_core.transforms import matrix_from_quaternion, yaw_matrix, yaw_of_quaternion, yaw_quaternion
 
 

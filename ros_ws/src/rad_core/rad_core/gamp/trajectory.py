@@ -1,9 +1,4 @@
-"""Joint trajectories: waypoints from IK, timed from the Panda's velocity limits.
-
-The shape is that of trajectory_msgs/JointTrajectory without ROS types, so the
-core stays free of rclpy and the dict form goes straight into result files:
-``{"joint_names": [...], "points": [{"positions": [...], "velocities": [...],
-"time_from_start": seconds}]}``.
+"""Timing GAMP's waypoints from the Panda's velocity limits into a `rad_core.trajectory.Trajectory`.
 
 Timing rule (`time_parameterize`): the start configuration is where the robot
 is now and is not a point (as a ros2_control joint_trajectory_controller
@@ -20,54 +15,14 @@ default scale 0.5 keeps every joint under 75 % of its limit.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from collections.abc import Sequence
 
 import numpy as np
 
 from rad_core.errors import RadError
 from rad_core.sim import panda
-
-
-@dataclass
-class TrajectoryPoint:
-    positions: list[float]
-    velocities: list[float]
-    time_from_start: float
-
-    def to_dict(self) -> dict:
-        return {'positions': list(map(float, self.positions)), 'velocities': list(map(float, self.velocities)),
-                'time_from_start': float(self.time_from_start)}
-
-
-@dataclass
-class Trajectory:
-    joint_names: tuple[str, ...]
-    points: list[TrajectoryPoint] = field(default_factory=list)
-
-    @property
-    def duration(self) -> float:
-        return self.points[-1].time_from_start if self.points else 0.0
-
-    def positions(self) -> np.ndarray:
-        """(n, joints) array of the points' positions."""
-        return np.array([pt.positions for pt in self.points])
-
-    def times(self) -> np.ndarray:
-        return np.array([pt.time_from_start for pt in self.points])
-
-    def to_dict(self) -> dict:
-        return {'joint_names': list(self.joint_names), 'points': [pt.to_dict() for pt in self.points]}
-
-    @classmethod
-    def from_dict(cls, doc: dict) -> Trajectory:
-        try:
-            names = tuple(str(n) for n in doc['joint_names'])
-            points = [TrajectoryPoint([float(v) for v in pt['positions']], [float(v) for v in pt['velocities']],
-                                      float(pt['time_from_start'])) for pt in doc['points']]
-        except (KeyError, TypeError, ValueError) as e:
-            raise RadError(f'not a trajectory document: {e}') from None
-        return cls(names, points)
+from rad_core.trajectory import Trajectory, TrajectoryPoint
 
 
 @dataclass(frozen=True)

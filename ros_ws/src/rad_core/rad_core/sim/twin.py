@@ -14,10 +14,10 @@ Two ways to drive it, both on the same state:
 - ``execute(trajectory, callback=..., real_time_factor=...)``: runs to the end
   in one call (tests, benchmarks, the MDP), optionally paced to wall time.
 
-Trajectories travel as the dict of rad_ros.motion: {"joint_names": [...],
-"points": [{"positions", "velocities" (may be empty), "time_from_start"}]}.
-Each is validated in full before anything moves; a bad one raises RadError and
-leaves the world as it was.
+A trajectory is a `rad_core.trajectory.Trajectory` (as GAMP plans it) or its
+dict form (as rad_ros.motion converts a JointTrajectory message). Each is
+validated in full (`parse_trajectory`) before anything moves; a bad one raises
+RadError and leaves the world as it was.
 
 Grasping is a contact-checked attachment, as in the predecessor. When the
 gripper is commanded to close (the finger targets fall below the open width and
@@ -47,10 +47,7 @@ from rad_core.sim import panda
 from rad_core.sim.mocap import RegistrationConfig, RigidBodyPose, register_scene
 from rad_core.sim.panda import JOINT_NAMES
 from rad_core.sim.world import World
-
-MAX_POINTS = 10_000
-MAX_DURATION = 3600.0
-
+from rad_core.trajectory import Trajectory, parse_trajectory
 
 @dataclass(frozen=True)
 class TwinConfig:
@@ -84,86 +81,6 @@ class TwinConfig:
         if len(self.arm_forces) != 7 or not all(isinstance(v, (int, float)) and math.isfinite(v) and v >= 0
                                                  for v in values):
             raise RadError('twin config: expected 7 arm forces and finite, non-negative settings')
-
-
-@dataclass(frozen=True)
-class Trajectory:
-    """A validated trajectory: joint indices (into JOINT_NAMES), times (m,), positions (m, k)."""
-
-    joint_names: tuple[str, ...]
-    joints: np.ndarray            # (k,) indices into JOINT_NAMES
-    times: np.ndarray             # (m,) strictly increasing, >= 0
-    positions: np.ndarray         # (m, k)
-    velocities: np.ndarray | None  # (m, k) when every point gives velocities, else None
-
-    @property
-    def duration(self) -> float:
-        return float(self.times[-1])
-
-
-def parse_trajectory(doc, limit_tol: float = 1e-3) -> Trajectory:
-    """Validate a trajectory dict (see module docstring); RadError says what is wrong."""
-    if isinstance(doc, Trajectory):
-        return doc
-    if not isinstance(doc, dict) or 'joint_names' not in doc or 'points' not in doc:
-        raise RadError('trajectory: expected {"joint_names": [...], "points": [...]}')
-    names = doc['joint_names']
-    if not isinstance(names, (list, tuple)) or not names or not all(isinstance(n, str) for n in names):
-        raise RadError('trajectory: joint_names must be a non-empty list of strings')
-    unknown = [n for n in names if n not in JOINT_NAMES]
-    if unknown:
-        raise RadError(f'trajectory: unknown joint name {unknown[0]!r} (the Panda has {", ".join(JOINT_NAMES)})')
-    dup = sorted({n for n in names if list(names).count(n) > 1})
-    if dup:
-        raise RadError(f'trajectory: joint {dup[0]!r} is named twice')
-    points = doc['points']
-    if not isinstance(points, (list, tuple)) or not points:
-        raise RadError('trajectory: has no points')
-    if len(points) > MAX_POINTS:
-        raise RadError(f'trajectory: {len(points)} points exceed the limit of {MAX_POINTS}')
-    k = len(names)
-    joints = np.array([JOINT_NAMES.index(n) for n in names])
-    lower, upper = panda.LOWER[joints] - limit_tol, panda.UPPER[joints] + limit_tol
-    times, pos, vel = [], [], []
-    for i, p in enumerate(points):
-        where = f'trajectory point {i}'
-        if not isinstance(p, dict):
-            raise RadError(f'{where}: expected an object with positions and time_from_start')
-        q = _vector(p.get('positions'), f'{where} positions')
-        v = _vector(p.get('velocities') or [], f'{where} velocities')
-        t = p.get('time_from_start')
-        if not isinstance(t, (int, float)) or isinstance(t, bool) or not math.isfinite(t):
-            raise RadError(f'{where}: time_from_start must be a finite number of seconds, got {t!r}')
-        if len(q) != k:
-            raise RadError(f'{where}: {len(q)} positions for {k} joint names')
-        if len(v) not in (0, k):
-            raise RadError(f'{where}: {len(v)} velocities for {k} joint names (give all or none)')
-        bad = np.flatnonzero((q < lower) | (q > upper))
-        if len(bad):
-            j = bad[0]
-            raise RadError(f'{where}: {names[j]} = {q[j]:.4f} is outside its limits '
-                           f'[{panda.LOWER[joints[j]]:.4f}, {panda.UPPER[joints[j]]:.4f}]')
-        if i == 0 and t < 0:
-            raise RadError(f'{where}: time_from_start {t} is negative')
-        if i > 0 and not t > times[-1]:
-            raise RadError(f'{where}: time_from_start {t} does not increase (previous {times[-1]})')
-        if t > MAX_DURATION:
-            raise RadError(f'{where}: time_from_start {t} s exceeds the limit of {MAX_DURATION:g} s')
-        times.append(float(t))
-        pos.append(np.clip(q, panda.LOWER[joints], panda.UPPER[joints]))
-        vel.append(v)
-    velocities = np.array(vel) if all(len(v) for v in vel) else None
-    return Trajectory(tuple(names), joints, np.array(times), np.array(pos), velocities)
-
-
-def _vector(v, where: str) -> np.ndarray:
-    try:
-        a = np.asarray(v, dtype=float).reshape(-1)
-    except (TypeError, ValueError):
-        raise RadError(f'{where}: expected a list of numbers') from None
-    if not np.all(np.isfinite(a)):
-        raise RadError(f'{where}: contains NaN or infinity')
-    return a
 
 
 @dataclass
@@ -204,19 +121,19 @@ class _Run:
     """One trajectory being executed: its interpolant and its running figures."""
 
     def __init__(self, traj: Trajectory, start_q: np.ndarray):
-        self.traj = traj
-        k = len(traj.joints)
-        first = start_q[traj.joints]
-        if traj.times[0] > 0:          # the controller starts from where the joints are
-            times = np.concatenate([[0.0], traj.times])
-            pos = np.vstack([first, traj.positions])
-            vel = None if traj.velocities is None else np.vstack([np.zeros(k), traj.velocities])
-        else:
-            times, pos, vel = traj.times, traj.positions, traj.velocities
+        """traj: validated (`parse_trajectory`)."""
+        self.joints = np.array([JOINT_NAMES.index(n) for n in traj.joint_names])
+        k = len(self.joints)
+        times, pos = traj.times(), traj.positions()
+        vel = np.array([pt.velocities for pt in traj.points]) if traj.points[0].velocities else None
+        if times[0] > 0:               # the controller starts from where the joints are
+            times = np.concatenate([[0.0], times])
+            pos = np.vstack([start_q[self.joints], pos])
+            vel = None if vel is None else np.vstack([np.zeros(k), vel])
         self.times, self.pos, self.vel = times, pos, vel
         self.t = 0.0
         self.max_error = 0.0
-        self.arm = traj.joints < 7
+        self.arm = self.joints < 7
         self.report = ExecutionReport(traj.joint_names, start_q, math.nan, 0.0, duration=traj.duration)
         self.wall_start = time.perf_counter()
 
@@ -224,7 +141,7 @@ class _Run:
         """Commanded positions and velocities of the named joints at time t."""
         times = self.times
         if t >= times[-1] or len(times) == 1:
-            return self.pos[-1], np.zeros(len(self.traj.joints))
+            return self.pos[-1], np.zeros(len(self.joints))
         i = max(int(np.searchsorted(times, t, side='right')) - 1, 0)
         h = times[i + 1] - times[i]
         s = (t - times[i]) / h
@@ -310,7 +227,7 @@ class Twin:
         return register_scene(self.bodies(), template, config)
 
     # ---- commands ----------------------------------------------------------
-    def start(self, trajectory) -> dict:
+    def start(self, trajectory: Trajectory | dict) -> dict:
         """Validate and begin a trajectory, replacing any running one; returns a summary.
 
         Raises RadError (nothing changes) when the trajectory is invalid.
@@ -320,7 +237,7 @@ class Twin:
             self._finish(preempted=True)
         self._run = _Run(traj, self._target.copy())
         self._events = []
-        return {'joints': list(traj.joint_names), 'points': len(traj.times), 'duration': traj.duration}
+        return {'joints': list(traj.joint_names), 'points': len(traj.points), 'duration': traj.duration}
 
     def cancel(self) -> ExecutionReport | None:
         """Stop the running trajectory and hold where the joints are."""
@@ -351,7 +268,7 @@ class Twin:
         """Let physics run for `seconds`: the robot holds its command (a running trajectory goes on)."""
         self.advance(seconds)
 
-    def execute(self, trajectory, callback=None, callback_period: float = 0.02,
+    def execute(self, trajectory: Trajectory | dict, callback=None, callback_period: float = 0.02,
                 real_time_factor: float | None = None) -> ExecutionReport:
         """Run a trajectory to its end (goal hold included) and report.
 
@@ -389,9 +306,9 @@ class Twin:
             run = self._run
             if run is not None:
                 q_cmd, dq_cmd = run.command(run.t + self.dt)
-                self._target[run.traj.joints] = q_cmd
+                self._target[run.joints] = q_cmd
                 self._target_vel[:] = 0.0
-                self._target_vel[run.traj.joints] = dq_cmd
+                self._target_vel[run.joints] = dq_cmd
             self._apply()
             self.world.step()
             self.time += self.dt
@@ -408,7 +325,7 @@ class Twin:
 
     def _progress(self, run: _Run) -> bool:
         """Track the error; True once the trajectory is over and the arm has arrived."""
-        q = self.world.joint_positions()[run.traj.joints]
+        q = self.world.joint_positions()[run.joints]
         arm = run.arm
         if not arm.any():
             err = 0.0
@@ -429,7 +346,7 @@ class Twin:
         r.final_positions = self.world.joint_positions()
         if math.isnan(r.final_error):
             q_cmd = run.pos[-1]
-            q = r.final_positions[run.traj.joints]
+            q = r.final_positions[run.joints]
             r.final_error = float(np.abs(q - q_cmd)[run.arm].max()) if run.arm.any() else 0.0
         r.max_tracking_error = run.max_error
         r.grasp_events = list(self._events)
