@@ -139,7 +139,7 @@ def test_logging_a_scene_plan_and_robot_writes_every_entity(tmp_path):
     entities = _entities(path)
     expected = {'/world/table', '/world/blocks/c0', '/world/blocks/i0', '/world/targets/front/target_cells',
                 '/world/targets/front/other_cells', '/world/plan/allocation/0', '/world/plan/step',
-                '/world/plan/done', '/plan/steps', '/plan/timings/allocate', '/plan/summary',
+                '/world/plan/done', '/plan/step_text', '/plan/timings/allocate', '/plan/summary',
                 '/plan/predicted_coverage', '/world/panda/base', '/world/panda/joints/panda_joint1',
                 '/world/panda/joints/panda_finger_joint1', '/world/panda/tf_static'}
     expected |= {f'/world/panda/visual_geometries/{link}/visual_0' for link in
@@ -147,3 +147,32 @@ def test_logging_a_scene_plan_and_robot_writes_every_entity(tmp_path):
     assert expected <= entities, sorted(expected - entities)
     assert '/world/panda/joints/elbow' not in entities and '/world/blocks/ghost' not in entities
     assert path.stat().st_size > 1_000_000    # the meshes are in it, not just their names
+
+
+def test_a_new_scene_or_plan_clears_only_what_it_does_not_log_again(tmp_path):
+    """Rerun hides data logged at the same time as a Clear of it: clear only the leftovers."""
+    import rerun as rr
+    s = scene()
+    fewer = scene(blocks=[{'id': 'c0', 'type': 'cube', 'position': [0.4, -0.2, U / 2], 'yaw': 0}])
+    plan = viz.parse_plan(json.dumps(_plan_doc(s)))
+    shorter = viz.PlanDoc(None, plan.steps[:1])
+    path = tmp_path / 'rec.rrd'
+    rec = rr.RecordingStream('rad_test')
+    rec.save(path)
+    viz.set_ros_time(rec, 1.0)
+    viz.log_scene(rec, s)
+    viz.log_plan(rec, s, plan, 1.5)
+    viz.set_ros_time(rec, 2.0)
+    viz.log_scene(rec, fewer, previous=s)
+    viz.log_plan(rec, fewer, shorter, 2.5, previous=plan)
+    rec.flush()
+    rec.disconnect()
+
+    def cleared(entity):
+        out = subprocess.run(['rerun', 'rrd', 'print', '--entity', entity, str(path)], capture_output=True,
+                             text=True, timeout=60, check=True).stdout
+        assert 'Chunk(' in out, entity
+        return 'Clear:' in out
+    assert cleared('/world/blocks/c1') and cleared('/world/blocks/i0')
+    assert not cleared('/world/blocks/c0') and not cleared('/world/targets/front/target_cells')
+    assert cleared('/world/plan/allocation/0')          # the shorter plan has no allocation at all

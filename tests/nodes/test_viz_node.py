@@ -66,7 +66,7 @@ def test_viz_records_robot_blocks_cells_plan_and_exits_cleanly(node_process, ros
     verify = rrd('verify', recording)
     assert verify.returncode == 0, verify.stdout + verify.stderr
     found = entities(recording)
-    expected = {'/world/table', '/world/panda/base', '/world/panda/tf_static', '/plan/summary', '/plan/steps',
+    expected = {'/world/table', '/world/panda/base', '/world/panda/tf_static', '/plan/summary', '/plan/step_text',
                 '/plan/timings/allocate', '/plan/predicted_coverage', '/world/plan/step'}
     expected |= {f'/world/panda/visual_geometries/{link}/visual_0' for link in
                  ('panda_link0', 'panda_link3', 'panda_link7', 'panda_hand', 'panda_rightfinger')}

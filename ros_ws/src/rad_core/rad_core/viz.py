@@ -14,8 +14,8 @@ Entity paths (all under /world, z up, metres, the scene frame = robot base frame
   /world/targets/<region>/target_cells       small pink boxes: target cells
   /world/targets/<region>/other_cells        smaller green boxes: the region's other cells
   /world/plan/allocation/<i>                 translucent ghost block per allocated placement
-  /world/plan/step, /world/plan/done         on the `step` timeline: the step's block, all placed so far
-  /plan/steps                                TextLog per step, on `step`
+  /world/plan/step, /world/plan/done         on the `step` timeline: the step's block, all placed before it
+  /plan/step_text                            TextDocument per step, on `step`
   /plan/timings/<stage>, /plan/predicted_coverage   Scalars, on `ros_time`
   /plan/summary                              TextDocument (markdown), on `ros_time`
 
@@ -264,14 +264,19 @@ def default_blueprint():
         rrb.Horizontal(
             rrb.Spatial3DView(origin='/world', name='cell',
                               contents=['+ /world/**', f'- /{ROBOT_ROOT}/collision_geometries/**'],
-                              spatial_information=rrb.archetypes.SpatialInformation(target_frame=f'tf#/{WORLD}')),
+                              spatial_information=rrb.archetypes.SpatialInformation(target_frame=f'tf#/{WORLD}'),
+                              # front-right of the robot, looking at where blocks lie and structures rise
+                              eye_controls=rrb.archetypes.EyeControls3D(position=(1.4, -1.2, 0.9),
+                                                                        look_target=(0.4, -0.15, 0.1),
+                                                                        eye_up=(0.0, 0.0, 1.0))),
             rrb.Vertical(
-                rrb.TextLogView(origin='/plan/steps', name='plan steps'),
+                rrb.TextDocumentView(origin='/plan/step_text', name='step'),
                 rrb.TimeSeriesView(origin='/plan/timings', name='stage timings (s)'),
                 rrb.TextDocumentView(origin='/plan/summary', name='plan'),
             ),
             column_shares=[3, 1],
         ),
+        rrb.TimePanel(timeline=TIMELINE, play_state='following'),   # open at the latest state
         collapse_panels=False,
     )
 
@@ -289,11 +294,19 @@ def log_world(rec) -> None:
     rec.log(f'{WORLD}/table', _boxes(table_box()), static=True)
 
 
-def log_scene(rec, scene: Scene) -> None:
-    """Blocks (shape + pose from the scene), target and non-target cells; replaces an older scene."""
+def log_scene(rec, scene: Scene, previous: Scene | None = None) -> None:
+    """Blocks (shape + pose from the scene), target and non-target cells.
+
+    Entities of a `previous` scene that this one lacks are cleared. Nothing is
+    cleared that is logged anew: a Clear and new data at the same time stamp is
+    ambiguous in Rerun (measured: the new data may stay hidden).
+    """
     import rerun as rr
-    rec.log(f'{WORLD}/blocks', rr.Clear(recursive=True))
-    rec.log(f'{WORLD}/targets', rr.Clear(recursive=True))
+    if previous is not None:
+        for block_id in {b.id for b in previous.blocks} - {b.id for b in scene.blocks}:
+            rec.log(f'{WORLD}/blocks/{entity_part(block_id)}', rr.Clear(recursive=True))
+        for name in {t.name for t in previous.targets} - {t.name for t in scene.targets}:
+            rec.log(f'{WORLD}/targets/{entity_part(name)}', rr.Clear(recursive=True))
     rec.log(f'{WORLD}/table', _boxes(table_box(scene)), static=True)
     for block in scene.blocks:
         path = f'{WORLD}/blocks/{entity_part(block.id)}'
@@ -316,18 +329,31 @@ def log_block_poses(rec, poses: Iterable[tuple[str, Sequence[float], Sequence[fl
     return n
 
 
-def log_plan(rec, scene: Scene, plan: PlanDoc, stamp_s: float) -> list[str]:
-    """Ghost allocation, steps on the `step` timeline, timings; returns problems (skipped parts)."""
+def _concat(boxes: list[BoxSet]) -> BoxSet:
+    return BoxSet(*(np.concatenate([getattr(b, f) for b in boxes]) for f in ('centers', 'half_sizes', 'colors')))
+
+
+def log_plan(rec, scene: Scene, plan: PlanDoc, stamp_s: float, previous: PlanDoc | None = None) -> list[str]:
+    """Ghost allocation and timings at `stamp_s`, the steps on the `step` timeline.
+
+    Step i (1..n) shows that step's block (/world/plan/step), the blocks placed
+    before it (/world/plan/done) and a line of text (/plan/step_text); step n + 1
+    shows the finished plan. Parts of a `previous` plan this one does not
+    overwrite are cleared. Returns problems (parts not drawn, with the reason).
+    """
     import rerun as rr
     problems = []
     set_ros_time(rec, stamp_s)
-    rec.log(f'{WORLD}/plan', rr.Clear(recursive=True))
     placements = plan.allocation.placements if plan.allocation is not None else ()
     for i, p in enumerate(placements):
         try:
             rec.log(f'{WORLD}/plan/allocation/{i}', _boxes(placement_boxes(scene, p)))
         except RadError as e:
             problems.append(f'allocation.placements[{i}]: {e}')
+            rec.log(f'{WORLD}/plan/allocation/{i}', rr.Clear(recursive=False))
+    old = previous.allocation.placements if previous is not None and previous.allocation is not None else ()
+    for i in range(len(placements), len(old)):
+        rec.log(f'{WORLD}/plan/allocation/{i}', rr.Clear(recursive=False))
     for stage, seconds in plan.timings.items():
         rec.log(f'plan/timings/{entity_part(stage)}', rr.Scalars(seconds))
     if plan.predicted_coverage is not None:
@@ -335,25 +361,31 @@ def log_plan(rec, scene: Scene, plan: PlanDoc, stamp_s: float) -> list[str]:
     rec.log('plan/summary', rr.TextDocument(plan_summary(plan), media_type=rr.MediaType.MARKDOWN))
 
     rec.reset_time()
-    rec.set_time(STEP_TIMELINE, sequence=0)
-    rec.log(f'{WORLD}/plan/step', rr.Clear(recursive=False))
-    rec.log(f'{WORLD}/plan/done', rr.Clear(recursive=False))
     done: list[BoxSet] = []
-    for i, step in enumerate(plan.steps):
+    n = len(plan.steps)
+    for i in range(n + 1):
         rec.set_time(STEP_TIMELINE, sequence=i + 1)
+        rec.log(f'{WORLD}/plan/done', _boxes(_concat(done)) if done else rr.Clear(recursive=False))
+        if i == n:
+            rec.log(f'{WORLD}/plan/step', rr.Clear(recursive=False))
+            rec.log('plan/step_text', rr.TextDocument(f'plan done: {n} steps'))
+            break
+        step = plan.steps[i]
         try:
             boxes = placement_boxes(scene, Placement(step.type, step.target, step.yaw, step.cells),
                                     size=STEP_SIZE, alpha=1.0)
         except RadError as e:
             problems.append(f'steps[{i}]: {e}')
-            rec.log('plan/steps', rr.TextLog(step_text(i, step) + f' (not drawn: {e})', level='WARN'))
+            rec.log(f'{WORLD}/plan/step', rr.Clear(recursive=False))
+            rec.log('plan/step_text', rr.TextDocument(step_text(i, step) + f' (not drawn: {e})'))
             continue
-        rec.log(f'{WORLD}/plan/step', _boxes(boxes, fill='solid'))
-        if done:
-            rec.log(f'{WORLD}/plan/done', _boxes(BoxSet(*(np.concatenate([getattr(b, f) for b in done])
-                                                         for f in ('centers', 'half_sizes', 'colors')))))
+        rec.log(f'{WORLD}/plan/step', _boxes(boxes))
+        rec.log('plan/step_text', rr.TextDocument(step_text(i, step)))
         done.append(boxes)
-        rec.log('plan/steps', rr.TextLog(step_text(i, step), level='INFO'))
+    if previous is not None and len(previous.steps) > n:
+        rec.set_time(STEP_TIMELINE, sequence=n + 2)     # the older, longer plan's steps end here
+        for path in (f'{WORLD}/plan/step', f'{WORLD}/plan/done', 'plan/step_text'):
+            rec.log(path, rr.Clear(recursive=False))
     rec.reset_time()
     return problems
 

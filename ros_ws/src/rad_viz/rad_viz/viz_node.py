@@ -80,6 +80,7 @@ class VizNode(Node):
         self.scene = None
         self.known_blocks: set[str] = set()
         self.plan = None
+        self.plan_logged = None
         self.joints: JointState | None = None
         self.bodies: RigidBodies | None = None
         self.counts = {'joint_states': 0, 'rigid_bodies': 0, 'scenes': 0, 'plans': 0}
@@ -165,11 +166,11 @@ class VizNode(Node):
         except RadError as e:
             self.get_logger().error(f'scene not shown: {e}')
             return
-        self.scene, self.known_blocks = scene, {b.id for b in scene.blocks}
+        previous, self.scene, self.known_blocks = self.scene, scene, {b.id for b in scene.blocks}
         self.counts['scenes'] += 1
         if self.sinks:
             viz.set_ros_time(self.rec, stamp_s(msg.header, self.get_clock().now().nanoseconds * 1e-9))
-            viz.log_scene(self.rec, scene)
+            viz.log_scene(self.rec, scene, previous)
         self._log_plan()
 
     def plan_callback(self, msg: String) -> None:
@@ -187,7 +188,9 @@ class VizNode(Node):
         if self.scene is None:
             self.get_logger().info('plan received; drawn once a scene arrives')
             return
-        problems = viz.log_plan(self.rec, self.scene, self.plan, self.get_clock().now().nanoseconds * 1e-9)
+        problems = viz.log_plan(self.rec, self.scene, self.plan, self.get_clock().now().nanoseconds * 1e-9,
+                                previous=self.plan_logged)
+        self.plan_logged = self.plan
         for p in problems:
             self.get_logger().warning(f'plan: {p}')
 
