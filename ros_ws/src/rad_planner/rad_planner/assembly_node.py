@@ -23,7 +23,8 @@ import time
 import numpy as np
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
-from rclpy.executors import MultiThreadedExecutor
+import rclpy
+from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, qos_profile_sensor_data
 from sensor_msgs.msg import JointState
@@ -38,7 +39,7 @@ from rad_core.sequencing.result import deviation, measured_coverage, result_docu
 from rad_core.sim import panda
 from rad_core.sim.mocap import RegistrationConfig, RigidBodyPose, body_map_for, register_scene
 from rad_msgs.action import ExecuteAssembly
-from rad_msgs.msg import Scene as SceneMsg
+from rad_msgs.msg import RigidBodies, Scene as SceneMsg
 from rad_msgs.srv import Allocate, PlanAction, PlanAssembly
 from rad_ros.conversions import allocation_from_response, scene_from_msg, scene_from_request
 from rad_ros.node_main import run_node
@@ -63,13 +64,21 @@ class AssemblyNode(Node):
         path = self.get_parameter('task_file').value
         if path:
             self.task = Scene.load(path)
+        # Requests block while they wait for other services and for the robot, so
+        # what they wait on (service responses, joint states, motion capture) is
+        # handled by a node of its own with its own thread: however many requests
+        # are in flight, nothing they depend on can be starved of a thread.
+        self.io = rclpy.create_node('assembly_io', namespace=self.get_namespace(), context=self.context)
+        self.allocate_client = self.io.create_client(Allocate, 'allocate')
+        self.plan_client = self.io.create_client(PlanAction, 'plan_action')
+        self.io.create_subscription(JointState, 'joint_states', self.joint_states_callback, 10)
+        self.io.create_subscription(RigidBodies, 'rigid_bodies', self.rigid_bodies_callback, qos_profile_sensor_data)
+        self.io.create_subscription(SceneMsg, 'scene', self.scene_callback, LATCHED)
+        self.io_executor = SingleThreadedExecutor(context=self.context)
+        self.io_executor.add_node(self.io)
+        self.io_thread = threading.Thread(target=self.io_executor.spin, daemon=True)
+        self.io_thread.start()
         group = ReentrantCallbackGroup()
-        self.allocate_client = self.create_client(Allocate, 'allocate', callback_group=group)
-        self.plan_client = self.create_client(PlanAction, 'plan_action', callback_group=group)
-        self.create_subscription(JointState, 'joint_states', self.joint_states_callback, 10, callback_group=group)
-        self.create_subscription(self.rigid_bodies_type(), 'rigid_bodies', self.rigid_bodies_callback,
-                                 qos_profile_sensor_data, callback_group=group)
-        self.create_subscription(SceneMsg, 'scene', self.scene_callback, LATCHED, callback_group=group)
         self.trajectory_pub = self.create_publisher(JointTrajectory, 'joint_trajectory_controller/joint_trajectory', 10)
         self.plan_pub = self.create_publisher(String, 'plan_json', LATCHED)
         self.create_service(PlanAssembly, 'plan_assembly', self.plan_assembly_callback, callback_group=group)
@@ -79,10 +88,10 @@ class AssemblyNode(Node):
                                           callback_group=group)
         self.get_logger().info('assembly planner ready')
 
-    @staticmethod
-    def rigid_bodies_type():
-        from rad_msgs.msg import RigidBodies
-        return RigidBodies
+    def destroy_node(self):
+        self.io_executor.shutdown(timeout_sec=2.0)
+        self.io.destroy_node()
+        super().destroy_node()
 
     def param(self, name):
         return self.get_parameter(name).value
@@ -303,4 +312,4 @@ class AssemblyNode(Node):
 
 
 def main(args=None):
-    raise SystemExit(run_node(AssemblyNode, args, executor_factory=MultiThreadedExecutor))
+    raise SystemExit(run_node(AssemblyNode, args, executor_factory=lambda: MultiThreadedExecutor(num_threads=8)))

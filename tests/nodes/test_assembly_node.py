@@ -1,0 +1,196 @@
+"""/plan_assembly and /execute_assembly through the node graph, over real DDS."""
+
+import json
+import math
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pytest
+import rclpy
+from rclpy.action import ActionClient
+
+from ros_harness import REPO_ROOT, call_service, ros_args, wait_for_service
+from scenes import U, doc
+
+from rad_core.generator import GeneratorConfig, generate_scene
+from rad_core.scene import Scene
+
+DEMO_SCENE = generate_scene(GeneratorConfig(grid=4), 8)      # the demo's default: builds completely
+SMALL = Scene.from_dict(doc())                                 # one region, a few cubes
+
+
+def rss_mb(pid: int) -> float:
+    for line in Path(f'/proc/{pid}/status').read_text().splitlines():
+        if line.startswith('VmRSS:'):
+            return int(line.split()[1]) / 1024
+    return math.nan
+
+
+@pytest.fixture
+def graph(node_process, ros_node, tmp_path):
+    from rad_msgs.action import ExecuteAssembly
+    from rad_msgs.srv import PlanAssembly
+    path = tmp_path / 'scene.json'
+    path.write_text(DEMO_SCENE.dumps())
+    twin_args = ros_args({'scene_file': str(path), 'real_time_factor': 8.0})
+    procs = {'twin': node_process('rad_sim', 'twin_node', *twin_args),
+             'allocation': node_process('rad_planner', 'allocation_node'),
+             'gamp': node_process('rad_gamp', 'gamp_node'),
+             'assembly': node_process('rad_planner', 'assembly_node', *ros_args({'stale_after_s': 1.5}))}
+    client = wait_for_service(ros_node, PlanAssembly, 'plan_assembly', timeout=30.0)
+    actions = ActionClient(ros_node, ExecuteAssembly, 'execute_assembly')
+    assert actions.wait_for_server(timeout_sec=30.0)
+
+    class Graph:
+        pass
+    g = Graph()
+    g.procs, g.node, g.actions, g.twin_args = procs, ros_node, actions, twin_args
+    g.plan = lambda **kw: call_service(ros_node, client, PlanAssembly.Request(**kw), timeout=120.0)
+    yield g
+    for name, proc in procs.items():
+        if proc.is_running():
+            assert proc.stop() == 0, proc.output_tail()
+
+
+def execute(g, goal, on_feedback=None, timeout=180.0):
+    sent = g.actions.send_goal_async(goal, feedback_callback=on_feedback)
+    rclpy.spin_until_future_complete(g.node, sent, timeout_sec=30.0)
+    done = sent.result().get_result_async()
+    rclpy.spin_until_future_complete(g.node, done, timeout_sec=timeout)
+    assert done.done(), 'execute_assembly gave no result in time'
+    return done.result().result
+
+
+def test_plans_from_json_and_from_motion_capture(graph):
+    time.sleep(1.0)   # a few motion-capture frames
+    for kwargs in ({'scene_json': DEMO_SCENE.dumps()}, {}):
+        r = graph.plan(**kwargs)
+        assert r.success, r.reason
+        assert r.allocation_status == 'OPTIMAL' and r.allocation_objective == DEMO_SCENE.num_target_cells
+        assert r.predicted_coverage == 1.0 and len(r.steps) == len(r.allocation)
+        stages = {t.stage for t in r.timings}
+        assert {'allocation', 'sequencing', 'motion', 'registration', 'total'} <= stages
+        for step in r.steps:
+            assert step.trajectory.joint_names and step.trajectory.points
+            assert step.block_id in {b.id for b in DEMO_SCENE.blocks}
+        assert Scene.loads(r.scene_json).to_dict()['targets'] == DEMO_SCENE.to_dict()['targets']
+
+
+def _bad_requests():
+    unreachable = doc(targets=[{'name': 'far', 'origin': [0.0, 0.95, U / 2], 'size': [2, 1, 1],
+                                'filled': [[0, 0, 0], [1, 0, 0]]}])
+    many = doc(blocks=[{'id': f'b{n}', 'type': 'cube', 'position': [0.2 + 0.06 * (n % 20), -0.3 - 0.06 * (n // 20),
+                                                                      U / 2], 'yaw': 0} for n in range(300)])
+    nan = json.dumps(doc()).replace('-0.2,', 'NaN,', 1)
+    return {
+        'malformed scene': ({'scene_json': '{"format": "rad-scene/1", '}, 'not valid JSON'),
+        'empty target': ({'scene_json': json.dumps(doc()).replace(
+            '"filled": [[0, 0, 0], [1, 0, 0], [2, 0, 0], [0, 0, 1]]', '"filled": []')}, 'is empty'),
+        'unreachable target region': ({'scene_json': json.dumps(unreachable)}, 'unreachable'),
+        'more blocks than the table holds': ({'scene_json': json.dumps(many)}, 'exceed the limit of 256'),
+        'a time limit too short to plan': ({'scene_json': SMALL.dumps(), 'time_limit_s': 1e-9}, 'time limit'),
+        'negative time limit': ({'scene_json': SMALL.dumps(), 'time_limit_s': -1.0}, 'time_limit_s must be'),
+        'NaN pose': ({'scene_json': nan}, 'must be finite'),
+        'start joints of the wrong length': ({'scene_json': SMALL.dumps(), 'start_positions': [0.0] * 4},
+                                             'start_positions needs'),
+    }
+
+
+@pytest.mark.parametrize('case', list(_bad_requests()))
+def test_bad_input_gets_a_reason_and_the_graph_serves_the_next_request(graph, case):
+    kwargs, expected = _bad_requests()[case]
+    r = graph.plan(**kwargs)
+    assert not r.success and expected in r.reason, r.reason
+    assert graph.plan(scene_json=SMALL.dumps()).success
+    assert all(p.is_running() for p in graph.procs.values())
+
+
+def test_execute_builds_the_scene_and_reports_each_step(graph):
+    from rad_msgs.action import ExecuteAssembly
+    phases = []
+    result = execute(graph, ExecuteAssembly.Goal(scene_json=DEMO_SCENE.dumps(), replan=True),
+                     lambda m: phases.append(m.feedback.phase))
+    assert result.success, result.reason
+    assert result.steps_executed == 4 and result.coverage == 1.0
+    assert {'planning', 'executing', 'verifying', 'done'} <= set(phases)
+    doc_ = json.loads(result.result_json)
+    assert doc_['format'] == 'rad-result/1' and doc_['coverage'] == 1.0
+    assert set(doc_) == {'format', 'scene', 'allocation', 'steps', 'final_blocks', 'coverage', 'timings'}
+    step = doc_['steps'][0]
+    assert {'block', 'type', 'target', 'yaw', 'cells', 'trajectory'} <= set(step)
+    assert set(step['trajectory']) == {'joint_names', 'points'}
+    assert set(step['trajectory']['points'][0]) == {'positions', 'velocities', 'time_from_start'}
+
+
+def test_twin_killed_mid_execution_fails_in_bounded_time_and_planning_recovers(graph, node_process):
+    from rad_msgs.action import ExecuteAssembly
+    killed = threading.Event()
+
+    def on_feedback(msg):
+        if msg.feedback.phase == 'executing' and not killed.is_set():
+            graph.procs['twin'].popen.kill()
+            killed.set()
+
+    t0 = time.monotonic()
+    result = execute(graph, ExecuteAssembly.Goal(scene_json=DEMO_SCENE.dumps(), replan=True), on_feedback,
+                     timeout=60.0)
+    assert killed.is_set()
+    assert not result.success and 'joint_states' in result.reason, result.reason
+    assert time.monotonic() - t0 < 30.0
+    graph.procs['twin'] = node_process('rad_sim', 'twin_node', *graph.twin_args)
+    time.sleep(2.0)
+    assert graph.plan(scene_json=DEMO_SCENE.dumps()).success
+    assert graph.plan().success, 'planning from motion capture after the twin restarted'
+
+
+def test_200_calls_and_4_concurrent_clients_with_bounded_memory(graph):
+    before = {name: rss_mb(p.pid) for name, p in graph.procs.items()}
+    text = SMALL.dumps()
+    for _ in range(200):
+        r = graph.plan(scene_json=text)
+        assert r.success, r.reason
+    code = ('import rclpy, sys\n'
+            'from rad_msgs.srv import PlanAssembly\n'
+            'rclpy.init(); n = rclpy.create_node(f"client_{sys.argv[1]}")\n'
+            'c = n.create_client(PlanAssembly, "plan_assembly"); assert c.wait_for_service(20)\n'
+            'ok = 0\n'
+            'for _ in range(10):\n'
+            '    f = c.call_async(PlanAssembly.Request(scene_json=sys.stdin.read() if False else TEXT))\n'
+            '    rclpy.spin_until_future_complete(n, f, timeout_sec=60); ok += bool(f.result() and f.result().success)\n'
+            'print(ok)\n')
+    clients = [subprocess.Popen([sys.executable, '-c', code.replace('TEXT', repr(text)), str(k)],
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for k in range(4)]
+    outputs = [c.communicate(timeout=300) for c in clients]
+    assert [o[0].strip() for o in outputs] == ['10'] * 4, [o[1][-500:] for o in outputs]
+    after = {name: rss_mb(p.pid) for name, p in graph.procs.items()}
+    print('RSS MB before/after:', {n: (round(before[n]), round(after[n])) for n in before})
+    for name in before:
+        assert after[name] - before[name] < 100, (name, before[name], after[name])
+
+
+def test_planners_run_against_a_different_plant(node_process, process, ros_node, tmp_path):
+    """A kinematic plant (no physics, not the twin) speaking the same topics."""
+    from rad_msgs.action import ExecuteAssembly
+    path = tmp_path / 'scene.json'
+    path.write_text(DEMO_SCENE.dumps())
+    plant = process([sys.executable, str(REPO_ROOT / 'tests/ros/nodes/kinematic_plant.py'), '--ros-args',
+                     '-p', f'scene_file:={path}', '-p', 'speed:=8.0'], name='kinematic_plant')
+    procs = [node_process('rad_planner', 'allocation_node'), node_process('rad_gamp', 'gamp_node'),
+             node_process('rad_planner', 'assembly_node')]
+    actions = ActionClient(ros_node, ExecuteAssembly, 'execute_assembly')
+    assert actions.wait_for_server(timeout_sec=30.0)
+    time.sleep(1.0)
+
+    class G:
+        pass
+    g = G()
+    g.node, g.actions = ros_node, actions
+    result = execute(g, ExecuteAssembly.Goal(replan=True))   # the scene from the plant's motion capture
+    assert result.success, result.reason + '\n' + plant.output_tail()
+    assert result.coverage == 1.0 and result.steps_executed == 4
+    for proc in procs:
+        assert proc.stop() == 0, proc.output_tail()
+    assert plant.stop() == 0, plant.output_tail()
