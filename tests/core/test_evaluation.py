@@ -20,7 +20,7 @@ ROBOT_SCENES = list(generated_scenes(4, 2, 4, 0))
 def rad(*args):
     exe = shutil.which('rad')
     cmd = [exe] if exe else [sys.executable, '-m', 'rad_core.cli']
-    return subprocess.run(cmd + list(args), capture_output=True, text=True, timeout=300)
+    return subprocess.run(cmd + list(args), check=False, capture_output=True, text=True, timeout=300)
 
 
 def short_scene(blocks: int) -> Scene:
@@ -87,6 +87,17 @@ def test_heur_fails_with_the_robot_where_heur_verified_does_not():
 def test_heur_verified_always_has_the_robot():
     verified = evaluate('heur-verified', ROBOT_SCENES[:1], robot=False, seed=0)
     assert 'reason' in verified['scenes'][0]
+
+
+def test_execution_mode_reaches_the_robot_env():
+    scene = ROBOT_SCENES[2]   # heur completes it in teleport mode
+    teleport = evaluate('heur', [scene], robot=True, seed=0)
+    simulate = evaluate('heur', [scene], robot=True, seed=0, execution='simulate')
+    assert teleport['scenes'][0]['outcome'] == Outcome.COMPLETED.value
+    assert simulate['n'] == 1 and tuple(simulate) == KEYS
+    from rad_core.errors import RadError
+    with pytest.raises(RadError, match='execution'):
+        evaluate('heur', [scene], robot=True, seed=0, execution='warp')
 
 
 def test_same_seed_same_numbers_and_the_seed_matters():

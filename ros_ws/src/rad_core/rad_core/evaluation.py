@@ -22,9 +22,10 @@ from __future__ import annotations
 
 import sys
 import time
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Iterable, Iterator, TextIO
+from typing import TextIO
 
 import numpy as np
 
@@ -119,13 +120,17 @@ def _first_feasible(renv, ranked: list[Action]) -> Action:
 
 
 def run_episode(agent: str | Agent, scene: Scene, robot: bool, seed: int, execution: str = 'teleport',
-                policy: Policy | None = None, allocation: AllocationParams = AllocationParams()) -> dict:
-    """One episode from the scene as given; the row `evaluate` reports for it."""
+                policy: Policy | None = None, allocation: AllocationParams | None = None) -> dict:
+    """One episode from the scene as given; the row `evaluate` reports for it.
+
+    allocation: CP-SAT settings (default: 10 s, one worker, seed 0: deterministic
+    unless the time limit cuts the search).
+    """
     agent = get_agent(agent)
     with_robot = uses_robot(agent, robot)
     policy = policy if policy is not None else agent.make_policy()
     policy.reset(seed)
-    placements = solve(scene, allocation).placements
+    placements = solve(scene, allocation or AllocationParams()).placements
     renv = None
     if with_robot:
         from rad_core.robot_env import RobotAssemblyEnv, RobotEnvConfig
