@@ -140,6 +140,15 @@ def polycube_inertia(offsets: np.ndarray, edge: float, cube_mass: float) -> tupl
     return com, tensor
 
 
+def principal_frame(offsets: np.ndarray, edge: float, cube_mass: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Centre of mass, principal moments and principal axes (columns, right-handed) of a polycube."""
+    com, tensor = polycube_inertia(offsets, edge, cube_mass)
+    moments, axes = np.linalg.eigh(tensor)
+    if np.linalg.det(axes) < 0:
+        axes[:, 2] = -axes[:, 2]
+    return com, moments, axes
+
+
 @dataclass
 class _Shape:
     collision: int            # PyBullet collision shape, shared by every body of this shape
@@ -228,10 +237,7 @@ class PhysicsStability:
         shape = self._shapes.get(key)
         if shape is None:
             p, cfg, u = self._p, self.config, self.config.sim_unit
-            com, tensor = polycube_inertia(offsets, u, cfg.cube_mass)
-            moments, axes = np.linalg.eigh(tensor)
-            if np.linalg.det(axes) < 0:
-                axes[:, 2] = -axes[:, 2]
+            com, moments, axes = principal_frame(offsets, u, cfg.cube_mass)
             # Boxes in the principal frame, turned back so they are axis-aligned in the world.
             local = (offsets * u - com) @ axes
             side, height = u / 2 - cfg.side_gap * u, u / 2 + cfg.overlap * u

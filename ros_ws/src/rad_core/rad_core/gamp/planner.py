@@ -227,11 +227,7 @@ def _plan_pick(world, block_id, grasp_point, hand_yaw, start, open_f, closed_f, 
                   'IK at the grasp')
     _probe(free, q_grasp, 'at the grasp')
     column = _vertical(world, grasp_point, q_grasp, hand_yaw, rise, config, clock, rng, 'above the grasp')
-    q_prev = q_grasp
-    for q in column:                               # bottom up
-        _probe(free, q, 'above the grasp')
-        _segment(free, q_prev, q, config, 'on the approach')
-        q_prev = q
+    _check_column(free, q_grasp, column, config, 'above the grasp', 'on the approach')
     _segment(free, start, column[-1], config, 'on the way to the grasp')
     # The hand holds the block from here on.
     world.set_joint_positions(q_grasp, hold=False)
@@ -239,15 +235,9 @@ def _plan_pick(world, block_id, grasp_point, hand_yaw, start, open_f, closed_f, 
     carry = clock.timed(make_collision_fn(world, attached=attachment, config=config.collision))
     q_closed = _with_fingers(q_grasp, closed_f)
     lift = [_with_fingers(q, closed_f) for q in column]
-    q_prev = q_closed
-    for q in lift:
-        _probe(carry, q, 'lifting the block')
-        _segment(carry, q_prev, q, config, 'lifting the block')
-        q_prev = q
-    approach = column[::-1]
-    waypoints = approach + [q_grasp, q_closed] + lift
-    stops = [True] + [False] * (len(approach) - 1) + [True, True] + [False] * (len(lift) - 1) + [True]
-    return {'waypoints': waypoints, 'stops': stops, 'grasp_index': len(approach) + 1,
+    _check_column(carry, q_closed, lift, config, 'lifting the block', 'lifting the block')
+    waypoints, stops = _down_and_up(column, q_grasp, q_closed, lift)
+    return {'waypoints': waypoints, 'stops': stops, 'grasp_index': len(column) + 1,
             'attachment': attachment, 'carry': carry, 'top': lift[-1]}
 
 
@@ -258,11 +248,7 @@ def _plan_place(world, block_id, pick, place_point, position, yaw_deg, hand_yaw,
     q_place = _ik(world, place_point, hand_yaw, [top], closed_f, config, clock, rng, 'IK at the placement')
     _probe(carry, q_place, 'at the placement')
     column = _vertical(world, place_point, q_place, hand_yaw, rise, config, clock, rng, 'above the placement')
-    q_prev = q_place
-    for q in column:
-        _probe(carry, q, 'above the placement')
-        _segment(carry, q_prev, q, config, 'on the descent')
-        q_prev = q
+    _check_column(carry, q_place, column, config, 'above the placement', 'on the descent')
     _segment(carry, top, column[-1], config, 'carrying the block over')
     # Released: the block stays exactly at its final pose, the fingers open.
     world.set_block_pose(block_id, position, yaw_quaternion(yaw_deg))
@@ -270,15 +256,9 @@ def _plan_place(world, block_id, pick, place_point, position, yaw_deg, hand_yaw,
     q_open = _with_fingers(q_place, open_f)
     _probe(after, q_open, 'opening the fingers')
     retreat = [_with_fingers(q, open_f) for q in column]
-    q_prev = q_open
-    for q in retreat:
-        _probe(after, q, 'on the retreat')
-        _segment(after, q_prev, q, config, 'on the retreat')
-        q_prev = q
-    descent = column[::-1]
-    waypoints = descent + [q_place, q_open] + retreat
-    stops = [True] + [False] * (len(descent) - 1) + [True, True] + [False] * (len(retreat) - 1) + [True]
-    return {'waypoints': waypoints, 'stops': stops, 'release_index': len(descent) + 1}
+    _check_column(after, q_open, retreat, config, 'on the retreat', 'on the retreat')
+    waypoints, stops = _down_and_up(column, q_place, q_open, retreat)
+    return {'waypoints': waypoints, 'stops': stops, 'release_index': len(column) + 1}
 
 
 def _ik(world, point, hand_yaw, seeds, fingers, config, clock, rng, where) -> np.ndarray:
@@ -320,6 +300,24 @@ def _segment(fn, q_from, q_to, config, where) -> None:
     reason = check_path(fn, q_from, q_to, config.path_step)
     if reason:
         raise _Blocked(f'{where}: {reason}')
+
+
+def _check_column(fn, q_bottom, column, config, probe_where, segment_where) -> None:
+    """Probe each waypoint of a column (bottom up) and each segment up to it from q_bottom."""
+    q_prev = q_bottom
+    for q in column:
+        _probe(fn, q, probe_where)
+        _segment(fn, q_prev, q, config, segment_where)
+        q_prev = q
+
+
+def _down_and_up(column, q_at, q_gripped, up) -> tuple[list[np.ndarray], list[bool]]:
+    """Waypoints down a column (given bottom up) to q_at, the gripper acting (q_gripped), back up;
+    and their stop flags: at rest on top, at the bottom before and after the gripper acts."""
+    down = column[::-1]
+    waypoints = down + [q_at, q_gripped] + up
+    stops = [True] + [False] * (len(down) - 1) + [True, True] + [False] * (len(up) - 1) + [True]
+    return waypoints, stops
 
 
 def _finish(result: GampResult, failure: str, reason: str, clock: _Clock, t0: float) -> GampResult:

@@ -36,7 +36,7 @@ from collections.abc import Iterator
 import numpy as np
 
 from rad_core.errors import RadError
-from rad_core.physics import polycube_inertia
+from rad_core.physics import principal_frame
 from rad_core.scene import Scene
 from rad_core.sim import panda
 from rad_core.sim.panda import JOINT_NAMES
@@ -124,10 +124,7 @@ class World:
         self.ee_link = self.link_index[panda.GRASP_TARGET_LINK]
         self.hand_link = self.link_index[panda.HAND_LINK]
         self.finger_links = tuple(self.link_index[n] for n in panda.FINGER_LINKS)
-        # The base stands on the table: that contact is by design, never a collision.
-        p.setCollisionFilterPair(self.robot, self.table, -1, -1, 0, physicsClientId=cid)
-        for link in (self.link_index['panda_link1'],):
-            p.setCollisionFilterPair(self.robot, self.table, link, -1, 0, physicsClientId=cid)
+        self._base_on_table()
         for link in self.finger_links:
             p.changeDynamics(self.robot, link, lateralFriction=config.friction, physicsClientId=cid)
         self.set_joint_positions(panda.HOME)
@@ -179,6 +176,11 @@ class World:
         p.removeBody(self.table, physicsClientId=cid)
         self._table_box = (centre, half)
         self._make_table(centre, half)
+        self._base_on_table()
+
+    def _base_on_table(self) -> None:
+        """The base stands on the table: that contact is by design, never a collision."""
+        p, cid = self._p, self.client
         p.setCollisionFilterPair(self.robot, self.table, -1, -1, 0, physicsClientId=cid)
         p.setCollisionFilterPair(self.robot, self.table, self.link_index['panda_link1'], -1, 0,
                                  physicsClientId=cid)
@@ -199,10 +201,7 @@ class World:
         visual = p.createVisualShapeArray([p.GEOM_BOX] * n, halfExtents=[[vis_half] * 3] * n,
                                           visualFramePositions=centres, physicsClientId=cid)
         mass = cfg.block_mass_per_cube * n
-        com, tensor = polycube_inertia(offsets, unit, cfg.block_mass_per_cube)
-        moments, axes = np.linalg.eigh(tensor)
-        if np.linalg.det(axes) < 0:
-            axes[:, 2] = -axes[:, 2]
+        com, moments, axes = principal_frame(offsets, unit, cfg.block_mass_per_cube)
         shape = _BlockShape(collision, visual, mass, moments.tolist(), (com.tolist(), quaternion_from_matrix(axes)))
         shape.colour = [*type_colour(type_name), 1.0]
         self._shapes[key] = shape
