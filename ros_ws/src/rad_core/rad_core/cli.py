@@ -6,6 +6,7 @@
     rad scene stats --grid G --sides S --scenes N
     rad allocate scene.json [--time-limit S] [--seed N] [--workers W] [--solver cp-sat|highs]
     rad demo [--scene FILE] [--out DIR] [--rtf X]
+    rad eval --agent heur|heur-verified|heur-norobot --grid G [--robot] --scenes N --seed S --json FILE
 
 Bad input ends with exit code 2 and one line on stderr naming the problem.
 """

@@ -89,24 +89,10 @@ def coverage_opt(env: AssemblyEnv, guide: AllocationGuide) -> float:
     return float((filled & env.grid.is_target).sum()) / total if total else 1.0
 
 
-def _gamp_feasible(renv, action: Action) -> bool:
-    from rad_core.gamp.planner import placement_pose, plan_action
-    env = renv.env
-    block_id = renv.scene.blocks[action.block].id
-    position, yaw = placement_pose(renv.scene, block_id, action.unit, env.grid.centres[action.cell],
-                                   action.rotation)
-    plan = plan_action(renv.world, block_id, position, yaw, start=renv.world.joint_positions(),
-                       config=renv.config.gamp)
-    return plan.success
-
-
-def _first_feasible(renv, ranked: list[Action]) -> Action:
-    """The best-ranked action GAMP can execute from the world as it is, or TERMINATE.
-
-    Ranked actions that only differ in the unit or rotation naming the same final
-    pose are one motion: planned once. (The chosen action is planned once more by
-    RobotAssemblyEnv.step; plan_action is seeded, so it gets the same answer.)
-    """
+def _first_feasible(renv, ranked: list[Action]):
+    """The best-ranked action GAMP can execute from the world as it is, with its plan,
+    or (TERMINATE, None). Ranked actions that only differ in the unit or rotation
+    naming the same final pose are one motion: planned once."""
     env, tried = renv.env, set()
     for action in ranked:
         cells, yaw = env.resulting_cells(action)
@@ -114,9 +100,10 @@ def _first_feasible(renv, ranked: list[Action]) -> Action:
         if key in tried:
             continue
         tried.add(key)
-        if _gamp_feasible(renv, action):
-            return action
-    return TERMINATE
+        plan = renv.plan(action)
+        if plan.success:
+            return action, plan
+    return TERMINATE, None
 
 
 def run_episode(agent: str | Agent, scene: Scene, robot: bool, seed: int, execution: str = 'teleport',
@@ -146,10 +133,10 @@ def run_episode(agent: str | Agent, scene: Scene, robot: bool, seed: int, execut
         while not env.state.done:
             ranked = ranked_actions(policy, env, guide.allowed_actions())
             if agent.verified:
-                action = _first_feasible(renv, ranked)
+                action, plan = _first_feasible(renv, ranked)
+                result = renv.step(action, plan=plan)
             else:
-                action = ranked[0] if ranked else TERMINATE
-            result = step(action)
+                result = step(ranked[0] if ranked else TERMINATE)
             ret += discount * result.reward
             discount *= env.config.gamma
     finally:

@@ -107,7 +107,17 @@ class RobotAssemblyEnv:
         return self.env.reset()
 
     # ---- one action ----------------------------------------------------------
-    def step(self, action: Action) -> StepResult:
+    def plan(self, action: Action):
+        """GAMP's plan for an action from the world as it is now, without acting."""
+        block_id = self.scene.blocks[action.block].id
+        position, yaw = placement_pose(self.scene, block_id, action.unit, self.env.grid.centres[action.cell],
+                                       action.rotation)
+        return plan_action(self.world, block_id, position, yaw, start=self.world.joint_positions(),
+                           config=self.config.gamp)
+
+    def step(self, action: Action, plan=None) -> StepResult:
+        """One MDP step. plan: GAMP's answer for this action from the current state,
+        if the caller already has it (from `plan`), so it is not computed twice."""
         env = self.env
         if action.is_terminate or env.state.done:
             return env.step(action)
@@ -119,8 +129,7 @@ class RobotAssemblyEnv:
         block_id = self.scene.blocks[action.block].id
         position, yaw = placement_pose(self.scene, block_id, action.unit, env.grid.centres[action.cell],
                                        action.rotation)
-        plan = plan_action(self.world, block_id, position, yaw, start=self.world.joint_positions(),
-                           config=self.config.gamp)
+        plan = plan if plan is not None else self.plan(action)
         self.last_plan = plan
         if not plan.success:
             failure = Outcome.INVALID_GRASP if plan.failure == 'grasp' else Outcome.INVALID_PLACEMENT
