@@ -26,7 +26,8 @@ from rad_core.gamp.planner import GampConfig, placement_pose, plan_action
 from rad_core.mdp import Action, AssemblyEnv, EnvConfig, Outcome, StepResult
 from rad_core.scene import Scene
 from rad_core.sim.twin import Twin, TwinConfig
-from rad_core.sim.world import World, yaw_of_quaternion
+from rad_core.sim.world import World
+from rad_core.transforms import yaw_of_quaternion, yaw_quaternion
 
 # How each outcome counts in the paper's Table II.
 OUTCOME_CLASS = {
@@ -149,7 +150,7 @@ class RobotAssemblyEnv:
         if self.config.execution == 'simulate':
             twin.execute(plan.trajectory.to_dict())
         else:
-            self.world.set_block_pose(block_id, position, _yaw_quat(yaw))
+            self.world.set_block_pose(block_id, position, yaw_quaternion(yaw))
             self.world.set_joint_positions(plan.trajectory.points[-1].positions)
             twin.sync()
         twin.settle(self.config.settle_s)
@@ -182,17 +183,13 @@ class RobotAssemblyEnv:
         and the world matches the MDP state the learner sees."""
         for b, (cells, yaw) in self.env.state.placed.items():
             # cells are in unit order: the first is the anchor's.
-            self.world.set_block_pose(self.scene.blocks[b].id, self.env.grid.centres[cells[0]], _yaw_quat(yaw))
+            anchor = self.env.grid.centres[cells[0]]
+            self.world.set_block_pose(self.scene.blocks[b].id, anchor, yaw_quaternion(yaw))
         self.world.set_block_velocities_zero()
         self.twin.sync()
 
     def current_scene(self) -> Scene:
         return self.twin.current_scene(self.scene)
-
-
-def _yaw_quat(yaw_deg: float) -> list[float]:
-    half = np.radians(yaw_deg) / 2
-    return [0.0, 0.0, float(np.sin(half)), float(np.cos(half))]
 
 
 def _tilt_deg(q) -> float:

@@ -5,7 +5,7 @@ from __future__ import annotations
 from rad_msgs.msg import PlanStep, StageTiming
 
 from rad_core.sequencing.plan import AssemblyPlan
-from rad_core.sim.mocap import yaw_quaternion
+from rad_core.transforms import yaw_quaternion
 from rad_ros.conversions import cells_msg, placement_to_msg
 from rad_ros.motion import pose_msg, trajectory_to_msg
 
