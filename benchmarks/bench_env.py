@@ -5,7 +5,8 @@
 Episodes follow a random policy over the allocation's actions (only those that
 pass the geometric support rule, as the paper's HEUR does), so most steps are
 successful placements that reach the stability check. Allocation time is not
-counted, nor is the policy's own time (printed apart). 'support' is the geometric rule alone; 'physics' asks PyBullet (with its
+counted, nor is the policy's own time (printed apart). 'support' is the geometric rule
+alone; 'physics' asks PyBullet (with its
 cache of identical structures cleared per episode, so every check is real).
 """
 

@@ -47,7 +47,8 @@ def test_random_reachable_top_down_targets_are_solved_accurately_within_limits(w
         errors.append((pos_err, down, axis_err))
     e = np.array(errors)
     print(f'\nIK over 300 targets: {len(failures)} failures; position error mm median '
-          f'{np.median(e[:, 0]) * 1000:.4f} p95 {np.percentile(e[:, 0], 95) * 1000:.4f} max {e[:, 0].max() * 1000:.3f}; '
+          f'{np.median(e[:, 0]) * 1000:.4f} p95 {np.percentile(e[:, 0], 95) * 1000:.4f} '
+          f'max {e[:, 0].max() * 1000:.3f}; '
           f'tilt deg max {e[:, 1].max():.3f}; closing-axis deg max {e[:, 2].max():.3f}')
     assert len(failures) <= 3, failures
     assert e[:, 0].max() < 0.002

@@ -248,6 +248,7 @@ def test_overlapping_bodies_are_named():
 
 
 def test_config_is_checked():
-    for bad in ({'resolution': -1e-4}, {'position_tol': 0.6}, {'tilt_tol_deg': math.nan}, {'yaw_tol_deg': 0}, {'table_z': math.inf}):
+    for bad in ({'resolution': -1e-4}, {'position_tol': 0.6}, {'tilt_tol_deg': math.nan}, {'yaw_tol_deg': 0},
+                {'table_z': math.inf}):
         with pytest.raises(RadError):
             RegistrationConfig(**bad)

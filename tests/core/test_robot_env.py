@@ -103,7 +103,7 @@ def test_a_block_moved_by_the_motion_counts_as_a_placement_failure():
 
 
 def test_geometric_failures_are_booked_as_in_the_mdp():
-    blocks = [('c', 'cube', (0.45, -0.2, U / 2)), ('d', 'cube', (0.55, -0.2, U / 2)), ('e', 'cube', (0.65, -0.2, U / 2))]
+    blocks = [(name, 'cube', (x, -0.2, U / 2)) for name, x in (('c', 0.45), ('d', 0.55), ('e', 0.65))]
     with RobotAssemblyEnv(scene_of(blocks), RobotEnvConfig(execution='teleport')) as renv:
         assert renv.step(action(renv.env, 'c', 0, (0, 0, 0))).outcome == Outcome.COMPLETED
     with RobotAssemblyEnv(scene_of(blocks, filled=((0, 0, 0), (1, 0, 0))),

@@ -164,8 +164,9 @@ def test_200_calls_and_4_concurrent_clients_with_bounded_memory(graph):
             'c = n.create_client(PlanAssembly, "plan_assembly"); assert c.wait_for_service(20)\n'
             'ok = 0\n'
             'for _ in range(10):\n'
-            '    f = c.call_async(PlanAssembly.Request(scene_json=sys.stdin.read() if False else TEXT))\n'
-            '    rclpy.spin_until_future_complete(n, f, timeout_sec=60); ok += bool(f.result() and f.result().success)\n'
+            '    f = c.call_async(PlanAssembly.Request(scene_json=TEXT))\n'
+            '    rclpy.spin_until_future_complete(n, f, timeout_sec=60)\n'
+            '    ok += bool(f.result() and f.result().success)\n'
             'print(ok)\n')
     clients = [subprocess.Popen([sys.executable, '-c', code.replace('TEXT', repr(text)), str(k)],
                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for k in range(4)]

@@ -52,7 +52,8 @@ def test_viz_records_robot_blocks_cells_plan_and_exits_cleanly(node_process, ros
     twin = node_process('rad_sim', 'twin_node', *ros_args({'scene_file': str(path)}))
     viz = node_process('rad_viz', 'viz_node', *ros_args({'recording_path': str(recording), 'log_rate_hz': 20.0}))
     # Latched, like /plan_assembly's publisher: viz gets it whenever it starts.
-    pub = ros_node.create_publisher(String, 'plan_json', QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
+    pub = ros_node.create_publisher(
+        String, 'plan_json', QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
     plan = plan_json(scene)
     pub.publish(String(data=plan))
     bodies = []
@@ -95,7 +96,8 @@ def test_bad_plan_json_is_reported_and_the_node_keeps_running(node_process, ros_
     recording = tmp_path / 'recording.rrd'
     node_process('rad_sim', 'twin_node', *ros_args({'scene_file': str(path)}))
     viz = node_process('rad_viz', 'viz_node', *ros_args({'recording_path': str(recording)}))
-    pub = ros_node.create_publisher(String, 'plan_json', QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
+    pub = ros_node.create_publisher(
+        String, 'plan_json', QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
     viz.wait_for_output('viz ready', timeout=30.0)
     spin_until(ros_node, lambda: pub.get_subscription_count() > 0, timeout=15.0)
     pub.publish(String(data='{"steps": [{"block": "b0"}]}'))

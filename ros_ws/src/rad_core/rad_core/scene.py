@@ -210,7 +210,8 @@ def _parse_block_types(doc: Any) -> dict[str, BlockType]:
         _expect(len(set(cells)) == len(cells), where, 'lists the same cell twice')
         t = BlockType.from_cells(name, cells)
         extent = max(max(abs(v) for v in o) for o in t.offsets)
-        _expect(extent <= MAX_TYPE_EXTENT, where, f'cells reach {extent} units from the anchor (limit {MAX_TYPE_EXTENT})')
+        _expect(extent <= MAX_TYPE_EXTENT, where,
+                f'cells reach {extent} units from the anchor (limit {MAX_TYPE_EXTENT})')
         _expect(t.is_connected(), where, 'cells are not face-connected (a block must be one piece)')
         types[name] = t
     return types

@@ -200,7 +200,8 @@ def _snap(body: RigidBodyPose, template: Scene, block_type, config: Registration
         off = np.abs(idx - np.round(idx))
         if off.max() > config.position_tol:
             raise RadError(f'rigid body {name!r} is in target region {region.name!r} but '
-                           f'{off.max() * u * 1000:.1f} mm off its grid (limit {config.position_tol * u * 1000:.1f} mm)')
+                           f'{off.max() * u * 1000:.1f} mm off its grid '
+                           f'(limit {config.position_tol * u * 1000:.1f} mm)')
         for a in range(2):
             out[a] = round(float(origin[a] + u * np.round(idx[a])), _DECIMALS)
     return out, snapped_yaw

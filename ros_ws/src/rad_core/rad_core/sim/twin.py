@@ -409,7 +409,8 @@ class Twin:
 
     def _constraint_ids(self) -> set[int]:
         p, cid = self._p, self.world.client
-        return {p.getConstraintUniqueId(i, physicsClientId=cid) for i in range(p.getNumConstraints(physicsClientId=cid))}
+        count = p.getNumConstraints(physicsClientId=cid)
+        return {p.getConstraintUniqueId(i, physicsClientId=cid) for i in range(count)}
 
     def _run_time(self) -> float:
         return self._run.t + self.dt if self._run is not None else self.time
