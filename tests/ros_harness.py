@@ -218,13 +218,20 @@ def spin_until(node, predicate: Callable[[], bool], timeout: float = 10.0) -> bo
     return True
 
 
+# After a client sees the server, the server may not yet see the client's reply
+# reader; rmw_fastrtps then drops the first reply ("failed to send response
+# (timeout): client will not receive response"), seen under load with fresh clients.
+DISCOVERY_SETTLE_S = 0.5
+
+
 def wait_for_service(node, srv_type, name: str, timeout: float = 10.0):
-    """Create a client for `name` and wait until a server is discovered; return the client."""
+    """Create a client for `name` and wait until a server is discovered (both ways); return it."""
     client = node.create_client(srv_type, name)
     if not client.wait_for_service(timeout_sec=timeout):
         node.destroy_client(client)
         raise TimeoutError(f'service {name!r} ({srv_type.__name__}) not available '
                            f'after {timeout} s (ROS_DOMAIN_ID={os.environ.get("ROS_DOMAIN_ID")})')
+    time.sleep(DISCOVERY_SETTLE_S)
     return client
 
 
