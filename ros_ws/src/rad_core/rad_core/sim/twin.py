@@ -168,7 +168,7 @@ class Twin:
         self._p = p
         self.world = world
         self.config = config
-        self.dt = float(world.config.time_step)
+        self.dt = float(world.config.physics.time_step)
         self._forces = [*config.arm_forces, config.finger_force, config.finger_force]
         self._target = world.joint_positions()
         self._target_vel = np.zeros(9)

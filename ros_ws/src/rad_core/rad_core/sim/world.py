@@ -30,50 +30,34 @@ from __future__ import annotations
 
 import math
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from collections.abc import Iterator
 
 import numpy as np
 
 from rad_core.errors import RadError
-from rad_core.physics import principal_frame
+from rad_core.physics import PhysicsConfig, principal_frame
 from rad_core.scene import Scene
 from rad_core.sim import panda
 from rad_core.sim.panda import JOINT_NAMES
 from rad_core.transforms import quaternion_from_matrix, yaw_quaternion
-from rad_core.transforms import yaw_of_quaternion  # noqa: F401 - robot_env imports it from here
 
 
 @dataclass(frozen=True)
 class WorldConfig:
     """How the world is built and simulated."""
 
-    gravity: float = -9.81
-    """Gravity along z (m/s^2)."""
-    time_step: float = 1.0 / 240.0
-    """Seconds per `step`; PyBullet's default, the rate its solver is tuned for."""
-    block_mass_per_cube: float = 0.1
-    """Mass of one unit cube (kg), the predecessor's value."""
-    friction: float = 1.0
-    """Lateral friction of blocks and table."""
-    side_gap: float = 0.002
-    """Block collision boxes are this fraction of a unit narrower on each side face."""
-    overlap: float = 0.0002
-    """...and this fraction of a unit taller on top and bottom: stacked layers start in contact."""
-    solver_iterations: int = 100
-    """Constraint solver iterations per step (50 lets off-centre loads creep, see physics.py)."""
+    physics: PhysicsConfig = field(default_factory=PhysicsConfig)
+    """Gravity, time step, cube mass, friction, the collision-box hairs and the solver
+    iterations: the same material the stability check simulates (rad_core.physics)."""
     table_half_extents: tuple[float, float, float] = (1.2, 1.2, 0.025)
     """Half size of the static table box (m); its top is z = 0, centred under `table_centre`."""
     table_centre: tuple[float, float] = (0.3, 0.0)
     """x, y of the table's centre (m); grown by `load_scene` if a scene reaches past it."""
 
     def __post_init__(self):
-        for name in ('time_step', 'block_mass_per_cube', 'solver_iterations'):
-            v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
-                raise RadError(f'world config {name}: expected a positive number, got {v!r}')
-        if not (0 <= self.side_gap < 0.25 and 0 <= self.overlap < 0.05):
-            raise RadError('world config: side_gap and overlap are hairs (< 0.25, < 0.05 of a unit)')
+        if not all(math.isfinite(v) and v > 0 for v in self.table_half_extents):
+            raise RadError(f'world config table_half_extents: expected positive sizes, got {self.table_half_extents!r}')
 
 
 @dataclass
@@ -100,9 +84,9 @@ class World:
         if self.client < 0:
             raise RuntimeError('cannot start a PyBullet DIRECT client')
         cid = self.client
-        p.setGravity(0, 0, config.gravity, physicsClientId=cid)
-        p.setTimeStep(config.time_step, physicsClientId=cid)
-        p.setPhysicsEngineParameter(numSolverIterations=int(config.solver_iterations),
+        p.setGravity(0, 0, -config.physics.gravity, physicsClientId=cid)
+        p.setTimeStep(config.physics.time_step, physicsClientId=cid)
+        p.setPhysicsEngineParameter(numSolverIterations=int(config.physics.solver_iterations),
                                     deterministicOverlappingPairs=1, physicsClientId=cid)
         self.scene: Scene | None = None
         self.blocks: dict[str, int] = {}
@@ -126,7 +110,7 @@ class World:
         self.finger_links = tuple(self.link_index[n] for n in panda.FINGER_LINKS)
         self._base_on_table()
         for link in self.finger_links:
-            p.changeDynamics(self.robot, link, lateralFriction=config.friction, physicsClientId=cid)
+            p.changeDynamics(self.robot, link, lateralFriction=config.physics.lateral_friction, physicsClientId=cid)
         self.set_joint_positions(panda.HOME)
         if scene is not None:
             self.load_scene(scene)
@@ -157,7 +141,7 @@ class World:
                                      physicsClientId=cid)
         self.table = p.createMultiBody(0, shape, visual, basePosition=[centre[0], centre[1], -half[2]],
                                        physicsClientId=cid)
-        p.changeDynamics(self.table, -1, lateralFriction=self.config.friction, frictionAnchor=1,
+        p.changeDynamics(self.table, -1, lateralFriction=self.config.physics.lateral_friction, frictionAnchor=1,
                          physicsClientId=cid)
 
     def _fit_table(self, scene: Scene) -> None:
@@ -194,14 +178,14 @@ class World:
         from rad_core.render import type_colour
         n = len(offsets)
         centres = (offsets * unit).tolist()
-        side, height = unit / 2 - cfg.side_gap * unit, unit / 2 + cfg.overlap * unit
+        side, height = unit / 2 - cfg.physics.side_gap * unit, unit / 2 + cfg.physics.overlap * unit
         collision = p.createCollisionShapeArray([p.GEOM_BOX] * n, halfExtents=[[side, side, height]] * n,
                                                 collisionFramePositions=centres, physicsClientId=cid)
         vis_half = unit / 2 * 0.98
         visual = p.createVisualShapeArray([p.GEOM_BOX] * n, halfExtents=[[vis_half] * 3] * n,
                                           visualFramePositions=centres, physicsClientId=cid)
-        mass = cfg.block_mass_per_cube * n
-        com, moments, axes = principal_frame(offsets, unit, cfg.block_mass_per_cube)
+        mass = cfg.physics.cube_mass * n
+        com, moments, axes = principal_frame(offsets, unit, cfg.physics.cube_mass)
         shape = _BlockShape(collision, visual, mass, moments.tolist(), (com.tolist(), quaternion_from_matrix(axes)))
         shape.colour = [*type_colour(type_name), 1.0]
         self._shapes[key] = shape
@@ -228,7 +212,8 @@ class World:
                                      baseInertialFrameOrientation=shape.com[1], physicsClientId=cid)
             # mass repeated on purpose: setting the inertia alone may zero it (see physics.py).
             p.changeDynamics(body, -1, mass=shape.mass, localInertiaDiagonal=shape.inertia,
-                             lateralFriction=self.config.friction, frictionAnchor=1, physicsClientId=cid)
+                             lateralFriction=self.config.physics.lateral_friction, frictionAnchor=1,
+                             physicsClientId=cid)
             p.changeVisualShape(body, -1, rgbaColor=shape.colour, physicsClientId=cid)
             self._inertial[body] = shape.com
             self.blocks[block.id] = body
