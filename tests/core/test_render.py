@@ -133,3 +133,19 @@ def test_png_round_trip(tmp_path, shape):
 def test_png_rejects_what_it_cannot_write(bad):
     with pytest.raises(ValueError):
         encode_png(bad)
+
+
+def test_robot_is_drawn_at_the_given_joints():
+    from rad_core.render import ROBOT_BOX
+    from rad_core.sim.panda import HOME
+    s = scene()
+    camera = fit_camera(ROBOT_BOX[0], ROBOT_BOX[1] + [0.6, 0, 0], 4 / 3)
+    bare = render_scene(s, width=160, height=120, camera=camera)
+    with_robot = render_scene(s, width=160, height=120, camera=camera, robot=HOME)
+    changed = np.any(bare != with_robot, axis=2).mean()
+    assert changed > 0.03, changed
+    bent = np.array(HOME)
+    bent[0] += 1.2
+    assert np.any(render_scene(s, width=160, height=120, camera=camera, robot=bent) != with_robot)
+    with pytest.raises(RadError, match='robot joints'):
+        render_scene(s, robot=[0.0] * 3)

@@ -2,7 +2,7 @@
 
     rad scene generate --grid G --sides S --seed N -o scene.json
     rad scene check scene.json
-    rad scene render scene.json -o scene.png [--allocation allocation.json]
+    rad scene render scene.json -o scene.png [--allocation allocation.json] [--robot]
     rad scene stats --grid G --sides S --scenes N
     rad allocate scene.json [--time-limit S] [--seed N] [--workers W] [--solver cp-sat|highs]
     rad demo [--scene FILE] [--out DIR] [--rtf X]
@@ -80,7 +80,11 @@ def cmd_scene_render(args) -> int:
             allocation = AllocationResult.from_dict(json.loads(Path(args.allocation).read_text()))
         except (OSError, ValueError, KeyError, TypeError) as e:
             raise RadError(f'cannot read allocation {args.allocation!r}: {e}') from None
-    save_scene_png(scene, args.output, allocation=allocation, width=args.width, height=args.height)
+    robot = None
+    if args.robot:
+        from rad_core.sim.panda import HOME
+        robot = HOME
+    save_scene_png(scene, args.output, allocation=allocation, width=args.width, height=args.height, robot=robot)
     print(f'wrote {args.output}')
     return 0
 
@@ -168,6 +172,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--allocation', help='rad-allocation/1 file to draw as ghost blocks')
     p.add_argument('--width', type=int, default=640)
     p.add_argument('--height', type=int, default=480)
+    p.add_argument('--robot', action='store_true', help='draw the Panda (at its home pose) too')
     p.set_defaults(func=cmd_scene_render)
     p = scene.add_parser('stats', help='target-size statistics of generated scenes')
     p.add_argument('--grid', type=int, default=3)

@@ -105,12 +105,13 @@ def fit_camera(lo, hi, aspect: float, azimuth_deg: float = 135.0, elevation_deg:
 
 
 def render_scene(scene: Scene, allocation=None, occupancy=None, width: int = 640, height: int = 480,
-                 camera: Camera | None = None) -> np.ndarray:
+                 camera: Camera | None = None, robot=None) -> np.ndarray:
     """An (height, width, 3) uint8 picture of the scene; see the module docstring.
 
     allocation: an AllocationResult or an iterable of Placements (type, target,
     yaw, cells). occupancy: one entry per grid cell (`Grid` order), -1 for free,
-    else the scene index of the block there.
+    else the scene index of the block there. robot: the Panda's 9 joint positions
+    (panda.JOINT_NAMES order) to draw it with its meshes at the origin, or None.
     """
     if not (isinstance(width, int) and isinstance(height, int) and 0 < width <= 4096 and 0 < height <= 4096):
         raise RadError(f'image size must be 1..4096 pixels a side, got {width!r} x {height!r}')
@@ -118,9 +119,12 @@ def render_scene(scene: Scene, allocation=None, occupancy=None, width: int = 640
     corners = np.concatenate([[c - h, c + h] for c, h, _ in boxes])
     lo, hi = corners.min(axis=0), corners.max(axis=0)
     lo[2] = min(lo[2], 0.0)
+    if robot is not None:
+        # Roughly where the arm is: its base at the origin, up to shoulder height.
+        lo, hi = np.minimum(lo, ROBOT_BOX[0]), np.maximum(hi, ROBOT_BOX[1])
     if camera is None:
         camera = fit_camera(lo, hi, width / height)
-    return _draw(boxes, lo, hi, scene.unit, camera, width, height)
+    return _draw(boxes, lo, hi, scene.unit, camera, width, height, robot)
 
 
 def save_scene_png(scene: Scene, path: str | Path, **kw) -> Path:
@@ -129,6 +133,21 @@ def save_scene_png(scene: Scene, path: str | Path, **kw) -> Path:
 
 
 # ---- what to draw -------------------------------------------------------
+
+ROBOT_BOX = (np.array([-0.25, -0.25, 0.0]), np.array([0.45, 0.25, 0.9]))
+
+
+def _add_robot(p, cid: int, joints) -> None:
+    from rad_core.sim import panda
+    joints = np.asarray(joints, dtype=float)
+    if joints.shape != (len(panda.JOINT_NAMES),) or not np.all(np.isfinite(joints)):
+        raise RadError(f'robot joints: expected {len(panda.JOINT_NAMES)} finite values')
+    body = panda.load_panda(cid)
+    index = {p.getJointInfo(body, j, physicsClientId=cid)[1].decode(): j
+             for j in range(p.getNumJoints(body, physicsClientId=cid))}
+    for name, value in zip(panda.JOINT_NAMES, joints):
+        p.resetJointState(body, index[name], float(value), physicsClientId=cid)
+
 
 def _placements(allocation) -> list:
     if allocation is None:
@@ -171,12 +190,14 @@ def _scene_boxes(scene: Scene, placements: list, occupancy) -> list[tuple[np.nda
     return boxes
 
 
-def _draw(boxes, lo, hi, unit: float, camera: Camera, width: int, height: int) -> np.ndarray:
+def _draw(boxes, lo, hi, unit: float, camera: Camera, width: int, height: int, robot=None) -> np.ndarray:
     import pybullet as p      # here, not at the top: importing it prints a banner on stdout
     cid = p.connect(p.DIRECT)
     if cid < 0:
         raise RuntimeError('cannot start a PyBullet DIRECT client')
     try:
+        if robot is not None:
+            _add_robot(p, cid, robot)
         groups: dict[tuple, list] = {}
         for centre, half, colour in boxes:
             groups.setdefault((half, colour), []).append([float(v) for v in centre])

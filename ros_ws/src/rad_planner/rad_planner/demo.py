@@ -69,7 +69,8 @@ def run(scene: Scene, out: Path, rtf: float, time_limit: float) -> dict:
     if doc.get('final_blocks'):
         final = Scene.from_dict(dict(scene.to_dict(), blocks=doc['final_blocks']))
         from rad_core.render import save_scene_png
-        save_scene_png(final, out / 'final.png')
+        from rad_core.sim.panda import HOME
+        save_scene_png(final, out / 'final.png', robot=HOME)
     return {'result': result, 'doc': doc, 'exit_codes': codes, 'final': final}
 
 
