@@ -202,3 +202,39 @@ def test_planners_run_against_a_different_plant(node_process, process, ros_node,
     for proc in procs:
         assert proc.stop() == 0, proc.output_tail()
     assert plant.stop() == 0, plant.output_tail()
+
+
+def test_a_block_moved_during_execution_triggers_a_replan(graph):
+    """Someone moves a block the plan still needs; the action sees it and replans."""
+    from rad_msgs.action import ExecuteAssembly
+    plan = graph.plan(scene_json=DEMO_SCENE.dumps())
+    assert plan.success and len(plan.steps) >= 2
+    later = plan.steps[-1].block_id
+    block = DEMO_SCENE.block(later)
+    target = [block.position[0] + 0.02, block.position[1] - 0.30, block.position[2]]   # a free spot further out
+    mover = ('import rclpy, sys\n'
+             'from rad_msgs.srv import SetBlockPose\n'
+             'rclpy.init(); n = rclpy.create_node("disturber")\n'
+             'c = n.create_client(SetBlockPose, "set_block_pose"); assert c.wait_for_service(20)\n'
+             'import time; time.sleep(0.5)\n'
+             'r = SetBlockPose.Request(block_id=sys.argv[1])\n'
+             'r.pose.position.x, r.pose.position.y, r.pose.position.z = map(float, sys.argv[2:5])\n'
+             'r.pose.orientation.z, r.pose.orientation.w = map(float, sys.argv[5:7])\n'
+             'f = c.call_async(r); rclpy.spin_until_future_complete(n, f, timeout_sec=20)\n'
+             'print(f.result().success, f.result().reason)\n')
+    from rad_core.transforms import yaw_quaternion
+    q = yaw_quaternion(block.yaw)
+    started, phases = [], []
+
+    def on_feedback(msg):
+        phases.append(msg.feedback.phase)
+        if msg.feedback.phase == 'executing' and not started:
+            started.append(subprocess.Popen([sys.executable, '-c', mover, later, *map(str, target), str(q[2]),
+                                             str(q[3])], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True))
+
+    result = execute(graph, ExecuteAssembly.Goal(scene_json=DEMO_SCENE.dumps(), replan=True), on_feedback)
+    out, err = started[0].communicate(timeout=60)
+    assert out.startswith('True'), out + err
+    assert result.replans >= 1 and 'replanning' in phases, (result.replans, phases)
+    assert result.success, result.reason
+    assert result.coverage == 1.0
