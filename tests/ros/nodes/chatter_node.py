@@ -2,13 +2,12 @@
 """A minimal node for harness tests: publishes std_msgs/String on `chatter` and
 serves std_srvs/Trigger on `ping`. Written like rad's real nodes (Jazzy main())."""
 
-import signal
+import sys
 
-import rclpy
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
+from rad_ros.node_main import run_node
 
 
 class ChatterNode(Node):
@@ -33,19 +32,8 @@ class ChatterNode(Node):
 
 
 def main(args=None):
-    # SIGTERM like SIGINT: a clean shutdown either way.
-    signal.signal(signal.SIGINT, signal.default_int_handler)
-    signal.signal(signal.SIGTERM, signal.default_int_handler)
-    rclpy.init(args=args)
-    node = ChatterNode()
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
+    return run_node(ChatterNode, args)
 
 
 if __name__ == '__main__':
-    main()
+    sys.exit(main())

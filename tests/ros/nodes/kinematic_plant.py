@@ -11,12 +11,10 @@ prove the planners never depend on the twin's internals.
     kinematic_plant.py --ros-args -p scene_file:=FILE -p speed:=5.0
 """
 
-import signal
+import sys
 import time
 
 import numpy as np
-import rclpy
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, qos_profile_sensor_data
 from sensor_msgs.msg import JointState
@@ -30,6 +28,7 @@ from rad_core.transforms import matrix_from_quaternion, quaternion_from_matrix
 from rad_msgs.msg import RigidBodies
 from rad_ros.conversions import scene_to_msg
 from rad_ros.motion import rigid_bodies_msg, trajectory_from_msg
+from rad_ros.node_main import run_node
 
 
 class KinematicPlant(Node):
@@ -106,18 +105,8 @@ class KinematicPlant(Node):
 
 
 def main():
-    signal.signal(signal.SIGINT, signal.default_int_handler)
-    signal.signal(signal.SIGTERM, signal.default_int_handler)
-    rclpy.init()
-    node = KinematicPlant()
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
+    return run_node(KinematicPlant)
 
 
 if __name__ == '__main__':
-    main()
+    sys.exit(main())

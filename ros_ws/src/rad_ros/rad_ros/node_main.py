@@ -1,21 +1,32 @@
 """The one main() every rad node uses (the Jazzy pattern, hardened).
 
 SIGTERM and SIGINT both raise KeyboardInterrupt: a node spinning an executor
-otherwise sometimes ignores the first SIGTERM (see ENVIRONMENT.md).
+otherwise sometimes ignores the first SIGTERM (see ENVIRONMENT.md). When that
+interrupt lands inside rclpy's C++ code (say, while a message is converted),
+pybind11 turns it into another exception (seen: a RuntimeError from
+take_message); once a stop has been asked for, such an error is part of the
+shutdown, not a crash, and the node still exits 0.
 """
 
 from __future__ import annotations
 
 import signal
 import sys
+import threading
 
 import rclpy
 from rclpy.executors import ExternalShutdownException
 
 
 def run_node(node_factory, args=None, executor_factory=None) -> int:
-    signal.signal(signal.SIGINT, signal.default_int_handler)
-    signal.signal(signal.SIGTERM, signal.default_int_handler)
+    stop_requested = threading.Event()
+
+    def interrupt(signum, frame):
+        stop_requested.set()
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGINT, interrupt)
+    signal.signal(signal.SIGTERM, interrupt)
     rclpy.init(args=args)
     node = None
     try:
@@ -28,6 +39,9 @@ def run_node(node_factory, args=None, executor_factory=None) -> int:
             executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except Exception:
+        if not stop_requested.is_set():
+            raise
     finally:
         if node is not None:
             node.destroy_node()
