@@ -32,9 +32,9 @@ import numpy as np
 from rad_core.allocation import AllocationParams, solve
 from rad_core.allocation.guide import AllocationGuide
 from rad_core.errors import RadError
-from rad_core.mdp import TERMINATE, Action, AssemblyEnv, EnvConfig, Outcome
+from rad_core.mdp import TERMINATE, AssemblyEnv, EnvConfig, Outcome
 from rad_core.scene import Scene
-from rad_core.sequencing.policy import HeurPolicy, Policy, ranked_actions
+from rad_core.sequencing.policy import HeurPolicy, Policy, first_feasible, ranked_actions
 
 KEYS = ('R', 'R_std', 'd', 'e', 'f', 'f_g', 'f_p', 'coverage', 'coverage_rel', 'n', 'scenes')
 FAIL_GRASP = (Outcome.INVALID_GRASP,)
@@ -89,23 +89,6 @@ def coverage_opt(env: AssemblyEnv, guide: AllocationGuide) -> float:
     return float((filled & env.grid.is_target).sum()) / total if total else 1.0
 
 
-def _first_feasible(renv, ranked: list[Action]):
-    """The best-ranked action GAMP can execute from the world as it is, with its plan,
-    or (TERMINATE, None). Ranked actions that only differ in the unit or rotation
-    naming the same final pose are one motion: planned once."""
-    env, tried = renv.env, set()
-    for action in ranked:
-        cells, yaw = env.resulting_cells(action)
-        key = (action.block, tuple(sorted(int(c) for c in cells)), yaw)
-        if key in tried:
-            continue
-        tried.add(key)
-        plan = renv.plan(action)
-        if plan.success:
-            return action, plan
-    return TERMINATE, None
-
-
 def run_episode(agent: str | Agent, scene: Scene, robot: bool, seed: int, execution: str = 'teleport',
                 policy: Policy | None = None, allocation: AllocationParams | None = None) -> dict:
     """One episode from the scene as given; the row `evaluate` reports for it.
@@ -133,8 +116,8 @@ def run_episode(agent: str | Agent, scene: Scene, robot: bool, seed: int, execut
         while not env.state.done:
             ranked = ranked_actions(policy, env, guide.allowed_actions())
             if agent.verified:
-                action, plan = _first_feasible(renv, ranked)
-                result = renv.step(action, plan=plan)
+                action, plan, _ = first_feasible(env, ranked, renv.plan)
+                result = renv.step(action or TERMINATE, plan=plan)
             else:
                 result = step(ranked[0] if ranked else TERMINATE)
             ret += discount * result.reward

@@ -24,7 +24,7 @@ from rad_core.allocation.result import AllocationResult
 from rad_core.gamp.action import SceneAction
 from rad_core.mdp import AssemblyEnv, EnvConfig
 from rad_core.scene import Block, Scene
-from rad_core.sequencing.policy import Policy, ranked_actions
+from rad_core.sequencing.policy import Policy, first_feasible, ranked_actions
 
 
 @dataclass
@@ -129,27 +129,30 @@ def plan_assembly(scene: Scene, allocate: Allocate, plan_motion: PlanMotion, pol
 
 def _first_feasible(env: AssemblyEnv, scene: Scene, ranked, plan_motion: PlanMotion, q, timings):
     """(action, PlanStep) of the best-ranked action GAMP can execute, or why none."""
-    tried, failures = set(), []
-    for action in ranked:
-        cells, yaw = env.resulting_cells(action)
-        block = scene.blocks[action.block]
-        key = (block.id, tuple(sorted(int(c) for c in cells)), yaw)
-        if key in tried:   # another unit or rotation of the same motion
-            continue
-        tried.add(key)
-        region, ijk = env.grid.region_cells(cells)
-        cell = [int(v) for v in env.grid.ijk[action.cell]]
-        request = SceneAction(block.id, action.unit, scene.targets[region].name, tuple(cell), action.rotation)
+    def request(action) -> SceneAction:
+        cells, _ = env.resulting_cells(action)
+        region = int(env.grid.region_of[cells[0]])
+        cell = tuple(int(v) for v in env.grid.ijk[action.cell])
+        return SceneAction(scene.blocks[action.block].id, action.unit, scene.targets[region].name, cell,
+                           action.rotation)
+
+    def check(action) -> MotionPlan:
         ts = time.perf_counter()
-        motion = plan_motion(scene, request, q)
+        motion = plan_motion(scene, request(action), q)
         timings['motion'] += time.perf_counter() - ts
-        if motion.success:
-            anchor = env.grid.centres[cells[0]]
-            return action, PlanStep(block.id, block.type, request.target, int(yaw), ijk, action.unit, cell,
-                                    action.rotation, motion.grasp, [float(v) for v in anchor], motion.trajectory)
-        failures.append(f'{block.id}: {motion.reason}')
-    shown = '; '.join(failures[:3]) + (f'; and {len(failures) - 3} more' if len(failures) > 3 else '')
-    return f'no feasible next action ({len(failures)} tried): {shown}'
+        return motion
+
+    action, motion, failed = first_feasible(env, ranked, check)
+    if action is None:
+        failures = [f'{scene.blocks[a.block].id}: {m.reason}' for a, m in failed]
+        shown = '; '.join(failures[:3]) + (f'; and {len(failures) - 3} more' if len(failures) > 3 else '')
+        return f'no feasible next action ({len(failures)} tried): {shown}'
+    cells, yaw = env.resulting_cells(action)
+    _, ijk = env.grid.region_cells(cells)
+    req, block = request(action), scene.blocks[action.block]
+    anchor = env.grid.centres[cells[0]]   # cells are in unit order: the first is the anchor's
+    return action, PlanStep(block.id, block.type, req.target, int(yaw), ijk, action.unit, list(req.cell),
+                            action.rotation, motion.grasp, [float(v) for v in anchor], motion.trajectory)
 
 
 def _done(plan: AssemblyPlan, t0: float) -> AssemblyPlan:

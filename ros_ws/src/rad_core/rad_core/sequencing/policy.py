@@ -55,3 +55,26 @@ def ranked_actions(policy: Policy, env: AssemblyEnv, actions: list[Action]) -> l
     scores = np.asarray(policy.scores(env, actions), dtype=float)
     order = np.argsort(-scores, kind='stable')
     return [actions[i] for i in order if np.isfinite(scores[i])]
+
+
+def first_feasible(env: AssemblyEnv, ranked: list[Action], check):
+    """Go down the ranking and return (action, result) of the first action whose
+    check(action) answers with .success, plus the (action, result) pairs that failed
+    before it; (None, None, failed) when none does. /plan_assembly and the
+    heur-verified agent both choose this way (check = GAMP from the current state).
+
+    Ranked actions that only differ in the unit or rotation naming the same final
+    pose are one motion: checked once.
+    """
+    tried, failed = set(), []
+    for action in ranked:
+        cells, yaw = env.resulting_cells(action)
+        key = (action.block, tuple(sorted(int(c) for c in cells)), yaw)
+        if key in tried:
+            continue
+        tried.add(key)
+        result = check(action)
+        if result.success:
+            return action, result, failed
+        failed.append((action, result))
+    return None, None, failed
