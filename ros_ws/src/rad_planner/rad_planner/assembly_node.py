@@ -41,7 +41,8 @@ from rad_core.sim.mocap import RegistrationConfig, RigidBodyPose, body_map_for, 
 from rad_msgs.action import ExecuteAssembly
 from rad_msgs.msg import RigidBodies, Scene as SceneMsg
 from rad_msgs.srv import Allocate, PlanAction, PlanAssembly
-from rad_ros.conversions import allocation_from_response, scene_from_msg, scene_from_request
+from rad_ros.conversions import (allocation_from_response, scene_from_msg, scene_from_request,
+                                 scene_msg_is_empty)
 from rad_ros.node_main import run_node
 from rad_ros.plan_msgs import fill_plan_response, plan_json
 from rad_ros.motion import pose_from_msg, trajectory_from_msg, trajectory_to_msg
@@ -140,6 +141,12 @@ class AssemblyNode(Node):
                   for b in msg.rigidbodies]
         return register_scene(bodies, self.task, RegistrationConfig(body_map=body_map_for(self.task)))
 
+    def scene_of(self, msg: SceneMsg, text: str) -> tuple[Scene, bool]:
+        """The scene a request carries, or the registered one (and True) when it has none."""
+        if scene_msg_is_empty(msg) and not text.strip():
+            return self.registered_scene(), True
+        return scene_from_request(msg, text), False
+
     # ---- the two backends plan_assembly needs, over DDS ------------------------------
     def call(self, client, request):
         timeout = float(self.param('service_timeout_s'))
@@ -201,11 +208,8 @@ class AssemblyNode(Node):
         t0 = time.perf_counter()
         try:
             limit = self.time_limit(request.time_limit_s)
-            if request.scene_json.strip() or request.scene.blocks or request.scene.targets or request.scene.unit:
-                scene, registration = scene_from_request(request.scene, request.scene_json), 0.0
-            else:
-                scene = self.registered_scene()
-                registration = time.perf_counter() - t0
+            scene, registered = self.scene_of(request.scene, request.scene_json)
+            registration = time.perf_counter() - t0 if registered else 0.0
             plan = self.plan(scene, limit, self.start_joints(request.start_positions))
         except RadError as e:
             response.success, response.reason = False, str(e)
@@ -236,10 +240,7 @@ class AssemblyNode(Node):
         executed, allocation, scene, current = [], None, None, None
         try:
             limit = self.time_limit(goal.time_limit_s)
-            if goal.scene_json.strip() or goal.scene.blocks or goal.scene.targets or goal.scene.unit:
-                scene = scene_from_request(goal.scene, goal.scene_json)
-            else:
-                scene = self.registered_scene()
+            scene, _ = self.scene_of(goal.scene, goal.scene_json)
             current = scene
             while True:
                 report(len(executed), 0, '', 'planning')
