@@ -108,11 +108,16 @@ class RobotAssemblyEnv:
         return self.env.reset()
 
     # ---- one action ----------------------------------------------------------
-    def plan(self, action: Action):
-        """GAMP's plan for an action from the world as it is now, without acting."""
+    def _target(self, action: Action) -> tuple[str, np.ndarray, int]:
+        """Block id, final anchor position and yaw the action asks for."""
         block_id = self.scene.blocks[action.block].id
         position, yaw = placement_pose(self.scene, block_id, action.unit, self.env.grid.centres[action.cell],
                                        action.rotation)
+        return block_id, position, yaw
+
+    def plan(self, action: Action):
+        """GAMP's plan for an action from the world as it is now, without acting."""
+        block_id, position, yaw = self._target(action)
         return plan_action(self.world, block_id, position, yaw, start=self.world.joint_positions(),
                            config=self.config.gamp)
 
@@ -127,9 +132,7 @@ class RobotAssemblyEnv:
             return env.step(action)   # the same geometric failure, booked as the MDP does
         if not support.any_support(env.grid, env.state.occupancy, cells):
             return env.fail(Outcome.INVALID_UNSTABLE, 'the block would rest on nothing and fall', cells)
-        block_id = self.scene.blocks[action.block].id
-        position, yaw = placement_pose(self.scene, block_id, action.unit, env.grid.centres[action.cell],
-                                       action.rotation)
+        block_id, position, yaw = self._target(action)
         plan = plan if plan is not None else self.plan(action)
         self.last_plan = plan
         if not plan.success:
