@@ -205,11 +205,16 @@ def test_planners_run_against_a_different_plant(node_process, process, ros_node,
 
 
 def test_a_block_moved_during_execution_triggers_a_replan(graph):
-    """Someone moves a block the plan still needs; the action sees it and replans."""
+    """Someone moves a block while the robot works; the action sees the world differ and replans.
+
+    The moved block is one the plan does not use, so the disturbance can never race the
+    gripper (moving a block the hand holds would yank it out of the hand).
+    """
     from rad_msgs.action import ExecuteAssembly
     plan = graph.plan(scene_json=DEMO_SCENE.dumps())
     assert plan.success and len(plan.steps) >= 2
-    later = plan.steps[-1].block_id
+    used = {step.block_id for step in plan.steps}
+    later = next(b.id for b in DEMO_SCENE.blocks if b.id not in used)
     block = DEMO_SCENE.block(later)
     target = [block.position[0] + 0.02, block.position[1] - 0.30, block.position[2]]   # a free spot further out
     mover = ('import rclpy, sys\n'
