@@ -10,7 +10,8 @@ import pytest
 
 from rad_core.errors import RadError
 from rad_core.mdp import Action, AssemblyEnv, EnvConfig, Outcome
-from rad_core.physics import PhysicsConfig, PhysicsStability, polycube_inertia
+from rad_core.physics import (PhysicsConfig, PhysicsStability, add_block_body, block_shape, direct_client,
+                              polycube_inertia)
 
 from scenes import U, scene
 
@@ -167,6 +168,46 @@ def test_polycube_inertia_matches_a_solid_box():
     # An L3 has a product of inertia: its principal axes are diagonal in x-y.
     _, tensor = polycube_inertia(np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]]), 1.0, 1.0)
     assert tensor[0, 1] == pytest.approx(1 / 3)
+
+
+def test_both_body_frames_build_the_same_block():
+    """block_shape/add_block_body, shared by the stability check ('principal': body frame at the
+    centre of mass) and the twin's World ('anchor': the block's frame): one block either way."""
+    cfg = PhysicsConfig()
+    p, cid = direct_client(cfg)
+    try:
+        offsets = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 1, 1]])     # an S4-like block: skew inertia
+        anchor = np.array([0.3, -0.1, U / 2])
+        principal = block_shape(p, cid, offsets, U, cfg)
+        own = block_shape(p, cid, offsets, U, cfg, frame='anchor', visual_half=0.49 * U)
+        assert principal.visual == -1 and own.visual >= 0
+        assert (own.mass, own.inertia) == (principal.mass, principal.inertia) and own.mass == pytest.approx(0.4)
+        side, height = U / 2 - cfg.side_gap * U, U / 2 + cfg.overlap * U
+        centres = anchor + U * offsets
+        bodies = ((principal, (anchor + principal.com).tolist(), principal.axes, {'maximal_coordinates': True,
+                                                                                  'damping': 0.0}),
+                  (own, anchor.tolist(), [0, 0, 0, 1], {}))
+        for shape, position, orientation, kwargs in bodies:
+            body = add_block_body(p, cid, shape, position, orientation, cfg, **kwargs)
+            # Collision boxes at the cube centres, axis-aligned, a hair narrower and taller: a ray down
+            # through a cube meets its column's top, a ray along +x its row's first side face.
+            down = p.rayTestBatch((centres + [0, 0, 1]).tolist(), (centres - [0, 0, 1]).tolist(), physicsClientId=cid)
+            along = p.rayTestBatch((centres - [1, 0, 0]).tolist(), (centres + [1, 0, 0]).tolist(), physicsClientId=cid)
+            for o, hit_down, hit_along in zip(offsets, down, along):
+                column = offsets[(offsets[:, 0] == o[0]) & (offsets[:, 1] == o[1])]
+                row = offsets[(offsets[:, 1] == o[1]) & (offsets[:, 2] == o[2])]
+                assert hit_down[0] == body and hit_along[0] == body
+                assert hit_down[3][2] == pytest.approx(anchor[2] + U * column[:, 2].max() + height, abs=1e-6)
+                assert hit_along[3][0] == pytest.approx(anchor[0] + U * row[:, 0].min() - side, abs=1e-6)
+            info = p.getDynamicsInfo(body, -1, physicsClientId=cid)
+            assert info[0] == pytest.approx(0.4) and info[2] == pytest.approx(principal.inertia)
+            assert info[1] == pytest.approx(cfg.lateral_friction)
+            assert info[3] == pytest.approx(own.com.tolist() if shape is own else [0, 0, 0])   # inertial frame
+            p.removeBody(body, physicsClientId=cid)
+        with pytest.raises(RadError):
+            block_shape(p, cid, offsets, U, cfg, frame='world')
+    finally:
+        p.disconnect(physicsClientId=cid)
 
 
 def test_mdp_uses_physics_by_default():

@@ -7,10 +7,11 @@ import numpy as np
 import pytest
 
 from rad_core.allocation import solve
+from rad_core.colours import PINK, type_colour
 from rad_core.errors import RadError
 from rad_core.mdp import Action, AssemblyEnv, EnvConfig
 from rad_core.png import SIGNATURE, encode_png, write_png
-from rad_core.render import PINK, fit_camera, render_scene, save_scene_png, type_colour
+from rad_core.render import fit_camera, render_scene, save_scene_png
 
 from scenes import scene
 

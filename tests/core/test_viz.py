@@ -9,7 +9,8 @@ from rad_core import viz
 from rad_core.allocation import AllocationParams, solve
 from rad_core.allocation.placements import Placement
 from rad_core.errors import RadError
-from rad_core.render import type_colour
+from rad_core.colours import type_colour
+from rad_core.sequencing.plan import PlanStep
 from rad_core.transforms import yaw_quaternion
 from scenes import U, scene
 
@@ -77,12 +78,24 @@ def test_parse_plan_reads_allocation_steps_timings_coverage():
     doc = _plan_doc(s)
     plan = viz.parse_plan(json.dumps(doc))
     assert plan.allocation is not None and len(plan.allocation.placements) == len(doc['steps']) > 0
-    assert plan.steps[0].cells == tuple(tuple(c) for c in doc['steps'][0]['cells'])
+    assert plan.steps[0].cells == doc['steps'][0]['cells'] and plan.steps[0].trajectory is None
     assert plan.timings == {'allocate': 0.01, 'sequence': 0.2} and plan.predicted_coverage == 0.75
     text = viz.plan_summary(plan)
     assert 'allocate' in text and '0.750' in text and plan.allocation.status in text
     empty = viz.parse_plan('{}')
     assert empty.allocation is None and empty.steps == () and empty.timings == {}
+
+
+def test_plan_json_steps_are_read_back_as_the_planners_plan_steps():
+    """One PlanStep: what sequencing.plan makes and plan_json carries is what viz reads back."""
+    step = PlanStep('b0', 'L3_up', 'front', 90, [[0, 0, 0], [0, 1, 0]], 2, [0, 0, 0], 1, (1, 180),
+                    [0.4, 0.1, 0.025], {'joint_names': ['j'], 'points': []})
+    assert PlanStep.from_dict(json.loads(json.dumps(step.to_dict()))) == step
+    published = {k: v for k, v in step.to_dict().items() if k != 'trajectory'}    # rad_ros.plan_msgs.plan_json
+    (read,) = viz.parse_plan(json.dumps({'steps': [published]})).steps
+    assert isinstance(read, PlanStep) and read.to_dict() == {**step.to_dict(), 'trajectory': None}
+    with pytest.raises(RadError, match=r'steps\[0\]: not a plan step'):
+        viz.parse_plan(json.dumps({'steps': [{**published, 'grasp': [1, 2]}]}))
 
 
 @pytest.mark.parametrize('text, expected', [

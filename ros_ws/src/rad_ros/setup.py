@@ -14,6 +14,6 @@ setup(
     zip_safe=True,
     maintainer='rad developers',
     maintainer_email='dev@rad.local',
-    description='Conversions between rad_msgs and rad_core, and the shared node main().',
+    description='Conversions between rad_msgs and rad_core, the shared QoS profiles and node main().',
     license='Apache-2.0',
 )

@@ -26,7 +26,8 @@ Choices, each measured (numbers at the default 5 cm unit; see
 - Bodies. One compound rigid body per block (unit boxes, maximal coordinates),
   with its frame at the centre of mass along the principal axes and the exact
   polycube inertia: Bullet would take the inertia of the bounding box, wrong
-  for an L.
+  for an L. `block_shape` and `add_block_body` build them, here and in the
+  twin's world (`rad_core.sim.world`, which keeps the block's own frame).
 - Contact geometry. Bullet's box-box test reports nothing for boxes that only
   touch or are apart, so a block placed a hair above its support first falls
   into it (0.3-0.5 mm per layer: all eight cubes of a tower dropped 3.6 mm and
@@ -149,13 +150,91 @@ def principal_frame(offsets: np.ndarray, edge: float, cube_mass: float) -> tuple
     return com, moments, axes
 
 
-@dataclass
-class _Shape:
-    collision: int            # PyBullet collision shape, shared by every body of this shape
+def direct_client(config: PhysicsConfig):
+    """(the pybullet module, a new DIRECT client id) set up with the config's gravity, time step and
+    solver: the stability check's client and the twin world's are the same material."""
+    import pybullet as p      # here, not at the top: importing it prints a banner on stdout
+    cid = p.connect(p.DIRECT)
+    if cid < 0:
+        raise RuntimeError('cannot start a PyBullet DIRECT client')
+    p.setGravity(0, 0, -config.gravity, physicsClientId=cid)
+    p.setTimeStep(config.time_step, physicsClientId=cid)
+    p.setPhysicsEngineParameter(numSolverIterations=int(config.solver_iterations),
+                                deterministicOverlappingPairs=1, physicsClientId=cid)
+    return p, cid
+
+
+@dataclass(frozen=True)
+class BlockShape:
+    """The PyBullet shapes of one polycube block, and its mass properties, to create bodies from.
+
+    The body frame is either the inertial frame itself (``frame='principal'``: at the centre of
+    mass along the principal axes, so a body stands axis-aligned when turned by `axes`) or the
+    block's own frame (``frame='anchor'``: the anchor cube's centre, the type's axes; bodies then
+    get `com` and `axes` as their separate inertial frame).
+    """
+
+    frame: str
+    collision: int            # compound of one box per unit cube, in the body frame
+    visual: int               # compound of visual boxes in the body frame, or -1
     mass: float
     inertia: list[float]      # principal moments, kg m^2
-    com: np.ndarray           # centre of mass relative to the first cube, sim metres
-    quat: list[float]         # principal axes in the world as a quaternion (x, y, z, w)
+    com: np.ndarray           # centre of mass from the anchor cube's centre, block axes, m
+    axes: list[float]         # principal axes in the block's axes, as a quaternion (x, y, z, w)
+
+
+def block_shape(p, client: int, offsets: np.ndarray, edge: float, config: PhysicsConfig,
+                frame: str = 'principal', visual_half: float | None = None) -> BlockShape:
+    """Shapes and mass properties of a block of cubes at integer `offsets` with this edge (m).
+
+    Collision boxes are a hair narrower (``config.side_gap``) and taller (``config.overlap``)
+    than a cube, the mass is ``config.cube_mass`` per cube, the inertia the exact polycube's (see
+    the module docstring). visual_half: half edge of visual boxes at the cube centres (anchor
+    frame only); None for no visual shape. Shapes live in `client` and can be shared by bodies.
+    """
+    if frame not in ('principal', 'anchor'):
+        raise RadError(f"block_shape: frame must be 'principal' or 'anchor', got {frame!r}")
+    offsets = np.asarray(offsets)
+    n = len(offsets)
+    com, moments, axes = principal_frame(offsets, edge, config.cube_mass)
+    side, height = edge / 2 - config.side_gap * edge, edge / 2 + config.overlap * edge
+    boxes = {'halfExtents': [[side, side, height]] * n}
+    if frame == 'principal':
+        # Boxes in the principal frame, turned back so they are axis-aligned in the world.
+        boxes.update(collisionFramePositions=((offsets * edge - com) @ axes).tolist(),
+                     collisionFrameOrientations=[quaternion_from_matrix(axes.T)] * n)
+    else:
+        boxes.update(collisionFramePositions=(offsets * edge).tolist())
+    collision = p.createCollisionShapeArray([p.GEOM_BOX] * n, **boxes, physicsClientId=client)
+    visual = -1
+    if visual_half is not None:
+        if frame != 'anchor':
+            raise RadError("block_shape: visual boxes are made in the 'anchor' frame only")
+        visual = p.createVisualShapeArray([p.GEOM_BOX] * n, halfExtents=[[visual_half] * 3] * n,
+                                          visualFramePositions=(offsets * edge).tolist(), physicsClientId=client)
+    return BlockShape(frame, collision, visual, config.cube_mass * n, moments.tolist(), com,
+                      quaternion_from_matrix(axes))
+
+
+def add_block_body(p, client: int, shape: BlockShape, position, orientation, config: PhysicsConfig,
+                   maximal_coordinates: bool = False, damping: float | None = None) -> int:
+    """A body of this shape whose body frame (see `BlockShape`) is at position, orientation (x, y, z, w).
+
+    Its dynamics get the shape's mass and exact principal inertia, ``config.lateral_friction``
+    and friction anchors; damping (linear and angular) None keeps PyBullet's default.
+    """
+    extra = {}
+    if shape.frame == 'anchor':
+        extra.update(baseInertialFramePosition=shape.com.tolist(), baseInertialFrameOrientation=shape.axes)
+    if maximal_coordinates:
+        extra['useMaximalCoordinates'] = True
+    body = p.createMultiBody(shape.mass, shape.collision, shape.visual, basePosition=position,
+                             baseOrientation=orientation, **extra, physicsClientId=client)
+    dynamics = {} if damping is None else {'linearDamping': damping, 'angularDamping': damping}
+    # mass is repeated on purpose: for a maximal-coordinates body, setting the inertia alone zeroes it.
+    p.changeDynamics(body, -1, mass=shape.mass, localInertiaDiagonal=shape.inertia,
+                     lateralFriction=config.lateral_friction, frictionAnchor=1, **dynamics, physicsClientId=client)
+    return body
 
 
 class PhysicsStability:
@@ -171,7 +250,7 @@ class PhysicsStability:
         self.config = config
         self._p = None            # the pybullet module, imported on first use
         self._client = -1
-        self._shapes: dict[tuple, _Shape] = {}
+        self._shapes: dict[tuple, BlockShape] = {}
         self._bodies: list[int] = []
 
     # ---- lifetime --------------------------------------------------------
@@ -196,17 +275,9 @@ class PhysicsStability:
         self._bodies.clear()
 
     def _connect(self) -> None:
-        import pybullet as p      # here, not at the top: importing it prints a banner on stdout
-        self._p = p
         cfg = self.config
-        cid = p.connect(p.DIRECT)
-        if cid < 0:
-            raise RuntimeError('cannot start a PyBullet DIRECT client')
-        self._client = cid
-        p.setGravity(0, 0, -cfg.gravity, physicsClientId=cid)
-        p.setTimeStep(cfg.time_step, physicsClientId=cid)
-        p.setPhysicsEngineParameter(numSolverIterations=int(cfg.solver_iterations),
-                                    deterministicOverlappingPairs=1, physicsClientId=cid)
+        p, cid = direct_client(cfg)
+        self._p, self._client = p, cid
         half = 100.0 * cfg.sim_unit
         table = p.createCollisionShape(p.GEOM_BOX, halfExtents=[half, half, half], physicsClientId=cid)
         ground = p.createMultiBody(0, table, basePosition=[0, 0, -half], physicsClientId=cid)
@@ -232,34 +303,20 @@ class PhysicsStability:
                 self._p.removeBody(body, physicsClientId=self._client)
             self._bodies.clear()
 
-    def _shape(self, offsets: np.ndarray) -> _Shape:
+    def _shape(self, offsets: np.ndarray) -> BlockShape:
         key = tuple(map(tuple, offsets.tolist()))
         shape = self._shapes.get(key)
         if shape is None:
-            p, cfg, u = self._p, self.config, self.config.sim_unit
-            com, moments, axes = principal_frame(offsets, u, cfg.cube_mass)
-            # Boxes in the principal frame, turned back so they are axis-aligned in the world.
-            local = (offsets * u - com) @ axes
-            side, height = u / 2 - cfg.side_gap * u, u / 2 + cfg.overlap * u
-            n = len(offsets)
-            collision = p.createCollisionShapeArray(
-                [p.GEOM_BOX] * n, halfExtents=[[side, side, height]] * n, collisionFramePositions=local.tolist(),
-                collisionFrameOrientations=[quaternion_from_matrix(axes.T)] * n, physicsClientId=self._client)
-            shape = _Shape(collision, cfg.cube_mass * n, moments.tolist(), com, quaternion_from_matrix(axes))
+            shape = block_shape(self._p, self._client, offsets, self.config.sim_unit, self.config)
             self._shapes[key] = shape
         return shape
 
     def _add_body(self, cubes: np.ndarray) -> int:
         """A block whose unit cubes have these world centres (simulation scale)."""
-        p, cid, cfg = self._p, self._client, self.config
+        cfg = self.config
         shape = self._shape(np.round((cubes - cubes[0]) / cfg.sim_unit).astype(np.int64))
-        body = p.createMultiBody(shape.mass, shape.collision, basePosition=(cubes[0] + shape.com).tolist(),
-                                 baseOrientation=shape.quat, useMaximalCoordinates=True, physicsClientId=cid)
-        # mass is repeated on purpose: for a maximal-coordinates body, setting the inertia alone zeroes it.
-        p.changeDynamics(body, -1, mass=shape.mass, localInertiaDiagonal=shape.inertia,
-                         lateralFriction=cfg.lateral_friction, frictionAnchor=1,
-                         linearDamping=0.0, angularDamping=0.0, physicsClientId=cid)
-        return body
+        return add_block_body(self._p, self._client, shape, (cubes[0] + shape.com).tolist(), shape.axes, cfg,
+                              maximal_coordinates=True, damping=0.0)
 
     def _simulate(self, cubes: list[np.ndarray], unit: float) -> tuple[bool, str]:
         p, cid, cfg = self._p, self._client, self.config

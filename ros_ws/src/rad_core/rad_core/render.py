@@ -3,7 +3,7 @@
 What is drawn, in the scene's world frame (table top at z = 0):
 
 - the table, a flat slab under everything;
-- every block as unit cubes in its type's colour (`type_colour`), at its scene
+- every block as unit cubes in its type's colour (`rad_core.colours`), at its scene
   pose, or at its grid cells when `occupancy` (an MDP state's per-cell block
   index, -1 for free) says it has been placed;
 - every target region cell: a small pink cube on target cells, a smaller green
@@ -19,22 +19,17 @@ touches a physics client. A 640x480 frame of a small scene takes about 50 ms.
 from __future__ import annotations
 
 import math
-import zlib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterable
 
 import numpy as np
 
-from rad_core.blocks import DEFAULT_LIBRARY
+from rad_core.colours import GREEN, PINK, TABLE, type_colour
 from rad_core.errors import RadError
 from rad_core.grid import Grid
 from rad_core.png import write_png
 from rad_core.scene import Scene
-
-PINK = (1.0, 0.42, 0.71)
-GREEN = (0.25, 0.75, 0.30)
-TABLE = (0.80, 0.76, 0.68)
 
 # Edge of each kind of cube, as a fraction of the unit. Placed blocks leave a hair
 # of a gap so single cubes stay visible; the markers hide inside anything on them.
@@ -42,22 +37,6 @@ BLOCK_SIZE = 0.94
 PLAN_SIZE = 0.75
 TARGET_SIZE = 0.45
 OTHER_CELL_SIZE = 0.2
-
-# Block colours: the default library's types in a fixed order, others by a hash of the
-# name (crc32, the same in every run, unlike hash()). Pink and green are left out.
-_PALETTE = (
-    (0.90, 0.33, 0.20), (0.20, 0.45, 0.85), (0.95, 0.70, 0.15), (0.55, 0.30, 0.75),
-    (0.15, 0.70, 0.75), (0.60, 0.40, 0.25), (0.35, 0.35, 0.40), (0.85, 0.55, 0.45),
-    (0.45, 0.60, 0.95), (0.70, 0.65, 0.20), (0.50, 0.15, 0.30), (0.10, 0.30, 0.45),
-)
-_DEFAULT_ORDER = tuple(DEFAULT_LIBRARY)
-
-
-def type_colour(name: str) -> tuple[float, float, float]:
-    """RGB in 0..1 of a block type, the same in every run and every scene."""
-    if name in _DEFAULT_ORDER:
-        return _PALETTE[_DEFAULT_ORDER.index(name) % len(_PALETTE)]
-    return _PALETTE[zlib.crc32(name.encode()) % len(_PALETTE)]
 
 
 @dataclass(frozen=True)

@@ -37,9 +37,11 @@ import numpy as np
 
 from rad_core.allocation.placements import Placement
 from rad_core.allocation.result import AllocationResult
+from rad_core.colours import GREEN, PINK, TABLE, type_colour
 from rad_core.errors import RadError
-from rad_core.render import BLOCK_SIZE, GREEN, OTHER_CELL_SIZE, PINK, PLAN_SIZE, TABLE, TARGET_SIZE, type_colour
+from rad_core.render import BLOCK_SIZE, OTHER_CELL_SIZE, PLAN_SIZE, TARGET_SIZE
 from rad_core.scene import Scene
+from rad_core.sequencing.plan import PlanStep
 from rad_core.transforms import matrix_from_quaternion, yaw_quaternion
 
 WORLD = 'world'
@@ -152,17 +154,11 @@ def table_box(scene: Scene | None = None) -> BoxSet:
 # ---- the plan document (topic plan_json) ----------------------------------------------
 
 @dataclass(frozen=True)
-class PlanStep:
-    block: str
-    type: str
-    target: str
-    yaw: int
-    cells: tuple[tuple[int, int, int], ...]
-
-
-@dataclass(frozen=True)
 class PlanDoc:
-    """What /plan_assembly publishes on plan_json, the parts the visualizer draws."""
+    """What /plan_assembly publishes on plan_json, the parts the visualizer draws.
+
+    steps are `rad_core.sequencing.plan.PlanStep`s read back from the document (no trajectory).
+    """
 
     allocation: AllocationResult | None
     steps: tuple[PlanStep, ...]
@@ -170,12 +166,11 @@ class PlanDoc:
     predicted_coverage: float | None = None
 
 
-def _cells(value, where: str) -> tuple[tuple[int, int, int], ...]:
+def _check_cells(value, where: str) -> None:
     if not isinstance(value, list) or not all(
             isinstance(c, list) and len(c) == 3 and all(isinstance(v, int) and not isinstance(v, bool) for v in c)
             for c in value):
         raise RadError(f'{where}: cells must be a list of [i, j, k] integer triples')
-    return tuple(tuple(c) for c in value)
 
 
 def parse_plan(text: str) -> PlanDoc:
@@ -194,7 +189,7 @@ def parse_plan(text: str) -> PlanDoc:
         except (KeyError, TypeError, ValueError) as e:
             raise RadError(f'allocation: not a rad-allocation/1 document ({type(e).__name__}: {e})') from None
         for i, p in enumerate(alloc['placements']):
-            _cells(p['cells'], f'allocation.placements[{i}]')
+            _check_cells(p['cells'], f'allocation.placements[{i}]')
     steps = []
     raw_steps = doc.get('steps', [])
     if not isinstance(raw_steps, list):
@@ -208,8 +203,11 @@ def parse_plan(text: str) -> PlanDoc:
             raise RadError(f'{where} lacks {", ".join(missing)}')
         if not isinstance(s['yaw'], (int, float)) or isinstance(s['yaw'], bool) or not math.isfinite(s['yaw']):
             raise RadError(f'{where}.yaw must be a number')
-        steps.append(PlanStep(str(s['block']), str(s['type']), str(s['target']), int(s['yaw']),
-                              _cells(s['cells'], where)))
+        _check_cells(s['cells'], where)
+        try:
+            steps.append(PlanStep.from_dict(s))
+        except (KeyError, TypeError, ValueError, AttributeError) as e:
+            raise RadError(f'{where}: not a plan step ({type(e).__name__}: {e})') from None
     timings = doc.get('timings') or {}
     if not isinstance(timings, dict) or not all(
             isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in timings.values()):
@@ -372,8 +370,9 @@ def log_plan(rec, scene: Scene, plan: PlanDoc, stamp_s: float, previous: PlanDoc
             break
         step = plan.steps[i]
         try:
-            boxes = placement_boxes(scene, Placement(step.type, step.target, step.yaw, step.cells),
-                                    size=STEP_SIZE, alpha=1.0)
+            cells = tuple(tuple(c) for c in step.cells)
+            boxes = placement_boxes(scene, Placement(step.type, step.target, step.yaw, cells), size=STEP_SIZE,
+                                    alpha=1.0)
         except RadError as e:
             problems.append(f'steps[{i}]: {e}')
             rec.log(f'{WORLD}/plan/step', rr.Clear(recursive=False))

@@ -26,7 +26,7 @@ from rclpy.callback_groups import ReentrantCallbackGroup
 import rclpy
 from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, QoSProfile, qos_profile_sensor_data
+from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 from trajectory_msgs.msg import JointTrajectory
@@ -46,8 +46,7 @@ from rad_ros.conversions import (allocation_from_response, scene_from_msg, scene
 from rad_ros.node_main import run_node
 from rad_ros.plan_msgs import fill_plan_response, plan_json
 from rad_ros.motion import pose_from_msg, trajectory_from_msg, trajectory_to_msg
-
-LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+from rad_ros.qos import LATCHED
 
 
 class AssemblyNode(Node):

@@ -25,7 +25,7 @@ import time
 
 from geometry_msgs.msg import PoseStamped
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, DurabilityPolicy, qos_profile_sensor_data
+from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
@@ -41,8 +41,7 @@ from rad_msgs.srv import GetSceneState, LoadScene, SetBlockPose
 from rad_ros.conversions import scene_from_request, scene_to_msg
 from rad_ros.motion import pose_from_msg, pose_stamped, rigid_bodies_msg, trajectory_from_msg
 from rad_ros.node_main import main_for
-
-LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+from rad_ros.qos import LATCHED
 
 
 class TwinNode(Node):

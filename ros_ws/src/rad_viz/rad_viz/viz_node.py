@@ -29,12 +29,11 @@ from rad_msgs.msg import RigidBodies
 from rad_msgs.msg import Scene as SceneMsg
 from rad_ros.conversions import scene_from_msg
 from rad_ros.node_main import main_for
+from rad_ros.qos import LATCHED
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, QoSProfile, qos_profile_sensor_data
+from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
-
-LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
 def server_problem(url: str, timeout: float = 1.0) -> str:

@@ -59,7 +59,7 @@ class Attachment:
 
 def attachment_from_world(world: World, block_id: str) -> Attachment:
     """The attachment that holds a block where it is now, relative to the grasp target now."""
-    p = world._p
+    p = world.pybullet
     ee_pos, ee_orn = world.link_pose()
     b_pos, b_orn = world.block_pose(block_id)
     inv_pos, inv_orn = p.invertTransform(ee_pos.tolist(), ee_orn.tolist())
@@ -69,7 +69,7 @@ def attachment_from_world(world: World, block_id: str) -> Attachment:
 
 def place_attached(world: World, attachment: Attachment) -> None:
     """Move the held block to where the hand holds it now."""
-    p = world._p
+    p = world.pybullet
     ee_pos, ee_orn = world.link_pose()
     pos, orn = p.multiplyTransforms(ee_pos.tolist(), ee_orn.tolist(), attachment.position, attachment.quaternion)
     world.set_block_pose(attachment.block_id, pos, orn)
@@ -77,7 +77,7 @@ def place_attached(world: World, attachment: Attachment) -> None:
 
 def robot_links(world: World) -> list[int]:
     """Robot links that can hit something (base and shapeless links left out)."""
-    p, cid = world._p, world.client
+    p, cid = world.pybullet, world.client
     names = {v: k for k, v in world.link_index.items()}
     return [j for j in sorted(names) if names[j] != 'panda_link1' and names[j] != 'panda_grasptarget'
             and p.getCollisionShapeData(world.robot, j, physicsClientId=cid)]
@@ -99,7 +99,7 @@ def make_collision_fn(world: World, exclude: Iterable[str] = (), attached: Attac
     never an obstacle of the robot (the fingers hold it), but it is checked
     against every other block and the table.
     """
-    p, cid, robot = world._p, world.client, world.robot
+    p, cid, robot = world.pybullet, world.client, world.robot
     exclude = set(exclude)
     if attached is not None:
         exclude.add(attached.block_id)

@@ -101,7 +101,7 @@ def solve_pose(world: World, position, quaternion, seeds: Sequence[np.ndarray] =
     answer are those of the first seed (HOME's when there is none).
     """
     start = time.perf_counter()
-    p, cid, robot = world._p, world.client, world.robot
+    p, cid, robot = world.pybullet, world.client, world.robot
     position = np.asarray(position, dtype=float)
     quaternion = np.asarray(quaternion, dtype=float)
     rng = rng if rng is not None else np.random.default_rng(0)

@@ -284,7 +284,7 @@ def _vertical(world, point, q_low, hand_yaw, rise, config, clock, rng, where) ->
 
 def _tops(world: World, exclude: str) -> float:
     """Highest point of any block but one (m; 0 for the bare table)."""
-    p = world._p
+    p = world.pybullet
     tops = [p.getAABB(body, -1, physicsClientId=world.client)[1][2]
             for bid, body in world.blocks.items() if bid != exclude]
     return max(tops, default=0.0)

@@ -40,23 +40,46 @@ class MotionPlan:
 
 @dataclass
 class PlanStep:
+    """One step of a plan: a block, the allocated pose it goes to (type, target region, yaw,
+    region-local cells) and how (MDP unit, cell and rotation, grasp, anchor position, trajectory).
+
+    Its `to_dict` form is a step of rad-result/1 and of the plan_json topic (there without the
+    trajectory); `from_dict` reads it back. Only block to cells are required: a step read from a
+    document that lacks the rest has the defaults (0, empty, None for the trajectory).
+    """
+
     block: str
     type: str
     target: str
     yaw: int
     cells: list[list[int]]
-    unit: int
-    cell: list[int]
-    rotation: int
-    grasp: tuple[int, int]
-    position: list[float]
-    trajectory: dict
+    unit: int = 0
+    cell: list[int] = field(default_factory=list)
+    rotation: int = 0
+    grasp: tuple[int, int] = (0, 0)
+    position: list[float] = field(default_factory=list)
+    trajectory: dict | None = None
 
     def to_dict(self) -> dict:
         return {'block': self.block, 'type': self.type, 'target': self.target, 'yaw': self.yaw,
                 'cells': self.cells, 'unit': self.unit, 'cell': self.cell, 'rotation': self.rotation,
                 'grasp': {'unit': self.grasp[0], 'yaw': self.grasp[1]}, 'position': self.position,
                 'trajectory': self.trajectory}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> PlanStep:
+        """The step of a `to_dict` form (the inverse: from_dict(s.to_dict()) == s).
+
+        Converts, does not validate: a missing required key raises KeyError, a value of the
+        wrong kind TypeError, ValueError or AttributeError (rad_core.viz.parse_plan checks
+        plan_json first and names what is wrong).
+        """
+        grasp = d.get('grasp') or {}
+        return cls(str(d['block']), str(d['type']), str(d['target']), int(d['yaw']),
+                   [[int(v) for v in c] for c in d['cells']], int(d.get('unit', 0)),
+                   [int(v) for v in d.get('cell', ())], int(d.get('rotation', 0)),
+                   (int(grasp.get('unit', 0)), int(grasp.get('yaw', 0))),
+                   [float(v) for v in d.get('position', ())], d.get('trajectory'))
 
 
 @dataclass

@@ -1,8 +1,9 @@
 """One PyBullet world: the table, the Franka Panda and a scene's blocks.
 
 Everything that moves the robot or the blocks (GAMP's collision probes, the
-digital twin, registration from motion capture) works on a `World` and passes
-its ``client`` explicitly; there is no global client.
+digital twin, registration from motion capture) works on a `World`: its
+``pybullet`` module with its ``client`` passed explicitly; there is no global
+client.
 
 Frames and conventions:
 - World frame = scene frame: the table top is z = 0, the robot base is at the
@@ -14,9 +15,10 @@ Frames and conventions:
   bounding box's). PyBullet's base pose calls talk about the inertial frame;
   this module converts, so nobody else has to.
 - Collision boxes are a hair narrower than a unit on the side faces and a hair
-  taller (the same choice and reasons as `rad_core.physics`): side-by-side
-  neighbours start apart, stacked layers start in contact instead of falling
-  into each other.
+  taller (the same choice and reasons as `rad_core.physics`, whose
+  `block_shape` and `add_block_body` build the block bodies of both):
+  side-by-side neighbours start apart, stacked layers start in contact instead
+  of falling into each other.
 
 Cost (measured, see tests/core/test_world.py): `preserved()` snapshots and
 restores by hand what can change (joint states, block poses and velocities,
@@ -35,12 +37,13 @@ from collections.abc import Iterator
 
 import numpy as np
 
+from rad_core.colours import TABLE, type_colour
 from rad_core.errors import RadError
-from rad_core.physics import PhysicsConfig, principal_frame
+from rad_core.physics import BlockShape, PhysicsConfig, add_block_body, block_shape, direct_client
 from rad_core.scene import Scene
 from rad_core.sim import panda
 from rad_core.sim.panda import JOINT_NAMES
-from rad_core.transforms import quaternion_from_matrix, yaw_quaternion
+from rad_core.transforms import yaw_quaternion
 
 
 @dataclass(frozen=True)
@@ -60,15 +63,6 @@ class WorldConfig:
             raise RadError(f'world config table_half_extents: expected positive sizes, got {self.table_half_extents!r}')
 
 
-@dataclass
-class _BlockShape:
-    collision: int
-    visual: int
-    mass: float
-    inertia: list[float]          # principal moments
-    com: tuple[list, list]        # inertial frame in the body (anchor) frame: position, quaternion
-
-
 class World:
     """Table, robot and blocks in a private DIRECT client.
 
@@ -77,20 +71,13 @@ class World:
     """
 
     def __init__(self, scene: Scene | None = None, config: WorldConfig = WorldConfig()):
-        import pybullet as p      # here, not at module top: importing it prints a banner
-        self._p = p
         self.config = config
-        self.client = p.connect(p.DIRECT)
-        if self.client < 0:
-            raise RuntimeError('cannot start a PyBullet DIRECT client')
-        cid = self.client
-        p.setGravity(0, 0, -config.physics.gravity, physicsClientId=cid)
-        p.setTimeStep(config.physics.time_step, physicsClientId=cid)
-        p.setPhysicsEngineParameter(numSolverIterations=int(config.physics.solver_iterations),
-                                    deterministicOverlappingPairs=1, physicsClientId=cid)
+        self.client = -1          # until connected: close() has nothing to do
+        p, cid = direct_client(config.physics)    # imports pybullet here: importing it prints a banner
+        self._p, self.client = p, cid
         self.scene: Scene | None = None
         self.blocks: dict[str, int] = {}
-        self._shapes: dict[tuple, _BlockShape] = {}
+        self._shapes: dict[tuple, tuple[BlockShape, list[float]]] = {}   # -> shape, RGBA
         self._inertial: dict[int, tuple[list, list]] = {}   # body -> inertial frame in body frame
         self.table = -1
         self._table_box = (tuple(config.table_centre), tuple(config.table_half_extents))
@@ -115,6 +102,12 @@ class World:
         if scene is not None:
             self.load_scene(scene)
 
+    @property
+    def pybullet(self):
+        """The pybullet module, for calls this class has no method for: pass
+        ``physicsClientId=world.client`` with each (there is no global client)."""
+        return self._p
+
     # ---- lifetime --------------------------------------------------------
     def close(self) -> None:
         if self.client >= 0:
@@ -137,7 +130,7 @@ class World:
     def _make_table(self, centre, half) -> None:
         p, cid = self._p, self.client
         shape = p.createCollisionShape(p.GEOM_BOX, halfExtents=list(half), physicsClientId=cid)
-        visual = p.createVisualShape(p.GEOM_BOX, halfExtents=list(half), rgbaColor=[0.80, 0.76, 0.68, 1],
+        visual = p.createVisualShape(p.GEOM_BOX, halfExtents=list(half), rgbaColor=[*TABLE, 1],
                                      physicsClientId=cid)
         self.table = p.createMultiBody(0, shape, visual, basePosition=[centre[0], centre[1], -half[2]],
                                        physicsClientId=cid)
@@ -169,26 +162,14 @@ class World:
         p.setCollisionFilterPair(self.robot, self.table, self.link_index['panda_link1'], -1, 0,
                                  physicsClientId=cid)
 
-    def _shape(self, type_name: str, offsets: np.ndarray, unit: float) -> _BlockShape:
+    def _shape(self, type_name: str, offsets: np.ndarray, unit: float) -> tuple[BlockShape, list[float]]:
         key = (type_name, tuple(map(tuple, offsets.tolist())), unit)
         shape = self._shapes.get(key)
-        if shape is not None:
-            return shape
-        p, cid, cfg = self._p, self.client, self.config
-        from rad_core.render import type_colour
-        n = len(offsets)
-        centres = (offsets * unit).tolist()
-        side, height = unit / 2 - cfg.physics.side_gap * unit, unit / 2 + cfg.physics.overlap * unit
-        collision = p.createCollisionShapeArray([p.GEOM_BOX] * n, halfExtents=[[side, side, height]] * n,
-                                                collisionFramePositions=centres, physicsClientId=cid)
-        vis_half = unit / 2 * 0.98
-        visual = p.createVisualShapeArray([p.GEOM_BOX] * n, halfExtents=[[vis_half] * 3] * n,
-                                          visualFramePositions=centres, physicsClientId=cid)
-        mass = cfg.physics.cube_mass * n
-        com, moments, axes = principal_frame(offsets, unit, cfg.physics.cube_mass)
-        shape = _BlockShape(collision, visual, mass, moments.tolist(), (com.tolist(), quaternion_from_matrix(axes)))
-        shape.colour = [*type_colour(type_name), 1.0]
-        self._shapes[key] = shape
+        if shape is None:
+            shape = (block_shape(self._p, self.client, offsets, unit, self.config.physics, frame='anchor',
+                                 visual_half=unit / 2 * 0.98),
+                     [*type_colour(type_name), 1.0])
+            self._shapes[key] = shape
         return shape
 
     def load_scene(self, scene: Scene) -> None:
@@ -204,18 +185,11 @@ class World:
         self._fit_table(scene)
         for block in scene.blocks:
             offsets = np.asarray(scene.block_types[block.type].offsets, dtype=float)
-            shape = self._shape(block.type, offsets, scene.unit)
-            body = p.createMultiBody(shape.mass, shape.collision, shape.visual,
-                                     basePosition=list(block.position),
-                                     baseOrientation=yaw_quaternion(block.yaw),
-                                     baseInertialFramePosition=shape.com[0],
-                                     baseInertialFrameOrientation=shape.com[1], physicsClientId=cid)
-            # mass repeated on purpose: setting the inertia alone may zero it (see physics.py).
-            p.changeDynamics(body, -1, mass=shape.mass, localInertiaDiagonal=shape.inertia,
-                             lateralFriction=self.config.physics.lateral_friction, frictionAnchor=1,
-                             physicsClientId=cid)
-            p.changeVisualShape(body, -1, rgbaColor=shape.colour, physicsClientId=cid)
-            self._inertial[body] = shape.com
+            shape, rgba = self._shape(block.type, offsets, scene.unit)
+            body = add_block_body(p, cid, shape, list(block.position), yaw_quaternion(block.yaw),
+                                  self.config.physics)
+            p.changeVisualShape(body, -1, rgbaColor=rgba, physicsClientId=cid)
+            self._inertial[body] = (shape.com.tolist(), shape.axes)
             self.blocks[block.id] = body
         self.scene = scene
         self.set_block_velocities_zero()
