@@ -21,7 +21,7 @@ from rad_core.allocation import solve
 from rad_core.allocation.guide import AllocationGuide
 from rad_core.generator import GeneratorConfig, generate_scene
 from rad_core.mdp import TERMINATE, AssemblyEnv, EnvConfig
-from rad_core import support
+from rad_core.sequencing import supported_actions
 
 
 def run(mode: str, grid: int, episodes: int, seed: int) -> dict:
@@ -32,12 +32,11 @@ def run(mode: str, grid: int, episodes: int, seed: int) -> dict:
         alloc = solve(scene)
         env = AssemblyEnv(scene, EnvConfig(stability=mode), stability=stability)
         stability = env.stability  # one physics client for the whole run
-        guide = AllocationGuide(env, alloc.placements)
+        guide = AllocationGuide(scene, alloc.placements)
         rng = np.random.default_rng(e)
         while True:
             t0 = time.perf_counter()
-            actions = [a for a in guide.allowed_actions()
-                       if support.fully_supported(env.grid, env.state.occupancy, env.resulting_cells(a)[0])]
+            actions = supported_actions(env, guide.allowed_actions(env.state))
             action = actions[int(rng.integers(len(actions)))] if actions else TERMINATE
             t1 = time.perf_counter()
             result = env.step(action)

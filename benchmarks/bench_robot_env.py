@@ -17,7 +17,7 @@ from collections import Counter
 
 import numpy as np
 
-from rad_core import support
+from rad_core.sequencing import supported_actions
 from rad_core.allocation import solve
 from rad_core.allocation.guide import AllocationGuide
 from rad_core.generator import GeneratorConfig, generate_scene
@@ -31,11 +31,10 @@ def run(execution: str, grid: int, scenes: int, seed: int) -> dict:
         scene = generate_scene(GeneratorConfig(grid=grid), seed + s)
         with RobotAssemblyEnv(scene, RobotEnvConfig(execution=execution)) as renv:
             env = renv.env
-            guide = AllocationGuide(env, solve(scene).placements)
+            guide = AllocationGuide(scene, solve(scene).placements)
             rng = np.random.default_rng(seed + s)
             while not env.state.done:
-                acts = [a for a in guide.allowed_actions()
-                        if support.fully_supported(env.grid, env.state.occupancy, env.resulting_cells(a)[0])]
+                acts = supported_actions(env, guide.allowed_actions(env.state))
                 action = acts[int(rng.integers(len(acts)))] if acts else TERMINATE
                 renv.last_plan = None
                 t0 = time.perf_counter()

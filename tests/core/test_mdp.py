@@ -4,8 +4,9 @@ import pytest
 from rad_core.allocation import solve
 from rad_core.allocation.guide import AllocationGuide
 from rad_core.errors import RadError
-from rad_core.mdp import TERMINATE, Action, AssemblyEnv, EnvConfig, Outcome, rollout
+from rad_core.mdp import TERMINATE, Action, AssemblyEnv, EnvConfig, Outcome
 from rad_core.scene import Scene
+from rad_core.sequencing.episode import Decision, run_episode
 
 from scenes import U, doc, scene
 
@@ -123,8 +124,8 @@ def test_guide_offers_exactly_the_allocated_poses_and_drops_filled_ones():
     s = scene()
     alloc = solve(s)
     env = AssemblyEnv(s, GEOM)
-    guide = AllocationGuide(env, alloc.placements)
-    actions = guide.allowed_actions()
+    guide = AllocationGuide(s, alloc.placements)
+    actions = guide.allowed_actions(env.state)
     pose_sets = {frozenset(env.grid.index(0, c) for c in p.cells) for p in alloc.placements}
     for a in actions:
         cells, _ = env.resulting_cells(a)
@@ -136,7 +137,7 @@ def test_guide_offers_exactly_the_allocated_poses_and_drops_filled_ones():
     first = actions[0]
     cells, _ = env.resulting_cells(first)
     env.step(first)
-    for a in guide.allowed_actions():
+    for a in guide.allowed_actions(env.state):
         c, _ = env.resulting_cells(a)
         assert set(c.tolist()).isdisjoint(cells.tolist())
         assert a.block != first.block
@@ -145,13 +146,12 @@ def test_guide_offers_exactly_the_allocated_poses_and_drops_filled_ones():
 def test_guided_episode_with_allocation_reaches_completion():
     s = scene()
     env = AssemblyEnv(s, SUPPORT)
-    guide = AllocationGuide(env, solve(s).placements)
-    rng = np.random.default_rng(0)
+    guide = AllocationGuide(s, solve(s).placements)
 
-    def heur(e):
-        ok = [a for a in guide.allowed_actions() if e.evaluate(a)[0] is None]
-        return ok[int(rng.integers(len(ok)))] if ok else TERMINATE
+    def heur(e, rng):
+        ok = [a for a in guide.allowed_actions(e.state) if e.evaluate(a)[0] is None]
+        return Decision(ok[int(rng.integers(len(ok)))] if ok else TERMINATE)
 
-    stats = rollout(env, heur)
-    assert stats['outcome'] == 'completed' and stats['coverage'] == 1.0
-    assert stats['return'] == pytest.approx(0.2 * 4 + 1.0, abs=0.01)
+    ep = run_episode(env, heur, np.random.default_rng(0))
+    assert ep.outcome == Outcome.COMPLETED and ep.coverage == 1.0
+    assert ep.ret == pytest.approx(0.2 * 4 + 1.0, abs=0.01)

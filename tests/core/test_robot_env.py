@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from rad_core import support
+from rad_core.sequencing import supported_actions
 from rad_core.allocation import solve
 from rad_core.allocation.guide import AllocationGuide
 from rad_core.generator import GeneratorConfig, generate_scene
@@ -34,11 +34,10 @@ def test_guided_episode_builds_what_the_mdp_books(execution):
     scene = generate_scene(GeneratorConfig(grid=4), SEED)
     with RobotAssemblyEnv(scene, RobotEnvConfig(execution=execution)) as renv:
         env = renv.env
-        guide = AllocationGuide(env, solve(scene).placements)
+        guide = AllocationGuide(scene, solve(scene).placements)
         placed = 0
         while not env.state.done:
-            acts = [a for a in guide.allowed_actions()
-                    if support.fully_supported(env.grid, env.state.occupancy, env.resulting_cells(a)[0])]
+            acts = supported_actions(env, guide.allowed_actions(env.state))
             r = renv.step(acts[0] if acts else TERMINATE)
             placed += r.outcome in (Outcome.PLACED, Outcome.COMPLETED, Outcome.NO_BLOCKS) and r.cells is not None
         assert placed >= 2

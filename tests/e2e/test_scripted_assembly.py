@@ -13,7 +13,7 @@ import pytest
 
 from ros_harness import call_service, ros_args, spin_until, wait_for_service
 
-from rad_core import support
+from rad_core.sequencing import supported_actions
 from rad_core.allocation import solve
 from rad_core.allocation.guide import AllocationGuide
 from rad_core.gamp.planner import placement_pose
@@ -48,11 +48,10 @@ def test_twin_builds_the_allocation_from_trajectories_over_dds(node_process, ros
     spin_until(ros_node, lambda: joints, timeout=10.0)
 
     env = AssemblyEnv(scene, EnvConfig(stability='none'))
-    guide = AllocationGuide(env, solve(scene).placements)
+    guide = AllocationGuide(scene, solve(scene).placements)
     expected = {}
     while True:
-        candidates = [a for a in guide.allowed_actions()
-                      if support.fully_supported(env.grid, env.state.occupancy, env.resulting_cells(a)[0])]
+        candidates = supported_actions(env, guide.allowed_actions(env.state))
         executed = False
         for action in candidates:
             block_id = scene.blocks[action.block].id

@@ -10,12 +10,15 @@ choices that decide which row of Table II it reproduces:
   HEUR, which therefore fails with f_g / f_p), or the best one GAMP finds
   feasible from the current state (what /plan_assembly does: `heur-verified`).
 
-Nothing ranked means the termination action, as in the paper. Every episode
-starts from the scene with a fresh CP-SAT allocation (deterministic: one
-worker, fixed seed), and the policy is seeded with seed + i for scene i, so a
-run is reproducible from (agent, scenes, robot, seed).
+Nothing ranked (above terminating) means the termination action, as in the
+paper. Every episode starts from the scene with a fresh CP-SAT allocation
+(deterministic: one worker, fixed seed), and episode i gets the random
+generator default_rng(seed + i), so a run is reproducible from (agent, scenes,
+robot, seed).
 
-The learned sequencer of a later issue is one more `Agent` with its own policy.
+The learned sequencers (milp-dqn, dqn, dqn-rel) are agents whose policy is a
+trained Q-network (`rad_core.learning`), each choosing among its own action
+space; they load their shipped weights by name or any checkpoint file.
 """
 
 from __future__ import annotations
@@ -32,8 +35,10 @@ import numpy as np
 from rad_core.allocation import AllocationParams, solve
 from rad_core.allocation.guide import AllocationGuide
 from rad_core.errors import RadError
-from rad_core.mdp import TERMINATE, AssemblyEnv, EnvConfig, Outcome
+from rad_core.mdp import AssemblyEnv, EnvConfig, Outcome
 from rad_core.scene import Scene
+from rad_core.sequencing.actions import ActionSpace, action_space
+from rad_core.sequencing.episode import Decide, Decision, run_episode, stop
 from rad_core.sequencing.policy import HeurPolicy, Policy, first_feasible, ranked_actions
 
 KEYS = ('R', 'R_std', 'd', 'e', 'f', 'f_g', 'f_p', 'coverage', 'coverage_rel', 'n', 'scenes')
@@ -45,31 +50,51 @@ FAIL_PLACE = (Outcome.INVALID_PLACEMENT, Outcome.INVALID_DISTURBED)
 class Agent:
     """A sequencer under evaluation.
 
-    make_policy: a fresh policy per run (reset with each episode's seed).
+    make_policy: builds the policy (once per run; policies keep no per-episode
+        state, each episode gets its own seeded generator).
     robot: None follows `evaluate`'s robot flag; False never uses the robot
         (the oracle), True always does (GAMP checks need the robot's world),
         whatever the flag says.
     verified: take the best-ranked action GAMP finds feasible, not the best one.
+    actions: the action space it chooses among (`sequencing.actions`): 'milp'
+        (the allocation's actions), 'all' (the DQN baseline), 'rel' (DQN-REL).
     """
 
     name: str
     make_policy: Callable[[], Policy]
     robot: bool | None = None
     verified: bool = False
+    actions: str = 'milp'
+
+
+def _learned(name: str, actions: str, checkpoint=None) -> Agent:
+    def make_policy():
+        from rad_core.learning.policy import QPolicy
+        return QPolicy.load(checkpoint if checkpoint is not None else name)
+    return Agent(name, make_policy, actions=actions)
 
 
 AGENTS = {
     'heur': Agent('heur', HeurPolicy),
     'heur-verified': Agent('heur-verified', HeurPolicy, robot=True, verified=True),
     'heur-norobot': Agent('heur-norobot', HeurPolicy, robot=False),
+    'milp-dqn': _learned('milp-dqn', 'milp'),
+    'dqn': _learned('dqn', 'all'),
+    'dqn-rel': _learned('dqn-rel', 'rel'),
 }
+LEARNED = ('milp-dqn', 'dqn', 'dqn-rel')
 
 
-def get_agent(agent: str | Agent) -> Agent:
+def get_agent(agent: str | Agent, checkpoint: str | None = None) -> Agent:
+    """An agent by name; learned agents load `checkpoint` instead of their shipped weights."""
     if isinstance(agent, Agent):
         return agent
     if agent not in AGENTS:
         raise RadError(f'unknown agent {agent!r}; one of {", ".join(AGENTS)}')
+    if checkpoint is not None:
+        if agent not in LEARNED:
+            raise RadError(f'--checkpoint applies to the learned agents ({", ".join(LEARNED)}), not {agent!r}')
+        return _learned(agent, AGENTS[agent].actions, checkpoint)
     return AGENTS[agent]
 
 
@@ -89,48 +114,57 @@ def coverage_opt(env: AssemblyEnv, guide: AllocationGuide) -> float:
     return float((filled & env.grid.is_target).sum()) / total if total else 1.0
 
 
-def run_episode(agent: str | Agent, scene: Scene, robot: bool, seed: int, execution: str = 'teleport',
-                policy: Policy | None = None, allocation: AllocationParams | None = None) -> dict:
+def policy_decider(policy: Policy, actions: ActionSpace, verify=None) -> Decide:
+    """decide() for the episode loop: the best-ranked action, or with verify
+    (a GAMP check, `RobotAssemblyEnv.plan`) the best one it finds feasible,
+    carrying its motion plan; nothing ranked (or feasible) means terminate."""
+    def decide(env: AssemblyEnv, rng: np.random.Generator) -> Decision:
+        ranked = ranked_actions(policy, env, actions(env), rng)
+        if verify is None:
+            return Decision(ranked[0]) if ranked else stop()
+        action, plan, _ = first_feasible(env, ranked, verify)
+        return Decision(action, plan) if action is not None else stop()
+    return decide
+
+
+def scene_episode(agent: str | Agent, scene: Scene, robot: bool, seed: int, execution: str = 'teleport',
+                  policy: Policy | None = None, allocation: AllocationParams | None = None,
+                  stability=None) -> dict:
     """One episode from the scene as given; the row `evaluate` reports for it.
 
     allocation: CP-SAT settings (default: 10 s, one worker, seed 0: deterministic
-    unless the time limit cuts the search).
+    unless the time limit cuts the search). stability: a shared no-robot
+    stability check (one PyBullet client for a whole run); default: a fresh one.
     """
     agent = get_agent(agent)
     with_robot = uses_robot(agent, robot)
     policy = policy if policy is not None else agent.make_policy()
-    policy.reset(seed)
     placements = solve(scene, allocation or AllocationParams()).placements
-    renv = None
+    renv, own_stability = None, None
     if with_robot:
         from rad_core.robot_env import RobotAssemblyEnv, RobotEnvConfig
         renv = RobotAssemblyEnv(scene, RobotEnvConfig(execution=execution))
-        env, step = renv.env, renv.step
+        env = renv.env
     else:
-        env = AssemblyEnv(scene, EnvConfig(stability='physics'))
-        step = env.step
+        if stability is None:
+            from rad_core.physics import PhysicsStability
+            stability = own_stability = PhysicsStability()
+        env = AssemblyEnv(scene, EnvConfig(stability='physics'), stability=stability)
     try:
-        guide = AllocationGuide(env, placements)
+        guide = AllocationGuide(scene, placements, env.grid)
         opt = coverage_opt(env, guide)
-        ret, discount, result = 0.0, 1.0, None
-        while not env.state.done:
-            ranked = ranked_actions(policy, env, guide.allowed_actions())
-            if agent.verified:
-                action, plan, _ = first_feasible(env, ranked, renv.plan)
-                result = renv.step(action or TERMINATE, plan=plan)
-            else:
-                result = step(ranked[0] if ranked else TERMINATE)
-            ret += discount * result.reward
-            discount *= env.config.gamma
+        space = action_space(agent.actions, env, placements)
+        decide = policy_decider(policy, space, renv.plan if agent.verified else None)
+        act = (lambda d: renv.step(d.action, plan=d.plan)) if with_robot else None
+        episode = run_episode(env, decide, np.random.default_rng(seed), act)
     finally:
         if renv is not None:
             renv.close()
-        elif hasattr(env.stability, 'close'):
-            env.stability.close()   # its own PyBullet client
-    row = {'return': ret, 'outcome': result.outcome.value, 'coverage': env.coverage(),
-           'coverage_opt': opt, 'steps': env.state.steps}
+        if own_stability is not None:
+            own_stability.close()
+    row = {**episode.row(), 'coverage_opt': opt}
     if with_robot:
-        row['reason'] = result.reason if result.outcome.is_invalid else ''
+        row['reason'] = episode.reason if episode.outcome.is_invalid else ''
     return row
 
 
@@ -161,7 +195,8 @@ def summarize(rows: list[dict]) -> dict:
 
 
 def evaluate(agent: str | Agent, scenes: Iterable[tuple[str, Scene]], robot: bool, seed: int,
-             progress: Callable[[dict], None] | None = None, execution: str = 'teleport') -> dict:
+             progress: Callable[[dict], None] | None = None, execution: str = 'teleport',
+             policy: Policy | None = None) -> dict:
     """Run the agent once on every (name, scene); scene i seeds the policy with seed + i.
 
     Returns exactly KEYS: R, R_std (mean and std of the discounted return), d, e, f
@@ -170,15 +205,26 @@ def evaluate(agent: str | Agent, scenes: Iterable[tuple[str, Scene]], robot: boo
     motion that moved another block counts as f_p), coverage (target-cell
     coverage, the paper's a-bar), coverage_rel (coverage over the allocation
     optimum's coverage, the paper's corrected a-bar), n, and scenes (one row each).
-    progress(row) is called after each episode.
+    progress(row) is called after each episode. policy: an already built policy
+    (default: the agent's, built once for the run).
     """
     agent = get_agent(agent)
+    policy = policy if policy is not None else agent.make_policy()
+    stability = None
+    if not uses_robot(agent, robot):
+        from rad_core.physics import PhysicsStability
+        stability = PhysicsStability()
     rows = []
-    for i, (name, scene) in enumerate(scenes):
-        row = {'name': name, **run_episode(agent, scene, robot, seed + i, execution)}
-        rows.append(row)
-        if progress is not None:
-            progress(row)
+    try:
+        for i, (name, scene) in enumerate(scenes):
+            row = {'name': name, **scene_episode(agent, scene, robot, seed + i, execution, policy,
+                                                 stability=stability)}
+            rows.append(row)
+            if progress is not None:
+                progress(row)
+    finally:
+        if stability is not None:
+            stability.close()
     return summarize(rows)
 
 

@@ -7,6 +7,8 @@ are the paper's T_F, all other cells T_E.
 
 from __future__ import annotations
 
+from functools import cached_property
+
 import numpy as np
 
 from rad_core.scene import GRID_SNAP_TOL, Scene
@@ -44,6 +46,17 @@ class Grid:
         down = np.array([0.0, 0.0, self.unit])
         self.below_idx = np.array([self._or_minus_one(self.cell_at(c - down)) for c in self.centres],
                                   dtype=np.int64)
+
+    @cached_property
+    def face_neighbours(self) -> np.ndarray:
+        """[num_cells, 6] face neighbours of every cell within its region (+-x, +-y, +-z), -1 where none."""
+        out = np.full((self.num_cells, 6), -1, dtype=np.int64)
+        steps = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]])
+        for c in range(self.num_cells):
+            r = int(self.region_of[c])
+            for k, d in enumerate(steps):
+                out[c, k] = self._or_minus_one(self.index(r, self.ijk[c] + d))
+        return out
 
     @staticmethod
     def _or_minus_one(value):

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import enum
 from dataclasses import dataclass, field
-from typing import Callable, NamedTuple, Protocol
+from typing import NamedTuple, Protocol
 
 import numpy as np
 
@@ -143,6 +143,14 @@ class AssemblyEnv:
         other.__dict__.update(self.__dict__)
         other.state = self.state.copy()
         return other
+
+    def snapshot(self) -> AssemblyState:
+        """Everything that decides the next step (a copy: stepping on leaves it intact)."""
+        return self.state.copy()
+
+    def restore(self, snapshot: AssemblyState) -> None:
+        """Go back to a snapshot of this env (it stays usable for further restores)."""
+        self.state = snapshot.copy()
 
     def unplaced(self) -> list[int]:
         return [b for b in range(len(self.scene.blocks)) if b not in self.state.placed]
@@ -294,17 +302,3 @@ def _default_stability(mode: str) -> StabilityCheck | None:
         return None
     from rad_core.physics import PhysicsStability
     return PhysicsStability()
-
-
-def rollout(env: AssemblyEnv, policy: Callable[[AssemblyEnv], Action], max_steps: int = 1000) -> dict:
-    """Run one episode from the env's current state; returns the paper's per-episode numbers."""
-    ret, discount, outcome = 0.0, 1.0, None
-    for _ in range(max_steps):
-        result = env.step(policy(env))
-        ret += discount * result.reward
-        discount *= env.config.gamma
-        outcome = result.outcome
-        if result.done:
-            break
-    return {'return': ret, 'outcome': outcome.value if outcome else None, 'coverage': env.coverage(),
-            'steps': env.state.steps}

@@ -5,7 +5,11 @@ For every allocated pose and every unplaced block of its type, the actions
 units and all rotations that reproduce the pose (a symmetric block has several)
 are offered. A pose whose cells are no longer all free (it was filled, or another
 block took one of its cells) offers nothing: after a placement, the actions that
-would fill the same pose are gone. The guide is stateless: it reads the state.
+would fill the same pose are gone.
+
+The guide is built once per (scene, allocation) and is stateless: every query
+takes the `AssemblyState` it is about, so one guide serves any number of env
+clones, snapshots and search branches.
 """
 
 from __future__ import annotations
@@ -15,14 +19,18 @@ import numpy as np
 from rad_core.allocation.placements import Placement
 from rad_core.blocks import canonical_shape
 from rad_core.errors import RadError
-from rad_core.mdp import Action, AssemblyEnv
+from rad_core.grid import Grid
+from rad_core.mdp import Action, AssemblyState
+from rad_core.scene import Scene
 
 
 class AllocationGuide:
-    def __init__(self, env: AssemblyEnv, placements: tuple[Placement, ...] | list[Placement]):
-        self.env = env
+    def __init__(self, scene: Scene, placements: tuple[Placement, ...] | list[Placement],
+                 grid: Grid | None = None):
+        self.scene = scene
+        self.grid = grid if grid is not None else Grid(scene)
         self.placements = tuple(placements)
-        names = [t.name for t in env.scene.targets]
+        names = [t.name for t in scene.targets]
         self.pose_cells: list[np.ndarray] = []
         # Per pose: list of (block index, [actions]).
         self._actions: list[list[tuple[int, list[Action]]]] = []
@@ -30,19 +38,19 @@ class AllocationGuide:
             if p.target not in names:
                 raise RadError(f'allocation names unknown target region {p.target!r}')
             r = names.index(p.target)
-            ids = [env.grid.index(r, c) for c in p.cells]
+            ids = [self.grid.index(r, c) for c in p.cells]
             if any(i is None for i in ids):
                 raise RadError(f'allocated pose of {p.type} has a cell outside region {p.target!r}')
             self.pose_cells.append(np.asarray(ids, dtype=np.int64))
             per_block = []
-            for b, block in enumerate(env.scene.blocks):
+            for b, block in enumerate(scene.blocks):
                 if block.type == p.type:
-                    per_block.append((b, self._actions_for(env, b, np.asarray(p.cells), r)))
+                    per_block.append((b, self._actions_for(b, np.asarray(p.cells), r)))
             self._actions.append(per_block)
 
-    @staticmethod
-    def _actions_for(env: AssemblyEnv, b: int, pose: np.ndarray, region: int) -> list[Action]:
-        btype, yaw0 = env.types[b], env.scene.blocks[b].yaw
+    def _actions_for(self, b: int, pose: np.ndarray, region: int) -> list[Action]:
+        block = self.scene.blocks[b]
+        btype, yaw0 = self.scene.block_types[block.type], block.yaw
         want = canonical_shape(pose)
         pose_sorted = sorted(map(tuple, pose))
         out = []
@@ -53,19 +61,23 @@ class AllocationGuide:
             shift = np.asarray(pose_sorted[0]) - np.asarray(sorted(map(tuple, offs))[0])
             cells = offs + shift
             for u in range(btype.size):
-                out.append(Action(b, u, env.grid.index(region, cells[u]), rot))
+                out.append(Action(b, u, self.grid.index(region, cells[u]), rot))
         return out
 
-    def open_poses(self) -> list[int]:
-        """Indices of allocated poses whose cells are all still free."""
-        occ = self.env.state.occupancy
+    def open_poses(self, state: AssemblyState) -> list[int]:
+        """Indices of allocated poses whose cells are all still free in `state`."""
+        occ = state.occupancy
         return [k for k, cells in enumerate(self.pose_cells) if np.all(occ[cells] < 0)]
 
-    def allowed_actions(self) -> list[Action]:
-        """Allocation actions available now (the termination action is not included)."""
-        placed = self.env.state.placed
+    def allowed_actions(self, state: AssemblyState) -> list[Action]:
+        """Allocation actions available in `state` (the termination action is not included).
+
+        A block placed in an earlier step keeps its yaw; the actions are computed
+        from the scene's initial yaws, so they are only offered for unplaced blocks.
+        """
+        placed = state.placed
         out = []
-        for k in self.open_poses():
+        for k in self.open_poses(state):
             for b, actions in self._actions[k]:
                 if b not in placed:
                     out.extend(actions)

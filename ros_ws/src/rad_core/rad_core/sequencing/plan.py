@@ -19,11 +19,12 @@ from typing import Callable
 
 import numpy as np
 
-from rad_core.allocation.guide import AllocationGuide
 from rad_core.allocation.result import AllocationResult
 from rad_core.gamp.action import SceneAction
 from rad_core.mdp import AssemblyEnv, EnvConfig
 from rad_core.scene import Block, Scene
+from rad_core.sequencing.actions import AllocationActions
+from rad_core.sequencing.episode import Decision, run_episode, stop
 from rad_core.sequencing.policy import Policy, first_feasible, ranked_actions
 
 
@@ -116,35 +117,43 @@ def plan_assembly(scene: Scene, allocate: Allocate, plan_motion: PlanMotion, pol
         plan.reason = f'allocation failed: {allocation.status}'
         return _done(plan, t0)
     env = AssemblyEnv(scene, EnvConfig(stability='none'))
-    guide = AllocationGuide(env, allocation.placements)
-    policy.reset(seed)
-    current, q = scene, start
-    while True:
-        if time.perf_counter() - t0 > time_limit_s:
-            plan.reason = f'time limit of {time_limit_s:g} s reached after {len(plan.steps)} steps'
-            break
-        allowed = guide.allowed_actions()
+    allowed_actions = AllocationActions(env, allocation.placements)
+    guide = allowed_actions.guide
+    world = {'scene': scene, 'q': start}   # the planning copy: scene and arm joints
+
+    def decide(env: AssemblyEnv, rng) -> Decision:
+        allowed = allowed_actions(env)
         if not allowed:
-            break
+            return stop()
         ts = time.perf_counter()
-        ranked = ranked_actions(policy, env, allowed)
+        ranked = ranked_actions(policy, env, allowed, rng)
         timings['sequencing'] += time.perf_counter() - ts
         if not ranked:
-            plan.reason = (f'{len(guide.open_poses())} allocated poses left, none of them can be built next '
-                           f'(their blocks would not rest fully supported)')
-            break
-        step = _first_feasible(env, current, ranked, plan_motion, q, timings)
-        if isinstance(step, str):
-            plan.reason = step
-            break
-        action, step = step
-        plan.steps.append(step)
-        env.step(action)
-        current = moved(current, step.block, step.position, step.yaw)
-        q = np.asarray(step.trajectory['points'][-1]['positions'])
-    plan.final_scene = current
+            return stop(f'{len(guide.open_poses(env.state))} allocated poses left, none of them can be built next '
+                        f'({getattr(policy, "why_none", policy.name + " values stopping more")})')
+        found = _first_feasible(env, world['scene'], ranked, plan_motion, world['q'], timings)
+        if isinstance(found, str):
+            return stop(found)
+        action, step = found
+        return Decision(action, step)
+
+    def act(decision: Decision):
+        result = env.step(decision.action)
+        if decision.plan is not None:
+            step = decision.plan
+            plan.steps.append(step)
+            world['scene'] = moved(world['scene'], step.block, step.position, step.yaw)
+            world['q'] = np.asarray(step.trajectory['points'][-1]['positions'])
+        return result
+
+    episode = run_episode(env, decide, np.random.default_rng(seed), act, deadline=t0 + time_limit_s)
+    if episode.timed_out:
+        plan.reason = f'time limit of {time_limit_s:g} s reached after {len(plan.steps)} steps'
+    else:
+        plan.reason = episode.reason
+    plan.final_scene = world['scene']
     plan.predicted_coverage = env.coverage()
-    plan.success = not plan.reason and not guide.open_poses()
+    plan.success = not plan.reason and not guide.open_poses(env.state)
     if not plan.success and not plan.reason:
         plan.reason = 'allocated poses remain unbuilt'
     return _done(plan, t0)

@@ -1,9 +1,12 @@
-"""The sequencer interface: a policy scores the allowed actions of a state.
+"""The sequencer interface: a policy scores the candidate actions of a state.
 
-Everything that chooses actions (the paper's HEUR baseline now, the GNN's
-Q-values later, MCTS on top of either) goes through `Policy.scores`: higher is
-better, -inf means "never". The caller decides what to do with the ranking: take
-the best, or the best that GAMP finds feasible (`ranked_actions` + a check).
+Everything that chooses actions (the paper's HEUR baseline, the GNN's
+Q-values, MCTS on top of either) goes through `Policy.scores`: higher is
+better, -inf means "never". Scores are a function of the state, the candidate
+actions and an explicit random generator the caller passes in, so a search that
+asks twice with equally seeded generators gets the same answer; no policy keeps
+hidden random state. The caller decides what to do with the ranking: take the
+best, or the best that GAMP finds feasible (`ranked_actions` + a check).
 """
 
 from __future__ import annotations
@@ -19,11 +22,24 @@ from rad_core.mdp import Action, AssemblyEnv
 class Policy(Protocol):
     name: str
 
-    def reset(self, seed: int) -> None:
-        """Start a new episode with this seed (policies may be stochastic)."""
+    def scores(self, env: AssemblyEnv, actions: list[Action], rng: np.random.Generator) -> np.ndarray:
+        """len(actions) + 1 scores, higher is better: one per action, then the
+        termination action's. -inf rules an action out; an action scoring at or
+        below termination is not worth taking (HEUR scores termination -inf: it
+        stops only when nothing else is allowed).
+        """
 
-    def scores(self, env: AssemblyEnv, actions: list[Action]) -> np.ndarray:
-        """One score per action, higher is better; -inf rules an action out."""
+
+def supported_actions(env: AssemblyEnv, actions: list[Action]) -> list[Action]:
+    """HEUR's rule: the actions whose block would rest fully supported (every unit
+    on the table, a placed block or its own block), in the given order."""
+    occ = env.state.occupancy
+    out = []
+    for action in actions:
+        cells, _ = env.resulting_cells(action)
+        if cells is not None and support.fully_supported(env.grid, occ, cells):
+            out.append(action)
+    return out
 
 
 class HeurPolicy:
@@ -32,29 +48,28 @@ class HeurPolicy:
     table), chosen uniformly at random; nothing left means terminate."""
 
     name = 'heur'
+    why_none = 'their blocks would not rest fully supported'
 
-    def __init__(self, seed: int = 0):
-        self.reset(seed)
-
-    def reset(self, seed: int) -> None:
-        self.rng = np.random.default_rng(seed)
-
-    def scores(self, env: AssemblyEnv, actions: list[Action]) -> np.ndarray:
-        out = np.full(len(actions), -np.inf)
+    def scores(self, env: AssemblyEnv, actions: list[Action], rng: np.random.Generator) -> np.ndarray:
+        out = np.full(len(actions) + 1, -np.inf)
+        allowed = set(supported_actions(env, actions))
         for n, action in enumerate(actions):
-            cells, _ = env.resulting_cells(action)
-            if cells is not None and support.fully_supported(env.grid, env.state.occupancy, cells):
-                out[n] = self.rng.random()
+            if action in allowed:
+                out[n] = rng.random()
         return out
 
 
-def ranked_actions(policy: Policy, env: AssemblyEnv, actions: list[Action]) -> list[Action]:
-    """Actions the policy allows, best first (ties keep the given order)."""
+def ranked_actions(policy: Policy, env: AssemblyEnv, actions: list[Action],
+                   rng: np.random.Generator) -> list[Action]:
+    """Actions the policy values above terminating, best first (ties keep the given order)."""
     if not actions:
         return []
-    scores = np.asarray(policy.scores(env, actions), dtype=float)
+    scores = np.asarray(policy.scores(env, actions, rng), dtype=float)
+    if scores.shape != (len(actions) + 1,):
+        raise ValueError(f'{policy.name}: {scores.shape[0]} scores for {len(actions)} actions + terminate')
+    stop, scores = scores[-1], scores[:-1]
     order = np.argsort(-scores, kind='stable')
-    return [actions[i] for i in order if np.isfinite(scores[i])]
+    return [actions[i] for i in order if np.isfinite(scores[i]) and scores[i] > stop]
 
 
 def first_feasible(env: AssemblyEnv, ranked: list[Action], check):
