@@ -6,7 +6,9 @@
     rad scene stats --grid G --sides S --scenes N
     rad allocate scene.json [--time-limit S] [--seed N] [--workers W] [--solver cp-sat|highs]
     rad demo [--scene FILE] [--out DIR] [--rtf X]
-    rad eval --agent heur|heur-verified|heur-norobot --grid G [--robot] --scenes N --seed S --json FILE
+    rad eval --agent AGENT [--checkpoint FILE] --grid G [--robot] --scenes N --seed S --json FILE
+    rad dataset build --grids 3 --scenes 50000 -o data/train-g3.jsonl.gz [--shapes train]
+    rad train --method milp-dqn|dqn|dqn-rel --out runs/NAME [--resume] [--<config field> VALUE ...]
 
 Bad input ends with exit code 2 and one line on stderr naming the problem.
 """
@@ -118,8 +120,10 @@ def cmd_demo(args) -> int:
     return 1
 
 def cmd_eval(args) -> int:
-    from rad_core.evaluation import ProgressBar, evaluate, generated_scenes, scene_dir, uses_robot
-    robot = uses_robot(args.agent, args.robot)
+    from rad_core.evaluation import ProgressBar, evaluate, generated_scenes, get_agent, scene_dir, uses_robot
+    agent = get_agent(args.agent, args.checkpoint)
+    policy = agent.make_policy()   # a bad checkpoint fails here, before any scene runs
+    robot = uses_robot(agent, args.robot)
     if args.scene_dir:
         scenes = scene_dir(args.scene_dir)
         total, source = len(scenes), args.scene_dir
@@ -130,8 +134,8 @@ def cmd_eval(args) -> int:
         last = args.seed + args.scenes - 1
         total, source = args.scenes, f'g={args.grid} sides={args.sides} seeds {args.seed}..{last}'
     t0 = time.perf_counter()
-    result = evaluate(args.agent, scenes, robot, args.seed, progress=ProgressBar(total, args.agent),
-                      execution=args.execution)
+    result = evaluate(agent, scenes, robot, args.seed, progress=ProgressBar(total, args.agent),
+                      execution=args.execution, policy=policy)
     elapsed = time.perf_counter() - t0
     mode = f'robot ({args.execution})' if robot else 'no robot'
     print(f'{args.agent} on {result["n"]} scenes ({source}), {mode}, {elapsed:.1f} s')
@@ -142,6 +146,70 @@ def cmd_eval(args) -> int:
         _write_text(jsonfmt.dumps(result), args.json)
         print(f'wrote {args.json}')
     return 0
+
+
+def cmd_dataset_build(args) -> int:
+    from rad_core.evaluation import ProgressBar
+    from rad_core.learning.dataset import build
+    shapes = []
+    if args.shapes:
+        from rad_core import shapes as shape_lib
+        names = shape_lib.SPLITS.get(args.shapes, None)
+        if names is None:
+            raise RadError(f'--shapes must be one of {", ".join(shape_lib.SPLITS)}, got {args.shapes!r}')
+        shapes = [(n, shape_lib.shape_scene(n, seed)) for n in names for seed in range(args.shape_seeds)]
+    grids = [int(g) for g in args.grids.split(',') if g.strip()]
+    bar = ProgressBar(len(grids) * args.scenes + len(shapes), 'dataset')
+    header = build(args.output, grids, args.scenes, sides=args.sides, first_seed=args.seed, shapes=shapes,
+                   progress=bar)
+    size = Path(args.output).stat().st_size / 1e6
+    print(f'wrote {args.output}: {header["count"]} scenes in {header["created_s"]} s, {size:.1f} MB')
+    return 0
+
+
+def cmd_train(args) -> int:
+    from dataclasses import fields
+    from rad_core.evaluation import ProgressBar
+    from rad_core.learning.dqn import TrainConfig, train
+    given = {f.name: getattr(args, f.name) for f in fields(TrainConfig) if getattr(args, f.name) is not None}
+    if args.resume:
+        extra = sorted(set(given) - {'total_steps'})
+        if extra:
+            raise RadError(f'--resume continues with the checkpoint\'s configuration; only --total-steps may '
+                           f'change, not --{extra[0].replace("_", "-")}')
+        config = TrainConfig()
+    else:
+        config = TrainConfig(**given)
+        config.validate()
+    total = given.get('total_steps', config.total_steps)
+    bar = ProgressBar(total, f'train {given.get("method", config.method)}')
+
+    def progress(steps: int) -> None:   # the bar counts environment steps
+        bar.done = min(steps, bar.total) - 1
+        bar()
+
+    result = train(config, args.out, resume=args.resume, total_steps=given.get('total_steps'), progress=progress)
+    state = 'interrupted, checkpointed' if result['interrupted'] else 'done'
+    print(f'{state}: {result["env_steps"]} environment steps, {result["grad_steps"]} gradient steps, '
+          f'{result["episodes"]} episodes, {result["wall_s"]:.0f} s; model: {Path(args.out) / "model.pt"}')
+    return 130 if result['interrupted'] else 0
+
+
+def _add_train_args(p: argparse.ArgumentParser) -> None:
+    """Every TrainConfig field as --field-name (default: the dataclass's)."""
+    from dataclasses import MISSING, fields
+    from rad_core.learning.dqn import TrainConfig
+    for f in fields(TrainConfig):
+        flag = '--' + f.name.replace('_', '-')
+        default = f.default if f.default is not MISSING else None
+        helptext = f'{f.metadata.get("help", "")} (default: {default})'
+        if f.type in (bool, 'bool'):
+            p.add_argument(flag, dest=f.name, type=lambda v: v.lower() in ('1', 'true', 'yes', 'on'),
+                           metavar='BOOL', help=helptext)
+        else:
+            kind = {'int': int, 'float': float, 'str': str}.get(f.type if isinstance(f.type, str) else
+                                                                f.type.__name__, str)
+            p.add_argument(flag, dest=f.name, type=kind, help=helptext)
 
 
 def _add_solver_args(p: argparse.ArgumentParser) -> None:
@@ -196,7 +264,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_demo)
 
     p = sub.add_parser('eval', help="the paper's metrics (R, d, e, f, f_g, f_p, coverage) of a sequencer over scenes")
-    p.add_argument('--agent', choices=['heur', 'heur-verified', 'heur-norobot'], default='heur')
+    from rad_core.evaluation import AGENTS
+    p.add_argument('--agent', choices=list(AGENTS), default='heur')
+    p.add_argument('--checkpoint', metavar='FILE',
+                   help='learned agents: a model.pt / checkpoint.pt to load instead of the shipped weights')
     p.add_argument('--grid', type=int, default=4, help='g of generated scenes')
     p.add_argument('--sides', type=int, default=2, help='1 or 2 target faces of generated scenes')
     p.add_argument('--scenes', type=int, default=20, help='number of generated scenes')
@@ -208,6 +279,24 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--scene-dir', metavar='DIR', help='evaluate every *.json scene in DIR instead of generating')
     p.add_argument('--json', metavar='FILE', help='write the metrics and per-scene rows here')
     p.set_defaults(func=cmd_eval)
+
+    dataset = sub.add_parser('dataset', help='training scenes with precomputed allocations').add_subparsers(
+        dest='action', required=True)
+    p = dataset.add_parser('build', help='generate scenes, solve their allocations once, store them compactly')
+    p.add_argument('--grids', default='3', help='comma-separated g values, e.g. 3 or 3,4,5')
+    p.add_argument('--scenes', type=int, default=50_000, help='scenes per grid size')
+    p.add_argument('--sides', type=int, default=2)
+    p.add_argument('--seed', type=int, default=1_000_000, help='first generator seed (evaluation uses 0..)')
+    p.add_argument('--shapes', help="also add the hand-made shapes of this split ('train')")
+    p.add_argument('--shape-seeds', type=int, default=20, help='block layouts per hand-made shape')
+    p.add_argument('-o', '--output', required=True)
+    p.set_defaults(func=cmd_dataset_build)
+
+    p = sub.add_parser('train', help='train a sequencing policy with DQN (milp-dqn, dqn, dqn-rel)')
+    p.add_argument('--out', required=True, help='run folder: progress.csv, tb/, checkpoint.pt, model.pt, curves.png')
+    p.add_argument('--resume', action='store_true', help="continue the run in --out from its checkpoint")
+    _add_train_args(p)
+    p.set_defaults(func=cmd_train)
     return parser
 
 

@@ -1,0 +1,60 @@
+"""A trained Q-network as a `sequencing.Policy`: the scores are Q-values.
+
+scores(env, actions, rng) returns Q(s, a) for every candidate and Q(s, stop)
+last, so `ranked_actions` keeps exactly the actions the network values above
+terminating. The greedy choice needs no randomness; rng is accepted for the
+common interface (a search adds its own exploration).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from rad_core.learning import checkpoint as ckpt
+from rad_core.learning.graph import Observer
+from rad_core.learning.network import NetConfig, QNetwork, collate
+from rad_core.mdp import Action, AssemblyEnv
+
+
+class QPolicy:
+    def __init__(self, net: QNetwork, name: str = 'q', actions: str = 'milp', source: str = '',
+                 device: str | torch.device = 'cpu'):
+        self.net = net.to(device).eval()
+        self.name, self.actions, self.source, self.device = name, actions, source, torch.device(device)
+        self._observer: tuple | None = None   # (scene, Observer) of the last scene asked about
+
+    @classmethod
+    def load(cls, name_or_path: str | Path, device: str | torch.device = 'cpu') -> 'QPolicy':
+        """A shipped agent by name ('milp-dqn', 'dqn', 'dqn-rel') or a model /
+        training checkpoint file; a bad file raises CheckpointError naming it."""
+        path = ckpt.resolve(name_or_path)
+        try:
+            doc = ckpt.read(path, ckpt.MODEL_FORMAT)
+        except ckpt.CheckpointError as first:
+            try:   # a training checkpoint holds the same weights
+                doc = ckpt.read(path, ckpt.TRAIN_FORMAT, weights_only=False)
+            except ckpt.CheckpointError:
+                raise first from None
+        for key in ('net', 'weights', 'method', 'actions'):
+            if key not in doc:
+                raise ckpt.CheckpointError(f'checkpoint {str(path)!r} lacks {key!r}')
+        try:
+            net = QNetwork(NetConfig(**doc['net']))
+        except (TypeError, ValueError, AssertionError) as e:
+            raise ckpt.CheckpointError(f'checkpoint {str(path)!r}: bad network sizes {doc["net"]!r} ({e})') from None
+        ckpt.load_weights(net, doc['weights'], path)
+        return cls(net, str(doc['method']), str(doc['actions']), str(path), device)
+
+    def observer(self, env: AssemblyEnv) -> Observer:
+        if self._observer is None or self._observer[0] is not env.scene:
+            self._observer = (env.scene, Observer(env))
+        return self._observer[1]
+
+    @torch.no_grad()
+    def scores(self, env: AssemblyEnv, actions: list[Action], rng: np.random.Generator | None = None) -> np.ndarray:
+        obs = self.observer(env)(env, actions)
+        qa, qs = self.net(collate([obs], self.device))
+        return np.concatenate([qa.cpu().numpy(), qs.cpu().numpy()]).astype(float)
