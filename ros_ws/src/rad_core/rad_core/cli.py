@@ -134,8 +134,10 @@ def cmd_eval(args) -> int:
         last = args.seed + args.scenes - 1
         total, source = args.scenes, f'g={args.grid} sides={args.sides} seeds {args.seed}..{last}'
     t0 = time.perf_counter()
+    from rad_core.allocation import AllocationParams
+    allocation = AllocationParams(support=args.support)
     result = evaluate(agent, scenes, robot, args.seed, progress=ProgressBar(total, args.agent),
-                      execution=args.execution, policy=policy)
+                      execution=args.execution, policy=policy, allocation=allocation)
     elapsed = time.perf_counter() - t0
     mode = f'robot ({args.execution})' if robot else 'no robot'
     print(f'{args.agent} on {result["n"]} scenes ({source}), {mode}, {elapsed:.1f} s')
@@ -160,8 +162,11 @@ def cmd_dataset_build(args) -> int:
         shapes = [(n, shape_lib.shape_scene(n, seed)) for n in names for seed in range(args.shape_seeds)]
     grids = [int(g) for g in args.grids.split(',') if g.strip()]
     bar = ProgressBar(len(grids) * args.scenes + len(shapes), 'dataset')
+    from rad_core.allocation import AllocationParams
+    params = AllocationParams(support=args.support)
+    params.validate()
     header = build(args.output, grids, args.scenes, sides=args.sides, first_seed=args.seed, shapes=shapes,
-                   progress=bar)
+                   params=params, progress=bar)
     size = Path(args.output).stat().st_size / 1e6
     print(f'wrote {args.output}: {header["count"]} scenes in {header["created_s"]} s, {size:.1f} MB')
     return 0
@@ -277,6 +282,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--execution', choices=['teleport', 'simulate'], default='teleport',
                    help='robot runs: put the block in place (fast) or simulate the whole arm motion')
     p.add_argument('--scene-dir', metavar='DIR', help='evaluate every *.json scene in DIR instead of generating')
+    p.add_argument('--support', choices=['none', 'stable'], default='none',
+                   help="allocation: the paper's MILP (none) or every allocated block able to stand (stable)")
     p.add_argument('--json', metavar='FILE', help='write the metrics and per-scene rows here')
     p.set_defaults(func=cmd_eval)
 
@@ -289,6 +296,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--seed', type=int, default=1_000_000, help='first generator seed (evaluation uses 0..)')
     p.add_argument('--shapes', help="also add the hand-made shapes of this split ('train')")
     p.add_argument('--shape-seeds', type=int, default=20, help='block layouts per hand-made shape')
+    p.add_argument('--support', choices=['none', 'stable'], default='none',
+                   help="allocation: the paper's MILP (none) or every block able to stand (stable)")
     p.add_argument('-o', '--output', required=True)
     p.set_defaults(func=cmd_dataset_build)
 

@@ -196,7 +196,7 @@ def summarize(rows: list[dict]) -> dict:
 
 def evaluate(agent: str | Agent, scenes: Iterable[tuple[str, Scene]], robot: bool, seed: int,
              progress: Callable[[dict], None] | None = None, execution: str = 'teleport',
-             policy: Policy | None = None) -> dict:
+             policy: Policy | None = None, allocation: AllocationParams | None = None) -> dict:
     """Run the agent once on every (name, scene); scene i seeds the policy with seed + i.
 
     Returns exactly KEYS: R, R_std (mean and std of the discounted return), d, e, f
@@ -206,7 +206,8 @@ def evaluate(agent: str | Agent, scenes: Iterable[tuple[str, Scene]], robot: boo
     coverage, the paper's a-bar), coverage_rel (coverage over the allocation
     optimum's coverage, the paper's corrected a-bar), n, and scenes (one row each).
     progress(row) is called after each episode. policy: an already built policy
-    (default: the agent's, built once for the run).
+    (default: the agent's, built once for the run). allocation: CP-SAT settings,
+    e.g. AllocationParams(support='stable') (default: the paper's MILP).
     """
     agent = get_agent(agent)
     policy = policy if policy is not None else agent.make_policy()
@@ -218,7 +219,7 @@ def evaluate(agent: str | Agent, scenes: Iterable[tuple[str, Scene]], robot: boo
     try:
         for i, (name, scene) in enumerate(scenes):
             row = {'name': name, **scene_episode(agent, scene, robot, seed + i, execution, policy,
-                                                 stability=stability)}
+                                                 allocation=allocation, stability=stability)}
             rows.append(row)
             if progress is not None:
                 progress(row)

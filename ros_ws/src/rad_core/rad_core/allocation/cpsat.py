@@ -7,6 +7,23 @@
 
 Since cells hold at most one unit, each pose is used at most once, so the
 integer w of the paper is binary here without loss.
+
+`support='stable'` (rad's option, not the paper's) adds what the paper leaves
+to the sequencer, a static condition on every allocated block: it must stand
+on what is under it when it is placed. For each pose p, the minimal sets S of
+its bottom units whose convex footprint holds p's centre of mass
+(`support.sufficient_supports`); p is admitted only if for one such S every
+unit rests on the table, a placed block or a cell another chosen pose fills:
+
+    z_{p,S} <= sum_{q fills the cell below u} w_q    for u in S
+    w_p     <= sum_S z_{p,S}
+
+(linear; support only comes from below, so there are no cycles). With it, poses
+worth 0 (as many non-target as target cells) are admitted too, and among
+allocations of equal c^T g the one covering more target cells wins (a
+lexicographic second objective): a filler under an overhang costs nothing in
+c^T g and makes the target cell above it buildable. The reported objective and
+bound are c^T g's.
 """
 
 from __future__ import annotations
@@ -16,13 +33,18 @@ import time
 from collections import defaultdict
 from dataclasses import dataclass
 
+import numpy as np
 from ortools.sat.python import cp_model
 
+from rad_core import support
 from rad_core.allocation.placements import Candidate, enumerate_candidates
 from rad_core.allocation.result import AllocationResult
 from rad_core.errors import RadError
 from rad_core.grid import Grid, blocks_on_grid
 from rad_core.scene import Scene
+
+
+SUPPORT_MODES = ('none', 'stable')
 
 
 @dataclass(frozen=True)
@@ -38,8 +60,12 @@ class AllocationParams:
     time_limit_s: float = 10.0
     seed: int = 0
     num_workers: int = 1
+    support: str = 'none'
+    """'none' (the paper's MILP) or 'stable' (every allocated block can stand where it goes)."""
 
     def validate(self) -> None:
+        if self.support not in SUPPORT_MODES:
+            raise RadError(f'support must be one of {", ".join(SUPPORT_MODES)}, got {self.support!r}')
         if not (isinstance(self.time_limit_s, (int, float)) and math.isfinite(self.time_limit_s)
                 and self.time_limit_s > 0):
             raise RadError(f'time_limit_s must be a positive number of seconds, got {self.time_limit_s!r}')
@@ -59,8 +85,13 @@ def available_counts(scene: Scene, grid: Grid) -> dict[str, int]:
     return counts
 
 
-def build_model(candidates: list[Candidate], counts: dict[str, int]):
-    """CP-SAT model and its decision variables, one per candidate pose."""
+def build_model(candidates: list[Candidate], counts: dict[str, int], support: str = 'none',
+                grid: Grid | None = None, occupied=None):
+    """CP-SAT model and its decision variables, one per candidate pose.
+
+    support='stable' needs the grid and the cells already occupied (bool per cell).
+    Returns (model, w, scale): the model's objective is scale * c^T g plus the
+    support preference (scale 1 without it)."""
     model = cp_model.CpModel()
     w = [model.new_bool_var(f'w{n}') for n in range(len(candidates))]
     by_cell, by_type = defaultdict(list), defaultdict(list)
@@ -74,8 +105,39 @@ def build_model(candidates: list[Candidate], counts: dict[str, int]):
     for name, vars_ in by_type.items():
         if counts.get(name, 0) < len(vars_):
             model.add(sum(vars_) <= counts.get(name, 0))
-    model.maximize(sum(cand.value * w[n] for n, cand in enumerate(candidates)))
-    return model, w
+    primary = sum(cand.value * w[n] for n, cand in enumerate(candidates))
+    if support == 'none':
+        model.maximize(primary)
+        return model, w, 1
+    _add_support(model, candidates, w, by_cell, grid, occupied)
+    covered = [int(grid.is_target[list(cand.cell_ids)].sum()) for cand in candidates]
+    scale = sum(covered) + 1   # the coverage preference never outweighs one unit of c^T g
+    model.maximize(scale * primary + sum(k * w[n] for n, k in enumerate(covered)))
+    return model, w, scale
+
+
+def _add_support(model, candidates, w, by_cell, grid: Grid, occupied) -> None:
+    """The 'stable' constraints (see the module docstring)."""
+    for n, cand in enumerate(candidates):
+        ids = list(cand.cell_ids)
+        own = set(ids)
+        below = [int(grid.below_idx[c]) for c in ids]
+        bottom = [i for i, b in enumerate(below) if b not in own]
+        trivial = {i for i in bottom if grid.on_table[ids[i]] or (below[i] >= 0 and occupied[below[i]])}
+        sets = support.sufficient_supports(grid.ijk[ids], bottom)
+        if any(set(S) <= trivial for S in sets):
+            continue                                   # stands whatever else is chosen
+        options = []
+        for S in sets:
+            need = [i for i in S if i not in trivial]
+            unders = [by_cell.get(below[i], []) if below[i] >= 0 else [] for i in need]
+            if any(not u for u in unders):
+                continue                               # some unit of S can never be supported
+            z = model.new_bool_var(f'z{n}_{len(options)}')
+            for u in unders:
+                model.add(z <= sum(u))
+            options.append(z)
+        model.add(sum(options) >= w[n])
 
 
 def greedy(candidates: list[Candidate], counts: dict[str, int]) -> list[int]:
@@ -102,10 +164,18 @@ def solve(scene: Scene, params: AllocationParams = AllocationParams()) -> Alloca
     params.validate()
     start = time.perf_counter()
     grid = Grid(scene)
-    candidates = enumerate_candidates(scene, grid)
+    if params.support == 'none':
+        candidates = enumerate_candidates(scene, grid)
+    else:   # fillers worth 0 may hold up target cells
+        candidates = [c for c in enumerate_candidates(scene, grid, positive_only=False) if c.value >= 0]
     counts = available_counts(scene, grid)
-    model, w = build_model(candidates, counts)
-    incumbent = set(greedy(candidates, counts))
+    occupied = None
+    if params.support != 'none':
+        occupied = np.zeros(grid.num_cells, dtype=bool)
+        for cells in blocks_on_grid(scene, grid).values():
+            occupied[cells] = True
+    model, w, scale = build_model(candidates, counts, params.support, grid, occupied)
+    incumbent = set(greedy(candidates, counts)) if params.support == 'none' else set()
     for n, var in enumerate(w):
         model.add_hint(var, n in incumbent)
     solver = cp_model.CpSolver()
@@ -122,10 +192,14 @@ def solve(scene: Scene, params: AllocationParams = AllocationParams()) -> Alloca
     # c^T g can never exceed the number of free target cells.
     free_targets = float(grid.is_target.sum() - _filled_targets(scene, grid))
     if status in (cp_model.OPTIMAL, cp_model.FEASIBLE):
-        chosen = tuple(c.placement for n, c in enumerate(candidates) if solver.boolean_value(w[n]))
-        return AllocationResult(name, float(solver.objective_value),
-                                min(float(solver.best_objective_bound), free_targets), elapsed, chosen)
-    if status == cp_model.UNKNOWN:
+        picked = [n for n in range(len(candidates)) if solver.boolean_value(w[n])]
+        chosen = tuple(candidates[n].placement for n in picked)
+        value = float(sum(candidates[n].value for n in picked))
+        # scale * c^T g + coverage <= bound with 0 <= coverage < scale: c^T g <= bound / scale.
+        bound = math.floor(float(solver.best_objective_bound) / scale + 1e-9) if scale > 1 \
+            else float(solver.best_objective_bound)
+        return AllocationResult(name, value, min(float(bound), free_targets), elapsed, chosen)
+    if status == cp_model.UNKNOWN and incumbent:
         # CP-SAT's bound means nothing without a status; only the cell count is proven.
         value = float(sum(candidates[n].value for n in incumbent))
         chosen = tuple(candidates[n].placement for n in sorted(incumbent))
