@@ -14,6 +14,11 @@ source scripts/env.sh
 
 DATA=data/train-g3.jsonl.gz
 [ -f "$DATA" ] || rad dataset build --grids 3 --scenes 50000 -o "$DATA"
+# The default agent's data: g = 3, 4, 5 and the training split of the hand-made shapes,
+# with the stability-aware allocation.
+MIXED=data/train-mixed-stable.jsonl.gz
+[ -f "$MIXED" ] || rad dataset build --grids 3,4,5 --scenes 10000 --shapes train --shape-seeds 20 \
+    --support stable -o "$MIXED"
 
 declare -A ARGS=(
     [milp-dqn-s0]="--method milp-dqn --seed 0 --total-steps 30000"
@@ -22,8 +27,9 @@ declare -A ARGS=(
     [milp-dqn-double-s0]="--method milp-dqn --seed 0 --total-steps 30000 --double true"
     [dqn-s0]="--method dqn --seed 0 --total-steps 20000"
     [dqn-rel-s0]="--method dqn-rel --seed 0 --total-steps 20000"
+    [milp-dqn-mixed-s0]="--method milp-dqn --seed 0 --total-steps 30000 --eval-grid 4 --dataset $MIXED"
 )
-ORDER=(milp-dqn-s0 milp-dqn-s1 milp-dqn-s2 dqn-s0 dqn-rel-s0 milp-dqn-double-s0)
+ORDER=(milp-dqn-s0 milp-dqn-s1 milp-dqn-s2 dqn-s0 dqn-rel-s0 milp-dqn-double-s0 milp-dqn-mixed-s0)
 [ $# -gt 0 ] && ORDER=("$@")
 
 one() {  # one NAME: start or resume it; skip it when finished
@@ -35,6 +41,7 @@ one() {  # one NAME: start or resume it; skip it when finished
     if [ -f "$out/checkpoint.pt" ]; then
         rad train --out "$out" --resume >>"$out/train.log" 2>&1
     else
+        # A later --dataset in ARGS wins over this default.
         rad train --out "$out" --dataset "$DATA" ${ARGS[$name]} >>"$out/train.log" 2>&1
     fi
     echo "$name: $(tail -n 1 "$out/train.log")"

@@ -190,3 +190,27 @@ def test_config_errors_are_clear():
         if torch.cuda.is_available():
             raise RuntimeError('no CUDA (skipped: a GPU is present)')
         Trainer(TrainConfig(device='cuda'), Path('/tmp/unused'))
+
+
+@pytest.mark.parametrize('name', ['milp-dqn', 'dqn', 'dqn-rel', 'milp-dqn-mixed'])
+def test_shipped_agents_load_by_name_and_evaluate_with_the_same_keys(name):
+    from rad_core.evaluation import KEYS, evaluate, generated_scenes
+    assert ckpt.resolve(name).is_file(), f'{name}: no shipped weights in {ckpt.WEIGHTS_DIR}'
+    q = QPolicy.load(name)
+    assert q.name in name and q.source.endswith(f'{name}.pt')
+    result = evaluate(name, generated_scenes(3, 2, 3, 0), robot=False, seed=0)
+    assert set(result) == set(KEYS) and result['n'] == 3
+
+
+def test_verify_never_fails_and_never_builds_less():
+    """--verify: the best-ranked action the stability check accepts; a failing action
+    is skipped instead of ending the episode."""
+    from rad_core.evaluation import evaluate, generated_scenes, get_agent
+    scenes = list(generated_scenes(4, 2, 12, 0))
+    plain = evaluate('milp-dqn', scenes, robot=False, seed=0)
+    checked = evaluate(get_agent('milp-dqn', verify=True), scenes, robot=False, seed=0)
+    assert checked['f'] == 0
+    for a, b in zip(plain['scenes'], checked['scenes']):
+        if a['outcome'] != 'invalid_unstable':
+            continue
+        assert b['coverage'] >= a['coverage'] - 1e-9

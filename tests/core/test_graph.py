@@ -56,6 +56,19 @@ def test_candidates_point_at_the_unit_and_cell_of_each_action():
         assert np.allclose(obs.pos[u], want)
 
 
+def test_dense_action_mask_holds_exactly_the_candidates():
+    env, space = env_with_actions()
+    actions = space(env)
+    obs = Observer(env)(env, actions)
+    mask = obs.action_mask()
+    assert mask.shape == (len(env.unplaced_units()), len(env.free_cells()), 4)
+    assert mask.sum() == len(set(actions))
+    units = env.unplaced_units()
+    free = list(env.free_cells())
+    for a in actions:
+        assert mask[units.index((a.block, a.unit)), free.index(a.cell), a.rotation]
+
+
 def test_mask_cuts_only_unplaced_units_of_different_blocks_and_keeps_self():
     kind = np.array([UNPLACED, UNPLACED, UNPLACED, PLACED, TARGET, NON_TARGET])
     group = np.array([0, 0, 1, 2, -1, -1])

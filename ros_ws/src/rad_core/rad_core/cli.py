@@ -121,7 +121,7 @@ def cmd_demo(args) -> int:
 
 def cmd_eval(args) -> int:
     from rad_core.evaluation import ProgressBar, evaluate, generated_scenes, get_agent, scene_dir, uses_robot
-    agent = get_agent(args.agent, args.checkpoint)
+    agent = get_agent(args.agent, args.checkpoint, verify=args.verify)
     policy = agent.make_policy()   # a bad checkpoint fails here, before any scene runs
     robot = uses_robot(agent, args.robot)
     if args.scene_dir:
@@ -135,7 +135,7 @@ def cmd_eval(args) -> int:
         total, source = args.scenes, f'g={args.grid} sides={args.sides} seeds {args.seed}..{last}'
     t0 = time.perf_counter()
     from rad_core.allocation import AllocationParams
-    allocation = AllocationParams(support=args.support)
+    allocation = AllocationParams(support=args.support) if args.support else None
     result = evaluate(agent, scenes, robot, args.seed, progress=ProgressBar(total, args.agent),
                       execution=args.execution, policy=policy, allocation=allocation)
     elapsed = time.perf_counter() - t0
@@ -271,6 +271,9 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser('eval', help="the paper's metrics (R, d, e, f, f_g, f_p, coverage) of a sequencer over scenes")
     from rad_core.evaluation import AGENTS
     p.add_argument('--agent', choices=list(AGENTS), default='heur')
+    p.add_argument('--verify', action='store_true',
+                   help='take the best-ranked action the planning copy finds feasible (GAMP with the robot, '
+                        'the stability check without): no failures by construction')
     p.add_argument('--checkpoint', metavar='FILE',
                    help='learned agents: a model.pt / checkpoint.pt to load instead of the shipped weights')
     p.add_argument('--grid', type=int, default=4, help='g of generated scenes')
@@ -282,8 +285,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--execution', choices=['teleport', 'simulate'], default='teleport',
                    help='robot runs: put the block in place (fast) or simulate the whole arm motion')
     p.add_argument('--scene-dir', metavar='DIR', help='evaluate every *.json scene in DIR instead of generating')
-    p.add_argument('--support', choices=['none', 'stable'], default='none',
-                   help="allocation: the paper's MILP (none) or every allocated block able to stand (stable)")
+    p.add_argument('--support', choices=['none', 'stable'],
+                   help="allocation: the paper's MILP (none) or every allocated block able to stand (stable); "
+                        "default: the agent's (stable for milp-dqn-mixed, none for the others)")
     p.add_argument('--json', metavar='FILE', help='write the metrics and per-scene rows here')
     p.set_defaults(func=cmd_eval)
 

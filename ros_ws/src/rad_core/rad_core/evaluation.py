@@ -28,7 +28,7 @@ import time
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TextIO
+from typing import NamedTuple, TextIO
 
 import numpy as np
 
@@ -55,9 +55,12 @@ class Agent:
     robot: None follows `evaluate`'s robot flag; False never uses the robot
         (the oracle), True always does (GAMP checks need the robot's world),
         whatever the flag says.
-    verified: take the best-ranked action GAMP finds feasible, not the best one.
+    verified: take the best-ranked action the planning copy finds feasible (with
+        the robot: GAMP; without: the physics stability check), not the best one.
     actions: the action space it chooses among (`sequencing.actions`): 'milp'
         (the allocation's actions), 'all' (the DQN baseline), 'rel' (DQN-REL).
+    support: the allocation it expects (`AllocationParams.support`): 'none'
+        (the paper's MILP) or 'stable'; `evaluate`'s allocation argument overrides.
     """
 
     name: str
@@ -65,13 +68,14 @@ class Agent:
     robot: bool | None = None
     verified: bool = False
     actions: str = 'milp'
+    support: str = 'none'
 
 
-def _learned(name: str, actions: str, checkpoint=None) -> Agent:
+def _learned(name: str, actions: str, checkpoint=None, support: str = 'none') -> Agent:
     def make_policy():
         from rad_core.learning.policy import QPolicy
         return QPolicy.load(checkpoint if checkpoint is not None else name)
-    return Agent(name, make_policy, actions=actions)
+    return Agent(name, make_policy, actions=actions, support=support)
 
 
 AGENTS = {
@@ -81,20 +85,26 @@ AGENTS = {
     'milp-dqn': _learned('milp-dqn', 'milp'),
     'dqn': _learned('dqn', 'all'),
     'dqn-rel': _learned('dqn-rel', 'rel'),
+    'milp-dqn-mixed': _learned('milp-dqn-mixed', 'milp', support='stable'),
 }
-LEARNED = ('milp-dqn', 'dqn', 'dqn-rel')
+LEARNED = ('milp-dqn', 'dqn', 'dqn-rel', 'milp-dqn-mixed')
 
 
-def get_agent(agent: str | Agent, checkpoint: str | None = None) -> Agent:
-    """An agent by name; learned agents load `checkpoint` instead of their shipped weights."""
+def get_agent(agent: str | Agent, checkpoint: str | None = None, verify: bool = False) -> Agent:
+    """An agent by name; learned agents load `checkpoint` instead of their shipped
+    weights; verify makes it take the best-ranked action the planning copy finds
+    feasible (`Agent.verified`)."""
     if isinstance(agent, Agent):
         return agent
+    if verify:
+        from dataclasses import replace
+        return replace(get_agent(agent, checkpoint), name=f'{agent}+verify', verified=True)
     if agent not in AGENTS:
         raise RadError(f'unknown agent {agent!r}; one of {", ".join(AGENTS)}')
     if checkpoint is not None:
         if agent not in LEARNED:
             raise RadError(f'--checkpoint applies to the learned agents ({", ".join(LEARNED)}), not {agent!r}')
-        return _learned(agent, AGENTS[agent].actions, checkpoint)
+        return _learned(agent, AGENTS[agent].actions, checkpoint, AGENTS[agent].support)
     return AGENTS[agent]
 
 
@@ -112,6 +122,20 @@ def coverage_opt(env: AssemblyEnv, guide: AllocationGuide) -> float:
         filled[cells] = True
     total = int(env.grid.is_target.sum())
     return float((filled & env.grid.is_target).sum()) / total if total else 1.0
+
+
+class Check(NamedTuple):
+    success: bool
+    reason: str = ''
+
+
+def stability_check(env: AssemblyEnv):
+    """A verify() for no-robot agents: would the action be valid now (geometry and
+    physics, on the env's own cached stability check)? Acting is left to the env."""
+    def check(action) -> Check:
+        outcome, reason, _, _ = env.evaluate(action)
+        return Check(outcome is None, reason)
+    return check
 
 
 def policy_decider(policy: Policy, actions: ActionSpace, verify=None) -> Decide:
@@ -139,7 +163,7 @@ def scene_episode(agent: str | Agent, scene: Scene, robot: bool, seed: int, exec
     agent = get_agent(agent)
     with_robot = uses_robot(agent, robot)
     policy = policy if policy is not None else agent.make_policy()
-    placements = solve(scene, allocation or AllocationParams()).placements
+    placements = solve(scene, allocation or AllocationParams(support=agent.support)).placements
     renv, own_stability = None, None
     if with_robot:
         from rad_core.robot_env import RobotAssemblyEnv, RobotEnvConfig
@@ -154,7 +178,10 @@ def scene_episode(agent: str | Agent, scene: Scene, robot: bool, seed: int, exec
         guide = AllocationGuide(scene, placements, env.grid)
         opt = coverage_opt(env, guide)
         space = action_space(agent.actions, env, placements)
-        decide = policy_decider(policy, space, renv.plan if agent.verified else None)
+        verify = None
+        if agent.verified:
+            verify = renv.plan if with_robot else stability_check(env)
+        decide = policy_decider(policy, space, verify)
         act = (lambda d: renv.step(d.action, plan=d.plan)) if with_robot else None
         episode = run_episode(env, decide, np.random.default_rng(seed), act)
     finally:
@@ -207,7 +234,7 @@ def evaluate(agent: str | Agent, scenes: Iterable[tuple[str, Scene]], robot: boo
     optimum's coverage, the paper's corrected a-bar), n, and scenes (one row each).
     progress(row) is called after each episode. policy: an already built policy
     (default: the agent's, built once for the run). allocation: CP-SAT settings,
-    e.g. AllocationParams(support='stable') (default: the paper's MILP).
+    e.g. AllocationParams(support='stable') (default: the agent's, usually the paper's MILP).
     """
     agent = get_agent(agent)
     policy = policy if policy is not None else agent.make_policy()

@@ -48,6 +48,18 @@ class GraphObs(NamedTuple):
     def num_actions(self) -> int:
         return len(self.rot)
 
+    def action_mask(self) -> np.ndarray:
+        """The candidates as a validity mask over the paper's whole action space:
+        [unplaced units, free cells, 4] bool (units and cells in node order); the
+        termination action, always valid, is not in it. The network never needs
+        this (it scores only the candidate pairs); it is for inspection and for
+        code that wants the dense form."""
+        units = np.flatnonzero(self.kind == UNPLACED)
+        cells = np.flatnonzero(self.kind >= TARGET)
+        mask = np.zeros((len(units), len(cells), 4), dtype=bool)
+        mask[np.searchsorted(units, self.pairs[:, 0]), np.searchsorted(cells, self.pairs[:, 1]), self.rot] = True
+        return mask
+
 
 def node_features(pos: np.ndarray, kind: np.ndarray) -> np.ndarray:
     """[N, 5]: position, then the two type indices: +1 for grid cells / -1 for units,
