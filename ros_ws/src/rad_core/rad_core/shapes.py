@@ -26,6 +26,7 @@ from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
+from rad_core import support
 from rad_core.blocks import DEFAULT_LIBRARY, YAWS, BlockType
 from rad_core.errors import RadError
 from rad_core.scene import Block, Scene, TargetRegion
@@ -199,34 +200,6 @@ def tile_exact(cells, types: Mapping[str, BlockType], rng: np.random.Generator, 
 STABILITY_MARGIN = 0.05
 
 
-def _hull(points: np.ndarray) -> np.ndarray:
-    """Convex hull (counter-clockwise) of 2-D points, Andrew's monotone chain."""
-    pts = sorted(set(map(tuple, np.round(points, 9).tolist())))
-    if len(pts) <= 2:
-        return np.asarray(pts)
-
-    def half(seq):
-        h = []
-        for p in seq:
-            while len(h) >= 2 and ((h[-1][0] - h[-2][0]) * (p[1] - h[-2][1])
-                                   - (h[-1][1] - h[-2][1]) * (p[0] - h[-2][0])) <= 0:
-                h.pop()
-            h.append(p)
-        return h[:-1]
-
-    return np.asarray(half(pts) + half(pts[::-1]))
-
-
-def _inside(hull: np.ndarray, p: np.ndarray, margin: float) -> bool:
-    for k in range(len(hull)):
-        a, b = hull[k], hull[(k + 1) % len(hull)]
-        edge = b - a
-        # Signed distance of p to the edge's line, positive inside (counter-clockwise hull).
-        if (edge[0] * (p[1] - a[1]) - edge[1] * (p[0] - a[0])) / np.hypot(*edge) < margin:
-            return False
-    return True
-
-
 def rests_stably(piece: Sequence[Cell], occupied: set[Cell]) -> bool:
     """Whether a block would stay put on the table and the occupied cells alone.
 
@@ -240,9 +213,8 @@ def rests_stably(piece: Sequence[Cell], occupied: set[Cell]) -> bool:
                                               (c[0], c[1], c[2] - 1) not in own)]
     if not feet:
         return False
-    corners = np.array([(x + dx, y + dy) for x, y, _ in feet for dx in (-0.5, 0.5) for dy in (-0.5, 0.5)])
     com = np.asarray(piece, dtype=float)[:, :2].mean(axis=0)
-    return _inside(_hull(corners), com, STABILITY_MARGIN)
+    return support.com_inside(np.asarray(feet, dtype=float)[:, :2], com, STABILITY_MARGIN)
 
 
 def stable_order(pieces: Sequence[Sequence[Cell]]) -> list[int] | None:
