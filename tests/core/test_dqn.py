@@ -179,6 +179,12 @@ def test_an_existing_run_is_not_overwritten_and_resume_keeps_its_config(dataset,
     assert r.returncode == 2 and '--lr' in r.stderr
     out = train(TrainConfig(), tmp_path / 'run', resume=True, total_steps=100)
     assert out['env_steps'] >= 100
+    # Extending a run keeps its exploration schedule (eps_fraction of the first total_steps).
+    pos = torch.load(tmp_path / 'run' / 'checkpoint.pt', weights_only=False)['position']
+    assert pos['eps_horizon'] == pytest.approx(0.4 * 60)
+    rows = (tmp_path / 'run' / 'progress.csv').read_text().splitlines()[1:]
+    steps = [int(r.split(',')[0]) for r in rows]
+    assert steps == sorted(set(steps))
 
 
 def test_config_errors_are_clear():
@@ -186,6 +192,8 @@ def test_config_errors_are_clear():
         TrainConfig(method='ppo').validate()
     with pytest.raises(Exception, match='multiple of heads'):
         TrainConfig(dim=30, heads=4).validate()
+    with pytest.raises(Exception, match='grad_clip must be a positive'):
+        TrainConfig(grad_clip=0).validate()
     with pytest.raises(Exception, match='no CUDA'):
         if torch.cuda.is_available():
             raise RuntimeError('no CUDA (skipped: a GPU is present)')
@@ -214,3 +222,9 @@ def test_verify_never_fails_and_never_builds_less():
         if a['outcome'] != 'invalid_unstable':
             continue
         assert b['coverage'] >= a['coverage'] - 1e-9
+
+
+def test_a_model_of_another_action_space_is_refused():
+    from rad_core.evaluation import evaluate, generated_scenes
+    with pytest.raises(Exception, match="trained on the 'milp' action space"):
+        evaluate('dqn', generated_scenes(3, 2, 1, 0), robot=False, seed=0, policy=QPolicy.load('milp-dqn'))

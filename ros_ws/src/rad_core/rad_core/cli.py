@@ -160,7 +160,12 @@ def cmd_dataset_build(args) -> int:
         if names is None:
             raise RadError(f'--shapes must be one of {", ".join(shape_lib.SPLITS)}, got {args.shapes!r}')
         shapes = [(n, shape_lib.shape_scene(n, seed)) for n in names for seed in range(args.shape_seeds)]
-    grids = [int(g) for g in args.grids.split(',') if g.strip()]
+    try:
+        grids = [int(g) for g in args.grids.split(',') if g.strip()]
+    except ValueError:
+        raise RadError(f'--grids must be comma-separated integers, e.g. 3,4,5; got {args.grids!r}') from None
+    if not grids:
+        raise RadError('--grids names no grid size')
     bar = ProgressBar(len(grids) * args.scenes + len(shapes), 'dataset')
     from rad_core.allocation import AllocationParams
     params = AllocationParams(support=args.support)
@@ -275,7 +280,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help='take the best-ranked action the planning copy finds feasible (GAMP with the robot, '
                         'the stability check without): no failures by construction')
     p.add_argument('--checkpoint', metavar='FILE',
-                   help='learned agents: a model.pt / checkpoint.pt to load instead of the shipped weights')
+                   help='learned agents: a model file (runs/NAME/model.pt) to load instead of the shipped weights')
     p.add_argument('--grid', type=int, default=4, help='g of generated scenes')
     p.add_argument('--sides', type=int, default=2, help='1 or 2 target faces of generated scenes')
     p.add_argument('--scenes', type=int, default=20, help='number of generated scenes')

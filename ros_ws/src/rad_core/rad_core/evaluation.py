@@ -238,6 +238,10 @@ def evaluate(agent: str | Agent, scenes: Iterable[tuple[str, Scene]], robot: boo
     """
     agent = get_agent(agent)
     policy = policy if policy is not None else agent.make_policy()
+    trained_on = getattr(policy, 'actions', agent.actions)
+    if trained_on != agent.actions:
+        raise RadError(f'{getattr(policy, "source", agent.name)} was trained on the {trained_on!r} action space; '
+                       f'agent {agent.name!r} chooses among {agent.actions!r} (pick the agent of that method)')
     stability = None
     if not uses_robot(agent, robot):
         from rad_core.physics import PhysicsStability

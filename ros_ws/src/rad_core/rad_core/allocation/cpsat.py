@@ -18,7 +18,10 @@ unit rests on the table, a placed block or a cell another chosen pose fills:
     z_{p,S} <= sum_{q fills the cell below u} w_q    for u in S
     w_p     <= sum_S z_{p,S}
 
-(linear; support only comes from below, so there are no cycles). With it, poses
+(linear). Support only comes from the cell directly below, which with the
+default blocks (at most two cubes tall, each in one plane) rules out two poses
+holding each other up; scene-defined 3D types could interlock so, and physics
+then has the last word. With it, poses
 worth 0 (as many non-target as target cells) are admitted too, and among
 allocations of equal c^T g the one covering more target cells wins (a
 lexicographic second objective): a filler under an overhang costs nothing in

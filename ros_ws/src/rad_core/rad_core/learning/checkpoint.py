@@ -70,8 +70,11 @@ def read(path: str | Path, expect: str, weights_only: bool = True) -> dict:
     try:
         doc = torch.load(path, map_location='cpu', weights_only=weights_only)
     except Exception as e:  # noqa: BLE001 - torch raises many kinds for a bad file
-        raise CheckpointError(f'checkpoint {str(path)!r} is corrupt or not a rad checkpoint '
-                              f'({type(e).__name__}: {str(e).splitlines()[0][:120] if str(e) else ""})') from None
+        detail = str(e).splitlines()[0][:120] if str(e) else type(e).__name__
+        if 'Weights only load failed' in detail:
+            detail = ('it is not a torch file of tensors and plain data; a training checkpoint? '
+                      'pass the model.pt beside it')
+        raise CheckpointError(f'checkpoint {str(path)!r} is corrupt or not a rad model file ({detail})') from None
     if not isinstance(doc, dict) or 'format' not in doc:
         raise CheckpointError(f'checkpoint {str(path)!r} has no format field: not a rad checkpoint')
     if doc['format'] != expect:

@@ -90,7 +90,7 @@ class TrainConfig:
         if self.method not in METHODS:
             raise RadError(f'method must be one of {", ".join(METHODS)}, got {self.method!r}')
         for name in ('total_steps', 'batch_size', 'buffer_size', 'train_every', 'target_update', 'eval_every',
-                     'threads', 'dim', 'heads', 'rounds', 'ff', 'readout'):
+                     'eval_scenes', 'threads', 'dim', 'heads', 'rounds', 'ff', 'readout'):
             if getattr(self, name) < 1:
                 raise RadError(f'{name} must be at least 1, got {getattr(self, name)}')
         if self.dim % self.heads:
@@ -99,6 +99,8 @@ class TrainConfig:
             raise RadError('need 0 <= eps_end <= eps_start <= 1')
         if not (0 < self.gamma <= 1) or self.lr <= 0:
             raise RadError('need 0 < gamma <= 1 and lr > 0')
+        if not self.grad_clip > 0:
+            raise RadError(f'grad_clip must be a positive gradient norm, got {self.grad_clip}')
 
     @property
     def net(self) -> NetConfig:
@@ -135,7 +137,10 @@ class Trainer:
         self.target.load_state_dict(self.q.state_dict())
         self.opt = torch.optim.Adam(self.q.parameters(), lr=cfg.lr)
         self.replay = ReplayBuffer(cfg.buffer_size)
-        self.pos = {'env_steps': 0, 'grad_steps': 0, 'episodes': 0, 'wall_s': 0.0, 'next_eval': cfg.eval_every}
+        self.pos = {'env_steps': 0, 'grad_steps': 0, 'episodes': 0, 'wall_s': 0.0, 'next_eval': cfg.eval_every,
+                    # Fixed when the run starts: extending a run with --total-steps must not
+                    # move the exploration schedule.
+                    'eps_horizon': max(1.0, cfg.eps_fraction * cfg.total_steps)}
         self.recent: list[tuple[float, float]] = []   # (return, coverage) of recent training episodes
         self.losses: list[float] = []
         self.best_eval = -math.inf
@@ -150,7 +155,8 @@ class Trainer:
     # ---- exploration and acting ------------------------------------------------------
     def epsilon(self) -> float:
         c = self.cfg
-        frac = min(1.0, self.pos['env_steps'] / max(1.0, c.eps_fraction * c.total_steps))
+        horizon = self.pos.get('eps_horizon', max(1.0, c.eps_fraction * c.total_steps))
+        frac = min(1.0, self.pos['env_steps'] / horizon)
         return c.eps_start + frac * (c.eps_end - c.eps_start)
 
     @torch.no_grad()
@@ -238,11 +244,13 @@ class Trainer:
     # ---- evaluation ------------------------------------------------------------------
     def validation(self):
         if self._validation is None:
-            from rad_core.allocation import solve
+            from rad_core.allocation import AllocationParams, solve
             from rad_core.generator import GeneratorConfig, generate_scene
             config = GeneratorConfig(grid=self.cfg.eval_grid)
             scenes = [generate_scene(config, VALIDATION_SEED_BASE + i) for i in range(self.cfg.eval_scenes)]
-            self._validation = [(s, solve(s).placements) for s in scenes]
+            # Validate with the allocation the training data was made with.
+            params = AllocationParams(support=self.dataset.header.get('allocation', {}).get('support', 'none'))
+            self._validation = [(s, solve(s, params).placements) for s in scenes]
         return self._validation
 
     def evaluate(self) -> dict:
@@ -306,6 +314,12 @@ class Trainer:
         self.pos = dict(doc['position'])
         self.recent = list(doc['recent'])
         self.best_eval = doc['best_eval']
+        # Rows logged after this checkpoint (the run was killed later) would be logged again.
+        progress = self.out / 'progress.csv'
+        if progress.exists():
+            lines = progress.read_text().splitlines(keepends=True)
+            keep = lines[:1] + [ln for ln in lines[1:] if int(ln.split(',')[0]) <= self.pos['env_steps']]
+            progress.write_text(''.join(keep))
 
     # ---- the run -----------------------------------------------------------------------
     def run(self, progress=None) -> dict:

@@ -28,16 +28,13 @@ class QPolicy:
 
     @classmethod
     def load(cls, name_or_path: str | Path, device: str | torch.device = 'cpu') -> 'QPolicy':
-        """A shipped agent by name ('milp-dqn', 'dqn', 'dqn-rel') or a model /
-        training checkpoint file; a bad file raises CheckpointError naming it."""
+        """A shipped agent by name ('milp-dqn', 'dqn', 'dqn-rel', 'milp-dqn-mixed') or a
+        model file (runs/NAME/model.pt); a bad file raises CheckpointError naming it."""
         path = ckpt.resolve(name_or_path)
-        try:
-            doc = ckpt.read(path, ckpt.MODEL_FORMAT)
-        except ckpt.CheckpointError as first:
-            try:   # a training checkpoint holds the same weights
-                doc = ckpt.read(path, ckpt.TRAIN_FORMAT, weights_only=False)
-            except ckpt.CheckpointError:
-                raise first from None
+        # Model files only, read with torch's weights-only unpickler: a file from
+        # elsewhere cannot run code here. (A training checkpoint's model is the
+        # model.pt beside it.)
+        doc = ckpt.read(path, ckpt.MODEL_FORMAT)
         for key in ('net', 'weights', 'method', 'actions'):
             if key not in doc:
                 raise ckpt.CheckpointError(f'checkpoint {str(path)!r} lacks {key!r}')
