@@ -39,7 +39,7 @@ from rad_core.errors import RadError
 from rad_core.learning import checkpoint as ckpt
 from rad_core.learning.dataset import Dataset
 from rad_core.learning.graph import GraphObs, Observer
-from rad_core.learning.network import NetConfig, QNetwork, collate, graph_max
+from rad_core.learning.network import NetConfig, QNetwork, collate, graph_max, pick
 from rad_core.learning.replay import ReplayBuffer, Transition
 from rad_core.mdp import TERMINATE, AssemblyEnv, EnvConfig
 from rad_core.sequencing.actions import action_space
@@ -217,9 +217,7 @@ class Trainer:
         b = collate([t.obs for t in batch], self.device)
         k = torch.tensor([t.action for t in batch], device=self.device)
         r = torch.tensor([t.reward for t in batch], dtype=torch.float32, device=self.device)
-        qa, qs = self.q(b)
-        idx = (b.offsets[:-1] + k.clamp(min=0)).clamp(max=max(qa.numel() - 1, 0))
-        chosen = torch.where(k >= 0, qa[idx] if qa.numel() else qs, qs)
+        chosen = pick(*self.q(b), b, k)
         with torch.no_grad():
             y = r.clone()
             live = [i for i, t in enumerate(batch) if not t.done]
@@ -228,8 +226,7 @@ class Trainer:
                 tqa, tqs = self.target(nb)
                 if c.double:
                     _, arg = graph_max(*self.q(nb), nb)
-                    j = (nb.offsets[:-1] + arg.clamp(min=0)).clamp(max=max(tqa.numel() - 1, 0))
-                    value = torch.where(arg >= 0, tqa[j] if tqa.numel() else tqs, tqs)
+                    value = pick(tqa, tqs, nb, arg)
                 else:
                     value, _ = graph_max(tqa, tqs, nb)
                 y[live] += c.gamma * value
@@ -295,13 +292,13 @@ class Trainer:
                           'best_eval_return': self.best_eval}}
 
     def save(self) -> None:
-        doc = self.model_doc()
-        doc.update(format=ckpt.TRAIN_FORMAT, target=self.target.state_dict(), optimizer=self.opt.state_dict(),
-                   replay=self.replay.state_dict(), rng=self.rng.bit_generator.state,
-                   torch_rng=torch.get_rng_state(), position=dict(self.pos), recent=self.recent,
-                   best_eval=self.best_eval)
-        ckpt.atomic_save(doc, self.out / 'checkpoint.pt')
-        ckpt.atomic_save(self.model_doc(), self.out / 'model.pt')
+        model = self.model_doc()
+        ckpt.atomic_save({**model, 'format': ckpt.TRAIN_FORMAT, 'target': self.target.state_dict(),
+                          'optimizer': self.opt.state_dict(), 'replay': self.replay.state_dict(),
+                          'rng': self.rng.bit_generator.state, 'torch_rng': torch.get_rng_state(),
+                          'position': dict(self.pos), 'recent': self.recent, 'best_eval': self.best_eval},
+                         self.out / 'checkpoint.pt')
+        ckpt.atomic_save(model, self.out / 'model.pt')
 
     def restore(self, path: Path) -> None:
         doc = ckpt.read(path, ckpt.TRAIN_FORMAT, weights_only=False)

@@ -139,3 +139,12 @@ def graph_max(q_actions: torch.Tensor, q_stop: torch.Tensor, batch: Batch) -> tu
         best = torch.where(better, amax, q_stop)
         arg = torch.where(better, first, arg)
     return best, arg
+
+
+def pick(q_actions: torch.Tensor, q_stop: torch.Tensor, batch: Batch, k: torch.Tensor) -> torch.Tensor:
+    """Per graph, the Q of its candidate k[b] (an index within the graph), or of
+    terminating where k[b] < 0."""
+    if not q_actions.numel():
+        return q_stop
+    idx = (batch.offsets[:-1] + k.clamp(min=0)).clamp(max=q_actions.numel() - 1)
+    return torch.where(k >= 0, q_actions[idx], q_stop)

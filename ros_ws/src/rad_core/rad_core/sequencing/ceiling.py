@@ -44,13 +44,10 @@ def coverage_ceiling(env: AssemblyEnv, space: AllocationActions, max_states: int
             return True
         here = env.snapshot()
         for action in pose_actions():
-            outcome, _, cells, _ = env.evaluate(action)
-            if outcome is not None:
-                continue
-            result = env.step(action)
-            key = frozenset(k for k, pc in enumerate(guide.pose_cells) if (env.state.occupancy[pc] >= 0).all())
+            result = env.step(action)   # an invalid placement changes nothing but ends the episode
             if not result.outcome.is_invalid:
                 best = max(best, env.coverage())
+                key = frozenset(k for k, pc in enumerate(guide.pose_cells) if (env.state.occupancy[pc] >= 0).all())
                 if not result.done and not search(key):
                     env.restore(here)
                     return False
