@@ -224,6 +224,30 @@ def spin_until(node, predicate: Callable[[], bool], timeout: float = 10.0) -> bo
 DISCOVERY_SETTLE_S = 0.5
 
 
+def wait_for_plant(node, timeout: float = 30.0) -> None:
+    """Wait until the plant (twin or bridge) is up: its latched /scene and a /rigid_bodies frame.
+
+    A node started beside the plant can only know the task once the plant publishes it; a test
+    that asks for a plan from motion capture must not race the plant's start-up.
+    """
+    from rclpy.qos import DurabilityPolicy, QoSProfile, qos_profile_sensor_data
+    from rad_msgs.msg import RigidBodies, Scene as SceneMsg
+
+    seen: set[str] = set()
+    latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    subs = [node.create_subscription(SceneMsg, 'scene', lambda m: seen.add('scene'), latched),
+            node.create_subscription(RigidBodies, 'rigid_bodies', lambda m: seen.add('rigid_bodies'),
+                                     qos_profile_sensor_data)]
+    try:
+        if not spin_until(node, lambda: len(seen) == 2, timeout):
+            raise TimeoutError(f'the plant published {sorted(seen) or "nothing"} of /scene and '
+                               f'/rigid_bodies within {timeout} s')
+    finally:
+        for sub in subs:
+            node.destroy_subscription(sub)
+    time.sleep(DISCOVERY_SETTLE_S)
+
+
 def wait_for_service(node, srv_type, name: str, timeout: float = 10.0):
     """Create a client for `name` and wait until a server is discovered (both ways); return it."""
     client = node.create_client(srv_type, name)

@@ -12,7 +12,7 @@ import pytest
 import rclpy
 from rclpy.action import ActionClient
 
-from ros_harness import DISCOVERY_SETTLE_S, REPO_ROOT, call_service, ros_args, wait_for_service
+from ros_harness import DISCOVERY_SETTLE_S, REPO_ROOT, call_service, ros_args, wait_for_plant, wait_for_service
 from scenes import U, doc
 
 from rad_core.generator import GeneratorConfig, generate_scene
@@ -43,7 +43,7 @@ def graph(node_process, ros_node, tmp_path):
     client = wait_for_service(ros_node, PlanAssembly, 'plan_assembly', timeout=30.0)
     actions = ActionClient(ros_node, ExecuteAssembly, 'execute_assembly')
     assert actions.wait_for_server(timeout_sec=30.0)
-    time.sleep(DISCOVERY_SETTLE_S)
+    wait_for_plant(ros_node)
 
     class Graph:
         pass
@@ -190,6 +190,7 @@ def test_planners_run_against_a_different_plant(node_process, process, ros_node,
              node_process('rad_planner', 'assembly_node')]
     actions = ActionClient(ros_node, ExecuteAssembly, 'execute_assembly')
     assert actions.wait_for_server(timeout_sec=30.0)
+    wait_for_plant(ros_node)
     time.sleep(1.0)
 
     class G:
