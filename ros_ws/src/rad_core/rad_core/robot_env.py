@@ -78,6 +78,15 @@ class RobotEnvConfig:
             object.__setattr__(self, 'env', replace(self.env, stability='none'))
 
 
+@dataclass
+class RobotSnapshot:
+    """What `RobotAssemblyEnv.snapshot` returns (opaque to callers)."""
+
+    state: object        # the AssemblyEnv state
+    world: object        # a sim.world.WorldState
+    last_plan: object = None
+
+
 class RobotAssemblyEnv:
     """The MDP of `AssemblyEnv` (same actions, rewards, termination) with the robot.
 
@@ -106,6 +115,23 @@ class RobotAssemblyEnv:
         self.twin.load_scene(self.scene)
         self.last_plan = None
         return self.env.reset()
+
+    # ---- branching, for search ---------------------------------------------------
+    def snapshot(self) -> 'RobotSnapshot':
+        """Everything that decides the next step: the MDP state, the world (block poses
+        and velocities, arm joints, Bullet's contact cache) and the last motion plan.
+        Taken between steps (the twin idle, nothing held); restoring it and repeating an
+        action gives the same outcome (poses equal to 1e-7 m)."""
+        if self.twin.busy or self.twin.attached is not None:
+            raise RadError('RobotAssemblyEnv.snapshot: the twin is executing or holding a block')
+        return RobotSnapshot(self.env.snapshot(), self.world.save(), self.last_plan)
+
+    def restore(self, snapshot: 'RobotSnapshot') -> None:
+        """Go back to a snapshot of this env (it stays valid for further restores)."""
+        self.world.restore(snapshot.world)
+        self.twin.sync()
+        self.env.restore(snapshot.state)
+        self.last_plan = snapshot.last_plan
 
     # ---- one action ----------------------------------------------------------
     def _target(self, action: Action) -> tuple[str, np.ndarray, int]:

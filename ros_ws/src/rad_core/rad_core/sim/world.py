@@ -288,6 +288,22 @@ class World:
         if constraints - now:
             raise RadError('a constraint was removed inside World.preserved(); it cannot be restored')
 
+    def save(self) -> 'WorldState':
+        """Everything that decides how this world goes on: joints, block poses and
+        velocities, constraints, and Bullet's own state (contact cache included), so
+        restoring it and simulating replays bit-identically. The Bullet state is freed
+        when the WorldState is garbage-collected (or by `WorldState.free`)."""
+        return WorldState(self, self._snapshot(), self._p.saveState(physicsClientId=self.client))
+
+    def restore(self, state: 'WorldState') -> None:
+        """Go back to a state `save` returned (it stays valid for further restores)."""
+        if state.world is not self:
+            raise RadError('World.restore: the state was saved from another world')
+        if state.bullet < 0:
+            raise RadError('World.restore: the state was freed')
+        self._restore(state.snap)
+        self._p.restoreState(stateId=state.bullet, physicsClientId=self.client)
+
     @contextmanager
     def preserved(self, exact: bool = False) -> Iterator[World]:
         """Everything in the block is undone on exit: joints, block poses and
@@ -307,3 +323,23 @@ class World:
             if state is not None:
                 self._p.restoreState(stateId=state, physicsClientId=self.client)
                 self._p.removeState(state, physicsClientId=self.client)
+
+
+class WorldState:
+    """A saved `World` (see World.save). Bodies must not be added or removed between
+    save and restore; loading another scene invalidates it."""
+
+    def __init__(self, world: World, snap: tuple, bullet: int):
+        self.world, self.snap, self.bullet = world, snap, bullet
+
+    def free(self) -> None:
+        if self.bullet >= 0 and self.world.client >= 0:
+            self.world.pybullet.removeState(self.bullet, physicsClientId=self.world.client)
+        self.bullet = -1
+
+    def __del__(self):
+        try:
+            self.free()
+        except Exception:  # noqa: BLE001 - the client may be gone at interpreter exit
+            pass
+
