@@ -33,6 +33,13 @@ if _problems:
                        + '; '.join(_problems))
 assert 'rclpy' not in sys.modules, 'rclpy was imported before the DDS settings were loaded'
 
+# Test runs side by side on one machine (CI beside a developer's run, two checkouts)
+# must not hear each other's nodes: unless RAD_ROS_DOMAIN_ID pins a domain, each
+# session takes its own (100-199, from the pid; the same after the re-exec above).
+# RAD_ROS_DOMAIN_ID is set too, so scripts that source env.sh (the demo) join it.
+if not os.environ.get('RAD_ROS_DOMAIN_ID'):
+    os.environ['RAD_ROS_DOMAIN_ID'] = os.environ['ROS_DOMAIN_ID'] = str(100 + os.getpid() % 100)
+
 
 def pytest_configure(config):
     if _needs_reexec:

@@ -1,0 +1,306 @@
+"""Test-time search on top of a Q-function: the paper's MCTS and sequential halving.
+
+Both are pure functions over a `Model` (the environment interface a search needs:
+allowed actions, Q-values, one real step, snapshot and restore) and an explicit
+random generator, in the manner of mctx: the same model state and an equally
+seeded generator give the same tree. One *simulation* is one real step of the
+planning copy (with the robot: GAMP, execution and physics), so budgets compare
+in what they cost.
+
+`mcts` is the paper's search (Sec. IV-B, following the predecessor's budget-5
+search; ../shared/PREDECESSOR.md): every iteration adds one not-yet-expanded child
+of the root, chosen epsilon-greedily on Q(s, a) among the allowed actions plus
+termination, by one real step; the leaf is valued r + gamma max_a' Q(s', a') (r
+alone when the step ends the episode); a new child starts with one visit and
+value Q(s, a), and the leaf value is backed up into it (so after the expansion
+it has 2 visits and mean (Q(s, a) + leaf) / 2); the move is the child with the
+best mean, a random expanded child with probability epsilon. With a budget of 5
+the tree stays one level deep. When every allowed action has been expanded the
+remaining budget is not spent (a one-level tree has nothing left to add, and the
+planning copy is deterministic: expanding a child again would give the same leaf).
+
+`halving` is rad's stronger small-budget search (the idea of Gumbel MuZero's
+sequential halving, Danihelka et al. 2022, adapted to a deterministic planning
+copy): the top-m candidates by Q are each simulated one step; then rounds halve
+the survivors by their value and extend each survivor's line one more greedy
+step, until the budget is spent. Because re-simulating a child of a deterministic
+copy would teach nothing, a further "visit" deepens the line instead, so a move
+that leads into a dead end (no buildable pose left, or a failure next step) is
+seen before it is taken. Values are discounted returns along the line plus the
+bootstrapped Q at its end.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Callable, Protocol
+
+import numpy as np
+
+from rad_core.mdp import TERMINATE, Action
+
+
+class Model(Protocol):
+    """What a search needs from the planning copy (see `EnvModel`)."""
+
+    gamma: float
+
+    def actions(self) -> list[Action]:
+        """The allowed actions in the current state, termination excluded."""
+
+    def q_values(self, actions: list[Action]) -> np.ndarray:
+        """Q(s, a) for each action and Q(s, terminate) last (len(actions) + 1)."""
+
+    def step(self, action: Action) -> tuple[float, bool, bool]:
+        """One real step from the current state: (reward, episode done, action invalid)."""
+
+    def snapshot(self) -> Any: ...
+
+    def restore(self, snapshot: Any) -> None: ...
+
+    # Optional: key(action) -> hashable, equal for actions with the same outcome (the
+    # same block at the same cells, e.g. a cube under four rotations). A search then
+    # simulates only the best-valued action of each key.
+
+
+@dataclass
+class Child:
+    """One expanded (or, for halving, simulated) root action."""
+
+    action: Action
+    q: float                    # Q(s, a) of the network at the root
+    visits: int = 0
+    value_sum: float = 0.0
+    reward: float = 0.0         # the first step's reward
+    done: bool = False          # the first step ended the episode
+    invalid: bool = False       # the first step failed (f_g, f_p, unstable, ...)
+    depth: int = 0              # steps simulated along this line (halving)
+
+    @property
+    def value(self) -> float:
+        return self.value_sum / self.visits if self.visits else -math.inf
+
+    def to_dict(self) -> dict:
+        return {'action': _action_doc(self.action), 'q': round(self.q, 9), 'visits': self.visits,
+                'value': round(self.value, 9), 'reward': round(self.reward, 9), 'done': self.done,
+                'invalid': self.invalid, 'depth': self.depth}
+
+
+@dataclass
+class SearchResult:
+    action: Action                      # the move
+    children: list[Child] = field(default_factory=list)   # in expansion order
+    simulations: int = 0                # real steps spent
+    root_q: np.ndarray | None = None    # the network's Q at the root (actions + terminate)
+    actions: list[Action] = field(default_factory=list)   # the root's allowed actions
+
+    def ranking(self) -> list[tuple[Action, float]]:
+        """Every root action (termination included) best first: the searched children by
+        their value (those whose step failed last, so a verified caller never tries them
+        first), then the rest by Q. Ties keep the earlier order."""
+        searched = {c.action: c for c in self.children}
+        seen = sorted(self.children, key=lambda c: (c.invalid, -c.value))
+        chosen = [c for c in seen if c.action == self.action]
+        order = chosen + [c for c in seen if c.action != self.action]
+        out = [(c.action, c.value) for c in order]
+        candidates = list(self.actions) + [TERMINATE]
+        rest = [(a, float(self.root_q[i])) for i, a in enumerate(candidates) if a not in searched]
+        rest.sort(key=lambda t: -t[1])
+        return out + rest
+
+    def to_dict(self) -> dict:
+        return {'action': _action_doc(self.action), 'simulations': self.simulations,
+                'children': [c.to_dict() for c in self.children]}
+
+
+def _action_doc(a: Action) -> list:
+    return [int(v) for v in a]
+
+
+def _leaf(model: Model, reward: float, done: bool) -> float:
+    """r, or r + gamma max Q(s') from the state the step led to."""
+    if done:
+        return reward
+    return reward + model.gamma * float(np.max(model.q_values(model.actions())))
+
+
+def _root(model: Model) -> tuple[list[Action], list[Action], np.ndarray]:
+    """(allowed actions, candidates, Q of the candidates): candidates are the allowed
+    actions, one per outcome key (the best by Q, the first of ties), plus termination."""
+    actions = model.actions()
+    q_all = np.asarray(model.q_values(actions), dtype=float)
+    key = getattr(model, 'key', None)
+    keep = list(range(len(actions)))
+    if key is not None:
+        best: dict = {}
+        for i, a in enumerate(actions):
+            k = key(a)
+            if k not in best or q_all[i] > q_all[best[k]]:
+                best[k] = i
+        keep = sorted(best.values())
+    candidates = [actions[i] for i in keep] + [TERMINATE]
+    return actions, candidates, np.concatenate([q_all[keep], q_all[-1:]])
+
+
+def mcts(model: Model, rng: np.random.Generator, budget: int = 5, epsilon: float = 0.05) -> SearchResult:
+    """The paper's MCTS from the model's current state (which it leaves unchanged)."""
+    if budget < 1:
+        raise ValueError(f'mcts: budget must be >= 1, got {budget}')
+    if not 0.0 <= epsilon <= 1.0:
+        raise ValueError(f'mcts: epsilon must be in [0, 1], got {epsilon}')
+    actions, candidates, q = _root(model)
+    result = SearchResult(TERMINATE, root_q=q, actions=candidates[:-1])
+    root = model.snapshot()
+    open_ = list(range(len(candidates)))   # not yet expanded, in candidate order
+    for _ in range(budget):
+        if not open_:
+            break
+        if rng.random() < epsilon:
+            k = open_[int(rng.integers(len(open_)))]
+        else:
+            k = max(open_, key=lambda i: (q[i], -i))   # argmax Q, the first of ties
+        open_.remove(k)
+        reward, done, invalid = model.step(candidates[k])
+        leaf = _leaf(model, reward, done)
+        model.restore(root)
+        child = Child(candidates[k], float(q[k]), visits=1, value_sum=float(q[k]),
+                      reward=float(reward), done=bool(done), invalid=bool(invalid), depth=1)
+        child.visits += 1
+        child.value_sum += leaf
+        result.children.append(child)
+        result.simulations += 1
+    if rng.random() < epsilon:
+        result.action = result.children[int(rng.integers(len(result.children)))].action
+    else:
+        result.action = max(result.children, key=lambda c: c.value).action   # first of ties
+    return result
+
+
+def halving(model: Model, rng: np.random.Generator, budget: int = 5, epsilon: float = 0.0) -> SearchResult:
+    """Sequential halving with deepening lines (see the module doc), from the model's
+    current state (left unchanged). epsilon: probability of replacing the move with a
+    random simulated child (0 at test time)."""
+    if budget < 1:
+        raise ValueError(f'halving: budget must be >= 1, got {budget}')
+    actions, candidates, q = _root(model)
+    result = SearchResult(TERMINATE, root_q=q, actions=candidates[:-1])
+    root = model.snapshot()
+    order = sorted(range(len(candidates)), key=lambda i: (-q[i], i))
+    m = min(len(order), first_round(budget))
+    lines: dict[int, _Line] = {}
+    for k in order[:m]:
+        reward, done, invalid = model.step(candidates[k])
+        child = Child(candidates[k], float(q[k]), visits=1, reward=float(reward), done=bool(done),
+                      invalid=bool(invalid), depth=1)
+        line = lines[k] = _Line(child, float(reward))
+        if done:
+            child.value_sum = line.ret
+        else:
+            line.snap, line.end_q = model.snapshot(), float(np.max(model.q_values(model.actions())))
+            child.value_sum = line.ret + model.gamma * line.end_q
+        result.children.append(child)
+        result.simulations += 1
+        model.restore(root)
+    survivors = sorted(lines, key=lambda k: (-lines[k].child.value, k))
+    while result.simulations < budget:
+        survivors = survivors[:math.ceil(len(survivors) / 2)]
+        live = [k for k in survivors if lines[k].snap is not None]
+        if not live:
+            break
+        for k in live:
+            if result.simulations >= budget:
+                break
+            _deepen(model, lines[k])
+            result.simulations += 1
+            model.restore(root)
+        survivors.sort(key=lambda k: (-lines[k].child.value, k))
+    if epsilon > 0 and rng.random() < epsilon:
+        result.action = result.children[int(rng.integers(len(result.children)))].action
+    else:
+        result.action = lines[survivors[0]].child.action
+    return result
+
+
+@dataclass
+class _Line:
+    child: Child
+    ret: float                 # discounted rewards along the line so far
+    snap: Any = None           # the state at the line's end; None once the line has ended
+    end_q: float = 0.0
+
+
+def _deepen(model: Model, line: _Line) -> None:
+    """One more greedy step at the end of a line. A step that fails ends the line as if
+    the agent stopped there (a verified agent never takes a failing action: it takes
+    another or stops), valued by Q(s, terminate) at that state."""
+    child, gamma = line.child, model.gamma
+    model.restore(line.snap)
+    inner = model.actions()
+    iq = np.asarray(model.q_values(inner), dtype=float)
+    greedy = (list(inner) + [TERMINATE])[int(np.argmax(iq))]
+    reward, done, invalid = model.step(greedy)
+    discount = gamma ** child.depth
+    child.depth += 1
+    if invalid:
+        child.value_sum = line.ret + discount * float(iq[-1])
+        line.snap = None
+        return
+    line.ret += discount * reward
+    if done:
+        child.value_sum, line.snap = line.ret, None
+        return
+    line.snap, line.end_q = model.snapshot(), float(np.max(model.q_values(model.actions())))
+    child.value_sum = line.ret + gamma ** child.depth * line.end_q
+
+
+def first_round(budget: int) -> int:
+    """How many root candidates halving simulates first: the most that still leaves
+    budget to deepen the better half one step (m + ceil(m / 2) <= budget)."""
+    m = 1
+    while (m + 1) + math.ceil((m + 1) / 2) <= budget:
+        m += 1
+    return m
+
+
+SEARCHES: dict[str, Callable[..., SearchResult]] = {'mcts': mcts, 'halving': halving}
+
+
+class EnvModel:
+    """A `Model` over an AssemblyEnv or RobotAssemblyEnv (anything with .env, .step,
+    .snapshot, .restore) with a policy's scores as Q and an action space.
+
+    robot_env: the env that steps (RobotAssemblyEnv, or the AssemblyEnv itself);
+    policy: a sequencing Policy whose scores are Q-values (a QPolicy);
+    space: an action space (`sequencing.actions.action_space`) giving the allowed actions.
+    """
+
+    def __init__(self, robot_env, policy, space, rng_seed: int = 0):
+        self.robot_env = robot_env
+        self.env = getattr(robot_env, 'env', robot_env)
+        self.policy, self.space = policy, space
+        self.gamma = float(self.env.config.gamma)
+        self._rng = np.random.default_rng(rng_seed)   # for policies that draw (HEUR); a QPolicy does not
+
+    def actions(self) -> list[Action]:
+        return [] if self.env.state.done else list(self.space(self.env))
+
+    def q_values(self, actions: list[Action]) -> np.ndarray:
+        if not actions:
+            # Only termination is allowed; its Q is what the policy says of stopping.
+            return np.asarray(self.policy.scores(self.env, [], self._rng), dtype=float)[-1:]
+        return np.asarray(self.policy.scores(self.env, actions, self._rng), dtype=float)
+
+    def step(self, action: Action) -> tuple[float, bool, bool]:
+        result = self.robot_env.step(action)
+        return float(result.reward), bool(result.done), bool(result.outcome.is_invalid)
+
+    def key(self, action: Action):
+        cells, _ = self.env.resulting_cells(action)
+        return action.block, None if cells is None else tuple(sorted(int(c) for c in cells))
+
+    def snapshot(self):
+        return self.robot_env.snapshot()
+
+    def restore(self, snapshot) -> None:
+        self.robot_env.restore(snapshot)
