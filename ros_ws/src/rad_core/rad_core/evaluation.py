@@ -61,6 +61,10 @@ class Agent:
         (the allocation's actions), 'all' (the DQN baseline), 'rel' (DQN-REL).
     support: the allocation it expects (`AllocationParams.support`): 'none'
         (the paper's MILP) or 'stable'; `evaluate`'s allocation argument overrides.
+    search: '' (act on the policy's ranking) or a test-time search of
+        `sequencing.search` ('mcts', 'halving') on the acting env itself (snapshot,
+        simulate, restore), with `budget` simulations per decision and exploration
+        `epsilon` (None: the search's default, 0.05 for mcts as the paper, 0 for halving).
     """
 
     name: str
@@ -69,13 +73,17 @@ class Agent:
     verified: bool = False
     actions: str = 'milp'
     support: str = 'none'
+    search: str = ''
+    budget: int = 5
+    epsilon: float | None = None
 
 
-def _learned(name: str, actions: str, checkpoint=None, support: str = 'none') -> Agent:
+def _learned(name: str, actions: str, checkpoint=None, support: str = 'none', network: str | None = None,
+             **kw) -> Agent:
     def make_policy():
         from rad_core.learning.policy import QPolicy
-        return QPolicy.load(checkpoint if checkpoint is not None else name)
-    return Agent(name, make_policy, actions=actions, support=support)
+        return QPolicy.load(checkpoint if checkpoint is not None else (network or name))
+    return Agent(name, make_policy, actions=actions, support=support, **kw)
 
 
 AGENTS = {
@@ -86,26 +94,42 @@ AGENTS = {
     'dqn': _learned('dqn', 'all'),
     'dqn-rel': _learned('dqn-rel', 'rel'),
     'milp-dqn-mixed': _learned('milp-dqn-mixed', 'milp', support='stable'),
+    # The paper's MILP-DQN-MCTS (budget 5) and rad's sequential halving at the same budget.
+    'milp-dqn-mcts': _learned('milp-dqn-mcts', 'milp', network='milp-dqn', search='mcts'),
+    'milp-dqn-halving': _learned('milp-dqn-halving', 'milp', network='milp-dqn', search='halving'),
+    'milp-dqn-mixed-mcts': _learned('milp-dqn-mixed-mcts', 'milp', support='stable', network='milp-dqn-mixed',
+                                    search='mcts'),
+    'milp-dqn-mixed-halving': _learned('milp-dqn-mixed-halving', 'milp', support='stable',
+                                       network='milp-dqn-mixed', search='halving'),
 }
-LEARNED = ('milp-dqn', 'dqn', 'dqn-rel', 'milp-dqn-mixed')
+LEARNED = tuple(name for name, a in AGENTS.items() if a.name.startswith(('milp-dqn', 'dqn')))
 
 
-def get_agent(agent: str | Agent, checkpoint: str | None = None, verify: bool = False) -> Agent:
+def get_agent(agent: str | Agent, checkpoint: str | None = None, verify: bool = False,
+              budget: int | None = None) -> Agent:
     """An agent by name; learned agents load `checkpoint` instead of their shipped
     weights; verify makes it take the best-ranked action the planning copy finds
-    feasible (`Agent.verified`)."""
+    feasible (`Agent.verified`); budget sets a search agent's simulations per decision."""
+    from dataclasses import replace
     if isinstance(agent, Agent):
         return agent
     if verify:
-        from dataclasses import replace
-        return replace(get_agent(agent, checkpoint), name=f'{agent}+verify', verified=True)
+        base = get_agent(agent, checkpoint, budget=budget)
+        return replace(base, name=f'{base.name}+verify', verified=True)
     if agent not in AGENTS:
         raise RadError(f'unknown agent {agent!r}; one of {", ".join(AGENTS)}')
+    found = AGENTS[agent]
+    if budget is not None:
+        if not found.search:
+            raise RadError(f'--budget applies to the search agents, not {agent!r}')
+        if budget < 1:
+            raise RadError(f'--budget must be >= 1, got {budget}')
+        found = replace(found, name=f'{agent}@{budget}', budget=budget)
     if checkpoint is not None:
         if agent not in LEARNED:
             raise RadError(f'--checkpoint applies to the learned agents ({", ".join(LEARNED)}), not {agent!r}')
-        return _learned(agent, AGENTS[agent].actions, checkpoint, AGENTS[agent].support)
-    return AGENTS[agent]
+        found = replace(found, make_policy=_learned(agent, found.actions, checkpoint).make_policy)
+    return found
 
 
 def uses_robot(agent: str | Agent, robot: bool) -> bool:
@@ -151,6 +175,34 @@ def policy_decider(policy: Policy, actions: ActionSpace, verify=None) -> Decide:
     return decide
 
 
+def search_decider(policy: Policy, actions: ActionSpace, stepper, agent: Agent, verify=None) -> Decide:
+    """decide() that searches before every decision (`Agent.search`) on `stepper`, the env
+    that acts (RobotAssemblyEnv with the robot, the AssemblyEnv without): the move is
+    the search's; with verify, the first of the search's ranking the check accepts
+    (the search's own failed children excluded). The search leaves the env as it was."""
+    from rad_core.mdp import TERMINATE
+    from rad_core.sequencing.search import SEARCHES, EnvModel
+    search = SEARCHES[agent.search]
+    kwargs = {} if agent.epsilon is None else {'epsilon': agent.epsilon}
+
+    def decide(env: AssemblyEnv, rng: np.random.Generator) -> Decision:
+        if not actions(env):
+            return stop()
+        result = search(EnvModel(stepper, policy, actions), rng, budget=agent.budget, **kwargs)
+        if verify is None:
+            return Decision(result.action) if not result.action.is_terminate else stop()
+        failed = {c.action for c in result.children if c.invalid}
+        ranked = []
+        for action, _ in result.ranking():
+            if action == TERMINATE:
+                break
+            if action not in failed:
+                ranked.append(action)
+        action, plan, _ = first_feasible(env, ranked, verify)
+        return Decision(action, plan) if action is not None else stop()
+    return decide
+
+
 def scene_episode(agent: str | Agent, scene: Scene, robot: bool, seed: int, execution: str = 'teleport',
                   policy: Policy | None = None, allocation: AllocationParams | None = None,
                   stability=None) -> dict:
@@ -181,7 +233,10 @@ def scene_episode(agent: str | Agent, scene: Scene, robot: bool, seed: int, exec
         verify = None
         if agent.verified:
             verify = renv.plan if with_robot else stability_check(env)
-        decide = policy_decider(policy, space, verify)
+        if agent.search:
+            decide = search_decider(policy, space, renv if with_robot else env, agent, verify)
+        else:
+            decide = policy_decider(policy, space, verify)
         act = (lambda d: renv.step(d.action, plan=d.plan)) if with_robot else None
         episode = run_episode(env, decide, np.random.default_rng(seed), act)
     finally:

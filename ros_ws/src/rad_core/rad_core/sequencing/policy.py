@@ -67,9 +67,15 @@ def ranked_actions(policy: Policy, env: AssemblyEnv, actions: list[Action],
     scores = np.asarray(policy.scores(env, actions, rng), dtype=float)
     if scores.shape != (len(actions) + 1,):
         raise ValueError(f'{policy.name}: {scores.shape[0]} scores for {len(actions)} actions + terminate')
+    return [actions[i] for i in ranked_indices(scores)]
+
+
+def ranked_indices(scores: np.ndarray) -> list[int]:
+    """Indices of the actions scoring above termination (the last score), best first
+    (ties keep the given order)."""
     stop, scores = scores[-1], scores[:-1]
     order = np.argsort(-scores, kind='stable')
-    return [actions[i] for i in order if np.isfinite(scores[i]) and scores[i] > stop]
+    return [int(i) for i in order if np.isfinite(scores[i]) and scores[i] > stop]
 
 
 def first_feasible(env: AssemblyEnv, ranked: list[Action], check):

@@ -1,0 +1,191 @@
+"""The sequencer: for a scene state and its allocation, which actions to try next.
+
+This is what the `sequencer_node` serves and what `/plan_assembly` asks at every
+step. It owns the policy (a trained Q-network, or HEUR) and, for search, its own
+in-process planning twin (`RobotAssemblyEnv`, teleporting execution: GAMP plans
+every expanded action and physics judges it), so a search can try actions for
+real and come back. It answers a *ranking*: the caller (plan_assembly) still takes
+the first action that GAMP finds feasible from its own planning copy, so whatever
+the policy, nothing is commanded that fails there.
+
+Policies:
+- milp-dqn-mcts: the paper's MILP-DQN-MCTS (search.mcts, budget 5, epsilon 0.05).
+- milp-dqn-halving: rad's sequential halving with deepening lines (search.halving).
+- milp-dqn: the network's Q-values alone (no search).
+- heur: the paper's heuristic (uniform among fully supported allocated actions).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from rad_core.allocation.guide import AllocationGuide
+from rad_core.errors import RadError
+from rad_core.gamp.action import SceneAction, start_joints
+from rad_core.mdp import TERMINATE, Action, AssemblyEnv
+from rad_core.scene import Scene
+from rad_core.sequencing.actions import AllocationActions
+from rad_core.sequencing.policy import HeurPolicy, ranked_indices
+from rad_core.sequencing.search import SEARCHES, EnvModel
+
+POLICIES = ('milp-dqn-mcts', 'milp-dqn-halving', 'milp-dqn', 'heur')
+SEARCH_OF = {'milp-dqn-mcts': 'mcts', 'milp-dqn-halving': 'halving'}
+# The shipped network the learned policies load when no checkpoint is given.
+DEFAULT_NETWORK = 'milp-dqn-mixed'
+
+
+@dataclass(frozen=True)
+class SequencerConfig:
+    """policy: one of POLICIES. checkpoint: a model file, or '' for the shipped
+    network (DEFAULT_NETWORK). budget: search simulations (real planning-twin steps)
+    per decision. epsilon: the search's exploration (None: the paper's 0.05 for mcts,
+    0 for halving). seed: seeds the policy's and the search's generator, together
+    with the state's step count, so one request always gets the same answer."""
+
+    policy: str = 'milp-dqn-mcts'
+    checkpoint: str = ''
+    budget: int = 5
+    seed: int = 0
+    epsilon: float | None = None
+
+    def validate(self) -> None:
+        if self.policy not in POLICIES:
+            raise RadError(f'policy must be one of {", ".join(POLICIES)}, got {self.policy!r}')
+        if not isinstance(self.budget, int) or self.budget < 1:
+            raise RadError(f'budget must be a positive integer, got {self.budget!r}')
+        if self.epsilon is not None and not 0.0 <= self.epsilon <= 1.0:
+            raise RadError(f'epsilon must be in [0, 1], got {self.epsilon!r}')
+        if self.policy == 'heur' and self.checkpoint:
+            raise RadError('checkpoint applies to the learned policies, not heur')
+
+    @property
+    def search_epsilon(self) -> float:
+        if self.epsilon is not None:
+            return self.epsilon
+        return 0.05 if self.policy == 'milp-dqn-mcts' else 0.0
+
+
+@dataclass
+class Ranking:
+    """What to try next, best first. terminate: the policy prefers stopping over every
+    action (then actions is empty and reason says why)."""
+
+    actions: list[SceneAction] = field(default_factory=list)
+    values: list[float] = field(default_factory=list)
+    terminate: bool = False
+    reason: str = ''
+    timings: dict = field(default_factory=dict)
+    search: dict | None = None     # the search tree (SearchResult.to_dict), when one ran
+
+
+def scene_action(env: AssemblyEnv, action: Action) -> SceneAction:
+    """An MDP action named the way messages name it (block id, target, region cell)."""
+    region = int(env.grid.region_of[action.cell])
+    cell = tuple(int(v) for v in env.grid.ijk[action.cell])
+    return SceneAction(env.scene.blocks[action.block].id, int(action.unit), env.scene.targets[region].name, cell,
+                       int(action.rotation))
+
+
+class Sequencer:
+    def __init__(self, config: SequencerConfig = SequencerConfig()):
+        config.validate()
+        self.config = config
+        if config.policy == 'heur':
+            self.policy = HeurPolicy()
+        else:
+            from rad_core.learning.policy import QPolicy
+            self.policy = QPolicy.load(config.checkpoint or DEFAULT_NETWORK)
+            if self.policy.actions != 'milp':
+                raise RadError(f'{self.policy.source} was trained on the {self.policy.actions!r} action space; '
+                               f'the sequencer chooses among the allocation\'s actions (a milp-dqn network)')
+
+    @property
+    def source(self) -> str:
+        return getattr(self.policy, 'source', self.config.policy)
+
+    def close(self) -> None:
+        pass
+
+    def rank(self, scene: Scene, placements, start=None, max_actions: int = 0) -> Ranking:
+        """Rank the allocation's next actions in `scene` (blocks already placed sit in
+        their cells). start: the arm's joints (7 or 9 values) or None for home.
+        Raises RadError when the request does not fit (placements outside the scene's
+        regions, unknown block types, bad joints)."""
+        t0 = time.perf_counter()
+        if max_actions < 0:
+            raise RadError(f'max_actions must be >= 0, got {max_actions}')
+        q0 = start_joints([] if start is None else start)
+        env = AssemblyEnv(scene)
+        _check_placements(scene, placements)
+        space = AllocationActions(env, placements)
+        guide = space.guide
+        rng = np.random.default_rng([self.config.seed, env.state.steps, len(env.state.placed)])
+        allowed = space(env)
+        ranking = Ranking()
+        left = len(guide.open_poses(env.state))
+        if not allowed:
+            ranking.terminate = True
+            ranking.reason = ('every allocated pose is built' if left == 0
+                              else f'{left} allocated poses left, no unplaced block of their types')
+        elif self.config.policy in SEARCH_OF:
+            self._search(scene, placements, q0, rng, ranking, left)
+        else:
+            ts = time.perf_counter()
+            scores = np.asarray(self.policy.scores(env, allowed, rng), dtype=float)
+            ranked = ranked_indices(scores)
+            ranking.actions = [scene_action(env, allowed[i]) for i in ranked]
+            ranking.values = [float(scores[i]) for i in ranked]
+            ranking.timings['policy'] = time.perf_counter() - ts
+            if not ranked:
+                ranking.terminate = True
+                why = getattr(self.policy, 'why_none', f'{self.config.policy} values stopping more')
+                ranking.reason = f'{left} allocated poses left, none of them can be built next ({why})'
+        if max_actions:
+            ranking.actions, ranking.values = ranking.actions[:max_actions], ranking.values[:max_actions]
+        ranking.timings['sequencing'] = time.perf_counter() - t0
+        return ranking
+
+    def _search(self, scene: Scene, placements, q0, rng, ranking: Ranking, left: int) -> None:
+        from rad_core.robot_env import RobotAssemblyEnv, RobotEnvConfig
+        ts = time.perf_counter()
+        renv = RobotAssemblyEnv(scene, RobotEnvConfig(execution='teleport'))
+        try:
+            renv.reset()
+            if q0 is not None:
+                renv.world.set_joint_positions(q0)
+                renv.twin.sync()
+            ranking.timings['twin'] = time.perf_counter() - ts
+            ts = time.perf_counter()
+            model = EnvModel(renv, self.policy, AllocationActions(renv.env, placements))
+            result = SEARCHES[SEARCH_OF[self.config.policy]](model, rng, budget=self.config.budget,
+                                                           epsilon=self.config.search_epsilon)
+            ranking.timings['search'] = time.perf_counter() - ts
+            ranking.search = result.to_dict()
+            failed = {c.action for c in result.children if c.invalid}
+            for action, value in result.ranking():
+                if action == TERMINATE:
+                    break
+                if action not in failed:
+                    ranking.actions.append(scene_action(renv.env, action))
+                    ranking.values.append(float(value))
+            if not ranking.actions:
+                ranking.terminate = True
+                tried = sum(1 for c in result.children if not c.action.is_terminate)
+                ranking.reason = (f'{left} allocated poses left, none of them can be built next ('
+                                  + (f'the {tried} the search tried failed in the planning twin or are valued '
+                                     f'below stopping)' if tried else 'stopping is valued above all of them)'))
+        finally:
+            renv.close()
+
+
+def _check_placements(scene: Scene, placements) -> None:
+    names = {t.name for t in scene.targets}
+    for p in placements:
+        if p.type not in scene.block_types:
+            raise RadError(f'allocation names block type {p.type!r}, which the scene does not define')
+        if p.target not in names:
+            raise RadError(f'allocation names unknown target region {p.target!r}')
+    AllocationGuide(scene, placements)   # cells inside their regions, or RadError
