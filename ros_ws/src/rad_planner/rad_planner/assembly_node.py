@@ -9,6 +9,7 @@ twin can be replaced by a real cell without touching this node.
   srv  plan_assembly     rad_msgs/PlanAssembly
   act  execute_assembly  rad_msgs/ExecuteAssembly: plan, execute step by step via the
                          trajectory topic, re-register after each step, replan on deviation
+                         (the loop is rad_core.sequencing.execute; this node supplies the plant)
   pub  plan_json         std_msgs/String (latched): the latest plan, for the visualizer
   pub  joint_trajectory_controller/joint_trajectory  the steps' trajectories
 """
@@ -34,8 +35,8 @@ from trajectory_msgs.msg import JointTrajectory
 from rad_core.errors import RadError
 from rad_core.scene import Scene
 from rad_core.sequencing import HeurPolicy
-from rad_core.sequencing.plan import MotionPlan, moved, plan_assembly
-from rad_core.sequencing.result import deviation, measured_coverage, result_document
+from rad_core.sequencing.execute import ExecuteConfig, execute_assembly
+from rad_core.sequencing.plan import MotionPlan, plan_assembly
 from rad_core.sim import panda
 from rad_core.sim.mocap import RegistrationConfig, RigidBodyPose, body_map_for, register_scene
 from rad_msgs.action import ExecuteAssembly
@@ -226,70 +227,47 @@ class AssemblyNode(Node):
 
     # ---- /execute_assembly -------------------------------------------------------------
     def execute_callback(self, goal_handle):
+        """Glue for rad_core.sequencing.execute: the plant is the trajectory topic, joint states
+        and motion capture; feedback and cancel go through the goal handle."""
         goal = goal_handle.request
         result = ExecuteAssembly.Result()
         t0 = time.perf_counter()
         feedback = ExecuteAssembly.Feedback()
 
-        def report(step, planned, block, phase, message=''):
+        def report(step, planned, block, phase, message):
             feedback.step, feedback.steps_planned, feedback.block_id = step, planned, block
             feedback.phase, feedback.message = phase, message
             goal_handle.publish_feedback(feedback)
 
-        executed, allocation, scene, current = [], None, None, None
+        def send(trajectory: dict) -> None:
+            self.trajectory_pub.publish(trajectory_to_msg(trajectory, self.param('frame_id')))
+            self.wait_until_done(trajectory)
+
         try:
             limit = self.time_limit(goal.time_limit_s)
             scene, _ = self.scene_of(goal.scene, goal.scene_json)
-            current = scene
-            while True:
-                report(len(executed), 0, '', 'planning')
-                plan = self.plan(current, limit, self.start_joints([]))
-                allocation = allocation or plan.allocation
-                outcome = self.execute_plan(goal_handle, plan, current, executed, report)
-                current = outcome['scene']
-                if outcome['deviation'] is None:
-                    result.success, result.reason = plan.success, plan.reason
-                    break
-                if not goal.replan or result.replans >= int(self.param('max_replans')):
-                    raise RadError(f'the world differs from the plan: {outcome["deviation"]}')
-                result.replans += 1
-                report(len(executed), len(plan.steps), '', 'replanning', outcome['deviation'])
+            config = ExecuteConfig(float(self.param('settle_s')), float(self.param('position_tol')),
+                                   int(self.param('max_replans')), bool(goal.replan))
+            run = execute_assembly(scene, lambda current, start: self.plan(current, limit, start), send,
+                                   self.registered_scene, config, joints=lambda: self.start_joints([]),
+                                   cancelled=lambda: goal_handle.is_cancel_requested, report=report)
         except RadError as e:
             result.success, result.reason = False, str(e)
-        except Exception as e:  # noqa: BLE001
+            report(0, 0, '', 'done', result.reason)
+            goal_handle.abort()
+            return result
+        except Exception as e:  # noqa: BLE001 - an action must answer, never die
             self.get_logger().error(f'execute_assembly failed: {type(e).__name__}: {e}')
             result.success, result.reason = False, f'internal error: {e}'
-        try:
-            final = self.registered_scene()
-        except RadError:
-            final = current
-        result.steps_executed = len(executed)
-        result.coverage = measured_coverage(final) if final is not None else 0.0
-        if scene is not None:
-            result.result_json = json.dumps(result_document(
-                scene, allocation, executed, final, {'total': time.perf_counter() - t0}))
-        report(len(executed), len(executed), '', 'done', result.reason)
+            report(0, 0, '', 'done', result.reason)
+            goal_handle.abort()
+            return result
+        result.success, result.reason, result.replans = run.success, run.reason, run.replans
+        result.steps_executed = len(run.steps)
+        result.coverage = run.coverage
+        result.result_json = json.dumps(run.document({'total': time.perf_counter() - t0}))
         (goal_handle.succeed if result.success else goal_handle.abort)()
         return result
-
-    def execute_plan(self, goal_handle, plan, scene: Scene, executed: list, report) -> dict:
-        """Run the plan's steps; stop at the first step whose result deviates."""
-        for k, step in enumerate(plan.steps):
-            if goal_handle.is_cancel_requested:
-                raise RadError('cancelled')
-            report(len(executed), len(plan.steps), step.block, 'executing')
-            self.trajectory_pub.publish(trajectory_to_msg(step.trajectory, self.param('frame_id')))
-            self.wait_until_done(step.trajectory)
-            time.sleep(float(self.param('settle_s')))
-            report(len(executed), len(plan.steps), step.block, 'verifying')
-            expected = moved(scene, step.block, step.position, step.yaw)
-            measured = self.registered_scene()
-            executed.append(step.to_dict())
-            problem = deviation(expected, measured, float(self.param('position_tol')))
-            scene = measured
-            if problem is not None:
-                return {'scene': scene, 'deviation': problem}
-        return {'scene': scene, 'deviation': None}
 
     def wait_until_done(self, trajectory: dict) -> None:
         """Until the robot rests at the trajectory's last point; fails if the robot

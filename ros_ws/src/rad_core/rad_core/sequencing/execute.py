@@ -1,0 +1,130 @@
+"""Execute an assembly on a plant: plan, run each step, verify it, replan on deviation.
+
+`execute_assembly` knows nothing of ROS: the plant and the planner come in as
+callables, so /execute_assembly passes DDS glue (a trajectory topic, joint states,
+motion capture) and tests pass an in-process `rad_core.sim.twin.Twin`.
+
+After each step the world is registered again and compared with what the plan
+expected (`result.deviation`). A step that left the world other than planned (a
+block nudged, a block that slid) ends that plan: with `replan`, a new plan starts
+from the measured world, at most `max_replans` times; without, the run fails with
+the deviation as its reason. Every executed step is kept in the result, including
+the one that deviated, so the rad-result/1 document says what the robot did.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from rad_core.allocation.result import AllocationResult
+from rad_core.errors import RadError
+from rad_core.scene import Scene
+from rad_core.sequencing.plan import AssemblyPlan, moved
+from rad_core.sequencing.result import deviation, measured_coverage, result_document
+
+
+@dataclass(frozen=True)
+class ExecuteConfig:
+    """How execution checks its steps."""
+
+    settle_s: float = 0.5
+    """Wait this long (s) after a step before registering the world (blocks come to rest)."""
+    position_tol: float = 0.005
+    """A block farther than this (m) from where the plan put it is a deviation."""
+    max_replans: int = 3
+    """At most this many new plans after deviations."""
+    replan: bool = True
+    """Replan on a deviation (else the run fails with it)."""
+
+    def validate(self) -> None:
+        if not (self.settle_s >= 0 and np.isfinite(self.settle_s)):
+            raise RadError(f'settle_s must be finite and >= 0, got {self.settle_s}')
+        if not (self.position_tol > 0 and np.isfinite(self.position_tol)):
+            raise RadError(f'position_tol must be positive, got {self.position_tol}')
+        if self.max_replans < 0:
+            raise RadError(f'max_replans must be >= 0, got {self.max_replans}')
+
+
+@dataclass
+class ExecutionResult:
+    success: bool
+    reason: str
+    scene: Scene                                   # the world the run started from
+    steps: list[dict] = field(default_factory=list)   # PlanStep.to_dict() of every executed step
+    replans: int = 0
+    final_scene: Scene | None = None               # registered at the end (or the last one known)
+    allocation: AllocationResult | None = None     # the first plan's
+
+    @property
+    def coverage(self) -> float:
+        return measured_coverage(self.final_scene) if self.final_scene is not None else 0.0
+
+    def document(self, timings: dict) -> dict:
+        """The rad-result/1 document of the run."""
+        return result_document(self.scene, self.allocation, self.steps, self.final_scene, timings)
+
+
+Plan = Callable[[Scene, 'np.ndarray | None'], AssemblyPlan]   # scene, start joints (None: home)
+Send = Callable[[dict], None]        # run a trajectory to its end; RadError if the plant does not finish
+Register = Callable[[], Scene]       # the world as measured now; RadError if it cannot be
+Report = Callable[[int, int, str, str, str], None]   # (steps done, steps planned, block, phase, message)
+
+
+def execute_assembly(scene: Scene, plan: Plan, send: Send, register: Register,
+                     config: ExecuteConfig = ExecuteConfig(), joints: Callable[[], 'np.ndarray | None'] | None = None,
+                     cancelled: Callable[[], bool] = lambda: False, report: Report | None = None,
+                     settle: Callable[[float], None] = time.sleep) -> ExecutionResult:
+    """Build `scene` on the plant; never raises RadError (it becomes the result's reason).
+
+    joints: the robot's joints now, for each plan's start (None: home); without it,
+    every plan starts where the last executed trajectory ended (home at first).
+    settle(seconds): let the plant come to rest (a real plant: wait; a twin: step it).
+    Phases reported: planning, executing, verifying, replanning, done.
+    """
+    config.validate()
+    report = report or (lambda *_: None)
+    result = ExecutionResult(False, '', scene, final_scene=scene)
+    last_q = None
+    current = scene
+    try:
+        while True:
+            report(len(result.steps), 0, '', 'planning', '')
+            start = joints() if joints is not None else last_q
+            assembly = plan(current, start)
+            if result.allocation is None:
+                result.allocation = assembly.allocation
+            problem = None
+            for step in assembly.steps:
+                if cancelled():
+                    raise RadError('cancelled')
+                report(len(result.steps), len(assembly.steps), step.block, 'executing', '')
+                send(step.trajectory)
+                last_q = np.asarray(step.trajectory['points'][-1]['positions'])
+                settle(config.settle_s)
+                report(len(result.steps), len(assembly.steps), step.block, 'verifying', '')
+                expected = moved(current, step.block, step.position, step.yaw)
+                current = register()
+                result.final_scene = current
+                result.steps.append(step.to_dict())
+                problem = deviation(expected, current, config.position_tol)
+                if problem is not None:
+                    break
+            if problem is None:
+                result.success, result.reason = assembly.success, assembly.reason
+                break
+            if not config.replan or result.replans >= config.max_replans:
+                raise RadError(f'the world differs from the plan: {problem}')
+            result.replans += 1
+            report(len(result.steps), len(assembly.steps), '', 'replanning', problem)
+    except RadError as e:
+        result.success, result.reason = False, str(e)
+    try:
+        result.final_scene = register()
+    except RadError:
+        pass   # the plant is gone: keep the last scene measured
+    report(len(result.steps), len(result.steps), '', 'done', result.reason)
+    return result
