@@ -79,6 +79,34 @@ class BlockType:
         return len(seen) == len(cells)
 
 
+def unit_boxes(offsets, half_side: float, half_height: float, recess: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """One box per unit cube of a block, with the block's outer side faces set back.
+
+    offsets: the block's integer unit offsets (n, 3) in the frame the boxes are wanted in
+    (the type's, or turned by a yaw). Every side face (x, y) of a unit lies `half_side`
+    from the unit's centre, and `recess` less where it is an outer face, i.e. no unit
+    of the same block is behind it (a scene's clearance: ``recess = clearance * edge / 2``);
+    top and bottom faces lie `half_height` from it. Returns (shift of each box's centre from
+    its unit's centre (n, 3), half extents (n, 3)), in the units of the lengths given.
+    With recess 0 every box is centred and exactly (half_side, half_side, half_height).
+    """
+    offsets = np.asarray(offsets, dtype=np.int64).reshape(-1, 3)
+    cells = {tuple(o) for o in offsets.tolist()}
+    shift = np.zeros((len(offsets), 3))
+    half = np.empty((len(offsets), 3))
+    half[:, 2] = half_height
+    for i, o in enumerate(offsets.tolist()):
+        for a in (0, 1):
+            face = []
+            for s in (1, -1):
+                behind = list(o)
+                behind[a] += s
+                face.append(half_side if tuple(behind) in cells else half_side - recess)
+            shift[i, a] = (face[0] - face[1]) / 2
+            half[i, a] = (face[0] + face[1]) / 2
+    return shift, half
+
+
 def canonical_shape(cells: np.ndarray) -> tuple[tuple[int, int, int], ...]:
     """Translation-invariant key of a set of cells: sorted, shifted to min corner."""
     cells = np.asarray(cells, dtype=np.int64)

@@ -1,6 +1,6 @@
 """The `rad` command line tool.
 
-    rad scene generate --grid G --sides S --seed N -o scene.json
+    rad scene generate --grid G --sides S --seed N [--clearance C] -o scene.json
     rad scene check scene.json
     rad scene render scene.json -o scene.png [--allocation allocation.json] [--robot]
     rad scene stats --grid G --sides S --scenes N
@@ -52,7 +52,7 @@ def _allocation_params(args):
 
 def cmd_scene_generate(args) -> int:
     from rad_core.generator import GeneratorConfig, generate_scene
-    config = GeneratorConfig(grid=args.grid, sides=args.sides, unit=args.unit)
+    config = GeneratorConfig(grid=args.grid, sides=args.sides, unit=args.unit, clearance=args.clearance)
     _write_text(generate_scene(config, args.seed).dumps(), args.output)
     return 0
 
@@ -121,7 +121,7 @@ def cmd_demo(args) -> int:
 
 def cmd_eval(args) -> int:
     from rad_core.evaluation import ProgressBar, evaluate, generated_scenes, get_agent, scene_dir, uses_robot
-    agent = get_agent(args.agent, args.checkpoint, verify=args.verify)
+    agent = get_agent(args.agent, args.checkpoint, verify=args.verify, budget=args.budget)
     policy = agent.make_policy()   # a bad checkpoint fails here, before any scene runs
     robot = uses_robot(agent, args.robot)
     if args.scene_dir:
@@ -140,7 +140,7 @@ def cmd_eval(args) -> int:
                       execution=args.execution, policy=policy, allocation=allocation)
     elapsed = time.perf_counter() - t0
     mode = f'robot ({args.execution})' if robot else 'no robot'
-    print(f'{args.agent} on {result["n"]} scenes ({source}), {mode}, {elapsed:.1f} s')
+    print(f'{agent.name} on {result["n"]} scenes ({source}), {mode}, {elapsed:.1f} s')
     print(f'{"R":>13} {"d":>5} {"e":>5} {"f":>5} {"f_g":>5} {"f_p":>5} {"cov":>5} {"cov_rel":>7}')
     print(f'{result["R"]:6.2f} ({result["R_std"]:.2f}) {result["d"]:5.2f} {result["e"]:5.2f} {result["f"]:5.2f} '
           f'{result["f_g"]:5.2f} {result["f_p"]:5.2f} {result["coverage"]:5.2f} {result["coverage_rel"]:7.2f}')
@@ -238,7 +238,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--grid', type=int, default=3, help='g: largest target width and height, cells')
     p.add_argument('--sides', type=int, default=2, help='1 or 2 target faces')
     p.add_argument('--seed', type=int, default=0)
-    p.add_argument('--unit', type=float, default=0.05, help='cube edge, metres')
+    p.add_argument('--unit', type=float, default=0.05, help='grid pitch (the cube edge of flush blocks), metres')
+    p.add_argument('--clearance', type=float, default=0.0,
+                   help='gap between neighbouring blocks, a fraction of the unit (0: flush; 0.2: 1 cm at 5 cm)')
     p.add_argument('-o', '--output', help='output file (default: stdout)')
     p.set_defaults(func=cmd_scene_generate)
     p = scene.add_parser('check', help='validate a scene file')
@@ -281,6 +283,9 @@ def build_parser() -> argparse.ArgumentParser:
                         'the stability check without): no failures by construction')
     p.add_argument('--checkpoint', metavar='FILE',
                    help='learned agents: a model file (runs/NAME/model.pt) to load instead of the shipped weights')
+    p.add_argument('--budget', type=int, metavar='N',
+                   help='search agents (*-mcts, *-halving): simulations (real planning-twin steps) per decision; '
+                        'default 5, the paper\'s')
     p.add_argument('--grid', type=int, default=4, help='g of generated scenes')
     p.add_argument('--sides', type=int, default=2, help='1 or 2 target faces of generated scenes')
     p.add_argument('--scenes', type=int, default=20, help='number of generated scenes')

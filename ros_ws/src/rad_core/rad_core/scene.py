@@ -3,6 +3,18 @@
 A scene is validated once, when it is built from a document (`Scene.from_dict`),
 so every other module can trust it. Validation errors name the offending field
 the way a user would find it in the JSON file, e.g. ``blocks[3].yaw``.
+
+Block geometry: by default blocks are flush, every unit cube exactly one grid cell
+(cube edge == grid pitch == ``unit``). The optional ``clearance`` (a fraction of
+the unit, 0 <= clearance < 0.5, absent = 0) makes every block smaller than its
+cells on its outer side faces (x and y): each such face is set back by
+``clearance / 2`` unit, so two neighbouring blocks leave ``clearance`` unit
+between them for the fingers, the predecessor's robot scenes (0.05 m cubes on a
+0.06 m pitch are ``unit`` 0.06, ``clearance`` 1/6; 0.2 at the default 5 cm unit
+is their 1 cm gap). A block stays one solid: faces between units of the same
+block do not move (the predecessor's filler slabs), and top and bottom faces do
+not move either, so heights and stacking are unchanged. `unit_boxes` in
+rad_core.blocks turns this into boxes for physics, rendering and Rerun.
 """
 
 from __future__ import annotations
@@ -35,6 +47,9 @@ UNIT_RANGE = (0.005, 1.0)
 MAX_COORD = 100.0
 # Fraction of a unit within which a block counts as sitting on a grid cell.
 GRID_SNAP_TOL = 0.1
+# Clearance is a fraction of the unit in [0, MAX_CLEARANCE): at half a unit a
+# block's outer faces would meet at its unit centres.
+MAX_CLEARANCE = 0.5
 
 
 @dataclass(frozen=True)
@@ -81,6 +96,8 @@ class Scene:
     block_types: Mapping[str, BlockType]
     blocks: tuple[Block, ...]
     targets: tuple[TargetRegion, ...]
+    clearance: float = 0.0
+    """Gap left between neighbouring blocks, a fraction of the unit (module docstring); 0 = flush."""
     _by_id: dict = field(default=None, repr=False, compare=False)
 
     def __post_init__(self):
@@ -104,6 +121,10 @@ class Scene:
         offsets = self.block_types[block.type].rotated(block.yaw)
         return np.asarray(block.position) + self.unit * offsets
 
+    def with_clearance(self, clearance: float) -> 'Scene':
+        """This scene with another clearance, validated as a document would be."""
+        return Scene.from_dict({**self.to_dict(), 'clearance': clearance})
+
     def type_counts(self) -> dict[str, int]:
         counts = {name: 0 for name in self.block_types}
         for b in self.blocks:
@@ -116,13 +137,16 @@ class Scene:
 
     # ---- serialisation ---------------------------------------------------
     def to_dict(self) -> dict:
-        return {
-            'format': FORMAT,
-            'unit': self.unit,
+        doc = {'format': FORMAT, 'unit': self.unit}
+        if self.clearance:
+            # Only when set: flush scenes keep the exact documents they always had.
+            doc['clearance'] = self.clearance
+        doc.update({
             'block_types': {n: [list(o) for o in t.offsets] for n, t in self.block_types.items()},
             'blocks': [b.to_dict() for b in self.blocks],
             'targets': [t.to_dict() for t in self.targets],
-        }
+        })
+        return doc
 
     def dumps(self) -> str:
         return jsonfmt.dumps(self.to_dict())
@@ -197,6 +221,16 @@ def _show(v: Any) -> str:
     return text if len(text) <= 40 else text[:37] + '...'
 
 
+def _clearance(v: Any) -> float:
+    _expect(isinstance(v, (int, float)) and not isinstance(v, bool), 'clearance',
+            f'expected a fraction of the unit as a number, got {_show(v)}')
+    _expect(math.isfinite(v), 'clearance', f'must be finite, got {v}')
+    _expect(0 <= v < MAX_CLEARANCE, 'clearance',
+            f'{v} is outside 0 <= clearance < {MAX_CLEARANCE} (a fraction of the unit: the gap between '
+            f'neighbouring blocks)')
+    return float(v)
+
+
 def _parse_block_types(doc: Any) -> dict[str, BlockType]:
     _expect(isinstance(doc, dict), 'block_types', 'expected an object mapping type names to cell lists')
     _expect(0 < len(doc) <= MAX_BLOCK_TYPES, 'block_types', f'needs 1 to {MAX_BLOCK_TYPES} types, got {len(doc)}')
@@ -256,10 +290,11 @@ def _parse_target(doc: Any, i: int) -> TargetRegion:
 
 def _parse_scene(doc: Any) -> Scene:
     _expect(isinstance(doc, dict), '', 'a scene must be a JSON object')
-    _check_keys(doc, '', {'format', 'unit', 'block_types', 'blocks', 'targets'})
+    _check_keys(doc, '', {'format', 'unit', 'block_types', 'blocks', 'targets'}, {'clearance'})
     _expect(doc['format'] == FORMAT, 'format', f'expected {FORMAT!r}, got {_show(doc["format"])}')
     unit = _number(doc['unit'], 'unit')
     _expect(UNIT_RANGE[0] <= unit <= UNIT_RANGE[1], 'unit', f'{unit} m is outside {UNIT_RANGE[0]}..{UNIT_RANGE[1]} m')
+    clearance = _clearance(doc.get('clearance', 0.0))
     types = _parse_block_types(doc['block_types'])
 
     blocks_doc = doc['blocks']
@@ -281,7 +316,7 @@ def _parse_scene(doc: Any) -> Scene:
     total = sum(t.num_cells for t in targets)
     _expect(total <= MAX_GRID_CELLS, 'targets', f'{total} grid cells exceed the limit of {MAX_GRID_CELLS}')
 
-    scene = Scene(unit, types, blocks, targets)
+    scene = Scene(unit, types, blocks, targets, clearance)
     _check_geometry(scene)
     return scene
 
@@ -312,9 +347,11 @@ def _check_geometry(scene: Scene) -> None:
     pts = np.concatenate(centres)
     owner = np.asarray(owner)
     # Axis-aligned unit cubes (yaw is a multiple of 90) overlap iff their centres
-    # are closer than one unit on every axis.
+    # are closer than one unit on every axis; units of two blocks face each other
+    # with outer faces, so with a clearance they may come that much closer sideways.
+    reach = 0.99 * u * np.array([1.0 - scene.clearance, 1.0 - scene.clearance, 1.0])
     for k in range(len(pts)):
-        close = np.all(np.abs(pts[k + 1:] - pts[k]) < 0.99 * u, axis=1) & (owner[k + 1:] != owner[k])
+        close = np.all(np.abs(pts[k + 1:] - pts[k]) < reach, axis=1) & (owner[k + 1:] != owner[k])
         if close.any():
             j = owner[k + 1:][np.argmax(close)]
             raise SceneError(f'blocks[{j}]', f'block {scene.blocks[j].id!r} overlaps block '
