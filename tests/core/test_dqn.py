@@ -228,3 +228,42 @@ def test_a_model_of_another_action_space_is_refused():
     from rad_core.evaluation import evaluate, generated_scenes
     with pytest.raises(Exception, match="trained on the 'milp' action space"):
         evaluate('dqn', generated_scenes(3, 2, 1, 0), robot=False, seed=0, policy=QPolicy.load('milp-dqn'))
+
+
+# ---- with the robot in the loop ---------------------------------------------------------
+def robot_tiny(dataset, **kw) -> TrainConfig:
+    return tiny(dataset, robot=True, total_steps=200, learning_starts=30, eval_every=100, eval_scenes=2, **kw)
+
+
+def test_robot_training_runs_checkpoints_and_resumes_as_if_never_stopped(dataset, tmp_path):
+    """A few hundred robot steps; stopped after an episode past step 80 (as SIGINT
+    does) and resumed, the weights and the step cache equal those of a straight run."""
+    cfg = robot_tiny(dataset)
+    train(cfg, tmp_path / 'straight')
+    rows = (tmp_path / 'straight' / 'progress.csv').read_text().splitlines()
+    assert 'eval_failures' in rows[0] and 'cache_hit_rate' in rows[0] and len(rows) == 3
+    stopped = Trainer(robot_tiny(dataset), tmp_path / 'stopped')
+    result = stopped.run(progress=lambda steps: setattr(stopped, '_stop', steps >= 80))
+    assert result['interrupted'] and 80 <= result['env_steps'] < 200
+    doc = torch.load(tmp_path / 'stopped' / 'checkpoint.pt', weights_only=False)
+    assert doc['step_cache']['table'], 'the checkpoint holds the step cache'
+    train(TrainConfig(), tmp_path / 'stopped', resume=True)
+    assert same_weights(weights(tmp_path / 'straight' / 'model.pt'), weights(tmp_path / 'stopped' / 'model.pt'))
+    a = torch.load(tmp_path / 'straight' / 'checkpoint.pt', weights_only=False)['step_cache']
+    b = torch.load(tmp_path / 'stopped' / 'checkpoint.pt', weights_only=False)['step_cache']
+    assert a['table'] == b['table']
+
+
+def test_init_starts_from_the_model_file_and_a_mismatch_is_refused(dataset, tmp_path):
+    train(tiny(dataset, total_steps=50, learning_starts=10), tmp_path / 'norobot')
+    init = tmp_path / 'norobot' / 'model.pt'
+    trainer = Trainer(robot_tiny(dataset, init=str(init)), tmp_path / 'fine')
+    assert same_weights(trainer.q.state_dict(), weights(init))
+    assert same_weights(trainer.target.state_dict(), weights(init))
+    # The shipped no-robot network by name (the default sizes are its sizes).
+    shipped = Trainer(TrainConfig(dataset=str(dataset), robot=True, init='milp-dqn-mixed'), tmp_path / 'shipped')
+    assert same_weights(shipped.q.state_dict(), weights(ckpt.resolve('milp-dqn-mixed')))
+    with pytest.raises(Exception, match='network sizes'):
+        Trainer(robot_tiny(dataset, init='milp-dqn-mixed'), tmp_path / 'small')
+    with pytest.raises(Exception, match="action space"):
+        Trainer(robot_tiny(dataset, method='dqn', init=str(init)), tmp_path / 'dqn')

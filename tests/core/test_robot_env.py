@@ -111,3 +111,56 @@ def test_geometric_failures_are_booked_as_in_the_mdp():
         r = renv.step(action(renv.env, 'd', 0, (0, 0, 0)))
         assert renv.last_plan is not None and renv.last_plan.success   # only the first was planned
     assert r.outcome == Outcome.INVALID_OVERLAP and r.reward == -1.0 and "overlaps placed block 'c'" in r.reason
+
+
+# ---- for training: the world as a function of the MDP state, and the step cache -------------
+MARKOV = RobotEnvConfig(execution='teleport', markov=True)
+
+
+def test_markov_puts_the_arm_home_and_unplaced_blocks_back_so_gamp_sees_only_the_state():
+    """Two orders of the same two placements leave the same world, so GAMP's plan of a
+    third action is the same (a pure function of scene, placed blocks and action)."""
+    from rad_core.sim import panda
+    blocks = [(name, 'cube', (x, -0.2, U / 2)) for name, x in (('c', 0.45), ('d', 0.55), ('e', 0.65))]
+    scene = scene_of(blocks, filled=((0, 0, 0), (1, 0, 0), (2, 0, 0)))
+    plans = []
+    with RobotAssemblyEnv(scene, MARKOV) as renv:
+        for order in (('c', 'd'), ('d', 'c')):
+            renv.reset()
+            for name in order:
+                cell = (0, 0, 0) if name == 'c' else (1, 0, 0)
+                assert renv.step(action(renv.env, name, 0, cell)).outcome == Outcome.PLACED
+            assert np.allclose(renv.world.joint_positions(), panda.HOME, atol=1e-9)
+            p, q = renv.world.block_pose('e')
+            assert np.allclose(p, (0.65, -0.2, U / 2), atol=1e-9)
+            plans.append(renv.plan(action(renv.env, 'e', 0, (2, 0, 0))))
+    a, b = plans
+    assert a.success and b.success
+    assert np.array_equal(a.trajectory.positions(), b.trajectory.positions())
+
+
+def test_the_step_cache_replays_the_verdicts_of_a_fresh_env():
+    scene = generate_scene(GeneratorConfig(grid=4), SEED)
+    placements = solve(scene).placements
+    rng = np.random.default_rng(3)
+    with RobotAssemblyEnv(scene, MARKOV) as fresh, \
+            RobotAssemblyEnv(scene, RobotEnvConfig(execution='teleport', markov=True, cache=True)) as cached:
+        guide = AllocationGuide(scene, placements)
+        walks = []
+        for _ in range(3):
+            walk, k = [], 0
+            fresh.reset()
+            cached.reset()
+            while not fresh.env.state.done:
+                acts = guide.allowed_actions(fresh.env.state)
+                # The first two episodes take the same path (the second replays it), the third its own.
+                a = acts[(k * 7 + len(walks) // 2) % len(acts)] if acts else TERMINATE
+                k += 1
+                r1, r2 = fresh.step(a), cached.step(a)
+                assert (r1.outcome, r1.reward, r1.reason) == (r2.outcome, r2.reward, r2.reason)
+                assert cached.env.state.placed.keys() == fresh.env.state.placed.keys()
+                walk.append(r1.outcome)
+            walks.append(walk)
+        assert cached.cache.hits >= len(walks[1]) - 1 and cached.cache.misses > 0
+    with pytest.raises(Exception, match='needs markov'):
+        RobotEnvConfig(execution='teleport', cache=True)

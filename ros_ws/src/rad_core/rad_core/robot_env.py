@@ -12,10 +12,25 @@ steps, inside a restoring context); blocks that would rest on nothing fail by
 geometry without any physics; and `execution='teleport'` skips simulating the
 arm (the block is put in place and physics only settles the structure), the
 predecessor's shortcut, for training; 'simulate' runs the whole trajectory.
+
+For training (`rad_core.learning.dqn` with the robot), two more (measured in
+scripts/bench_robot_training.py and docs/results/robot_training.md):
+- ``markov=True``: after each successful step the world is put where the MDP
+  state says (placed blocks on their grid poses, as always; the other blocks back
+  at their start poses, the arm at HOME), so what the next step sees is a function
+  of (scene, placed blocks) alone, as the learner's observation assumes;
+- ``cache=True`` (needs markov and teleport): the verdict of GAMP + execution +
+  physics for an action, keyed on the scene, the placed blocks and the action, is
+  remembered (`StepCache`) and replayed when the same question comes again (the
+  validation scenes every evaluation, repeated training scenes), skipping GAMP and
+  the settling. One env serves many scenes with `load`, so the PyBullet world (and
+  its robot model) is built once.
 """
 
 from __future__ import annotations
 
+import hashlib
+import json
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -25,6 +40,7 @@ from rad_core.errors import RadError
 from rad_core.gamp.planner import GampConfig, placement_pose, plan_action
 from rad_core.mdp import Action, AssemblyEnv, EnvConfig, Outcome, StepResult
 from rad_core.scene import Scene
+from rad_core.sim import panda
 from rad_core.sim.twin import Twin, TwinConfig
 from rad_core.sim.world import World
 from rad_core.transforms import yaw_of_quaternion, yaw_quaternion
@@ -58,6 +74,11 @@ class RobotEnvConfig:
         at 5 cm, the predecessor's "destroyed the structure") fails the action.
     disturbed_tol: a block on the table moving this far fails it (f_p).
     tilt_tol_deg: any block tilting more than this fails it.
+    markov: after each successful step, blocks not placed go back to their start
+        poses and the arm to HOME (placed ones are always snapped to the grid), so
+        the world before a step is a function of the MDP state.
+    cache: replay the verdict of an action already judged from the same state
+        (scene, placed blocks); needs markov and teleport execution.
     """
 
     env: EnvConfig = field(default_factory=lambda: EnvConfig(stability='none'))
@@ -69,10 +90,15 @@ class RobotEnvConfig:
     tilt_tol_deg: float = 5.0
     gamp: GampConfig = field(default_factory=GampConfig)
     twin: TwinConfig = field(default_factory=TwinConfig)
+    markov: bool = False
+    cache: bool = False
 
     def __post_init__(self):
         if self.execution not in ('simulate', 'teleport'):
             raise RadError(f"execution must be 'simulate' or 'teleport', got {self.execution!r}")
+        if self.cache and not (self.markov and self.execution == 'teleport'):
+            raise RadError('the step cache needs markov=True and teleport execution (otherwise the world '
+                           'before a step is not a function of the MDP state)')
         if self.env.stability != 'none':
             # Stability is what the twin shows after executing; no second opinion.
             object.__setattr__(self, 'env', replace(self.env, stability='none'))
@@ -87,6 +113,48 @@ class RobotSnapshot:
     last_plan: object = None
 
 
+class StepCache:
+    """Verdicts of robot steps: (scene key, placed blocks, action) -> (outcome, reason).
+
+    Valid because with `RobotEnvConfig.markov` the world before a step is a function
+    of the scene and the placed blocks (poses and arm; GAMP seeds its IK from a
+    fixed seed), so GAMP's answer and the teleport-and-settle verdict are too (up to
+    Bullet's contact cache, whose history the cache ignores: measured to change no
+    verdict, scripts/bench_robot_training.py). Plain data: a training checkpoint
+    stores it, so a resumed run replays exactly what the uninterrupted one would.
+    """
+
+    def __init__(self, max_entries: int = 200_000):
+        self.max_entries = max_entries
+        self.table: dict[tuple, tuple[str, str]] = {}
+        self.hits = self.misses = 0
+
+    def get(self, key: tuple) -> tuple[str, str] | None:
+        found = self.table.get(key)
+        if found is None:
+            self.misses += 1
+        else:
+            self.hits += 1
+        return found
+
+    def put(self, key: tuple, outcome: Outcome, reason: str) -> None:
+        if len(self.table) >= self.max_entries:
+            self.table.clear()   # rare (a long run on many scenes); simple and deterministic
+        self.table[key] = (outcome.value, reason)
+
+    def state_dict(self) -> dict:
+        return {'table': dict(self.table), 'hits': self.hits, 'misses': self.misses}
+
+    def load_state_dict(self, d: dict) -> None:
+        self.table, self.hits, self.misses = dict(d['table']), int(d['hits']), int(d['misses'])
+
+
+def scene_key(scene: Scene) -> str:
+    """A short digest of everything in a scene (blocks, poses, types, targets)."""
+    text = json.dumps(scene.to_dict(), sort_keys=True, separators=(',', ':'))
+    return hashlib.sha1(text.encode()).hexdigest()[:20]
+
+
 class RobotAssemblyEnv:
     """The MDP of `AssemblyEnv` (same actions, rewards, termination) with the robot.
 
@@ -94,13 +162,22 @@ class RobotAssemblyEnv:
     flat action index and an AllocationGuide); `world` and `twin` the simulation.
     """
 
-    def __init__(self, scene: Scene, config: RobotEnvConfig = RobotEnvConfig()):
-        self.scene = scene
+    def __init__(self, scene: Scene, config: RobotEnvConfig = RobotEnvConfig(), cache: StepCache | None = None):
         self.config = config
-        self.env = AssemblyEnv(scene, config.env)
         self.world = World(scene)
         self.twin = Twin(self.world, config.twin)
+        self.cache = (cache if cache is not None else StepCache()) if config.cache else None
+        self.load(scene)
+
+    def load(self, scene: Scene) -> None:
+        """Switch to another scene in the same PyBullet world (no new robot model);
+        call `reset` before stepping. Snapshots of the previous scene become invalid."""
+        self.scene = scene
+        self.env = AssemblyEnv(scene, self.config.env)
         self.last_plan = None
+        self._scene_key = scene_key(scene) if self.cache is not None else ''
+        self._start_poses = {b.id: (np.asarray(b.position, dtype=float), yaw_quaternion(b.yaw))
+                             for b in scene.blocks}
 
     def close(self) -> None:
         self.world.close()
@@ -158,20 +235,43 @@ class RobotAssemblyEnv:
             return env.step(action)   # the same geometric failure, booked as the MDP does
         if not support.any_support(env.grid, env.state.occupancy, cells):
             return env.fail(Outcome.INVALID_UNSTABLE, 'the block would rest on nothing and fall', cells)
+        key = None
+        if self.cache is not None:
+            key = (self._scene_key, tuple(sorted((b, tuple(c.tolist()), int(y)) for b, (c, y) in
+                                                 env.state.placed.items())), tuple(action))
+            known = self.cache.get(key)
+            if known is not None:
+                return self._replay(action, Outcome(known[0]), known[1], cells)
         block_id, position, yaw = self._target(action)
         plan = plan if plan is not None else self.plan(action)
         self.last_plan = plan
         if not plan.success:
             failure = Outcome.INVALID_GRASP if plan.failure == 'grasp' else Outcome.INVALID_PLACEMENT
-            return env.fail(failure, plan.reason, cells)
+            return self._remember(key, env.fail(failure, plan.reason, cells))
         before = {b: self.world.block_pose(b) for b in self.world.blocks}
         self._execute(plan, block_id, position, yaw)
         problem = self._judge(before, block_id, position, yaw)
         if problem is not None:
-            return env.fail(problem[0], problem[1], cells)
+            return self._remember(key, env.fail(problem[0], problem[1], cells))
         result = env.step(action)
         self._snap_placed()
         result.info['timings'] = dict(plan.timings)
+        return self._remember(key, result)
+
+    def _remember(self, key, result: StepResult) -> StepResult:
+        if key is not None:
+            self.cache.put(key, result.outcome, result.reason)
+        return result
+
+    def _replay(self, action: Action, outcome: Outcome, reason: str, cells) -> StepResult:
+        """A step whose verdict the cache knows: booked as the first time, the world
+        put where that step left it (markov: a function of the new state)."""
+        self.last_plan = None
+        if outcome.is_invalid:
+            return self.env.fail(outcome, reason, cells)
+        result = self.env.step(action)
+        self._snap_placed()
+        result.info['timings'] = {'cached': True}
         return result
 
     def _execute(self, plan, block_id: str, position, yaw) -> None:
@@ -214,6 +314,12 @@ class RobotAssemblyEnv:
             # cells are in unit order: the first is the anchor's.
             anchor = self.env.grid.centres[cells[0]]
             self.world.set_block_pose(self.scene.blocks[b].id, anchor, yaw_quaternion(yaw))
+        if self.config.markov:
+            placed = {self.scene.blocks[b].id for b in self.env.state.placed}
+            for block_id, (position, quaternion) in self._start_poses.items():
+                if block_id not in placed:
+                    self.world.set_block_pose(block_id, position, quaternion)
+            self.world.set_joint_positions(panda.HOME)
         self.world.set_block_velocities_zero()
         self.twin.sync()
 

@@ -11,7 +11,15 @@ Methods (the paper's Table I):
 - dqn:      any unplaced unit at any free cell, any rotation (`all_actions`);
 - dqn-rel:  only next to placed blocks, the first step on any target cell.
 The environment is the no-robot MDP with physical stability (PyBullet), the
-paper's reward (0.2 (dF - dE), -1 invalid, +1 complete) and gamma 0.999.
+paper's reward (0.2 (dF - dE), -1 invalid, +1 complete) and gamma 0.999; with
+`robot` it is the same MDP with the robot in the loop (`RobotAssemblyEnv`: GAMP
+plans grasp and placement, the block is teleported to its pose and physics
+settles and judges; an infeasible grasp (f_g) or placement (f_p), a disturbed
+block or an unstable structure ends the episode with -1), in one PyBullet world
+for the whole run, with the world put back to a function of the MDP state after
+each step (`RobotEnvConfig.markov`) and the verdicts cached (`StepCache`, saved in
+the checkpoint). `init` starts from a trained model (fine-tuning the no-robot
+network with the robot: scripts/train_robot.sh).
 
 Determinism: every random choice (scene sampling, exploration, replay
 sampling) comes from one numpy Generator seeded with `seed`, the network from
@@ -80,6 +88,10 @@ class TrainConfig:
     checkpoint_every_s: float = _f(120.0, 'seconds between training checkpoints (also on SIGINT and at the end)')
     device: str = _f('auto', "'auto' (cuda if present, else cpu), 'cpu', 'cuda', 'cuda:1', ...")
     threads: int = _f(1, 'torch CPU threads (1 is fastest on the 2-core machine when anything else runs)')
+    robot: bool = _f(False, 'train (and validate) with the robot in the loop: GAMP, teleport execution, physics')
+    robot_settle_s: float = _f(0.2, 'with the robot: simulated settling before a placement is judged (0.2 s '
+                                    'gave the verdicts of 0.5 s on every placement measured)')
+    init: str = _f('', "start from this model's weights: a shipped name ('milp-dqn-mixed') or a model.pt")
     dim: int = _f(64, 'network: node encoding width')
     heads: int = _f(4, 'network: attention heads')
     rounds: int = _f(3, 'network: message-passing rounds')
@@ -101,6 +113,8 @@ class TrainConfig:
             raise RadError('need 0 < gamma <= 1 and lr > 0')
         if not self.grad_clip > 0:
             raise RadError(f'grad_clip must be a positive gradient norm, got {self.grad_clip}')
+        if not self.robot_settle_s > 0:
+            raise RadError(f'robot_settle_s must be positive, got {self.robot_settle_s}')
 
     @property
     def net(self) -> NetConfig:
@@ -134,6 +148,9 @@ class Trainer:
         self.rng = np.random.default_rng(cfg.seed)
         self.q = QNetwork(cfg.net).to(self.device)
         self.target = QNetwork(cfg.net).to(self.device)
+        self.actions = METHODS[cfg.method]
+        if cfg.init:
+            self._load_init(cfg.init)
         self.target.load_state_dict(self.q.state_dict())
         self.opt = torch.optim.Adam(self.q.parameters(), lr=cfg.lr)
         self.replay = ReplayBuffer(cfg.buffer_size)
@@ -145,12 +162,27 @@ class Trainer:
         self.losses: list[float] = []
         self.best_eval = -math.inf
         self.dataset = Dataset.load(cfg.dataset)
-        self.actions = METHODS[cfg.method]
-        from rad_core.physics import PhysicsStability
-        self.stability = PhysicsStability()
+        self.stability = self.robot = self.step_cache = None
+        if cfg.robot:
+            from rad_core.robot_env import StepCache
+            self.step_cache = StepCache()
+        else:
+            from rad_core.physics import PhysicsStability
+            self.stability = PhysicsStability()
         self._validation = None
         self._writer = None
         self._stop = False
+
+    def _load_init(self, name: str) -> None:
+        path = ckpt.resolve(name)
+        doc = ckpt.read(path, ckpt.MODEL_FORMAT)
+        if doc.get('actions') != self.actions:
+            raise RadError(f'--init {name}: a model of the {doc.get("actions")!r} action space; '
+                           f'{self.cfg.method} chooses among {self.actions!r}')
+        if doc.get('net') != self.cfg.net.to_dict():
+            raise RadError(f'--init {name}: network sizes {doc.get("net")} differ from this run\'s '
+                           f'{self.cfg.net.to_dict()} (pass the same --dim/--heads/--rounds/--ff/--readout)')
+        ckpt.load_weights(self.q, doc['weights'], path)
 
     # ---- exploration and acting ------------------------------------------------------
     def epsilon(self) -> float:
@@ -168,7 +200,28 @@ class Trainer:
         return int(arg[0])
 
     def make_env(self, scene) -> AssemblyEnv:
-        return AssemblyEnv(scene, EnvConfig(stability='physics', gamma=self.cfg.gamma), stability=self.stability)
+        """The env of an episode on `scene`, reset; with the robot, the bookkeeping
+        env of the run's one RobotAssemblyEnv (step it with `act`)."""
+        if not self.cfg.robot:
+            return AssemblyEnv(scene, EnvConfig(stability='physics', gamma=self.cfg.gamma), stability=self.stability)
+        if self.robot is None:
+            from rad_core.robot_env import RobotAssemblyEnv, RobotEnvConfig
+            config = RobotEnvConfig(env=EnvConfig(stability='none', gamma=self.cfg.gamma), execution='teleport',
+                                    settle_s=self.cfg.robot_settle_s, markov=True, cache=True)
+            self.robot = RobotAssemblyEnv(scene, config, cache=self.step_cache)
+        else:
+            self.robot.load(scene)
+        self.robot.reset()
+        return self.robot.env
+
+    def act(self, decision: Decision):
+        """How an episode's step is carried out: None = the env's own step (no robot)."""
+        return self.robot.step(decision.action)
+
+    def close(self) -> None:
+        if self.robot is not None:
+            self.robot.close()
+            self.robot = None
 
     def episode(self) -> None:
         """One training episode on a random dataset scene, learning as it goes."""
@@ -206,7 +259,7 @@ class Trainer:
             if steps % self.cfg.target_update == 0:
                 self.target.load_state_dict(self.q.state_dict())
 
-        ep = run_episode(env, decide, self.rng, on_step=on_step)
+        ep = run_episode(env, decide, self.rng, self.act if self.cfg.robot else None, on_step=on_step)
         self.pos['episodes'] += 1
         self.recent = (self.recent + [(ep.ret, ep.coverage)])[-100:]
 
@@ -251,8 +304,9 @@ class Trainer:
         return self._validation
 
     def evaluate(self) -> dict:
-        """Greedy episodes on the validation scenes: mean return and coverage."""
-        rets, covs = [], []
+        """Greedy episodes on the validation scenes: mean return, coverage and the
+        fraction of episodes that ended on an invalid action (with the robot: f)."""
+        rets, covs, fails = [], [], []
         for scene, placements in self.validation():
             env = self.make_env(scene)
             space = action_space(self.actions, env, placements)
@@ -263,10 +317,14 @@ class Trainer:
                 k = self.greedy(observe(env, actions))
                 return Decision(actions[k] if k >= 0 else TERMINATE)
 
-            ep = run_episode(env, decide, np.random.default_rng(0))
+            ep = run_episode(env, decide, np.random.default_rng(0), self.act if self.cfg.robot else None)
             rets.append(ep.ret)
             covs.append(ep.coverage)
-        return {'eval_return': float(np.mean(rets)), 'eval_coverage': float(np.mean(covs))}
+            fails.append(bool(ep.outcome is not None and ep.outcome.is_invalid))
+        out = {'eval_return': float(np.mean(rets)), 'eval_coverage': float(np.mean(covs))}
+        if self.cfg.robot:
+            out['eval_failures'] = float(np.mean(fails))
+        return out
 
     # ---- logs, checkpoints -----------------------------------------------------------
     def log(self, row: dict) -> None:
@@ -296,7 +354,8 @@ class Trainer:
         ckpt.atomic_save({**model, 'format': ckpt.TRAIN_FORMAT, 'target': self.target.state_dict(),
                           'optimizer': self.opt.state_dict(), 'replay': self.replay.state_dict(),
                           'rng': self.rng.bit_generator.state, 'torch_rng': torch.get_rng_state(),
-                          'position': dict(self.pos), 'recent': self.recent, 'best_eval': self.best_eval},
+                          'position': dict(self.pos), 'recent': self.recent, 'best_eval': self.best_eval,
+                          'step_cache': self.step_cache.state_dict() if self.step_cache is not None else None},
                          self.out / 'checkpoint.pt')
         ckpt.atomic_save(model, self.out / 'model.pt')
 
@@ -311,6 +370,8 @@ class Trainer:
         self.pos = dict(doc['position'])
         self.recent = list(doc['recent'])
         self.best_eval = doc['best_eval']
+        if self.step_cache is not None and doc.get('step_cache') is not None:
+            self.step_cache.load_state_dict(doc['step_cache'])
         # Rows logged after this checkpoint (the run was killed later) would be logged again.
         progress = self.out / 'progress.csv'
         if progress.exists():
@@ -346,11 +407,13 @@ class Trainer:
             self.save()
         finally:
             signal.signal(signal.SIGINT, previous)
+            self.close()
             if self._writer is not None:
                 self._writer.close()
         if not interrupted:
             from rad_core.learning.curves import plot_progress
-            plot_progress(self.out / 'progress.csv', self.out / 'curves.png', title=f'{c.method} seed {c.seed}')
+            title = f'{c.method} seed {c.seed}' + (' (robot)' if c.robot else '')
+            plot_progress(self.out / 'progress.csv', self.out / 'curves.png', title=title)
         return {'interrupted': interrupted, **self.pos}
 
     def _on_sigint(self, signum, frame) -> None:
@@ -371,7 +434,9 @@ class Trainer:
                 'train_return': float(recent[:, 0].mean()), 'train_coverage': float(recent[:, 1].mean()),
                 **ev, 'env_steps_per_s': (self.pos['env_steps'] - s0) / dt,
                 'grad_steps_per_s': (self.pos['grad_steps'] - g0) / dt, 'wall_s': round(self.pos['wall_s'], 1),
-                'peak_rss_mb': resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}
+                'peak_rss_mb': resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+                **({'cache_hit_rate': self.step_cache.hits / max(1, self.step_cache.hits + self.step_cache.misses)}
+                   if self.step_cache is not None else {})}
 
 
 def train(cfg: TrainConfig, out: str | Path, resume: bool = False, total_steps: int | None = None,
