@@ -88,6 +88,8 @@ class StabilityCheck(Protocol):
 
     placed: world unit centres of every block already in the structure;
     new: world unit centres of the block being placed. Returns (stable, reason).
+    A scene with a clearance (`rad_core.scene`) passes it as the keyword
+    ``clearance`` (a fraction of the unit); flush scenes call with three arguments.
     """
 
     def __call__(self, unit: float, placed: list[np.ndarray], new: np.ndarray) -> tuple[bool, str]: ...
@@ -258,7 +260,8 @@ class AssemblyEnv:
         if key not in self._stability_cache:
             centres = self.grid.centres
             placed = [centres[cs] for cs, _ in self.state.placed.values()]
-            self._stability_cache[key] = self.stability(self.scene.unit, placed, centres[cells])
+            extra = {'clearance': self.scene.clearance} if self.scene.clearance else {}
+            self._stability_cache[key] = self.stability(self.scene.unit, placed, centres[cells], **extra)
         return self._stability_cache[key]
 
     def fail(self, outcome: Outcome, reason: str, cells: np.ndarray | None = None) -> StepResult:

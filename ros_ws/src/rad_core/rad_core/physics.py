@@ -39,6 +39,10 @@ Choices, each measured (numbers at the default 5 cm unit; see
   of mass exactly over an edge lies ``side_gap`` beyond the narrowed support
   and tips (past 3 deg after about 0.3 s): counted as unstable, as a real
   placement that precise would be.
+- Clearance. A scene's ``clearance`` (`rad_core.scene`) sets the outer side
+  faces of every block back by half of it, on top of the hair; inner faces,
+  tops and bottoms stay, so a block is one solid and stacks as before. The
+  stability check gets it per call (the MDP passes its scene's).
 - Solver. With PyBullet's default 50 iterations and no friction anchors, a
   load on one end of a balanced seesaw creeps at 2-3 mm/s; with 10 the seesaw
   collapses. 100 iterations with friction anchors bring it to rest (under
@@ -61,6 +65,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
+from rad_core.blocks import unit_boxes
 from rad_core.errors import RadError
 from rad_core.transforms import matrix_from_quaternion, quaternion_from_matrix, rotation_angle_deg
 
@@ -184,34 +189,46 @@ class BlockShape:
 
 
 def block_shape(p, client: int, offsets: np.ndarray, edge: float, config: PhysicsConfig,
-                frame: str = 'principal', visual_half: float | None = None) -> BlockShape:
+                frame: str = 'principal', visual_half: float | None = None,
+                clearance: float = 0.0) -> BlockShape:
     """Shapes and mass properties of a block of cubes at integer `offsets` with this edge (m).
 
     Collision boxes are a hair narrower (``config.side_gap``) and taller (``config.overlap``)
     than a cube, the mass is ``config.cube_mass`` per cube, the inertia the exact polycube's (see
-    the module docstring). visual_half: half edge of visual boxes at the cube centres (anchor
-    frame only); None for no visual shape. Shapes live in `client` and can be shared by bodies.
+    the module docstring). clearance: the scene's (a fraction of the edge, `rad_core.scene`):
+    the block's outer side faces are set back by half of it, its inner faces, top and bottom
+    stay (`rad_core.blocks.unit_boxes`), and visual boxes get the same set-back; the mass
+    properties stay the full cubes' (the predecessor's filled blocks are that much lighter,
+    which no verdict here depends on). visual_half: half edge of visual boxes at the cube
+    centres (anchor frame only); None for no visual shape. Shapes live in `client` and can be
+    shared by bodies.
     """
     if frame not in ('principal', 'anchor'):
         raise RadError(f"block_shape: frame must be 'principal' or 'anchor', got {frame!r}")
     offsets = np.asarray(offsets)
     n = len(offsets)
     com, moments, axes = principal_frame(offsets, edge, config.cube_mass)
+    if not (math.isfinite(clearance) and 0 <= clearance < 0.5):
+        raise RadError(f'block_shape: clearance must be in [0, 0.5) of the edge, got {clearance!r}')
     side, height = edge / 2 - config.side_gap * edge, edge / 2 + config.overlap * edge
-    boxes = {'halfExtents': [[side, side, height]] * n}
+    shift, half = unit_boxes(offsets, side, height, clearance * edge / 2)
+    centres = offsets * edge + shift
+    boxes = {'halfExtents': half.tolist()}
     if frame == 'principal':
         # Boxes in the principal frame, turned back so they are axis-aligned in the world.
-        boxes.update(collisionFramePositions=((offsets * edge - com) @ axes).tolist(),
+        boxes.update(collisionFramePositions=((centres - com) @ axes).tolist(),
                      collisionFrameOrientations=[quaternion_from_matrix(axes.T)] * n)
     else:
-        boxes.update(collisionFramePositions=(offsets * edge).tolist())
+        boxes.update(collisionFramePositions=centres.tolist())
     collision = p.createCollisionShapeArray([p.GEOM_BOX] * n, **boxes, physicsClientId=client)
     visual = -1
     if visual_half is not None:
         if frame != 'anchor':
             raise RadError("block_shape: visual boxes are made in the 'anchor' frame only")
-        visual = p.createVisualShapeArray([p.GEOM_BOX] * n, halfExtents=[[visual_half] * 3] * n,
-                                          visualFramePositions=(offsets * edge).tolist(), physicsClientId=client)
+        vshift, vhalf = unit_boxes(offsets, visual_half, visual_half, clearance * edge / 2)
+        visual = p.createVisualShapeArray([p.GEOM_BOX] * n, halfExtents=vhalf.tolist(),
+                                          visualFramePositions=(offsets * edge + vshift).tolist(),
+                                          physicsClientId=client)
     return BlockShape(frame, collision, visual, config.cube_mass * n, moments.tolist(), com,
                       quaternion_from_matrix(axes))
 
@@ -240,10 +257,11 @@ def add_block_body(p, client: int, shape: BlockShape, position, orientation, con
 class PhysicsStability:
     """The MDP's `StabilityCheck`, backed by PyBullet (see the module docstring).
 
-    ``check(unit, placed, new)`` returns (True, '') when the structure stands,
-    else (False, reason), e.g. 'new block tipped 4 deg' or 'placed block 1 moved
-    12 mm (structure destroyed)', where 1 indexes `placed`. Not thread-safe:
-    give each thread or process its own instance.
+    ``check(unit, placed, new, clearance=0.0)`` returns (True, '') when the
+    structure stands, else (False, reason), e.g. 'new block tipped 4 deg' or
+    'placed block 1 moved 12 mm (structure destroyed)', where 1 indexes `placed`.
+    clearance: the scene's, a fraction of the unit (see `block_shape`). Not
+    thread-safe: give each thread or process its own instance.
     """
 
     def __init__(self, config: PhysicsConfig = PhysicsConfig()):
@@ -284,9 +302,12 @@ class PhysicsStability:
         p.changeDynamics(ground, -1, lateralFriction=cfg.lateral_friction, frictionAnchor=1, physicsClientId=cid)
 
     # ---- the check -------------------------------------------------------
-    def __call__(self, unit: float, placed: list[np.ndarray], new: np.ndarray) -> tuple[bool, str]:
+    def __call__(self, unit: float, placed: list[np.ndarray], new: np.ndarray,
+                 clearance: float = 0.0) -> tuple[bool, str]:
         if not (math.isfinite(unit) and unit > 0):
             raise RadError(f'unit must be a positive length, got {unit!r}')
+        if not (math.isfinite(clearance) and 0 <= clearance < 0.5):
+            raise RadError(f'clearance must be in [0, 0.5) of a unit, got {clearance!r}')
         blocks = [np.asarray(b, dtype=float).reshape(-1, 3) for b in placed]
         blocks.append(np.asarray(new, dtype=float).reshape(-1, 3))
         if any(len(b) == 0 for b in blocks):
@@ -296,25 +317,26 @@ class PhysicsStability:
         cubes = [b * (self.config.sim_unit / unit) for b in blocks]
         try:
             for c in cubes:
-                self._bodies.append(self._add_body(c))
+                self._bodies.append(self._add_body(c, clearance))
             return self._simulate(cubes, unit)
         finally:
             for body in self._bodies:
                 self._p.removeBody(body, physicsClientId=self._client)
             self._bodies.clear()
 
-    def _shape(self, offsets: np.ndarray) -> BlockShape:
-        key = tuple(map(tuple, offsets.tolist()))
+    def _shape(self, offsets: np.ndarray, clearance: float) -> BlockShape:
+        key = (tuple(map(tuple, offsets.tolist())), clearance)
         shape = self._shapes.get(key)
         if shape is None:
-            shape = block_shape(self._p, self._client, offsets, self.config.sim_unit, self.config)
+            shape = block_shape(self._p, self._client, offsets, self.config.sim_unit, self.config,
+                                clearance=clearance)
             self._shapes[key] = shape
         return shape
 
-    def _add_body(self, cubes: np.ndarray) -> int:
+    def _add_body(self, cubes: np.ndarray, clearance: float) -> int:
         """A block whose unit cubes have these world centres (simulation scale)."""
         cfg = self.config
-        shape = self._shape(np.round((cubes - cubes[0]) / cfg.sim_unit).astype(np.int64))
+        shape = self._shape(np.round((cubes - cubes[0]) / cfg.sim_unit).astype(np.int64), clearance)
         return add_block_body(self._p, self._client, shape, (cubes[0] + shape.com).tolist(), shape.axes, cfg,
                               maximal_coordinates=True, damping=0.0)
 

@@ -5,7 +5,8 @@ What is drawn, in the scene's world frame (table top at z = 0):
 - the table, a flat slab under everything;
 - every block as unit cubes in its type's colour (`rad_core.colours`), at its scene
   pose, or at its grid cells when `occupancy` (an MDP state's per-cell block
-  index, -1 for free) says it has been placed;
+  index, -1 for free) says it has been placed; with the scene's ``clearance``
+  the block's outer side faces are set back by half of it (`rad_core.scene`);
 - every target region cell: a small pink cube on target cells, a smaller green
   one on the region's other cells;
 - optionally an allocation's placements as shrunk cubes in a paler shade of
@@ -25,6 +26,7 @@ from typing import Iterable
 
 import numpy as np
 
+from rad_core.blocks import unit_boxes
 from rad_core.colours import GREEN, PINK, TABLE, type_colour
 from rad_core.errors import RadError
 from rad_core.grid import Grid
@@ -137,8 +139,19 @@ def _placements(allocation) -> list:
     return list(placements)
 
 
-def _scene_boxes(scene: Scene, placements: list, occupancy) -> list[tuple[np.ndarray, float, tuple]]:
-    """(centre, half edge, rgb) of every cube to draw."""
+def block_cubes(centres: np.ndarray, unit: float, clearance: float) -> tuple[np.ndarray, np.ndarray]:
+    """(box centres (n, 3), half extents (n, 3)) drawn for one block's unit cubes at these
+    world centres: cubes of edge BLOCK_SIZE, their outer side faces set back by
+    half the clearance (a fraction of the unit)."""
+    centres = np.asarray(centres, dtype=float).reshape(-1, 3)
+    offsets = np.round((centres - centres[0]) / unit).astype(np.int64)
+    half = unit * BLOCK_SIZE / 2
+    shift, halves = unit_boxes(offsets, half, half, clearance * unit / 2)
+    return centres + shift, halves
+
+
+def _scene_boxes(scene: Scene, placements: list, occupancy) -> list[tuple[np.ndarray, float | tuple, tuple]]:
+    """(centre, half edge or half extents (x, y, z), rgb) of every box to draw."""
     u = scene.unit
     boxes = []
     on_grid: dict[int, np.ndarray] = {}
@@ -156,7 +169,10 @@ def _scene_boxes(scene: Scene, placements: list, occupancy) -> list[tuple[np.nda
         if centres is None:
             centres = scene.unit_positions(block)
         colour = type_colour(block.type)
-        boxes.extend((c, u * BLOCK_SIZE / 2, colour) for c in centres)
+        if scene.clearance:
+            boxes.extend((c, tuple(h.tolist()), colour) for c, h in zip(*block_cubes(centres, u, scene.clearance)))
+        else:
+            boxes.extend((c, u * BLOCK_SIZE / 2, colour) for c in centres)
     for p in placements:
         region = scene.target(p.target)
         colour = tuple(0.65 * v + 0.35 for v in type_colour(p.type))   # paler: planned, not built
@@ -181,7 +197,8 @@ def _draw(boxes, lo, hi, unit: float, camera: Camera, width: int, height: int, r
         for centre, half, colour in boxes:
             groups.setdefault((half, colour), []).append([float(v) for v in centre])
         for (half, colour), centres in groups.items():
-            shape = p.createVisualShape(p.GEOM_BOX, halfExtents=[half] * 3, rgbaColor=[*colour, 1.0],
+            extents = list(half) if isinstance(half, tuple) else [half] * 3
+            shape = p.createVisualShape(p.GEOM_BOX, halfExtents=extents, rgbaColor=[*colour, 1.0],
                                         physicsClientId=cid)
             p.createMultiBody(baseMass=0, baseVisualShapeIndex=shape, batchPositions=centres, physicsClientId=cid)
         # The table: a slab whose top is z = 0, a unit wider than everything on it.

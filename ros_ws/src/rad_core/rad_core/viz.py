@@ -37,6 +37,7 @@ import numpy as np
 
 from rad_core.allocation.placements import Placement
 from rad_core.allocation.result import AllocationResult
+from rad_core.blocks import unit_boxes
 from rad_core.colours import GREEN, PINK, TABLE, type_colour
 from rad_core.errors import RadError
 from rad_core.render import BLOCK_SIZE, OTHER_CELL_SIZE, PLAN_SIZE, TARGET_SIZE
@@ -83,10 +84,16 @@ def block_shape(scene: Scene, type_name: str) -> BoxSet:
     """A block's unit cubes in its own frame (anchor unit at the origin, yaw 0), in its colour.
 
     Logged once per block; motion capture then moves the block's frame, so a
-    tilted or knocked-over block is drawn as it is, not snapped to the grid.
+    tilted or knocked-over block is drawn as it is, not snapped to the grid. With the
+    scene's clearance the block's outer side faces are set back by half of it.
     """
     offsets = np.asarray(scene.block_types[type_name].offsets, dtype=float)
-    return BoxSet.of(scene.unit * offsets, scene.unit * BLOCK_SIZE / 2, rgba8(type_colour(type_name)))
+    boxes = BoxSet.of(scene.unit * offsets, scene.unit * BLOCK_SIZE / 2, rgba8(type_colour(type_name)))
+    if not scene.clearance:
+        return boxes
+    half = scene.unit * BLOCK_SIZE / 2
+    shift, halves = unit_boxes(offsets, half, half, scene.clearance * scene.unit / 2)
+    return BoxSet(boxes.centers + shift, halves, boxes.colors)
 
 
 def block_boxes(scene: Scene, poses: Mapping[str, tuple] | None = None) -> dict[str, BoxSet]:
@@ -97,8 +104,13 @@ def block_boxes(scene: Scene, poses: Mapping[str, tuple] | None = None) -> dict[
     for block in scene.blocks:
         position, quaternion = (poses or {}).get(block.id, (block.position, yaw_quaternion(block.yaw)))
         local = block_shape(scene, block.type)
-        centers = np.asarray(position, dtype=float) + local.centers @ matrix_from_quaternion(quaternion).T
-        out[block.id] = BoxSet(centers, local.half_sizes, local.colors)
+        turn = matrix_from_quaternion(quaternion)
+        centers = np.asarray(position, dtype=float) + local.centers @ turn.T
+        half_sizes = local.half_sizes
+        if scene.clearance:
+            # A quarter turn swaps a box's x and y sizes (they differ with a clearance).
+            half_sizes = half_sizes @ np.round(np.abs(turn)).T
+        out[block.id] = BoxSet(centers, half_sizes, local.colors)
     return out
 
 

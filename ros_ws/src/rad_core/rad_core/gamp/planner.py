@@ -62,7 +62,8 @@ class GampConfig:
     """Vertical moves get an IK waypoint at least every this many metres, so they stay straight."""
     finger_clearance: float = 0.01
     """Open fingers stand this far off the unit's faces (not the full 0.08 m opening:
-    neighbours on the table are only a few cm away)."""
+    neighbours on the table are only a few cm away). The faces are the block's own:
+    with a scene clearance, the grasped unit is that much narrower."""
     grip_squeeze: float = 0.001
     """Closed fingers are commanded this far inside the unit's faces, so a position-
     controlled gripper presses on the block."""
@@ -154,15 +155,17 @@ def plan_action(world: World, block_id: str, position, yaw_deg: float, start=Non
     btype = scene.block_types[scene.block(block_id).type]
     clock = _Clock()
     rng = np.random.default_rng(config.seed)
-    grasps = block_grasps(btype, unit)
+    # The fingers close on a unit's outer faces, which a scene's clearance sets back.
+    width = unit * (1.0 - scene.clearance)
+    grasps = block_grasps(btype, width)
     result = GampResult(False)
     if not grasps:
-        why = (f'{unit * 1000:.0f} mm units are wider than the hand takes ({MAX_GRASP_WIDTH * 1000:.0f} mm)'
-               if unit > MAX_GRASP_WIDTH else f'no unit of a {btype.name} is free from above')
+        why = (f'{width * 1000:.0f} mm units are wider than the hand takes ({MAX_GRASP_WIDTH * 1000:.0f} mm)'
+               if width > MAX_GRASP_WIDTH else f'no unit of a {btype.name} is free from above')
         return _finish(result, 'grasp', f'grasp: block {block_id} has no top-down grasp: {why}', clock, t0)
 
-    open_f = min(panda.FINGER_OPEN, unit / 2 + config.finger_clearance)
-    closed_f = max(0.0, unit / 2 - config.grip_squeeze)
+    open_f = min(panda.FINGER_OPEN, width / 2 + config.finger_clearance)
+    closed_f = max(0.0, width / 2 - config.grip_squeeze)
     pick_failures, place_failures = [], []
     with world.preserved():
         start = world.joint_positions() if start is None else _full(start)

@@ -17,7 +17,10 @@ tolerances, and refuses what it cannot express:
   other blocks, so their anchor is at u/2 + k u);
 - x/y to the target grid when the block is inside a target region, so a placed
   block registers exactly on its cells and the grid, the allocation and the MDP
-  see it as placed. Blocks elsewhere keep their measured x/y, rounded to the
+  see it as placed. A scene with a clearance (`rad_core.scene`) gives a block
+  that much room in its cell (it can rest up to clearance / 2 unit off the cell
+  centre and touch nothing), so the x/y tolerance there grows by clearance / 2
+  (at most 0.49 unit, where snapping would become ambiguous). Blocks elsewhere keep their measured x/y, rounded to the
   config's ``resolution``: the table is not a lattice, and snapping there would
   invent collisions or gaps.
 
@@ -62,9 +65,10 @@ class RegistrationConfig:
         rejected: an unknown body in the capture volume is a set-up error worth
         seeing, not something to ignore silently.
     position_tol: how far (fraction of a unit) a pose may be off the height
-        lattice, or off the grid inside a target region. 0.25 unit (12.5 mm at
-        5 cm) is well above tracker noise (< 1 mm) and placement error of a
-        few mm, and well below half a unit, where snapping would become ambiguous.
+        lattice, or off the grid inside a target region (plus half the scene's
+        clearance there). 0.25 unit (12.5 mm at 5 cm) is well above tracker noise
+        (< 1 mm) and placement error of a few mm, and well below half a unit,
+        where snapping would become ambiguous.
     tilt_tol_deg: the most a block may be tilted (roll/pitch) and still count as
         lying flat. Blocks are rigid and rest on flat faces; 10 degrees allows
         for tracker noise and a block leaning on a slightly uneven neighbour.
@@ -198,13 +202,22 @@ def _snap(body: RigidBodyPose, template: Scene, block_type, config: Registration
         origin = np.asarray(region.origin)
         idx = (np.array(out[:2]) - origin[:2]) / u
         off = np.abs(idx - np.round(idx))
-        if off.max() > config.position_tol:
+        tol = grid_tolerance(config, template)
+        if off.max() > tol:
             raise RadError(f'rigid body {name!r} is in target region {region.name!r} but '
                            f'{off.max() * u * 1000:.1f} mm off its grid '
-                           f'(limit {config.position_tol * u * 1000:.1f} mm)')
+                           f'(limit {tol * u * 1000:.1f} mm)')
         for a in range(2):
             out[a] = round(float(origin[a] + u * np.round(idx[a])), _DECIMALS)
     return out, snapped_yaw
+
+
+def grid_tolerance(config: RegistrationConfig, scene: Scene) -> float:
+    """How far (fraction of a unit) a block in a target region may be off its cell centre
+    in x/y and still register to it: position_tol, plus the room a clearance leaves."""
+    if not scene.clearance:
+        return config.position_tol
+    return min(config.position_tol + scene.clearance / 2, 0.49)
 
 
 def _quantise(x: float, step: float) -> float:

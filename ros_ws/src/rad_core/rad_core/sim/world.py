@@ -18,7 +18,9 @@ Frames and conventions:
   taller (the same choice and reasons as `rad_core.physics`, whose
   `block_shape` and `add_block_body` build the block bodies of both):
   side-by-side neighbours start apart, stacked layers start in contact instead
-  of falling into each other.
+  of falling into each other. A scene's ``clearance`` sets the blocks' outer
+  side faces back by half of it (collision and visual boxes alike, see
+  `rad_core.scene`), so GAMP's probes and the twin see the gaps.
 
 Cost (measured, see tests/core/test_world.py): `preserved()` snapshots and
 restores by hand what can change (joint states, block poses and velocities,
@@ -162,12 +164,13 @@ class World:
         p.setCollisionFilterPair(self.robot, self.table, self.link_index['panda_link1'], -1, 0,
                                  physicsClientId=cid)
 
-    def _shape(self, type_name: str, offsets: np.ndarray, unit: float) -> tuple[BlockShape, list[float]]:
-        key = (type_name, tuple(map(tuple, offsets.tolist())), unit)
+    def _shape(self, type_name: str, offsets: np.ndarray, unit: float,
+               clearance: float = 0.0) -> tuple[BlockShape, list[float]]:
+        key = (type_name, tuple(map(tuple, offsets.tolist())), unit, clearance)
         shape = self._shapes.get(key)
         if shape is None:
             shape = (block_shape(self._p, self.client, offsets, unit, self.config.physics, frame='anchor',
-                                 visual_half=unit / 2 * 0.98),
+                                 visual_half=unit / 2 * 0.98, clearance=clearance),
                      [*type_colour(type_name), 1.0])
             self._shapes[key] = shape
         return shape
@@ -185,7 +188,7 @@ class World:
         self._fit_table(scene)
         for block in scene.blocks:
             offsets = np.asarray(scene.block_types[block.type].offsets, dtype=float)
-            shape, rgba = self._shape(block.type, offsets, scene.unit)
+            shape, rgba = self._shape(block.type, offsets, scene.unit, scene.clearance)
             body = add_block_body(p, cid, shape, list(block.position), yaw_quaternion(block.yaw),
                                   self.config.physics)
             p.changeVisualShape(body, -1, rgbaColor=rgba, physicsClientId=cid)
