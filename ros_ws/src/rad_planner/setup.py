@@ -18,12 +18,13 @@ setup(
     zip_safe=True,
     maintainer='rad developers',
     maintainer_email='dev@rad.local',
-    description='rad planning nodes: allocation service.',
+    description='rad planning nodes: allocation, sequencer, assembly planning and execution.',
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
             'allocation_node = rad_planner.allocation_node:main',
             'assembly_node = rad_planner.assembly_node:main',
+            'sequencer_node = rad_planner.sequencer_node:main',
             'graph = rad_planner.graph:main',
             'demo = rad_planner.demo:main',
         ],

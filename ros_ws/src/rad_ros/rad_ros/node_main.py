@@ -6,6 +6,10 @@ interrupt lands inside rclpy's C++ code (say, while a message is converted),
 pybind11 turns it into another exception (seen: a RuntimeError from
 take_message); once a stop has been asked for, such an error is part of the
 shutdown, not a crash, and the node still exits 0.
+
+A node that cannot start for a reason a user can fix (a RadError from its
+constructor: a bad parameter, a checkpoint that does not load) says so in one line
+on stderr and exits 1, without a traceback.
 """
 
 from __future__ import annotations
@@ -13,9 +17,12 @@ from __future__ import annotations
 import signal
 import sys
 import threading
+from pathlib import Path
 
 import rclpy
 from rclpy.executors import ExternalShutdownException
+
+from rad_core.errors import RadError
 
 
 def run_node(node_factory, args=None, executor_factory=None) -> int:
@@ -30,7 +37,11 @@ def run_node(node_factory, args=None, executor_factory=None) -> int:
     rclpy.init(args=args)
     node = None
     try:
-        node = node_factory()
+        try:
+            node = node_factory()
+        except RadError as e:
+            print(f'{Path(sys.argv[0]).name}: cannot start: {e}', file=sys.stderr, flush=True)
+            return 1
         if executor_factory is None:
             rclpy.spin(node)
         else:

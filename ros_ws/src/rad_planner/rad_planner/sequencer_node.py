@@ -1,0 +1,69 @@
+"""/sequence: the learned sequencer of the node graph (rad_core.sequencing.sequencer).
+
+Loads the policy once at start-up (a Q-network, or HEUR) and, for search, keeps its
+own in-process planning twin; for each request ranks the allocation's next actions
+from the given scene state, best first. /plan_assembly asks it at every step and
+takes the first action GAMP finds feasible, so the policy never commands anything.
+
+  srv  sequence  rad_msgs/Sequence
+
+Parameters: policy (milp-dqn-mcts, milp-dqn-halving, milp-dqn, heur), checkpoint
+('' = the shipped network), budget (search simulations per decision), seed.
+A bad policy or checkpoint: the node does not start (one line on stderr, exit 1).
+"""
+
+from __future__ import annotations
+
+import time
+
+from rclpy.node import Node
+
+from rad_core.errors import RadError
+from rad_core.sequencing.sequencer import Sequencer, SequencerConfig
+from rad_msgs.srv import Sequence
+from rad_ros.node_main import main_for
+from rad_ros.sequencer_msgs import fill_sequence_response, sequence_inputs
+
+
+class SequencerNode(Node):
+    def __init__(self):
+        super().__init__('sequencer')
+        for name, value in (('policy', 'milp-dqn-mcts'), ('checkpoint', ''), ('budget', 5), ('seed', 0)):
+            self.declare_parameter(name, value)
+        config = SequencerConfig(policy=str(self.param('policy')), checkpoint=str(self.param('checkpoint')),
+                                 budget=int(self.param('budget')), seed=int(self.param('seed')))
+        t0 = time.perf_counter()
+        self.sequencer = Sequencer(config)   # RadError (a bad checkpoint names its file): the node does not start
+        self.policy = config.policy if config.policy == 'heur' else f'{config.policy} ({self.sequencer.source})'
+        self.create_service(Sequence, 'sequence', self.sequence_callback)
+        self.get_logger().info(f'sequencer ready: {self.policy}, budget {config.budget}, '
+                               f'loaded in {time.perf_counter() - t0:.1f} s')
+
+    def param(self, name):
+        return self.get_parameter(name).value
+
+    def destroy_node(self):
+        self.sequencer.close()
+        super().destroy_node()
+
+    def sequence_callback(self, request, response):
+        response.policy = self.policy
+        try:
+            scene, placements, start, max_actions = sequence_inputs(request)
+            ranking = self.sequencer.rank(scene, placements, start=start, max_actions=max_actions)
+        except RadError as e:
+            response.success, response.reason = False, str(e)
+            self.get_logger().warning(f'sequence refused: {e}')
+            return response
+        except Exception as e:  # noqa: BLE001 - a service must answer, never die
+            self.get_logger().error(f'sequence failed: {type(e).__name__}: {e}')
+            response.success, response.reason = False, f'internal error: {e}'
+            return response
+        fill_sequence_response(response, ranking, self.policy)
+        best = f'best {ranking.actions[0].block_id}' if ranking.actions else f'stop: {ranking.reason}'
+        self.get_logger().info(f'ranked {len(ranking.actions)} actions ({best}) in '
+                               f'{ranking.timings.get("sequencing", 0.0) * 1e3:.0f} ms')
+        return response
+
+
+main = main_for(SequencerNode)
