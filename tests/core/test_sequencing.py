@@ -71,3 +71,43 @@ def test_failed_allocation_and_time_limit_are_reasons(motion):
     assert not plan.success and plan.reason == 'allocation failed: UNKNOWN'
     plan = plan_assembly(scene, solve, motion, HeurPolicy(), time_limit_s=0.0)
     assert not plan.success and 'time limit' in plan.reason
+
+
+def test_a_plan_can_ask_a_ranking_callable_as_the_sequencer_node_is_asked(motion):
+    from rad_core.sequencing.sequencer import Sequencer, SequencerConfig
+    scene = generate_scene(GeneratorConfig(grid=3), 1)
+    sequencer = Sequencer(SequencerConfig(policy='heur', seed=1))
+    asked = []
+
+    def rank(state, placements, start):
+        asked.append((state, start))
+        return sequencer.rank(state, placements, start)
+    plan = plan_assembly(scene, solve, motion, rank)
+    assert plan.success, plan.reason
+    assert plan.predicted_coverage == 1.0 and len(plan.steps) == len(plan.allocation.placements)
+    assert len(asked) == len(plan.steps) and asked[0] == (scene, None)
+    # Each question carries the planning copy: the blocks placed so far at their poses, the arm where it ended.
+    placed = {b.id: b for b in asked[1][0].blocks}[plan.steps[0].block]
+    assert np.allclose(placed.position, plan.steps[0].position)
+    assert np.allclose(asked[1][1], plan.steps[0].trajectory['points'][-1]['positions'])
+    assert plan.timings['sequencing'] > 0 and plan.timings['sequencer_call'] >= plan.timings['sequencing']
+
+
+def test_a_ranking_outside_the_allocation_is_never_taken_and_a_failing_sequencer_propagates(motion):
+    from rad_core.errors import RadError
+    from rad_core.gamp.action import SceneAction
+    from rad_core.sequencing.sequencer import Ranking
+    scene = generate_scene(GeneratorConfig(grid=3), 1)
+    wrong = Ranking([SceneAction(scene.blocks[0].id, 0, scene.targets[0].name, (2, 0, 2), 0),
+                     SceneAction('nosuch', 0, scene.targets[0].name, (0, 0, 0), 0)], [1.0, 0.5], False, '', {})
+    plan = plan_assembly(scene, solve, motion, lambda *_: wrong)
+    assert not plan.success and plan.steps == []
+    assert 'the sequencer proposed 2 actions, none of them among the' in plan.reason
+    stop = Ranking([], [], True, '3 allocated poses left, stopping is valued above all of them', {})
+    plan = plan_assembly(scene, solve, motion, lambda *_: stop)
+    assert not plan.success and plan.reason == stop.reason
+
+    def down(*_):
+        raise RadError('service sequence is not available')
+    with pytest.raises(RadError, match='service sequence is not available'):
+        plan_assembly(scene, solve, motion, down)

@@ -4,24 +4,29 @@
 allocation and the motion planner as callables, so the /plan_assembly node passes
 DDS service clients and tests or `rad eval` pass the in-process functions.
 
-Each step: the policy ranks the allocation's allowed actions; the best one whose
-motion GAMP finds feasible from the current state is taken (so a plan never
+Each step: the sequencer ranks the allocation's allowed actions; the best one
+whose motion GAMP finds feasible from the current state is taken (so a plan never
 commands an action that fails in the planning copy); the planning copy of the
 scene then has that block at its allocated pose, and the next step starts from
 the last trajectory's final joints.
+
+The sequencer is either a `Policy` scoring the MDP state in-process, or a `Rank`
+callable asked with the planning copy's scene, the allocation and the start joints
+(`Sequencer(...).rank` in-process, the sequencer node's service over DDS). A
+ranked action outside the allocation's allowed actions is never taken.
 """
 
 from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from typing import Callable
+from typing import Any, Callable
 
 import numpy as np
 
 from rad_core.allocation.result import AllocationResult
 from rad_core.gamp.action import SceneAction
-from rad_core.mdp import AssemblyEnv, EnvConfig
+from rad_core.mdp import Action, AssemblyEnv, EnvConfig
 from rad_core.scene import Block, Scene
 from rad_core.sequencing.actions import AllocationActions
 from rad_core.sequencing.episode import Decision, run_episode, stop
@@ -97,6 +102,8 @@ class AssemblyPlan:
 
 Allocate = Callable[[Scene], AllocationResult]
 PlanMotion = Callable[[Scene, SceneAction, 'np.ndarray | None'], MotionPlan]
+# (scene state, allocation placements, start joints or None) -> a sequencing.sequencer.Ranking
+Rank = Callable[[Scene, list, 'np.ndarray | None'], Any]
 
 
 def moved(scene: Scene, block_id: str, position, yaw: int) -> Scene:
@@ -106,8 +113,10 @@ def moved(scene: Scene, block_id: str, position, yaw: int) -> Scene:
     return Scene.from_dict(Scene(scene.unit, scene.block_types, blocks, scene.targets).to_dict())
 
 
-def plan_assembly(scene: Scene, allocate: Allocate, plan_motion: PlanMotion, policy: Policy, seed: int = 0,
-                  start=None, time_limit_s: float = 60.0) -> AssemblyPlan:
+def plan_assembly(scene: Scene, allocate: Allocate, plan_motion: PlanMotion, sequencer: Policy | Rank,
+                  seed: int = 0, start=None, time_limit_s: float = 60.0) -> AssemblyPlan:
+    """sequencer: a Policy (in-process scores of the MDP state) or a Rank callable.
+    A Rank callable's RadError (say, the sequencer node is down) propagates."""
     t0 = time.perf_counter()
     timings = {'allocation': 0.0, 'sequencing': 0.0, 'motion': 0.0}
     allocation = allocate(scene)
@@ -121,16 +130,35 @@ def plan_assembly(scene: Scene, allocate: Allocate, plan_motion: PlanMotion, pol
     guide = allowed_actions.guide
     world = {'scene': scene, 'q': start}   # the planning copy: scene and arm joints
 
+    def rank_by_policy(env: AssemblyEnv, allowed, rng) -> list | str:
+        ts = time.perf_counter()
+        ranked = ranked_actions(sequencer, env, allowed, rng)
+        timings['sequencing'] += time.perf_counter() - ts
+        if not ranked:
+            return (f'{len(guide.open_poses(env.state))} allocated poses left, none of them can be built next '
+                    f'({getattr(sequencer, "why_none", sequencer.name + " values stopping more")})')
+        return ranked
+
+    def rank_by_sequencer(env: AssemblyEnv, allowed, rng) -> list | str:
+        ts = time.perf_counter()
+        ranking = sequencer(world['scene'], list(allocation.placements), world['q'])
+        timings['sequencer_call'] = timings.get('sequencer_call', 0.0) + time.perf_counter() - ts
+        timings['sequencing'] += float(ranking.timings.get('sequencing', 0.0))
+        if not ranking.actions:
+            return ranking.reason or 'the sequencer proposes to stop'
+        ranked = mdp_actions(env, ranking.actions, allowed)
+        return ranked or (f'the sequencer proposed {len(ranking.actions)} actions, none of them among the '
+                          f'{len(allowed)} the allocation allows now')
+
+    rank = rank_by_policy if hasattr(sequencer, 'scores') else rank_by_sequencer
+
     def decide(env: AssemblyEnv, rng) -> Decision:
         allowed = allowed_actions(env)
         if not allowed:
             return stop()
-        ts = time.perf_counter()
-        ranked = ranked_actions(policy, env, allowed, rng)
-        timings['sequencing'] += time.perf_counter() - ts
-        if not ranked:
-            return stop(f'{len(guide.open_poses(env.state))} allocated poses left, none of them can be built next '
-                        f'({getattr(policy, "why_none", policy.name + " values stopping more")})')
+        ranked = rank(env, allowed, rng)
+        if isinstance(ranked, str):
+            return stop(ranked)
         found = _first_feasible(env, world['scene'], ranked, plan_motion, world['q'], timings)
         if isinstance(found, str):
             return stop(found)
@@ -157,6 +185,21 @@ def plan_assembly(scene: Scene, allocate: Allocate, plan_motion: PlanMotion, pol
     if not plan.success and not plan.reason:
         plan.reason = 'allocated poses remain unbuilt'
     return _done(plan, t0)
+
+
+def mdp_actions(env: AssemblyEnv, ranked: list[SceneAction], allowed) -> list:
+    """The MDP actions of ranked scene actions, in order, keeping only those in `allowed`."""
+    index = {b.id: n for n, b in enumerate(env.scene.blocks)}
+    regions = {t.name: n for n, t in enumerate(env.scene.targets)}
+    allowed, out = set(allowed), []
+    for a in ranked:
+        if a.block_id not in index or a.target not in regions:
+            continue
+        cell = env.grid.index(regions[a.target], a.cell)
+        action = Action(index[a.block_id], int(a.unit), -1 if cell is None else cell, int(a.rotation))
+        if action in allowed:
+            out.append(action)
+    return out
 
 
 def _first_feasible(env: AssemblyEnv, scene: Scene, ranked, plan_motion: PlanMotion, q, timings):
