@@ -12,7 +12,7 @@ import pytest
 import rclpy
 from rclpy.action import ActionClient
 
-from ros_harness import DISCOVERY_SETTLE_S, REPO_ROOT, call_service, ros_args, wait_for_plant, wait_for_service
+from ros_harness import REPO_ROOT, call_service, ros_args, wait_for_plant, wait_for_service
 from scenes import U, doc
 
 from rad_core.generator import GeneratorConfig, generate_scene
@@ -20,6 +20,8 @@ from rad_core.scene import Scene
 
 DEMO_SCENE = generate_scene(GeneratorConfig(grid=4), 8)      # the demo's default: builds completely
 SMALL = Scene.from_dict(doc())                                 # one region, a few cubes
+# The network without search: deterministic, and it builds DEMO_SCENE completely.
+SEQUENCER = {'policy': 'milp-dqn'}
 
 
 def rss_mb(pid: int) -> float:
@@ -32,15 +34,17 @@ def rss_mb(pid: int) -> float:
 @pytest.fixture
 def graph(node_process, ros_node, tmp_path):
     from rad_msgs.action import ExecuteAssembly
-    from rad_msgs.srv import PlanAssembly
+    from rad_msgs.srv import PlanAssembly, Sequence
     path = tmp_path / 'scene.json'
     path.write_text(DEMO_SCENE.dumps())
     twin_args = ros_args({'scene_file': str(path), 'real_time_factor': 8.0})
     procs = {'twin': node_process('rad_sim', 'twin_node', *twin_args),
              'allocation': node_process('rad_planner', 'allocation_node'),
              'gamp': node_process('rad_gamp', 'gamp_node'),
+             'sequencer': node_process('rad_planner', 'sequencer_node', *ros_args(SEQUENCER)),
              'assembly': node_process('rad_planner', 'assembly_node', *ros_args({'stale_after_s': 1.5}))}
     client = wait_for_service(ros_node, PlanAssembly, 'plan_assembly', timeout=30.0)
+    wait_for_service(ros_node, Sequence, 'sequence', timeout=60.0)   # the network loads in a few seconds
     actions = ActionClient(ros_node, ExecuteAssembly, 'execute_assembly')
     assert actions.wait_for_server(timeout_sec=30.0)
     wait_for_plant(ros_node)
@@ -182,14 +186,17 @@ def test_200_calls_and_4_concurrent_clients_with_bounded_memory(graph):
 def test_planners_run_against_a_different_plant(node_process, process, ros_node, tmp_path):
     """A kinematic plant (no physics, not the twin) speaking the same topics."""
     from rad_msgs.action import ExecuteAssembly
+    from rad_msgs.srv import Sequence
     path = tmp_path / 'scene.json'
     path.write_text(DEMO_SCENE.dumps())
     plant = process([sys.executable, str(REPO_ROOT / 'tests/ros/nodes/kinematic_plant.py'), '--ros-args',
                      '-p', f'scene_file:={path}', '-p', 'speed:=8.0'], name='kinematic_plant')
     procs = [node_process('rad_planner', 'allocation_node'), node_process('rad_gamp', 'gamp_node'),
+             node_process('rad_planner', 'sequencer_node', *ros_args(SEQUENCER)),
              node_process('rad_planner', 'assembly_node')]
     actions = ActionClient(ros_node, ExecuteAssembly, 'execute_assembly')
     assert actions.wait_for_server(timeout_sec=30.0)
+    wait_for_service(ros_node, Sequence, 'sequence', timeout=60.0)
     wait_for_plant(ros_node)
     time.sleep(1.0)
 

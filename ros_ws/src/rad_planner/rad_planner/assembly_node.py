@@ -1,10 +1,14 @@
-"""/plan_assembly and /execute_assembly: the sequencer of the node graph.
+"""/plan_assembly and /execute_assembly: the assembly planner and executor of the node graph.
 
 It knows the world only through the graph: the scene from the request or, if the
 request has none, registered from motion capture (`rigid_bodies`) against the task
 (`task_file` parameter, else the latched `scene` topic); the robot from
-`joint_states`; allocation from `/allocate`; motions from `/plan_action`. So the
-twin can be replaced by a real cell without touching this node.
+`joint_states`; allocation from `/allocate`; the order from the sequencer node
+(`/sequence`, asked at every step for a ranking of the next actions); motions from
+`/plan_action` (the first ranked action GAMP finds feasible is taken). So the twin
+can be replaced by a real cell, and the policy by another, without touching this node.
+A sequencer that is down or does not answer within `sequencer_timeout_s` fails the
+request with a reason naming it.
 
   srv  plan_assembly     rad_msgs/PlanAssembly
   act  execute_assembly  rad_msgs/ExecuteAssembly: plan, execute step by step via the
@@ -34,18 +38,19 @@ from trajectory_msgs.msg import JointTrajectory
 
 from rad_core.errors import RadError
 from rad_core.scene import Scene
-from rad_core.sequencing import HeurPolicy
 from rad_core.sequencing.execute import ExecuteConfig, execute_assembly
 from rad_core.sequencing.plan import MotionPlan, plan_assembly
+from rad_core.sequencing.sequencer import Ranking
 from rad_core.sim import panda
 from rad_core.sim.mocap import RegistrationConfig, RigidBodyPose, body_map_for, register_scene
 from rad_msgs.action import ExecuteAssembly
 from rad_msgs.msg import RigidBodies, Scene as SceneMsg
-from rad_msgs.srv import Allocate, PlanAction, PlanAssembly
+from rad_msgs.srv import Allocate, PlanAction, PlanAssembly, Sequence
 from rad_ros.conversions import (allocation_from_response, scene_from_msg, scene_from_request,
                                  scene_msg_is_empty)
 from rad_ros.node_main import run_node
 from rad_ros.plan_msgs import fill_plan_response, plan_json
+from rad_ros.sequencer_msgs import action_to_msg, ranking_from_response, sequence_request
 from rad_ros.motion import pose_from_msg, trajectory_from_msg, trajectory_to_msg
 from rad_ros.qos import LATCHED
 
@@ -56,7 +61,7 @@ class AssemblyNode(Node):
         for name, value in (('time_limit_s', 120.0), ('allocation_time_limit_s', 10.0), ('seed', 0),
                             ('task_file', ''), ('service_timeout_s', 60.0), ('stale_after_s', 2.0),
                             ('settle_s', 0.5), ('position_tol', 0.005), ('max_replans', 3),
-                            ('step_timeout_factor', 3.0), ('frame_id', 'world')):
+                            ('step_timeout_factor', 3.0), ('frame_id', 'world'), ('sequencer_timeout_s', 20.0)):
             self.declare_parameter(name, value)
         self.lock = threading.Lock()
         self.joints: tuple[float, JointState] | None = None
@@ -72,6 +77,7 @@ class AssemblyNode(Node):
         self.io = rclpy.create_node('assembly_io', namespace=self.get_namespace(), context=self.context)
         self.allocate_client = self.io.create_client(Allocate, 'allocate')
         self.plan_client = self.io.create_client(PlanAction, 'plan_action')
+        self.sequence_client = self.io.create_client(Sequence, 'sequence')
         self.io.create_subscription(JointState, 'joint_states', self.joint_states_callback, 10)
         self.io.create_subscription(RigidBodies, 'rigid_bodies', self.rigid_bodies_callback, qos_profile_sensor_data)
         self.io.create_subscription(SceneMsg, 'scene', self.scene_callback, LATCHED)
@@ -147,18 +153,27 @@ class AssemblyNode(Node):
             return self.registered_scene(), True
         return scene_from_request(msg, text), False
 
-    # ---- the two backends plan_assembly needs, over DDS ------------------------------
-    def call(self, client, request):
-        timeout = float(self.param('service_timeout_s'))
+    # ---- the three backends plan_assembly needs, over DDS ------------------------------
+    def call(self, client, request, timeout: float | None = None, what: str = ''):
+        timeout = float(self.param('service_timeout_s')) if timeout is None else timeout
+        what = what or f'service {client.srv_name}'
         if not client.wait_for_service(timeout_sec=min(timeout, 5.0)):
-            raise RadError(f'service {client.srv_name} is not available')
+            raise RadError(f'{what} is not available')
         done = threading.Event()
         future = client.call_async(request)
         future.add_done_callback(lambda _: done.set())
         if not done.wait(timeout):
             client.remove_pending_request(future)
-            raise RadError(f'{client.srv_name} did not answer within {timeout:g} s')
+            raise RadError(f'{what} did not answer within {timeout:g} s')
         return future.result()
+
+    def rank(self, scene: Scene, placements, start) -> Ranking:
+        timeout = float(self.param('sequencer_timeout_s'))
+        if not timeout > 0:
+            raise RadError(f'the sequencer_timeout_s parameter must be positive, got {timeout}')
+        response = self.call(self.sequence_client, sequence_request(scene, placements, start), timeout,
+                             f'the sequencer ({self.sequence_client.srv_name}: is sequencer_node running?)')
+        return ranking_from_response(response)
 
     def allocate(self, scene: Scene):
         response = self.call(self.allocate_client, Allocate.Request(
@@ -170,9 +185,7 @@ class AssemblyNode(Node):
     def plan_motion(self, scene: Scene, action, start) -> MotionPlan:
         request = PlanAction.Request(scene_json=scene.dumps(),
                                      start_positions=[] if start is None else [float(v) for v in start])
-        a = request.action
-        a.block_id, a.unit, a.target, a.rotation = action.block_id, action.unit, action.target, action.rotation
-        a.cell.i, a.cell.j, a.cell.k = (int(v) for v in action.cell)
+        request.action = action_to_msg(action)
         response = self.call(self.plan_client, request)
         if response.failure in ('invalid_request', 'error'):
             raise RadError(f'plan_action: {response.reason}')
@@ -182,7 +195,7 @@ class AssemblyNode(Node):
                           trajectory_from_msg(response.trajectory))
 
     def plan(self, scene: Scene, time_limit: float, start):
-        plan = plan_assembly(scene, self.allocate, self.plan_motion, HeurPolicy(), seed=int(self.param('seed')),
+        plan = plan_assembly(scene, self.allocate, self.plan_motion, self.rank, seed=int(self.param('seed')),
                              start=start, time_limit_s=time_limit)
         self.plan_pub.publish(String(data=json.dumps(plan_json(plan))))
         return plan
