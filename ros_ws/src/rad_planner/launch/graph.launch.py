@@ -10,8 +10,8 @@ from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
 NODES = (('rad_sim', 'twin_node', 'twin'), ('rad_planner', 'allocation_node', 'allocation'),
-         ('rad_gamp', 'gamp_node', 'gamp'), ('rad_planner', 'assembly_node', 'assembly'),
-         ('rad_viz', 'viz_node', 'viz'))
+         ('rad_gamp', 'gamp_node', 'gamp'), ('rad_planner', 'sequencer_node', 'sequencer'),
+         ('rad_planner', 'assembly_node', 'assembly'), ('rad_viz', 'viz_node', 'viz'))
 
 
 def generate_launch_description():

@@ -18,4 +18,6 @@ def generate_launch_description():
         DeclareLaunchArgument('params_file', default_value=default_params),
         Node(package='rad_planner', executable='allocation_node', name='allocation',
              parameters=[params], output='screen'),
+        Node(package='rad_planner', executable='sequencer_node', name='sequencer',
+             parameters=[params], output='screen'),
     ])

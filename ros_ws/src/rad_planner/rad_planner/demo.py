@@ -28,6 +28,7 @@ DEFAULT_SCENE = (GeneratorConfig(grid=4, sides=2), 8)
 
 def run(scene: Scene, out: Path, rtf: float, time_limit: float) -> dict:
     from rad_msgs.action import ExecuteAssembly
+    from rad_msgs.srv import Sequence
     out.mkdir(parents=True, exist_ok=True)
     scene_path = out / 'scene.json'
     scene_path.write_text(scene.dumps() + '\n')
@@ -41,6 +42,8 @@ def run(scene: Scene, out: Path, rtf: float, time_limit: float) -> dict:
         client = ActionClient(node, ExecuteAssembly, 'execute_assembly')
         if not client.wait_for_server(timeout_sec=60.0):
             raise RadError(f'the graph did not come up (see {out / "logs"})')
+        if not node.create_client(Sequence, 'sequence').wait_for_service(timeout_sec=60.0):
+            raise RadError(f'the sequencer did not come up (see {out / "logs"}/sequencer.log)')
         time.sleep(1.0)   # let the twin publish its first motion-capture frames
 
         def feedback(msg):

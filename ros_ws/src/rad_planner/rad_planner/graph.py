@@ -24,6 +24,7 @@ NODES = (
     ('rad_sim', 'twin_node', 'twin'),
     ('rad_planner', 'allocation_node', 'allocation'),
     ('rad_gamp', 'gamp_node', 'gamp'),
+    ('rad_planner', 'sequencer_node', 'sequencer'),
     ('rad_planner', 'assembly_node', 'assembly'),
     ('rad_viz', 'viz_node', 'viz'),
 )
