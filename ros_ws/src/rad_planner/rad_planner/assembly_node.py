@@ -172,7 +172,7 @@ class AssemblyNode(Node):
         if not timeout > 0:
             raise RadError(f'the sequencer_timeout_s parameter must be positive, got {timeout}')
         response = self.call(self.sequence_client, sequence_request(scene, placements, start), timeout,
-                             f'the sequencer ({self.sequence_client.srv_name}: is sequencer_node running?)')
+                             f'the sequencer node (service {self.sequence_client.srv_name})')
         return ranking_from_response(response)
 
     def allocate(self, scene: Scene):
