@@ -177,30 +177,62 @@ def policy_decider(policy: Policy, actions: ActionSpace, verify=None) -> Decide:
 
 def search_decider(policy: Policy, actions: ActionSpace, stepper, agent: Agent, verify=None) -> Decide:
     """decide() that searches before every decision (`Agent.search`) on `stepper`, the env
-    that acts (RobotAssemblyEnv with the robot, the AssemblyEnv without): the move is
-    the search's; with verify, the first of the search's ranking the check accepts
-    (the search's own failed children excluded). The search leaves the env as it was."""
+    that acts (RobotAssemblyEnv with the robot, the AssemblyEnv without); the search
+    leaves it as it was. Unverified: the search's move. Verified: the best of the
+    search's ranking that is known to work: a searched child whose simulated step
+    succeeded needs no further check (it was a real step of the planning copy, GAMP
+    and physics included; its motion plan is reused), an unsearched one is checked by
+    simulating it (`simulated_check`); failed children are never taken."""
     from rad_core.mdp import TERMINATE
     from rad_core.sequencing.search import SEARCHES, EnvModel
     search = SEARCHES[agent.search]
     kwargs = {} if agent.epsilon is None else {'epsilon': agent.epsilon}
+    check = simulated_check(stepper) if verify is not None else None
 
     def decide(env: AssemblyEnv, rng: np.random.Generator) -> Decision:
         if not actions(env):
             return stop()
-        result = search(EnvModel(stepper, policy, actions), rng, budget=agent.budget, **kwargs)
+        model = EnvModel(stepper, policy, actions)
+        result = search(model, rng, budget=agent.budget, **kwargs)
+        plans = {a: plan for (steps, a), plan in model.plans.items() if steps == env.state.steps}
         if verify is None:
-            return Decision(result.action) if not result.action.is_terminate else stop()
-        failed = {c.action for c in result.children if c.invalid}
-        ranked = []
+            if result.action.is_terminate:
+                return stop()
+            return Decision(result.action, plans.get(result.action))
+        searched = {c.action: c for c in result.children}
         for action, _ in result.ranking():
             if action == TERMINATE:
                 break
-            if action not in failed:
-                ranked.append(action)
-        action, plan, _ = first_feasible(env, ranked, verify)
-        return Decision(action, plan) if action is not None else stop()
+            child = searched.get(action)
+            if child is not None:
+                if not child.invalid:
+                    return Decision(action, plans.get(action))
+                continue
+            ok = check(action)
+            if ok.success:
+                return Decision(action, ok.plan)
+        return stop()
     return decide
+
+
+class SimCheck(NamedTuple):
+    success: bool
+    reason: str = ''
+    plan: object = None
+
+
+def simulated_check(stepper):
+    """A check that steps the action in a snapshot of the planning copy and goes back:
+    success when the step is valid (with the robot: GAMP, execution and physics)."""
+    def check(action) -> SimCheck:
+        snap = stepper.snapshot()
+        try:
+            result = stepper.step(action)
+            plan = getattr(stepper, 'last_plan', None)
+        finally:
+            stepper.restore(snap)
+        return SimCheck(not result.outcome.is_invalid, result.reason, plan)
+    return check
 
 
 def scene_episode(agent: str | Agent, scene: Scene, robot: bool, seed: int, execution: str = 'teleport',

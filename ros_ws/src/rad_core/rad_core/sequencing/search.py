@@ -281,6 +281,9 @@ class EnvModel:
         self.policy, self.space = policy, space
         self.gamma = float(self.env.config.gamma)
         self._rng = np.random.default_rng(rng_seed)   # for policies that draw (HEUR); a QPolicy does not
+        # (steps taken before, action) -> the motion plan its simulation used (robot env):
+        # the move can be executed with it instead of planning it again.
+        self.plans: dict = {}
 
     def actions(self) -> list[Action]:
         return [] if self.env.state.done else list(self.space(self.env))
@@ -292,7 +295,13 @@ class EnvModel:
         return np.asarray(self.policy.scores(self.env, actions, self._rng), dtype=float)
 
     def step(self, action: Action) -> tuple[float, bool, bool]:
+        before = self.env.state.steps
+        if hasattr(self.robot_env, 'last_plan'):
+            self.robot_env.last_plan = None
         result = self.robot_env.step(action)
+        plan = getattr(self.robot_env, 'last_plan', None)
+        if plan is not None:
+            self.plans[(before, action)] = plan
         return float(result.reward), bool(result.done), bool(result.outcome.is_invalid)
 
     def key(self, action: Action):

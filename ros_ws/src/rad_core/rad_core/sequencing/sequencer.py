@@ -93,6 +93,7 @@ class Sequencer:
     def __init__(self, config: SequencerConfig = SequencerConfig()):
         config.validate()
         self.config = config
+        self._renv = None   # the planning twin, made on the first search
         if config.policy == 'heur':
             self.policy = HeurPolicy()
         else:
@@ -107,7 +108,9 @@ class Sequencer:
         return getattr(self.policy, 'source', self.config.policy)
 
     def close(self) -> None:
-        pass
+        if self._renv is not None:
+            self._renv.close()
+            self._renv = None
 
     def rank(self, scene: Scene, placements, start=None, max_actions: int = 0) -> Ranking:
         """Rank the allocation's next actions in `scene` (blocks already placed sit in
@@ -149,36 +152,41 @@ class Sequencer:
         return ranking
 
     def _search(self, scene: Scene, placements, q0, rng, ranking: Ranking, left: int) -> None:
-        from rad_core.robot_env import RobotAssemblyEnv, RobotEnvConfig
         ts = time.perf_counter()
-        renv = RobotAssemblyEnv(scene, RobotEnvConfig(execution='teleport'))
-        try:
-            renv.reset()
-            if q0 is not None:
-                renv.world.set_joint_positions(q0)
-                renv.twin.sync()
-            ranking.timings['twin'] = time.perf_counter() - ts
-            ts = time.perf_counter()
-            model = EnvModel(renv, self.policy, AllocationActions(renv.env, placements))
-            result = SEARCHES[SEARCH_OF[self.config.policy]](model, rng, budget=self.config.budget,
-                                                           epsilon=self.config.search_epsilon)
-            ranking.timings['search'] = time.perf_counter() - ts
-            ranking.search = result.to_dict()
-            failed = {c.action for c in result.children if c.invalid}
-            for action, value in result.ranking():
-                if action == TERMINATE:
-                    break
-                if action not in failed:
-                    ranking.actions.append(scene_action(renv.env, action))
-                    ranking.values.append(float(value))
-            if not ranking.actions:
-                ranking.terminate = True
-                tried = sum(1 for c in result.children if not c.action.is_terminate)
-                ranking.reason = (f'{left} allocated poses left, none of them can be built next ('
-                                  + (f'the {tried} the search tried failed in the planning twin or are valued '
-                                     f'below stopping)' if tried else 'stopping is valued above all of them)'))
-        finally:
-            renv.close()
+        renv = self._twin(scene)
+        renv.reset()
+        if q0 is not None:
+            renv.world.set_joint_positions(q0)
+            renv.twin.sync()
+        ranking.timings['twin'] = time.perf_counter() - ts
+        ts = time.perf_counter()
+        model = EnvModel(renv, self.policy, AllocationActions(renv.env, placements))
+        result = SEARCHES[SEARCH_OF[self.config.policy]](model, rng, budget=self.config.budget,
+                                                       epsilon=self.config.search_epsilon)
+        ranking.timings['search'] = time.perf_counter() - ts
+        ranking.search = result.to_dict()
+        failed = {c.action for c in result.children if c.invalid}
+        for action, value in result.ranking():
+            if action == TERMINATE:
+                break
+            if action not in failed:
+                ranking.actions.append(scene_action(renv.env, action))
+                ranking.values.append(float(value))
+        if not ranking.actions:
+            ranking.terminate = True
+            tried = sum(1 for c in result.children if not c.action.is_terminate)
+            ranking.reason = (f'{left} allocated poses left, none of them can be built next ('
+                              + (f'the {tried} the search tried failed in the planning twin or are valued '
+                                 f'below stopping)' if tried else 'stopping is valued above all of them)'))
+
+    def _twin(self, scene: Scene):
+        """The planning twin, one PyBullet world reused across requests."""
+        if self._renv is None:
+            from rad_core.robot_env import RobotAssemblyEnv, RobotEnvConfig
+            self._renv = RobotAssemblyEnv(scene, RobotEnvConfig(execution='teleport'))
+        else:
+            self._renv.load(scene)
+        return self._renv
 
 
 def _check_placements(scene: Scene, placements) -> None:
