@@ -102,7 +102,12 @@ def test_sigint_checkpoints_and_exits_130(dataset, tmp_path):
             '--total-steps', '100000', '--learning-starts', '40', '--batch-size', '8', '--eval-every', '100000',
             *[a for k, v in SMALL_NET.items() for a in (f'--{k}', str(v))]]
     proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    time.sleep(6)
+    # Interrupt once training runs (the run folder appears when it starts), not at a fixed
+    # time: start-up (torch, pybullet) takes longer than any fixed sleep on a loaded machine.
+    deadline = time.monotonic() + 120
+    while not (tmp_path / 'run').exists() and time.monotonic() < deadline and proc.poll() is None:
+        time.sleep(0.05)
+    time.sleep(2)
     proc.send_signal(signal.SIGINT)
     out, err = proc.communicate(timeout=60)
     assert proc.returncode == 130, err

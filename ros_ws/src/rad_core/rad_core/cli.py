@@ -214,8 +214,9 @@ def _add_train_args(p: argparse.ArgumentParser) -> None:
         default = f.default if f.default is not MISSING else None
         helptext = f'{f.metadata.get("help", "")} (default: {default})'
         if f.type in (bool, 'bool'):
+            # `--robot` alone means true; `--double false` still reads a value.
             p.add_argument(flag, dest=f.name, type=lambda v: v.lower() in ('1', 'true', 'yes', 'on'),
-                           metavar='BOOL', help=helptext)
+                           nargs='?', const=True, metavar='BOOL', help=helptext)
         else:
             kind = {'int': int, 'float': float, 'str': str}.get(f.type if isinstance(f.type, str) else
                                                                 f.type.__name__, str)

@@ -388,6 +388,8 @@ class Trainer:
         mark = (time.perf_counter(), self.pos['env_steps'], self.pos['grad_steps'])
         interrupted = False
         try:
+            if c.init and self.pos['env_steps'] == 0 and not (self.out / 'progress.csv').exists():
+                self.log(self._report(mark))   # where the starting model stands, at step 0
             while self.pos['env_steps'] < c.total_steps:
                 self.episode()
                 self.pos['wall_s'] = time.perf_counter() - t_start
