@@ -1,6 +1,5 @@
 """The sequencer (rad_core.sequencing.sequencer): what the sequencer node serves."""
 
-import numpy as np
 import pytest
 
 from rad_core.allocation import AllocationParams, solve

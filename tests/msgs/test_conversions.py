@@ -59,17 +59,14 @@ def test_request_takes_message_or_json_but_not_both_or_neither():
         scene_from_request(SceneMsg(), ' ' * (11 * 1024 * 1024) + '{}')
 
 
-def test_scene_clearance_and_the_message():
-    """rad_msgs/Scene has no clearance field yet: a message reads as a flush scene, and a scene
-    with a clearance is refused rather than silently made flush, unless the caller drops it."""
-    from rad_ros.conversions import MSG_HAS_CLEARANCE
+def test_scene_clearance_travels_in_the_message():
     s = generate_scene(GeneratorConfig(grid=3, clearance=0.2), 1)
     flush = generate_scene(GeneratorConfig(grid=3), 1)
-    if MSG_HAS_CLEARANCE:
-        assert scene_from_msg(scene_to_msg(s)).to_dict() == s.to_dict()
-        return
-    with pytest.raises(RadError, match='clearance 0.2.*scene_json'):
-        scene_to_msg(s)
-    assert scene_from_msg(scene_to_msg(s, drop_clearance=True)).to_dict() == flush.to_dict()
-    assert scene_from_request(SceneMsg(), s.dumps()).clearance == 0.2     # JSON carries it
+    assert scene_to_msg(s).clearance == pytest.approx(0.2)
+    assert scene_from_msg(scene_to_msg(s)).to_dict() == s.to_dict()
     assert scene_from_msg(scene_to_msg(flush)).to_dict() == flush.to_dict()
+    assert 'clearance' not in scene_from_msg(scene_to_msg(flush)).to_dict()
+    bad = scene_to_msg(s)
+    bad.clearance = 0.7
+    with pytest.raises(RadError, match='clearance'):
+        scene_from_msg(bad)

@@ -3,11 +3,8 @@
 A scene message is turned into the rad-scene/1 document and parsed by the same
 validator the CLI uses, so a bad message gets the same field-naming errors.
 
-A scene's ``clearance`` (rad_core.scene) travels in a ``float64 clearance`` field of
-rad_msgs/Scene where the message has one. Today's message has none: then a
-message always reads as a flush scene, and `scene_to_msg` refuses a scene with a
-clearance unless the caller accepts, with ``drop_clearance=True``, that the
-message shows it flush (send such a scene as scene_json to keep it).
+A scene's ``clearance`` (rad_core.scene) travels in rad_msgs/Scene's ``clearance``
+field (0 = flush, as in a scene document without the key).
 """
 
 from __future__ import annotations
@@ -21,8 +18,6 @@ from rad_core.errors import RadError
 from rad_core.scene import FORMAT, Scene
 
 MAX_SCENE_JSON_BYTES = 10 * 1024 * 1024
-MSG_HAS_CLEARANCE = 'clearance' in SceneMsg.get_fields_and_field_types()
-"""Whether rad_msgs/Scene can carry a scene's clearance (see the module docstring)."""
 
 
 def cells_msg(cells) -> list:
@@ -33,15 +28,10 @@ def _ijk(cells) -> list[list[int]]:
     return [[c.i, c.j, c.k] for c in cells]
 
 
-def scene_to_msg(scene: Scene, frame_id: str = 'world', drop_clearance: bool = False) -> SceneMsg:
-    """The scene as a message. A clearance the message cannot carry raises RadError,
-    or with drop_clearance is left out (the message shows the blocks flush)."""
-    if scene.clearance and not MSG_HAS_CLEARANCE and not drop_clearance:
-        raise RadError(f'the scene has clearance {scene.clearance:g}, which the rad_msgs/Scene message cannot '
-                       f'carry: send the scene as scene_json')
+def scene_to_msg(scene: Scene, frame_id: str = 'world') -> SceneMsg:
+    """The scene as a message."""
     msg = SceneMsg()
-    if MSG_HAS_CLEARANCE:
-        msg.clearance = float(scene.clearance)
+    msg.clearance = float(scene.clearance)
     msg.header.frame_id = frame_id
     msg.unit = float(scene.unit)
     msg.block_types = [BlockType(name=t.name, cells=cells_msg(t.offsets)) for t in scene.block_types.values()]
@@ -53,13 +43,11 @@ def scene_to_msg(scene: Scene, frame_id: str = 'world', drop_clearance: bool = F
 
 
 def scene_msg_to_dict(msg: SceneMsg) -> dict:
-    """The rad-scene/1 document a scene message stands for (not yet validated); flush
-    unless the message has a clearance field and it is set."""
-    clearance = getattr(msg, 'clearance', 0.0) if MSG_HAS_CLEARANCE else 0.0
+    """The rad-scene/1 document a scene message stands for (not yet validated)."""
     return {
         'format': FORMAT,
         'unit': msg.unit,
-        **({'clearance': clearance} if clearance else {}),
+        **({'clearance': msg.clearance} if msg.clearance else {}),
         'block_types': {t.name: _ijk(t.cells) for t in msg.block_types},
         'blocks': [{'id': b.id, 'type': b.type, 'position': [b.position.x, b.position.y, b.position.z],
                     'yaw': b.yaw_deg} for b in msg.blocks],

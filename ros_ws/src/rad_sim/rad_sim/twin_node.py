@@ -38,7 +38,7 @@ from rad_core.sim.workspace import Workspace
 from rad_core.sim.world import World
 from rad_msgs.msg import RigidBodies, Scene as SceneMsg
 from rad_msgs.srv import GetSceneState, LoadScene, SetBlockPose
-from rad_ros.conversions import MSG_HAS_CLEARANCE, scene_from_request, scene_to_msg
+from rad_ros.conversions import scene_from_request, scene_to_msg
 from rad_ros.motion import pose_from_msg, pose_stamped, rigid_bodies_msg, trajectory_from_msg
 from rad_ros.node_main import main_for
 from rad_ros.qos import LATCHED
@@ -92,10 +92,7 @@ class TwinNode(Node):
             if block.id not in self.pose_pubs:
                 topic = f'{self.get_parameter("mocap_prefix").value}/{block.id}/pose'
                 self.pose_pubs[block.id] = self.create_publisher(PoseStamped, topic, qos_profile_sensor_data)
-        if scene.clearance and not MSG_HAS_CLEARANCE:
-            self.get_logger().warning(f'scene clearance {scene.clearance:g}: the /scene message has no field for it, '
-                                      f'subscribers see the blocks flush (get_scene_state scene_json keeps it)')
-        self.scene_pub.publish(scene_to_msg(scene, self.frame_id, drop_clearance=True))
+        self.scene_pub.publish(scene_to_msg(scene, self.frame_id))
 
     def event(self, kind: str, **fields) -> None:
         self.events_pub.publish(String(data=json.dumps({'event': kind, **fields})))
@@ -164,7 +161,7 @@ class TwinNode(Node):
             response.success, response.reason = False, f'the world is not a valid scene now: {e}'
             return response
         response.success = True
-        response.scene = scene_to_msg(current, self.frame_id, drop_clearance=True)   # scene_json keeps all
+        response.scene = scene_to_msg(current, self.frame_id)
         response.scene_json = current.dumps()
         return response
 

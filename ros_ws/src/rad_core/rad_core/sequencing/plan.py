@@ -19,7 +19,7 @@ ranked action outside the allocation's allowed actions is never taken.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Callable
 
 import numpy as np
@@ -110,7 +110,7 @@ def moved(scene: Scene, block_id: str, position, yaw: int) -> Scene:
     """The scene with one block at a new pose (validated like any scene)."""
     blocks = tuple(Block(b.id, b.type, tuple(round(float(v), 6) for v in position), int(yaw) % 360)
                    if b.id == block_id else b for b in scene.blocks)
-    return Scene.from_dict(Scene(scene.unit, scene.block_types, blocks, scene.targets).to_dict())
+    return Scene.from_dict(replace(scene, blocks=blocks).to_dict())
 
 
 def plan_assembly(scene: Scene, allocate: Allocate, plan_motion: PlanMotion, sequencer: Policy | Rank,
