@@ -188,3 +188,38 @@ def test_search_on_the_robot_env_is_repeatable_and_leaves_it_unchanged(robot_cas
     # one action per outcome: no two searched children put the same block on the same cells
     keys = [model.key(c.action) for c in first.children if not c.action.is_terminate]
     assert len(keys) == len(set(keys))
+
+
+def test_lookahead_keeps_the_networks_order_unless_a_step_or_the_next_one_fails():
+    # Without traps or failures it takes the greedy action.
+    model = ToyModel(bad=(), trap=-1)
+    q = model.q_values(model.actions())
+    r = SEARCHES['lookahead'](model, np.random.default_rng(0), budget=5)
+    assert r.action == model.actions()[int(np.argmax(q[:-1]))]
+    # A failing greedy action is skipped for the next one by Q.
+    model = ToyModel(bad=(1,), trap=-1)
+    r = SEARCHES['lookahead'](model, np.random.default_rng(0), budget=5)
+    order = np.argsort(-model.q_values(model.actions())[:-1], kind='stable')
+    assert model.actions()[order[0]].block == 1 and r.action == model.actions()[order[1]]
+    assert r.children[0].invalid and not r.children[1].invalid
+
+
+def test_lookahead_skips_a_move_into_a_dead_end_but_takes_it_when_nothing_else_works():
+    class DeadEnd(ToyModel):
+        """After item 1, every other item fails; item 1 has the best Q."""
+        def q_values(self, actions):
+            q = super().q_values(actions)
+            for i, a in enumerate(actions):
+                if a.block == 1 and not self.placed:
+                    q[i] = 3.0
+            return q
+
+        def step(self, action):
+            if self.placed == (1,) and not action.is_terminate:
+                self.done = True
+                return -1.0, True, True
+            return super().step(action)
+    r = SEARCHES['lookahead'](DeadEnd(n=3, bad=(), trap=-1), np.random.default_rng(0), budget=10)
+    assert r.action.block != 1
+    r = SEARCHES['lookahead'](DeadEnd(n=3, bad=(0, 2), trap=-1), np.random.default_rng(0), budget=10)
+    assert r.action.block == 1     # a dead end, but the only block that can be placed at all

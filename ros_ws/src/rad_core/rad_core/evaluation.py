@@ -62,7 +62,7 @@ class Agent:
     support: the allocation it expects (`AllocationParams.support`): 'none'
         (the paper's MILP) or 'stable'; `evaluate`'s allocation argument overrides.
     search: '' (act on the policy's ranking) or a test-time search of
-        `sequencing.search` ('mcts', 'halving') on the acting env itself (snapshot,
+        `sequencing.search` ('mcts', 'halving', 'lookahead') on the acting env itself (snapshot,
         simulate, restore), with `budget` simulations per decision and exploration
         `epsilon` (None: the search's default, 0.05 for mcts as the paper, 0 for halving).
     """
@@ -101,6 +101,9 @@ AGENTS = {
                                     search='mcts'),
     'milp-dqn-mixed-halving': _learned('milp-dqn-mixed-halving', 'milp', support='stable',
                                        network='milp-dqn-mixed', search='halving'),
+    'milp-dqn-lookahead': _learned('milp-dqn-lookahead', 'milp', network='milp-dqn', search='lookahead'),
+    'milp-dqn-mixed-lookahead': _learned('milp-dqn-mixed-lookahead', 'milp', support='stable',
+                                         network='milp-dqn-mixed', search='lookahead'),
 }
 LEARNED = tuple(name for name, a in AGENTS.items() if a.name.startswith(('milp-dqn', 'dqn')))
 

@@ -24,10 +24,22 @@ sequential halving, Danihelka et al. 2022, adapted to a deterministic planning
 copy): the top-m candidates by Q are each simulated one step; then rounds halve
 the survivors by their value and extend each survivor's line one more greedy
 step, until the budget is spent. Because re-simulating a child of a deterministic
-copy would teach nothing, a further "visit" deepens the line instead, so a move
-that leads into a dead end (no buildable pose left, or a failure next step) is
-seen before it is taken. Values are discounted returns along the line plus the
-bootstrapped Q at its end.
+copy would teach nothing, a further "visit" deepens the line instead, by the step
+a verified agent would take there (the best action by Q whose simulated step
+succeeds; each try costs a simulation), so a move that leads into a dead end (no
+buildable pose left) is seen before it is taken. Values are discounted returns
+along the line plus the bootstrapped Q at its end (Q(s, terminate) where the line
+stops).
+
+`lookahead` is the search that serves a verified agent best when the network was
+trained without the robot (measured: it knows what fills the target, not what the
+arm can still reach): it keeps the network's order and spends the budget on vetoes.
+Candidates are simulated in the order of Q; each one's line is extended by the
+verified greedy step (horizon 2 by default); the first candidate that succeeds and
+does not run into a dead end (every action worth more than stopping fails there) is
+the move. So it is never worse than the verified greedy policy within its budget,
+and a block that would leave the rest unbuildable is skipped while another order
+exists.
 """
 
 from __future__ import annotations
@@ -211,8 +223,7 @@ def halving(model: Model, rng: np.random.Generator, budget: int = 5, epsilon: fl
         for k in live:
             if result.simulations >= budget:
                 break
-            _deepen(model, lines[k])
-            result.simulations += 1
+            result.simulations += _deepen(model, lines[k], budget - result.simulations)[0]
             model.restore(root)
         survivors.sort(key=lambda k: (-lines[k].child.value, k))
     if epsilon > 0 and rng.random() < epsilon:
@@ -230,28 +241,97 @@ class _Line:
     end_q: float = 0.0
 
 
-def _deepen(model: Model, line: _Line) -> None:
-    """One more greedy step at the end of a line. A step that fails ends the line as if
-    the agent stopped there (a verified agent never takes a failing action: it takes
-    another or stops), valued by Q(s, terminate) at that state."""
+def _deepen(model: Model, line: _Line, budget: int) -> tuple[int, str]:
+    """Extend a line by the step a verified greedy agent would take at its end: the best
+    action by Q whose simulated step succeeds (each try is one simulation, at most
+    `budget`). Returns (simulations spent, what happened): 'stepped'; 'stopped' (the
+    network values terminating above every action there); 'dead' (every action it
+    values above terminating failed); 'budget' (ran out before one succeeded). Except after 'stepped' the line ends,
+    valued by Q(s, terminate) where it stopped: what the agent would get by stopping."""
     child, gamma = line.child, model.gamma
     model.restore(line.snap)
-    inner = model.actions()
-    iq = np.asarray(model.q_values(inner), dtype=float)
-    greedy = (list(inner) + [TERMINATE])[int(np.argmax(iq))]
-    reward, done, invalid = model.step(greedy)
+    _, candidates, iq = _root(model)
     discount = gamma ** child.depth
-    child.depth += 1
-    if invalid:
-        child.value_sum = line.ret + discount * float(iq[-1])
-        line.snap = None
-        return
-    line.ret += discount * reward
-    if done:
-        child.value_sum, line.snap = line.ret, None
-        return
-    line.snap, line.end_q = model.snapshot(), float(np.max(model.q_values(model.actions())))
-    child.value_sum = line.ret + gamma ** child.depth * line.end_q
+    spent, status = 0, 'dead'
+    for k in sorted(range(len(candidates)), key=lambda i: (-iq[i], i)):
+        action = candidates[k]
+        if action.is_terminate:
+            # Stopping is worth more than what is left: by choice, or because all that
+            # was worth more failed.
+            status = 'stopped' if spent == 0 else 'dead'
+            break
+        if spent >= budget:
+            status = 'budget'
+            break
+        reward, done, invalid = model.step(action)
+        spent += 1
+        if invalid:
+            model.restore(line.snap)
+            continue
+        child.depth += 1
+        line.ret += discount * reward
+        if done:
+            child.value_sum, line.snap = line.ret, None
+        else:
+            line.snap, line.end_q = model.snapshot(), float(np.max(model.q_values(model.actions())))
+            child.value_sum = line.ret + gamma ** child.depth * line.end_q
+        return spent, 'stepped'
+    child.value_sum = line.ret + discount * float(iq[-1])
+    line.snap = None
+    return spent, status
+
+
+def lookahead(model: Model, rng: np.random.Generator, budget: int = 5, epsilon: float = 0.0,
+              horizon: int = 2) -> SearchResult:
+    """Verified greedy with a look-ahead veto (see the module doc): candidates in the
+    order of Q; each is simulated, then its line extended by verified greedy steps up to
+    `horizon` steps in all; the first whose step succeeds and whose line does not run
+    into a dead end is the move. A dead end still beats stopping when nothing else
+    works (its block adds coverage): then the best such child by value; termination
+    only when every simulated candidate failed or the network prefers it. epsilon:
+    probability of a random simulated, valid child instead (0 at test time)."""
+    if budget < 1:
+        raise ValueError(f'lookahead: budget must be >= 1, got {budget}')
+    if horizon < 1:
+        raise ValueError(f'lookahead: horizon must be >= 1, got {horizon}')
+    actions, candidates, q = _root(model)
+    result = SearchResult(TERMINATE, root_q=q, actions=candidates[:-1])
+    root = model.snapshot()
+    chosen, dead = None, []
+    for k in sorted(range(len(candidates)), key=lambda i: (-q[i], i)):
+        action = candidates[k]
+        if action.is_terminate or result.simulations >= budget:
+            break
+        reward, done, invalid = model.step(action)
+        result.simulations += 1
+        child = Child(action, float(q[k]), visits=1, reward=float(reward), done=bool(done),
+                      invalid=bool(invalid), depth=1)
+        result.children.append(child)
+        line = _Line(child, float(reward))
+        status = 'stepped'
+        if done or invalid:
+            child.value_sum = line.ret
+        else:
+            line.snap, line.end_q = model.snapshot(), float(np.max(model.q_values(model.actions())))
+            child.value_sum = line.ret + model.gamma * line.end_q
+            while child.depth < horizon and line.snap is not None and result.simulations < budget:
+                spent, status = _deepen(model, line, budget - result.simulations)
+                result.simulations += spent
+        model.restore(root)
+        if invalid:
+            continue
+        if status == 'dead':
+            dead.append(child)
+            continue
+        chosen = child
+        break
+    if chosen is None and dead:
+        chosen = max(dead, key=lambda c: c.value)
+    valid = [c for c in result.children if not c.invalid]
+    if epsilon > 0 and valid and rng.random() < epsilon:
+        chosen = valid[int(rng.integers(len(valid)))]
+    result.action = chosen.action if chosen is not None else TERMINATE
+    return result
 
 
 def first_round(budget: int) -> int:
@@ -263,7 +343,7 @@ def first_round(budget: int) -> int:
     return m
 
 
-SEARCHES: dict[str, Callable[..., SearchResult]] = {'mcts': mcts, 'halving': halving}
+SEARCHES: dict[str, Callable[..., SearchResult]] = {'mcts': mcts, 'halving': halving, 'lookahead': lookahead}
 
 
 class EnvModel:

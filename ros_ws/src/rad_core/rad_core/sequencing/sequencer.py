@@ -11,6 +11,7 @@ the policy, nothing is commanded that fails there.
 Policies:
 - milp-dqn-mcts: the paper's MILP-DQN-MCTS (search.mcts, budget 5, epsilon 0.05).
 - milp-dqn-halving: rad's sequential halving with deepening lines (search.halving).
+- milp-dqn-lookahead: verified greedy with a look-ahead veto (search.lookahead).
 - milp-dqn: the network's Q-values alone (no search).
 - heur: the paper's heuristic (uniform among fully supported allocated actions).
 """
@@ -31,8 +32,8 @@ from rad_core.sequencing.actions import AllocationActions
 from rad_core.sequencing.policy import HeurPolicy, ranked_indices
 from rad_core.sequencing.search import SEARCHES, EnvModel
 
-POLICIES = ('milp-dqn-mcts', 'milp-dqn-halving', 'milp-dqn', 'heur')
-SEARCH_OF = {'milp-dqn-mcts': 'mcts', 'milp-dqn-halving': 'halving'}
+POLICIES = ('milp-dqn-mcts', 'milp-dqn-halving', 'milp-dqn-lookahead', 'milp-dqn', 'heur')
+SEARCH_OF = {'milp-dqn-mcts': 'mcts', 'milp-dqn-halving': 'halving', 'milp-dqn-lookahead': 'lookahead'}
 # The shipped network the learned policies load when no checkpoint is given.
 DEFAULT_NETWORK = 'milp-dqn-mixed'
 
