@@ -7,7 +7,7 @@ takes the first action GAMP finds feasible, so the policy never commands anythin
 
   srv  sequence  rad_msgs/Sequence
 
-Parameters: policy (milp-dqn-mcts, milp-dqn-halving, milp-dqn, heur), checkpoint
+Parameters: policy (milp-dqn-lookahead, the default; milp-dqn-halving, milp-dqn-mcts, milp-dqn, heur), checkpoint
 ('' = the shipped network), budget (search simulations per decision), seed.
 A bad policy or checkpoint: the node does not start (one line on stderr, exit 1).
 """
@@ -19,7 +19,7 @@ import time
 from rclpy.node import Node
 
 from rad_core.errors import RadError
-from rad_core.sequencing.sequencer import Sequencer, SequencerConfig
+from rad_core.sequencing.sequencer import DEFAULT_POLICY, Sequencer, SequencerConfig
 from rad_msgs.srv import Sequence
 from rad_ros.node_main import main_for
 from rad_ros.sequencer_msgs import fill_sequence_response, sequence_inputs
@@ -28,7 +28,7 @@ from rad_ros.sequencer_msgs import fill_sequence_response, sequence_inputs
 class SequencerNode(Node):
     def __init__(self):
         super().__init__('sequencer')
-        for name, value in (('policy', 'milp-dqn-mcts'), ('checkpoint', ''), ('budget', 5), ('seed', 0)):
+        for name, value in (('policy', DEFAULT_POLICY), ('checkpoint', ''), ('budget', 5), ('seed', 0)):
             self.declare_parameter(name, value)
         config = SequencerConfig(policy=str(self.param('policy')), checkpoint=str(self.param('checkpoint')),
                                  budget=int(self.param('budget')), seed=int(self.param('seed')))

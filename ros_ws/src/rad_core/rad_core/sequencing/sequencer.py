@@ -34,6 +34,9 @@ from rad_core.sequencing.search import SEARCHES, EnvModel
 
 POLICIES = ('milp-dqn-mcts', 'milp-dqn-halving', 'milp-dqn-lookahead', 'milp-dqn', 'heur')
 SEARCH_OF = {'milp-dqn-mcts': 'mcts', 'milp-dqn-halving': 'halving', 'milp-dqn-lookahead': 'lookahead'}
+# What the sequencer node runs unless told otherwise (docs/results/table2.md: the searches
+# tie on average; lookahead is never worse than the verified greedy policy within its budget).
+DEFAULT_POLICY = 'milp-dqn-lookahead'
 # The shipped network the learned policies load when no checkpoint is given.
 DEFAULT_NETWORK = 'milp-dqn-mixed'
 
@@ -46,7 +49,7 @@ class SequencerConfig:
     0 for halving). seed: seeds the policy's and the search's generator, together
     with the state's step count, so one request always gets the same answer."""
 
-    policy: str = 'milp-dqn-mcts'
+    policy: str = DEFAULT_POLICY
     checkpoint: str = ''
     budget: int = 5
     seed: int = 0
