@@ -15,6 +15,13 @@ every configuration gives the same outcomes as the baseline on the same actions.
 settle: for how many simulated seconds of settling the judgement of a placement
 stays what 0.5 s (the default) says, over many exploratory placements.
 
+    python scripts/bench_robot_training.py eval --model runs/milp-dqn-robot/model.pt [--grids 4,5]
+
+eval: `rad_core.evaluation.evaluate` with the robot (its default execution and
+settling, a fresh world per scene, no markov, no cache: the evaluation's own
+setting, not the training's) for the model and the no-robot network it started
+from, on evaluation scenes 0.. with the stable allocation; --json writes the rows.
+
 A benchmark, not a test: figures depend on the machine and its load.
 """
 
@@ -211,6 +218,31 @@ def cmd_settle(args) -> None:
         print(f'  settle {t:4.2f} s: {agree[t]}/{judged} ({100 * agree[t] / max(judged, 1):.1f} %)')
 
 
+def cmd_eval(args) -> None:
+    import json
+    from rad_core.evaluation import evaluate, generated_scenes, get_agent
+    out = {}
+    runs = [('trained with the robot', args.model, False), ('start (no robot)', args.baseline, False)]
+    if args.verify:
+        runs.append(('trained, + verify (GAMP)', args.model, True))
+    for label, model, verify in runs:
+        agent = get_agent('milp-dqn-mixed', checkpoint=model)   # milp actions, stable allocation
+        if verify:
+            from dataclasses import replace
+            agent = replace(agent, name=agent.name + '+verify', verified=True)
+        for g in (int(v) for v in args.grids.split(',')):
+            t0 = time.perf_counter()
+            r = evaluate(agent, generated_scenes(g, 2, args.scenes, 0), robot=True, seed=0)
+            out[f'{label} g{g}'] = {k: v for k, v in r.items() if k != 'scenes'}
+            print(f'{label:24s} g = {g}: R {r["R"]:.2f}  coverage {r["coverage"]:.3f}  rel {r["coverage_rel"]:.3f}  '
+                  f'f {r["f"]:.2f} (f_g {r["f_g"]:.2f}, f_p {r["f_p"]:.2f})  d {r["d"]:.2f}  e {r["e"]:.2f}  '
+                  f'n {r["n"]}  ({time.perf_counter() - t0:.0f} s)', flush=True)
+    if args.json:
+        with open(args.json, 'w') as f:
+            json.dump({'model': args.model, 'baseline': args.baseline, 'scenes': args.scenes,
+                       'allocation': 'stable', 'results': out}, f, indent=1)
+
+
 def main(argv=None) -> int:
     torch.set_num_threads(1)   # as training runs (TrainConfig.threads)
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -232,6 +264,14 @@ def main(argv=None) -> int:
     p.add_argument('--grid', type=int, default=4)
     p.add_argument('--seed', type=int, default=0)
     p.set_defaults(func=cmd_settle)
+    p = sub.add_parser('eval')
+    p.add_argument('--model', required=True)
+    p.add_argument('--baseline', default='milp-dqn-mixed')
+    p.add_argument('--grids', default='4,5')
+    p.add_argument('--scenes', type=int, default=30)
+    p.add_argument('--json', default='')
+    p.add_argument('--verify', action='store_true', help='also the model taking the best GAMP-feasible action')
+    p.set_defaults(func=cmd_eval)
     args = ap.parse_args(argv)
     args.func(args)
     return 0
