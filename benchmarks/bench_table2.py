@@ -35,9 +35,10 @@ PAPER = {   # Table II of the paper (two-sided, robot in the loop); absent keys 
     (5, 'milp-dqn'): {'R': 0.98, 'e': 0.53, 'f_g': 0.10, 'f_p': 0.15, 'coverage': 0.58},
     (5, 'milp-dqn-mcts'): {'R': 1.38, 'e': 0.65, 'f_g': 0.02, 'f_p': 0.06, 'coverage': 0.65},
 }
-DEFAULT_AGENTS = ('heur', 'heur-verified', 'milp-dqn', 'milp-dqn-mcts', 'milp-dqn-mcts+verify',
-                  'milp-dqn-halving+verify', 'milp-dqn-mixed+verify', 'milp-dqn-mixed-mcts+verify',
-                  'milp-dqn-mixed-halving+verify')
+DEFAULT_AGENTS = ('heur', 'heur-verified', 'milp-dqn', 'milp-dqn+verify', 'milp-dqn-mcts', 'milp-dqn-mcts+verify',
+                  'milp-dqn-halving+verify', 'milp-dqn-lookahead+verify', 'milp-dqn-mixed+verify',
+                  'milp-dqn-mixed-mcts+verify', 'milp-dqn-mixed-halving+verify', 'milp-dqn-mixed-lookahead+verify',
+                  'milp-dqn-robot+verify', 'milp-dqn-robot-lookahead+verify')
 COLS = ('R', 'd', 'e', 'f', 'f_g', 'f_p', 'coverage', 'coverage_rel')
 HEADS = {'coverage': 'a-bar', 'coverage_rel': 'a_rel'}
 

@@ -142,7 +142,6 @@ def test_markov_puts_the_arm_home_and_unplaced_blocks_back_so_gamp_sees_only_the
 def test_the_step_cache_replays_the_verdicts_of_a_fresh_env():
     scene = generate_scene(GeneratorConfig(grid=4), SEED)
     placements = solve(scene).placements
-    rng = np.random.default_rng(3)
     with RobotAssemblyEnv(scene, MARKOV) as fresh, \
             RobotAssemblyEnv(scene, RobotEnvConfig(execution='teleport', markov=True, cache=True)) as cached:
         guide = AllocationGuide(scene, placements)

@@ -102,6 +102,10 @@ AGENTS = {
     'milp-dqn-mixed-halving': _learned('milp-dqn-mixed-halving', 'milp', support='stable',
                                        network='milp-dqn-mixed', search='halving'),
     'milp-dqn-lookahead': _learned('milp-dqn-lookahead', 'milp', network='milp-dqn', search='lookahead'),
+    # milp-dqn-mixed fine-tuned with the robot in the loop (docs/results/robot_training.md).
+    'milp-dqn-robot': _learned('milp-dqn-robot', 'milp', support='stable'),
+    'milp-dqn-robot-lookahead': _learned('milp-dqn-robot-lookahead', 'milp', support='stable',
+                                         network='milp-dqn-robot', search='lookahead'),
     'milp-dqn-mixed-lookahead': _learned('milp-dqn-mixed-lookahead', 'milp', support='stable',
                                          network='milp-dqn-mixed', search='lookahead'),
 }
