@@ -91,7 +91,9 @@ def main() -> int:
     lines = ['# Table II: the robot in the loop', '',
              f'Generated two-sided scenes, seeds 0..{args.scenes - 1} per grid size, teleporting execution; '
              '`python benchmarks/bench_table2.py` (see its docstring). Paper rows from its Table II '
-             '(flush is not the paper\'s geometry: its blocks leave 1 cm between neighbours, clearance 0.2).', '']
+             '(flush is not the paper\'s geometry: its blocks leave 1 cm between neighbours, clearance 0.2). '
+             's/scene is wall time on a shared 2-core machine whose load varied between rows: compare it '
+             'within a row\'s own run only.', '']
     for clearance in clearances:
         for grid in grids:
             lines += [f'## g = {grid}, clearance {clearance:g}' + (' (flush)' if not clearance else ''), '',
