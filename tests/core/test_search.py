@@ -121,12 +121,34 @@ def test_a_failing_action_is_ranked_last_and_never_chosen_greedily():
         assert not any(c.invalid and c.action == r.action for c in r.children)
         ranking = [a for a, _ in r.ranking()]
         invalid = [c.action for c in r.children if c.invalid]
-        searched = [c.action for c in r.children]
-        assert ranking[0] == r.action
-        # among the searched children, the failed ones come after the others
-        positions = [ranking.index(a) for a in searched]
-        assert max(ranking.index(a) for a in searched if a not in invalid) < min(ranking.index(a) for a in invalid)
-        assert sorted(positions) == list(range(len(searched)))
+        assert invalid and ranking[0] == r.action
+        # every root action once, the failed ones last
+        assert sorted(ranking) == sorted(ToyModel(bad=(0, 1, 2, 3)).actions() + [TERMINATE])
+        assert ranking[-len(invalid):] == invalid
+
+
+def test_the_ranking_keeps_every_rotation_and_stopping_does_not_hide_better_actions():
+    """Actions with the same outcome key are simulated once but all ranked; a searched
+    termination is ranked by its Q, so unsearched actions valued above it stay listed."""
+    class Rotations(ToyModel):
+        def actions(self):
+            return [Action(a.block, 0, a.cell, rot) for a in super().actions() for rot in (0, 1)]
+
+        def key(self, action):
+            return action.block
+
+        def q_values(self, actions):
+            q = super().q_values([Action(a.block, 0, a.cell, 0) for a in actions])
+            q[-1] = 0.45   # terminating is worth less than most actions
+            return q
+    model = Rotations(bad=(), trap=-1)
+    r = SEARCHES['mcts'](model, np.random.default_rng(0), budget=2, epsilon=1.0)   # explores at random
+    ranking = [a for a, _ in r.ranking()]
+    assert sorted(ranking) == sorted(model.actions() + [TERMINATE])
+    q = dict(zip(model.actions() + [TERMINATE], model.q_values(model.actions())))
+    searched = {c.action for c in r.children}
+    above = [a for a in model.actions() if q[a] > q[TERMINATE] and a not in searched]
+    assert above and all(ranking.index(a) < ranking.index(TERMINATE) for a in above)
 
 
 def test_halving_sees_a_dead_end_that_one_step_does_not():

@@ -51,6 +51,7 @@ class SequencerNode(Node):
         try:
             scene, placements, start, max_actions = sequence_inputs(request)
             ranking = self.sequencer.rank(scene, placements, start=start, max_actions=max_actions)
+            fill_sequence_response(response, ranking, self.policy)
         except RadError as e:
             response.success, response.reason = False, str(e)
             self.get_logger().warning(f'sequence refused: {e}')
@@ -59,7 +60,6 @@ class SequencerNode(Node):
             self.get_logger().error(f'sequence failed: {type(e).__name__}: {e}')
             response.success, response.reason = False, f'internal error: {e}'
             return response
-        fill_sequence_response(response, ranking, self.policy)
         best = f'best {ranking.actions[0].block_id}' if ranking.actions else f'stop: {ranking.reason}'
         self.get_logger().info(f'ranked {len(ranking.actions)} actions ({best}) in '
                                f'{ranking.timings.get("sequencing", 0.0) * 1e3:.0f} ms')

@@ -104,22 +104,23 @@ class SearchResult:
     action: Action                      # the move
     children: list[Child] = field(default_factory=list)   # in expansion order
     simulations: int = 0                # real steps spent
-    root_q: np.ndarray | None = None    # the network's Q at the root (actions + terminate)
-    actions: list[Action] = field(default_factory=list)   # the root's allowed actions
+    root_q: np.ndarray | None = None    # the network's Q at the root: each of `actions`, then terminate
+    actions: list[Action] = field(default_factory=list)   # every allowed root action
 
     def ranking(self) -> list[tuple[Action, float]]:
-        """Every root action (termination included) best first: the searched children by
-        their value (those whose step failed last, so a verified caller never tries them
-        first), then the rest by Q. Ties keep the earlier order."""
-        searched = {c.action: c for c in self.children}
-        seen = sorted(self.children, key=lambda c: (c.invalid, -c.value))
-        chosen = [c for c in seen if c.action == self.action]
-        order = chosen + [c for c in seen if c.action != self.action]
-        out = [(c.action, c.value) for c in order]
+        """Every root action (termination included) best first, for a verified caller
+        that goes down the list: the move (unless it is to stop), the other searched
+        children whose step succeeded by their value, then everything not simulated
+        (other rotations of a searched pose included) and termination by Q, and last the
+        children whose step failed. Ties keep the earlier order."""
+        searched = {c.action: c for c in self.children if not c.action.is_terminate}
+        good = sorted((c for c in searched.values() if not c.invalid), key=lambda c: -c.value)
+        good.sort(key=lambda c: c.action != self.action)      # the move first, stable otherwise
         candidates = list(self.actions) + [TERMINATE]
         rest = [(a, float(self.root_q[i])) for i, a in enumerate(candidates) if a not in searched]
         rest.sort(key=lambda t: -t[1])
-        return out + rest
+        failed = [(c.action, c.value) for c in self.children if c.invalid]
+        return [(c.action, c.value) for c in good] + rest + failed
 
     def to_dict(self) -> dict:
         return {'action': _action_doc(self.action), 'simulations': self.simulations,
@@ -137,9 +138,11 @@ def _leaf(model: Model, reward: float, done: bool) -> float:
     return reward + model.gamma * float(np.max(model.q_values(model.actions())))
 
 
-def _root(model: Model) -> tuple[list[Action], list[Action], np.ndarray]:
-    """(allowed actions, candidates, Q of the candidates): candidates are the allowed
-    actions, one per outcome key (the best by Q, the first of ties), plus termination."""
+def _root(model: Model) -> tuple[list[Action], np.ndarray, list[Action], np.ndarray]:
+    """(allowed actions, their Q and terminate's, candidates, Q of the candidates):
+    candidates are the allowed actions, one per outcome key (the best by Q, the first of
+    ties), plus termination. The search simulates candidates only; its ranking still
+    lists every allowed action."""
     actions = model.actions()
     q_all = np.asarray(model.q_values(actions), dtype=float)
     key = getattr(model, 'key', None)
@@ -152,7 +155,7 @@ def _root(model: Model) -> tuple[list[Action], list[Action], np.ndarray]:
                 best[k] = i
         keep = sorted(best.values())
     candidates = [actions[i] for i in keep] + [TERMINATE]
-    return actions, candidates, np.concatenate([q_all[keep], q_all[-1:]])
+    return actions, q_all, candidates, np.concatenate([q_all[keep], q_all[-1:]])
 
 
 def mcts(model: Model, rng: np.random.Generator, budget: int = 5, epsilon: float = 0.05) -> SearchResult:
@@ -161,8 +164,8 @@ def mcts(model: Model, rng: np.random.Generator, budget: int = 5, epsilon: float
         raise ValueError(f'mcts: budget must be >= 1, got {budget}')
     if not 0.0 <= epsilon <= 1.0:
         raise ValueError(f'mcts: epsilon must be in [0, 1], got {epsilon}')
-    actions, candidates, q = _root(model)
-    result = SearchResult(TERMINATE, root_q=q, actions=candidates[:-1])
+    actions, q_all, candidates, q = _root(model)
+    result = SearchResult(TERMINATE, root_q=q_all, actions=list(actions))
     root = model.snapshot()
     open_ = list(range(len(candidates)))   # not yet expanded, in candidate order
     for _ in range(budget):
@@ -195,8 +198,8 @@ def halving(model: Model, rng: np.random.Generator, budget: int = 5, epsilon: fl
     random simulated child (0 at test time)."""
     if budget < 1:
         raise ValueError(f'halving: budget must be >= 1, got {budget}')
-    actions, candidates, q = _root(model)
-    result = SearchResult(TERMINATE, root_q=q, actions=candidates[:-1])
+    actions, q_all, candidates, q = _root(model)
+    result = SearchResult(TERMINATE, root_q=q_all, actions=list(actions))
     root = model.snapshot()
     order = sorted(range(len(candidates)), key=lambda i: (-q[i], i))
     m = min(len(order), first_round(budget))
@@ -250,7 +253,7 @@ def _deepen(model: Model, line: _Line, budget: int) -> tuple[int, str]:
     valued by Q(s, terminate) where it stopped: what the agent would get by stopping."""
     child, gamma = line.child, model.gamma
     model.restore(line.snap)
-    _, candidates, iq = _root(model)
+    _, _, candidates, iq = _root(model)
     discount = gamma ** child.depth
     spent, status = 0, 'dead'
     for k in sorted(range(len(candidates)), key=lambda i: (-iq[i], i)):
@@ -294,8 +297,8 @@ def lookahead(model: Model, rng: np.random.Generator, budget: int = 5, epsilon: 
         raise ValueError(f'lookahead: budget must be >= 1, got {budget}')
     if horizon < 1:
         raise ValueError(f'lookahead: horizon must be >= 1, got {horizon}')
-    actions, candidates, q = _root(model)
-    result = SearchResult(TERMINATE, root_q=q, actions=candidates[:-1])
+    actions, q_all, candidates, q = _root(model)
+    result = SearchResult(TERMINATE, root_q=q_all, actions=list(actions))
     root = model.snapshot()
     chosen, dead = None, []
     for k in sorted(range(len(candidates)), key=lambda i: (-q[i], i)):
