@@ -12,7 +12,7 @@ import pytest
 import rclpy
 from rclpy.action import ActionClient
 
-from ros_harness import REPO_ROOT, call_service, ros_args, wait_for_plant, wait_for_service
+from ros_harness import REPO_ROOT, call_service, ros_args, spin_until, wait_for_plant, wait_for_service
 from scenes import U, doc
 
 from rad_core.generator import GeneratorConfig, generate_scene
@@ -120,6 +120,8 @@ def test_execute_builds_the_scene_and_reports_each_step(graph):
                      lambda m: phases.append(m.feedback.phase))
     assert result.success, result.reason
     assert result.steps_executed == 4 and result.coverage == 1.0
+    # Feedback is a topic, the result a service: the last feedback ('done') may arrive after it.
+    spin_until(graph.node, lambda: 'done' in phases, timeout=5.0)
     assert {'planning', 'executing', 'verifying', 'done'} <= set(phases)
     doc_ = json.loads(result.result_json)
     assert doc_['format'] == 'rad-result/1' and doc_['coverage'] == 1.0

@@ -60,6 +60,9 @@ def test_viz_records_robot_blocks_cells_plan_and_exits_cleanly(node_process, ros
     ros_node.create_subscription(RigidBodies, 'rigid_bodies', bodies.append, qos_profile_sensor_data)
     viz.wait_for_output('viz ready', timeout=30.0)
     assert spin_until(ros_node, lambda: pub.get_subscription_count() > 0 and bodies, timeout=30.0)
+    # The twin's latched /scene and the plan may reach viz some time after it is ready (slow under load).
+    viz.wait_for_output('scene logged', timeout=30.0)
+    viz.wait_for_output('plan logged', timeout=30.0)
     spin_until(ros_node, lambda: False, timeout=2.5)    # let it log joint states and motion capture
     assert viz.stop(timeout=15.0) == 0, viz.output_tail()
     assert twin.is_running(), twin.output_tail()

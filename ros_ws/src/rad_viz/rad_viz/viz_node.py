@@ -170,6 +170,8 @@ class VizNode(Node):
         if self.sinks:
             viz.set_ros_time(self.rec, stamp_s(msg.header, self.get_clock().now().nanoseconds * 1e-9))
             viz.log_scene(self.rec, scene, previous)
+            if previous is None:
+                self.get_logger().info(f'scene logged: {len(scene.blocks)} blocks, {len(scene.targets)} regions')
         self._log_plan()
 
     def plan_callback(self, msg: String) -> None:
@@ -189,6 +191,8 @@ class VizNode(Node):
             return
         problems = viz.log_plan(self.rec, self.scene, self.plan, self.get_clock().now().nanoseconds * 1e-9,
                                 previous=self.plan_logged)
+        if self.plan_logged is None:
+            self.get_logger().info('plan logged')
         self.plan_logged = self.plan
         for p in problems:
             self.get_logger().warning(f'plan: {p}')
