@@ -158,6 +158,7 @@ def coverage_opt(env: AssemblyEnv, guide: AllocationGuide) -> float:
 class Check(NamedTuple):
     success: bool
     reason: str = ''
+    plan: object = None     # the motion plan the check found, when it planned one
 
 
 def stability_check(env: AssemblyEnv):
@@ -190,7 +191,6 @@ def search_decider(policy: Policy, actions: ActionSpace, stepper, agent: Agent, 
     succeeded needs no further check (it was a real step of the planning copy, GAMP
     and physics included; its motion plan is reused), an unsearched one is checked by
     simulating it (`simulated_check`); failed children are never taken."""
-    from rad_core.mdp import TERMINATE
     from rad_core.sequencing.search import SEARCHES, EnvModel
     search = SEARCHES[agent.search]
     kwargs = {} if agent.epsilon is None else {'epsilon': agent.epsilon}
@@ -206,39 +206,26 @@ def search_decider(policy: Policy, actions: ActionSpace, stepper, agent: Agent, 
             if result.action.is_terminate:
                 return stop()
             return Decision(result.action, plans.get(result.action))
-        searched = {c.action: c for c in result.children}
-        for action, _ in result.ranking():
-            if action == TERMINATE:
-                break
-            child = searched.get(action)
-            if child is not None:
-                if not child.invalid:
-                    return Decision(action, plans.get(action))
-                continue
-            ok = check(action)
-            if ok.success:
-                return Decision(action, ok.plan)
-        return stop()
+        worked = {c.action for c in result.children if not c.invalid}
+
+        def known_or_simulated(action) -> Check:
+            return Check(True, '', plans.get(action)) if action in worked else check(action)
+        action, ok, _ = first_feasible(env, [a for a, _ in result.proposals()], known_or_simulated)
+        return Decision(action, ok.plan) if action is not None else stop()
     return decide
-
-
-class SimCheck(NamedTuple):
-    success: bool
-    reason: str = ''
-    plan: object = None
 
 
 def simulated_check(stepper):
     """A check that steps the action in a snapshot of the planning copy and goes back:
     success when the step is valid (with the robot: GAMP, execution and physics)."""
-    def check(action) -> SimCheck:
+    def check(action) -> Check:
         snap = stepper.snapshot()
         try:
             result = stepper.step(action)
             plan = getattr(stepper, 'last_plan', None)
         finally:
             stepper.restore(snap)
-        return SimCheck(not result.outcome.is_invalid, result.reason, plan)
+        return Check(not result.outcome.is_invalid, result.reason, plan)
     return check
 
 

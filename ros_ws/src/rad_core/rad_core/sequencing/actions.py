@@ -14,13 +14,16 @@ allowed on top and is not listed), so the same object serves every env clone.
 
 from __future__ import annotations
 
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
 from rad_core.allocation.guide import AllocationGuide
 from rad_core.allocation.placements import Placement
 from rad_core.mdp import Action, AssemblyEnv
+
+if TYPE_CHECKING:
+    from rad_core.gamp.action import SceneAction
 
 METHODS = ('milp', 'all', 'rel')
 
@@ -70,3 +73,12 @@ def action_space(method: str, env: AssemblyEnv, placements=None) -> ActionSpace:
     if method == 'rel':
         return relative_actions
     raise ValueError(f'unknown action space {method!r}; one of {", ".join(METHODS)}')
+
+
+def scene_action(env: AssemblyEnv, action: Action) -> SceneAction:
+    """An MDP action named the way messages name it (block id, target, region cell)."""
+    from rad_core.gamp.action import SceneAction   # here: GAMP's module loads the simulator
+    region = int(env.grid.region_of[action.cell])
+    cell = tuple(int(v) for v in env.grid.ijk[action.cell])
+    return SceneAction(env.scene.blocks[action.block].id, int(action.unit), env.scene.targets[region].name, cell,
+                       int(action.rotation))

@@ -28,7 +28,7 @@ from rad_core.allocation.result import AllocationResult
 from rad_core.gamp.action import SceneAction
 from rad_core.mdp import Action, AssemblyEnv, EnvConfig
 from rad_core.scene import Block, Scene
-from rad_core.sequencing.actions import AllocationActions
+from rad_core.sequencing.actions import AllocationActions, scene_action
 from rad_core.sequencing.episode import Decision, run_episode, stop
 from rad_core.sequencing.policy import Policy, first_feasible, ranked_actions
 
@@ -204,16 +204,9 @@ def mdp_actions(env: AssemblyEnv, ranked: list[SceneAction], allowed) -> list:
 
 def _first_feasible(env: AssemblyEnv, scene: Scene, ranked, plan_motion: PlanMotion, q, timings):
     """(action, PlanStep) of the best-ranked action GAMP can execute, or why none."""
-    def request(action) -> SceneAction:
-        cells, _ = env.resulting_cells(action)
-        region = int(env.grid.region_of[cells[0]])
-        cell = tuple(int(v) for v in env.grid.ijk[action.cell])
-        return SceneAction(scene.blocks[action.block].id, action.unit, scene.targets[region].name, cell,
-                           action.rotation)
-
     def check(action) -> MotionPlan:
         ts = time.perf_counter()
-        motion = plan_motion(scene, request(action), q)
+        motion = plan_motion(scene, scene_action(env, action), q)
         timings['motion'] += time.perf_counter() - ts
         return motion
 
@@ -224,7 +217,7 @@ def _first_feasible(env: AssemblyEnv, scene: Scene, ranked, plan_motion: PlanMot
         return f'no feasible next action ({len(failures)} tried): {shown}'
     cells, yaw = env.resulting_cells(action)
     _, ijk = env.grid.region_cells(cells)
-    req, block = request(action), scene.blocks[action.block]
+    req, block = scene_action(env, action), scene.blocks[action.block]
     anchor = env.grid.centres[cells[0]]   # cells are in unit order: the first is the anchor's
     return action, PlanStep(block.id, block.type, req.target, int(yaw), ijk, action.unit, list(req.cell),
                             action.rotation, motion.grasp, [float(v) for v in anchor], motion.trajectory)

@@ -122,6 +122,16 @@ class SearchResult:
         failed = [(c.action, c.value) for c in self.children if c.invalid]
         return [(c.action, c.value) for c in good] + rest + failed
 
+    def proposals(self) -> list[tuple[Action, float]]:
+        """The ranking down to termination: what a verified caller may try, best first
+        (failed children rank after termination, so they are never among them)."""
+        out = []
+        for action, value in self.ranking():
+            if action.is_terminate:
+                break
+            out.append((action, value))
+        return out
+
     def to_dict(self) -> dict:
         return {'action': _action_doc(self.action), 'simulations': self.simulations,
                 'children': [c.to_dict() for c in self.children]}
@@ -205,17 +215,7 @@ def halving(model: Model, rng: np.random.Generator, budget: int = 5, epsilon: fl
     m = min(len(order), first_round(budget))
     lines: dict[int, _Line] = {}
     for k in order[:m]:
-        reward, done, invalid = model.step(candidates[k])
-        child = Child(candidates[k], float(q[k]), visits=1, reward=float(reward), done=bool(done),
-                      invalid=bool(invalid), depth=1)
-        line = lines[k] = _Line(child, float(reward))
-        if done:
-            child.value_sum = line.ret
-        else:
-            line.snap, line.end_q = model.snapshot(), float(np.max(model.q_values(model.actions())))
-            child.value_sum = line.ret + model.gamma * line.end_q
-        result.children.append(child)
-        result.simulations += 1
+        lines[k] = _simulate_child(model, candidates[k], float(q[k]), result)
         model.restore(root)
     survivors = sorted(lines, key=lambda k: (-lines[k].child.value, k))
     while result.simulations < budget:
@@ -242,6 +242,32 @@ class _Line:
     ret: float                 # discounted rewards along the line so far
     snap: Any = None           # the state at the line's end; None once the line has ended
     end_q: float = 0.0
+
+
+def _end_line(model: Model, line: _Line, done: bool) -> None:
+    """Value the line after a successful step: its return, plus gamma^depth max Q at its
+    end unless the episode ended there (then the line is closed)."""
+    child = line.child
+    if done:
+        child.value_sum, line.snap = line.ret, None
+        return
+    line.snap, line.end_q = model.snapshot(), float(np.max(model.q_values(model.actions())))
+    child.value_sum = line.ret + model.gamma ** child.depth * line.end_q
+
+
+def _simulate_child(model: Model, action: Action, q: float, result: SearchResult) -> _Line:
+    """One simulation of a root candidate: its child (recorded in result) and its line.
+    A failed step ends the line at its reward (-1)."""
+    reward, done, invalid = model.step(action)
+    result.simulations += 1
+    child = Child(action, q, visits=1, reward=float(reward), done=bool(done), invalid=bool(invalid), depth=1)
+    result.children.append(child)
+    line = _Line(child, float(reward))
+    if invalid:
+        child.value_sum = line.ret
+    else:
+        _end_line(model, line, bool(done))
+    return line
 
 
 def _deepen(model: Model, line: _Line, budget: int) -> tuple[int, str]:
@@ -273,11 +299,7 @@ def _deepen(model: Model, line: _Line, budget: int) -> tuple[int, str]:
             continue
         child.depth += 1
         line.ret += discount * reward
-        if done:
-            child.value_sum, line.snap = line.ret, None
-        else:
-            line.snap, line.end_q = model.snapshot(), float(np.max(model.q_values(model.actions())))
-            child.value_sum = line.ret + gamma ** child.depth * line.end_q
+        _end_line(model, line, done)
         return spent, 'stepped'
     child.value_sum = line.ret + discount * float(iq[-1])
     line.snap = None
@@ -305,23 +327,13 @@ def lookahead(model: Model, rng: np.random.Generator, budget: int = 5, epsilon: 
         action = candidates[k]
         if action.is_terminate or result.simulations >= budget:
             break
-        reward, done, invalid = model.step(action)
-        result.simulations += 1
-        child = Child(action, float(q[k]), visits=1, reward=float(reward), done=bool(done),
-                      invalid=bool(invalid), depth=1)
-        result.children.append(child)
-        line = _Line(child, float(reward))
-        status = 'stepped'
-        if done or invalid:
-            child.value_sum = line.ret
-        else:
-            line.snap, line.end_q = model.snapshot(), float(np.max(model.q_values(model.actions())))
-            child.value_sum = line.ret + model.gamma * line.end_q
-            while child.depth < horizon and line.snap is not None and result.simulations < budget:
-                spent, status = _deepen(model, line, budget - result.simulations)
-                result.simulations += spent
+        line = _simulate_child(model, action, float(q[k]), result)
+        child, status = line.child, 'stepped'
+        while child.depth < horizon and line.snap is not None and result.simulations < budget:
+            spent, status = _deepen(model, line, budget - result.simulations)
+            result.simulations += spent
         model.restore(root)
-        if invalid:
+        if child.invalid:
             continue
         if status == 'dead':
             dead.append(child)

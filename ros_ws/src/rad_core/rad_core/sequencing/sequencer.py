@@ -26,9 +26,9 @@ import numpy as np
 from rad_core.allocation.guide import AllocationGuide
 from rad_core.errors import RadError
 from rad_core.gamp.action import SceneAction, start_joints
-from rad_core.mdp import TERMINATE, Action, AssemblyEnv
+from rad_core.mdp import AssemblyEnv
 from rad_core.scene import Scene
-from rad_core.sequencing.actions import AllocationActions
+from rad_core.sequencing.actions import AllocationActions, scene_action
 from rad_core.sequencing.policy import HeurPolicy, ranked_indices
 from rad_core.sequencing.search import SEARCHES, EnvModel
 
@@ -83,14 +83,6 @@ class Ranking:
     reason: str = ''
     timings: dict = field(default_factory=dict)
     search: dict | None = None     # the search tree (SearchResult.to_dict), when one ran
-
-
-def scene_action(env: AssemblyEnv, action: Action) -> SceneAction:
-    """An MDP action named the way messages name it (block id, target, region cell)."""
-    region = int(env.grid.region_of[action.cell])
-    cell = tuple(int(v) for v in env.grid.ijk[action.cell])
-    return SceneAction(env.scene.blocks[action.block].id, int(action.unit), env.scene.targets[region].name, cell,
-                       int(action.rotation))
 
 
 class Sequencer:
@@ -169,13 +161,9 @@ class Sequencer:
                                                        epsilon=self.config.search_epsilon)
         ranking.timings['search'] = time.perf_counter() - ts
         ranking.search = result.to_dict()
-        failed = {c.action for c in result.children if c.invalid}
-        for action, value in result.ranking():
-            if action == TERMINATE:
-                break
-            if action not in failed:
-                ranking.actions.append(scene_action(renv.env, action))
-                ranking.values.append(float(value))
+        for action, value in result.proposals():
+            ranking.actions.append(scene_action(renv.env, action))
+            ranking.values.append(float(value))
         if not ranking.actions:
             ranking.terminate = True
             tried = sum(1 for c in result.children if not c.action.is_terminate)
