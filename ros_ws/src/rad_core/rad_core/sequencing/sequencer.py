@@ -130,7 +130,7 @@ class Sequencer:
             ranking.reason = ('every allocated pose is built' if left == 0
                               else f'{left} allocated poses left, no unplaced block of their types')
         elif self.config.policy in SEARCH_OF:
-            self._search(scene, placements, q0, rng, ranking, left)
+            self._search(scene, space, q0, rng, ranking, left)
         else:
             ts = time.perf_counter()
             scores = np.asarray(self.policy.scores(env, allowed, rng), dtype=float)
@@ -147,7 +147,7 @@ class Sequencer:
         ranking.timings['sequencing'] = time.perf_counter() - t0
         return ranking
 
-    def _search(self, scene: Scene, placements, q0, rng, ranking: Ranking, left: int) -> None:
+    def _search(self, scene: Scene, space: AllocationActions, q0, rng, ranking: Ranking, left: int) -> None:
         ts = time.perf_counter()
         renv = self._twin(scene)
         renv.reset()
@@ -156,7 +156,7 @@ class Sequencer:
             renv.twin.sync()
         ranking.timings['twin'] = time.perf_counter() - ts
         ts = time.perf_counter()
-        model = EnvModel(renv, self.policy, AllocationActions(renv.env, placements))
+        model = EnvModel(renv, self.policy, space)   # the space is stateless: it serves the twin's env too
         result = SEARCHES[SEARCH_OF[self.config.policy]](model, rng, budget=self.config.budget,
                                                        epsilon=self.config.search_epsilon)
         ranking.timings['search'] = time.perf_counter() - ts
