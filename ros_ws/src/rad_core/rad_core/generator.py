@@ -9,7 +9,8 @@ two cells deep with one polygon on its face towards the robot's left (+y) and on
 on its face towards the robot's right (-y).
 
 The blocks on the table are a random tiling of the target cells (so a perfect
-assembly exists) plus extras, laid out in rows on the robot's right.
+assembly exists) plus extras, laid out in rows on the robot's right; a block the
+arm could not reach there (`GeneratorConfig.reach`) goes to rows on its left.
 """
 
 from __future__ import annotations
@@ -41,6 +42,13 @@ class GeneratorConfig:
     table_x: x range (m) of the rows of blocks on the table.
     first_row_y: y (m) of the first row's near edge; rows go on towards -y.
     gap: free space between neighbouring blocks on the table (m).
+    reach: horizontal distance (m) from the robot base (the origin) that every unit
+        centre of a block on the table must be within; the Panda's top-down grasp
+        of a cube on the table works to about 0.78 m and fails beyond 0.80 m. A
+        block whose place in the rows on the right is beyond it goes to rows on
+        the left (+y, from y = -first_row_y on), which end early at the reach;
+        every other block keeps its place, and no random draw changes. math.inf
+        gives the layout of before reach existed (everything on the right).
     clearance: the scenes' clearance, a fraction of the unit (`rad_core.scene`): 0
         (flush blocks, the default) or e.g. 0.2, the predecessor's 1 cm between
         neighbouring 5 cm cells. It changes no random draw: a seed gives the same
@@ -57,6 +65,7 @@ class GeneratorConfig:
     table_x: tuple[float, float] = (0.3, 0.75)
     first_row_y: float = -0.12
     gap: float = 0.05
+    reach: float = 0.77
     clearance: float = 0.0
 
     def validate(self) -> None:
@@ -68,6 +77,9 @@ class GeneratorConfig:
             raise RadError(f'unit must be in 0.01..0.2 m, got {self.unit!r}')
         if not 1 <= self.min_cells_per_side <= self.grid * self.grid:
             raise RadError(f'min_cells_per_side must be in 1..{self.grid * self.grid}')
+        if not (isinstance(self.reach, (int, float)) and not isinstance(self.reach, bool) and self.reach > 0):
+            raise RadError(f'reach must be a positive distance in metres (or math.inf for no limit), '
+                           f'got {self.reach!r}')
         if not (isinstance(self.clearance, (int, float)) and math.isfinite(self.clearance)
                 and 0 <= self.clearance < MAX_CLEARANCE):
             raise RadError(f'clearance must be a fraction of the unit in 0 <= clearance < {MAX_CLEARANCE}, '
@@ -176,22 +188,76 @@ def generate_scene(config: GeneratorConfig = GeneratorConfig(), seed: int = 0) -
 
 
 def _lay_out(kinds: list[str], config: GeneratorConfig, rng: np.random.Generator) -> list[Block]:
-    """Rows of blocks on the table, each with a random yaw, at least `gap` apart."""
+    """Rows of blocks on the table, each with a random yaw, at least `gap` apart.
+
+    Every block takes its place in the rows on the right; one with a unit centre
+    beyond `config.reach` there takes the next place within reach in the rows on
+    the left instead (its place on the right stays empty, so the others keep theirs).
+    """
     u = config.unit
-    blocks, x, row_y, row_depth = [], config.table_x[0], config.first_row_y, 0.0
+    right, left = _Rows(config, config.first_row_y, -1), _Rows(config, -config.first_row_y, +1)
+    blocks = []
     for n, kind in enumerate(kinds):
         yaw = int(rng.choice([0, 90, 180, 270]))
         offs = DEFAULT_LIBRARY[kind].rotated(yaw)
-        lo, hi = offs.min(axis=0), offs.max(axis=0)
-        width, depth = u * (hi[0] - lo[0] + 1), u * (hi[1] - lo[1] + 1)
-        if x + width > config.table_x[1] and x > config.table_x[0]:
-            x, row_y, row_depth = config.table_x[0], row_y - row_depth - config.gap, 0.0
-        # Footprint spans x..x+width and row_y-depth..row_y.
-        pos = (x + u / 2 - lo[0] * u, row_y - depth + u / 2 - lo[1] * u, u / 2 - lo[2] * u)
-        blocks.append(Block(f'b{n}', kind, tuple(round(float(v), 6) for v in pos), yaw))
-        x += width + config.gap
-        row_depth = max(row_depth, depth)
+        pos = right.place(offs)
+        right.advance(offs)
+        if _reach_of(pos, offs, u) > config.reach:
+            pos = left.place(offs)
+            if _reach_of(pos, offs, u) > config.reach and left.x > config.table_x[0]:
+                left.new_row()
+                pos = left.place(offs)
+            if _reach_of(pos, offs, u) > config.reach:
+                raise RadError(
+                    f'the {len(kinds)} blocks of a g={config.grid} scene do not fit on the table within '
+                    f'the reach of {config.reach} m (block {n}, a {kind}, fits in no row on either side); '
+                    f'use a smaller extra_fraction (now {config.extra_fraction})')
+            left.advance(offs)
+        blocks.append(Block(f'b{n}', kind, pos, yaw))
     return blocks
+
+
+class _Rows:
+    """Rows of footprints on the table: along +x from table_x[0], each row `gap`
+    beyond the last one, from near_y on towards side (-1: -y, +1: +y)."""
+
+    def __init__(self, config: GeneratorConfig, near_y: float, side: int):
+        self.config, self.side = config, side
+        self.x, self.row_y, self.row_depth = config.table_x[0], near_y, 0.0
+
+    def new_row(self) -> None:
+        # row_y + side * ... is exactly the right side's original row_y - depth - gap.
+        self.x = self.config.table_x[0]
+        self.row_y = self.row_y + self.side * self.row_depth + self.side * self.config.gap
+        self.row_depth = 0.0
+
+    def place(self, offs: np.ndarray) -> tuple[float, float, float]:
+        """The block's position at the cursor, in a new row where it would pass table_x[1];
+        advance() then moves the cursor past it."""
+        u = self.config.unit
+        lo, width, depth = self._extent(offs)
+        if self.x + width > self.config.table_x[1] and self.x > self.config.table_x[0]:
+            self.new_row()
+        # The footprint spans x..x+width and, in y, row_y-depth..row_y (right) or row_y..row_y+depth (left).
+        near = self.row_y - depth if self.side < 0 else self.row_y
+        pos = (self.x + u / 2 - lo[0] * u, near + u / 2 - lo[1] * u, u / 2 - lo[2] * u)
+        return tuple(round(float(v), 6) for v in pos)
+
+    def advance(self, offs: np.ndarray) -> None:
+        _, width, depth = self._extent(offs)
+        self.x += width + self.config.gap
+        self.row_depth = max(self.row_depth, depth)
+
+    def _extent(self, offs: np.ndarray) -> tuple[np.ndarray, float, float]:
+        u = self.config.unit
+        lo, hi = offs.min(axis=0), offs.max(axis=0)
+        return lo, u * (hi[0] - lo[0] + 1), u * (hi[1] - lo[1] + 1)
+
+
+def _reach_of(position, offs: np.ndarray, unit: float) -> float:
+    """The largest horizontal distance of a block's unit centres from the robot base."""
+    centres = np.asarray(position) + unit * offs
+    return float(np.hypot(centres[:, 0], centres[:, 1]).max())
 
 
 def target_statistics(config: GeneratorConfig, n: int, seed: int = 0) -> dict:
