@@ -1,0 +1,203 @@
+"""What the best order of the allocation's poses can build with the robot.
+
+The robot-feasible ceiling: a depth-first branch and bound over the orders in
+which the allocation's open poses can be filled, each move a real step of a
+`RobotAssemblyEnv` (GAMP, execution, physics) from a snapshot, undone with
+`restore`. Unlike the no-robot ceiling (`sequencing.ceiling`), which block of a
+type fills a pose matters here: the robot picks each block from its own place on
+the table, so a move is (block, the cells it fills, its yaw), one per distinct
+final pose of each block still on the table.
+
+- A step the robot or physics fails is a dead child (nothing below it).
+- Visited states are memoized by what is placed where (block and cells), so two
+  orders of the same placements are searched once.
+- A state is pruned when its coverage plus the target cells of the allocation's
+  poses still open cannot beat the best coverage found; the root's value of that
+  (`coverage_opt`) is the bound, and reaching it ends the search at once.
+- `on_dead_end` lets the caller re-allocate where no move succeeds although
+  allocated poses remain; the search goes on from that state with the new action
+  space for that subtree (the memo does not tell spaces apart: a state reached
+  again under another space is not searched again).
+
+Anytime: when the time or state limit cuts the search, the best line found so
+far comes back with complete=False and its coverage is a lower bound only.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Callable
+
+from rad_core.errors import RadError
+from rad_core.evaluation import coverage_opt
+from rad_core.mdp import Action, AssemblyEnv
+from rad_core.sequencing.actions import AllocationActions
+
+_EPS = 1e-9   # coverages are ratios of cell counts computed two ways
+
+Order = Callable[[AssemblyEnv, list[Action]], list[Action]]
+OnDeadEnd = Callable[[object], 'AllocationActions | None']
+
+
+@dataclass
+class ExactResult:
+    """What `exact_search` found.
+
+    coverage: the best target coverage any searched order reached.
+    actions: the line that reaches it, from the given state (MDP actions).
+    complete: the search was exhausted or reached the bound, so no order of the
+        allocation's poses does better; False when a limit cut it (then coverage
+        is a lower bound only, and `reason` says which limit).
+    bound: the root's upper bound (coverage plus open allocated target cells).
+    states: states visited (distinct sets of placements).
+    elapsed_s: wall time of the search.
+    reason: why the search is not complete ('' when it is).
+    """
+
+    coverage: float
+    actions: list[Action] = field(default_factory=list)
+    complete: bool = True
+    bound: float = 1.0
+    states: int = 0
+    elapsed_s: float = 0.0
+    reason: str = ''
+
+
+class _Cut(Exception):
+    """A limit ends the search; args[0] names it."""
+
+
+class _AtBound(Exception):
+    """The best coverage found equals the root's bound: nothing can beat it."""
+
+
+def by_gain_then_height(env: AssemblyEnv, actions: list[Action]) -> list[Action]:
+    """The default child order: most target cells filled first, then the lowest
+    cells first (bottom-up), then the lowest cell ids (deterministic)."""
+    grid = env.grid
+
+    def key(action):
+        cells, _ = env.resulting_cells(action)
+        return (-int(grid.is_target[cells].sum()), int(grid.ijk[cells][:, 2].min()), sorted(int(c) for c in cells))
+    return sorted(actions, key=key)
+
+
+def exact_search(renv, space: AllocationActions, time_limit_s: float = 60.0, max_states: int = 100_000,
+                 order: Order | None = None, on_dead_end: OnDeadEnd | None = None) -> ExactResult:
+    """Branch and bound over the orders of the allocation's poses with the robot in
+    the loop (module docstring), from renv's current state.
+
+    renv: a `RobotAssemblyEnv` between steps; it is left in the state it was given.
+    space: the allocation's action space (`AllocationActions`: its guide's poses
+        give the bound).
+    order: `order(env, actions) -> the same actions, best first` (e.g. a policy's
+        ranking), so good lines come first; default `by_gain_then_height`.
+    on_dead_end: `on_dead_end(renv) -> new space or None`, called where no move
+        succeeds while allocated poses remain open (renv is put back in that state
+        after the call).
+    """
+    if not (isinstance(time_limit_s, (int, float)) and time_limit_s > 0):
+        raise RadError(f'exact_search: time_limit_s must be a positive number of seconds, got {time_limit_s!r}')
+    if not (isinstance(max_states, int) and max_states >= 1):
+        raise RadError(f'exact_search: max_states must be a positive integer, got {max_states!r}')
+    env = renv.env
+    if env.state.done:
+        raise RadError('exact_search: the episode is over; give it an env between steps')
+    order = order or by_gain_then_height
+    start_time = time.monotonic()
+    deadline = start_time + time_limit_s
+    root = renv.snapshot()
+    bound = coverage_opt(env, space.guide)
+    best, best_line = env.coverage(), []
+    seen: set[frozenset] = set()
+
+    def placed_key() -> frozenset:
+        return frozenset((b, tuple(sorted(int(c) for c in cells))) for b, (cells, _) in env.state.placed.items())
+
+    def moves(space) -> list[tuple[Action, frozenset]]:
+        """The distinct moves (deduped as first_feasible dedupes a ranking), in order,
+        each with the placements it would lead to."""
+        distinct = {}
+        for action in space(env):
+            cells, yaw = env.resulting_cells(action)
+            distinct.setdefault((action.block, tuple(sorted(int(c) for c in cells)), yaw), action)
+        actions = list(distinct.values())
+        ordered = list(order(env, actions))
+        if len(ordered) != len(actions) or set(ordered) != set(actions):
+            raise RadError('exact_search: order() must return the actions it was given, reordered '
+                           f'(got {len(ordered)} for {len(actions)})')
+        key = placed_key()
+        child = {a: key | {(a.block, k[1])} for k, a in distinct.items()}
+        return [(a, child[a]) for a in ordered]
+
+    def open_poses(space) -> frozenset:
+        guide = space.guide
+        return frozenset(tuple(guide.pose_cells[k].tolist()) for k in guide.open_poses(env.state))
+
+    def check_time() -> None:
+        if time.monotonic() > deadline:
+            raise _Cut(f'time limit of {time_limit_s:g} s')
+
+    def expand(space, line: list[Action]) -> bool:
+        """Search every move of the space from here; whether any step succeeded."""
+        here = renv.snapshot()
+        any_valid = False
+        try:
+            for action, child in moves(space):
+                if child in seen:
+                    # Searched already (another order, or another yaw of the same move): not
+                    # stepped again, and not a dead end here (its subtree is searched).
+                    any_valid = True
+                    continue
+                check_time()
+                result = renv.step(action)
+                if not result.outcome.is_invalid:
+                    any_valid = True
+                    search(space, line + [action])
+                renv.restore(here)
+        finally:
+            renv.restore(here)
+        return any_valid
+
+    def search(space, line: list[Action]) -> None:
+        nonlocal best, best_line
+        key = placed_key()
+        if key in seen:
+            return
+        if len(seen) >= max_states:
+            raise _Cut(f'state limit of {max_states}')
+        seen.add(key)
+        coverage = env.coverage()
+        if coverage > best:
+            best, best_line = coverage, list(line)
+        if best >= bound - _EPS:
+            raise _AtBound()
+        if env.state.done:
+            return
+        tried = set()
+        while coverage_opt(env, space.guide) > best + _EPS:   # else: cannot beat the best
+            tried.add(open_poses(space))
+            if expand(space, line) or on_dead_end is None or not open_poses(space):
+                return
+            here = renv.snapshot()
+            new = on_dead_end(renv)
+            renv.restore(here)
+            if new is None or open_poses(new) in tried:
+                return   # no new space, or the same open poses again: nothing new to try
+            space = new
+            check_time()
+
+    complete, reason = True, ''
+    try:
+        search(space, [])
+    except _AtBound:
+        pass
+    except _Cut as cut:
+        complete = False
+        reason = (f'{cut.args[0]} reached after {len(seen)} states; '
+                  f'{best:.2f} is a lower bound')
+    finally:
+        renv.restore(root)
+    return ExactResult(best, best_line, complete, bound, len(seen),
+                       time.monotonic() - start_time, reason)

@@ -1,0 +1,130 @@
+"""The exact planner: branch and bound over pose orders with the robot in the loop."""
+
+import numpy as np
+import pytest
+
+from rad_core.allocation import AllocationParams, Placement, solve
+from rad_core.errors import RadError
+from rad_core.robot_env import RobotAssemblyEnv, RobotEnvConfig
+from rad_core.scene import Scene
+from rad_core.sequencing.actions import AllocationActions
+from rad_core.sequencing.exact import exact_search
+
+from scenes import scene as default_scene
+
+U = 0.05
+FAR = (0.9, -0.6, U / 2)   # 1.08 m from the base: the arm cannot grasp there
+
+
+def row_scene(cubes, far=False, extra=()):
+    """A row of three target cells on the table; cubes (and one out of reach) to fill it."""
+    blocks = [{'id': f'c{n}', 'type': 'cube', 'position': [0.4 + 0.1 * n, -0.2, U / 2], 'yaw': 0}
+              for n in range(cubes)]
+    if far:
+        blocks.append({'id': 'far', 'type': 'cube', 'position': list(FAR), 'yaw': 0})
+    blocks += list(extra)
+    return Scene.from_dict({
+        'format': 'rad-scene/1', 'unit': U,
+        'block_types': {'cube': [[0, 0, 0]], 'I2': [[0, 0, 0], [1, 0, 0]]}, 'blocks': blocks,
+        'targets': [{'name': 't', 'origin': [0.45, 0.15, U / 2], 'size': [3, 1, 1],
+                     'filled': [[0, 0, 0], [1, 0, 0], [2, 0, 0]]}]})
+
+
+def robot_env(scene):
+    renv = RobotAssemblyEnv(scene, RobotEnvConfig(execution='teleport'))
+    renv.reset()
+    return renv
+
+
+def stable_space(renv):
+    return AllocationActions(renv.env, solve(renv.scene, AllocationParams(support='stable')).placements)
+
+
+def world_poses(renv):
+    return np.array([np.concatenate(renv.world.block_pose(b)) for b in renv.world.blocks])
+
+
+def test_finds_full_coverage_and_its_line_builds_it_with_the_robot():
+    with robot_env(default_scene()) as renv:
+        space = stable_space(renv)
+        before, poses = renv.env.snapshot(), world_poses(renv)
+        result = exact_search(renv, space, time_limit_s=30)
+        assert result.complete and result.reason == ''
+        assert result.coverage == result.bound == 1.0 and len(result.actions) == 3
+        # The env is back where it was given.
+        assert renv.env.state.placed == before.placed and not renv.env.state.done
+        assert np.allclose(world_poses(renv), poses, atol=1e-9)
+        for action in result.actions:
+            assert not renv.step(action).outcome.is_invalid
+        assert renv.env.coverage() == 1.0
+
+
+def test_a_pose_only_an_unreachable_block_can_fill_gives_a_proven_lower_coverage():
+    # Two cubes within reach, the third out of it: two of the three cells at best. The
+    # search must exhaust: 1 + 2*3 + 3*2 = 13 sets of placements, though 6 + 2*6 = 18 orders
+    # reach them; each set is stepped into once (a cube's four yaws are one state too).
+    with robot_env(row_scene(2, far=True)) as renv:
+        valid, step = [], renv.step
+
+        def counting_step(action, plan=None):
+            result = step(action, plan)
+            valid.append(not result.outcome.is_invalid)
+            return result
+        renv.step = counting_step
+        result = exact_search(renv, stable_space(renv), time_limit_s=60)
+        assert result.complete and result.bound == 1.0
+        assert result.coverage == pytest.approx(2 / 3) and len(result.actions) == 2
+        assert result.states == 13 and sum(valid) == 12 < 18
+        assert not renv.env.state.placed
+
+
+def test_a_cut_search_answers_a_lower_bound_and_says_why():
+    with robot_env(default_scene()) as renv:
+        result = exact_search(renv, stable_space(renv), time_limit_s=1e-6)
+        assert not result.complete and result.coverage == 0.0 and result.actions == []
+        assert 'time limit of 1e-06 s reached after 1 states; 0.00 is a lower bound' == result.reason
+        result = exact_search(renv, stable_space(renv), max_states=2)
+        assert not result.complete and result.states == 2 and 'state limit of 2' in result.reason
+        assert result.coverage > 0 and len(result.actions) == 1
+        assert not renv.env.state.placed and not renv.env.state.done
+
+
+def test_on_dead_end_is_called_and_its_space_is_searched():
+    # The allocation asks for cubes in cells 0 and 1, but only one cube is within reach;
+    # where the far cube fails, the hook hands over an I2 pose on cells 1 and 2.
+    i2 = {'id': 'i2', 'type': 'I2', 'position': [0.5, -0.35, U / 2], 'yaw': 0}
+    with robot_env(row_scene(1, far=True, extra=[i2])) as renv:
+        cube = [Placement('cube', 't', 0, ((0, 0, 0),)), Placement('cube', 't', 0, ((1, 0, 0),))]
+        calls = []
+
+        def reallocate(at):
+            calls.append(dict(at.env.state.placed))
+            cells = {int(c) for cells, _ in at.env.state.placed.values() for c in cells}
+            if cells != {at.env.grid.index(0, (0, 0, 0))}:
+                return None
+            return AllocationActions(at.env, [Placement('I2', 't', 0, ((1, 0, 0), (2, 0, 0)))])
+
+        result = exact_search(renv, AllocationActions(renv.env, cube), time_limit_s=60, on_dead_end=reallocate)
+        assert calls and result.coverage == 1.0
+        assert [renv.scene.blocks[a.block].id for a in result.actions] == ['c0', 'i2']
+
+
+def test_bad_limits_and_orders_are_refused_and_the_env_is_left_as_given():
+    with robot_env(default_scene()) as renv:
+        space = stable_space(renv)
+        with pytest.raises(RadError, match='time_limit_s'):
+            exact_search(renv, space, time_limit_s=0)
+        with pytest.raises(RadError, match='max_states'):
+            exact_search(renv, space, max_states=0)
+        with pytest.raises(RadError, match='order'):
+            exact_search(renv, space, order=lambda env, actions: actions[:1])
+        calls = []
+
+        def fails_below_the_root(env, actions):
+            calls.append(len(env.state.placed))
+            if env.state.placed:
+                raise RuntimeError('ranking failed')
+            return actions
+        with pytest.raises(RuntimeError, match='ranking failed'):
+            exact_search(renv, space, order=fails_below_the_root)
+        assert calls[-1] == 1 and not renv.env.state.placed and not renv.env.state.done
