@@ -116,3 +116,33 @@ def test_ros2run_script_starts_the_node_with_a_params_file(process, ros_node, tm
                             timeout=30.0)
     assert response.success, response.reason
     assert proc.stop() == 0, proc.output_tail()
+
+
+def test_a_request_sets_support_prefer_and_no_goods(node_process, ros_node):
+    from rad_msgs.srv import Allocate
+    from rad_ros.conversions import placement_from_msg, placement_to_msg
+    from rad_core.allocation import AllocationParams, Placement, solve
+    proc = node_process('rad_planner', 'allocation_node')
+    client = wait_for_service(ros_node, Allocate, 'allocate', timeout=20.0)
+    scene = generate_scene(GeneratorConfig(grid=4), 2)
+
+    def call(**kw):
+        exclude = kw.pop('exclude', [])
+        request = Allocate.Request(scene_json=scene.dumps(), **kw)
+        request.exclude = [placement_to_msg(p) for p in exclude]
+        return call_service(ros_node, client, request, timeout=30.0)
+
+    stable = call(support='stable', prefer='fewer')
+    assert stable.success, stable.reason
+    local = solve(scene, AllocationParams(support='stable', prefer='fewer'))
+    assert [placement_from_msg(p) for p in stable.placements] == list(local.placements)
+    banned = placement_from_msg(stable.placements[0])
+    again = call(support='stable', exclude=[banned])
+    assert again.success and banned not in [placement_from_msg(p) for p in again.placements]
+    for kw, words in (({'support': 'sturdy'}, 'support must be one of'),
+                      ({'prefer': 'fewer'}, "needs support='stable'"),
+                      ({'exclude': [Placement('cube', 'nowhere', 0, ((0, 0, 0),))]}, "'nowhere'")):
+        bad = call(**kw)
+        assert not bad.success and bad.status == 'INVALID_REQUEST' and words in bad.reason, bad.reason
+    assert call().success      # still serving, the paper's MILP by default
+    assert proc.stop() == 0, proc.output_tail()

@@ -84,6 +84,22 @@ def test_plans_from_json_and_from_motion_capture(graph):
         assert Scene.loads(r.scene_json).to_dict()['targets'] == DEMO_SCENE.to_dict()['targets']
 
 
+def test_a_pose_the_robot_cannot_build_is_reallocated(graph):
+    # Real GAMP: the I2 that the only full allocation needs lies out of the arm's reach.
+    blocks = [{'id': 'c0', 'type': 'cube', 'position': [0.4, -0.25, U / 2], 'yaw': 0},
+              {'id': 'far', 'type': 'I2', 'position': [0.95, -0.6, U / 2], 'yaw': 0}]
+    row = [{'name': 'front', 'origin': [0.45, 0.1, U / 2], 'size': [2, 1, 1], 'filled': [[0, 0, 0], [1, 0, 0]]}]
+    r = graph.plan(scene_json=json.dumps(doc(blocks=blocks, targets=row)))
+    assert [p.type for p in r.allocation] == ['I2']
+    assert len(r.reallocations) == 1, r.reason
+    event = r.reallocations[0]
+    assert event.step == 0 and event.changed and event.status == 'OPTIMAL'
+    assert [p.type for p in event.no_goods] == ['I2'] and 'unreachable' in event.no_good_reasons[0]
+    assert [p.type for p in event.placements] == ['cube']
+    assert r.success and [s.block_id for s in r.steps] == ['c0'] and r.predicted_coverage == 0.5
+    assert 'reallocation' in {t.stage for t in r.timings}
+
+
 def _bad_requests():
     unreachable = doc(targets=[{'name': 'far', 'origin': [0.0, 0.95, U / 2], 'size': [2, 1, 1],
                                 'filled': [[0, 0, 0], [1, 0, 0]]}])

@@ -121,7 +121,8 @@ def cmd_demo(args) -> int:
 
 def cmd_eval(args) -> int:
     from rad_core.evaluation import ProgressBar, evaluate, generated_scenes, get_agent, scene_dir, uses_robot
-    agent = get_agent(args.agent, args.checkpoint, verify=args.verify, budget=args.budget)
+    agent = get_agent(args.agent, args.checkpoint, verify=args.verify, budget=args.budget,
+                      reallocate=args.reallocate)
     policy = agent.make_policy()   # a bad checkpoint fails here, before any scene runs
     robot = uses_robot(agent, args.robot)
     if args.scene_dir:
@@ -282,6 +283,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--verify', action='store_true',
                    help='take the best-ranked action the planning copy finds feasible (GAMP with the robot, '
                         'the stability check without): no failures by construction')
+    p.add_argument('--reallocate', action='store_true',
+                   help='when sequencing stalls with allocated poses left, exclude the poses that fail (no-goods) '
+                        'and re-solve the allocation over the free cells, then go on (each event is in the rows)')
     p.add_argument('--checkpoint', metavar='FILE',
                    help='learned agents: a model file (runs/NAME/model.pt) to load instead of the shipped weights')
     p.add_argument('--budget', type=int, metavar='N',

@@ -65,6 +65,9 @@ class Agent:
         `sequencing.search` ('mcts', 'halving', 'lookahead') on the acting env itself (snapshot,
         simulate, restore), with `budget` simulations per decision and exploration
         `epsilon` (None: the search's default, 0.05 for mcts as the paper, 0 for halving).
+    reallocate: when the episode would stop with allocated poses open, check them (with
+        the robot: a simulated step; without: stability), exclude those that fail as
+        no-goods and re-solve the allocation over the free cells (each event in the row).
     """
 
     name: str
@@ -76,6 +79,10 @@ class Agent:
     search: str = ''
     budget: int = 5
     epsilon: float | None = None
+    reallocate: bool = False
+    """Re-solve the allocation when sequencing stalls (`sequencing.reallocation`)."""
+    time_limit_s: float = 60.0
+    """The exact planner's search time per scene (search='exact')."""
 
 
 def _learned(name: str, actions: str, checkpoint=None, support: str = 'none', network: str | None = None,
@@ -106,6 +113,9 @@ AGENTS = {
     'milp-dqn-robot': _learned('milp-dqn-robot', 'milp', support='stable'),
     'milp-dqn-robot-lookahead': _learned('milp-dqn-robot-lookahead', 'milp', support='stable',
                                          network='milp-dqn-robot', search='lookahead'),
+    # The robot-feasible ceiling: branch and bound over orders and re-allocations (`sequencing.exact`).
+    'exact': Agent('exact', HeurPolicy, robot=True, verified=True, support='stable', search='exact',
+                   reallocate=True),
     'milp-dqn-mixed-lookahead': _learned('milp-dqn-mixed-lookahead', 'milp', support='stable',
                                          network='milp-dqn-mixed', search='lookahead'),
 }
@@ -113,13 +123,20 @@ LEARNED = tuple(name for name, a in AGENTS.items() if a.name.startswith(('milp-d
 
 
 def get_agent(agent: str | Agent, checkpoint: str | None = None, verify: bool = False,
-              budget: int | None = None) -> Agent:
+              budget: int | None = None, reallocate: bool = False) -> Agent:
     """An agent by name; learned agents load `checkpoint` instead of their shipped
     weights; verify makes it take the best-ranked action the planning copy finds
-    feasible (`Agent.verified`); budget sets a search agent's simulations per decision."""
+    feasible (`Agent.verified`); budget sets a search agent's simulations per decision;
+    reallocate makes it re-solve the allocation when it stalls (`Agent.reallocate`)."""
     from dataclasses import replace
     if isinstance(agent, Agent):
         return agent
+    if reallocate:
+        base = get_agent(agent, checkpoint, verify, budget)
+        if base.actions != 'milp':
+            raise RadError(f'--reallocate applies to agents choosing among the allocation\'s actions, '
+                           f'not {base.name!r} ({base.actions!r})')
+        return replace(base, name=f'{base.name}+realloc', reallocate=True)
     if verify:
         base = get_agent(agent, checkpoint, budget=budget)
         return replace(base, name=f'{base.name}+verify', verified=True)
@@ -231,12 +248,13 @@ def simulated_check(stepper):
 
 def scene_episode(agent: str | Agent, scene: Scene, robot: bool, seed: int, execution: str = 'teleport',
                   policy: Policy | None = None, allocation: AllocationParams | None = None,
-                  stability=None) -> dict:
+                  stability=None, reallocation=None) -> dict:
     """One episode from the scene as given; the row `evaluate` reports for it.
 
     allocation: CP-SAT settings (default: 10 s, one worker, seed 0: deterministic
     unless the time limit cuts the search). stability: a shared no-robot
     stability check (one PyBullet client for a whole run); default: a fresh one.
+    reallocation: a `ReallocationConfig` for agents that re-allocate (default: its defaults).
     """
     agent = get_agent(agent)
     with_robot = uses_robot(agent, robot)
@@ -259,10 +277,18 @@ def scene_episode(agent: str | Agent, scene: Scene, robot: bool, seed: int, exec
         verify = None
         if agent.verified:
             verify = renv.plan if with_robot else stability_check(env)
-        if agent.search:
+        if agent.search == 'exact':
+            decide, exact = exact_decider(renv, space, agent, reallocation)
+        elif agent.search:
             decide = search_decider(policy, space, renv if with_robot else env, agent, verify)
         else:
             decide = policy_decider(policy, space, verify)
+        reallocator = None
+        if agent.reallocate and agent.search != 'exact':
+            from rad_core.sequencing.reallocation import ReallocationConfig, Reallocator, with_reallocation
+            reallocator = Reallocator(space, simulated_check(renv) if with_robot else stability_check(env),
+                                      reallocation or ReallocationConfig())
+            decide = with_reallocation(decide, reallocator)
         act = (lambda d: renv.step(d.action, plan=d.plan)) if with_robot else None
         episode = run_episode(env, decide, np.random.default_rng(seed), act)
     finally:
@@ -273,7 +299,39 @@ def scene_episode(agent: str | Agent, scene: Scene, robot: bool, seed: int, exec
     row = {**episode.row(), 'coverage_opt': opt}
     if with_robot:
         row['reason'] = episode.reason if episode.outcome.is_invalid else ''
+    if reallocator is not None:
+        row['reallocations'] = [e.to_dict() for e in reallocator.events]
+        row['reallocation_s'] = reallocator.seconds
+    if agent.search == 'exact':
+        found = exact['result']
+        row.update(exact_coverage=found.coverage, exact_complete=found.complete, exact_bound=found.bound,
+                   exact_states=found.states, exact_s=found.elapsed_s, exact_reason=found.reason)
     return row
+
+
+def exact_decider(renv, space, agent: Agent, reallocation=None):
+    """decide() that plays the exact planner's best line (`sequencing.exact.exact_search`, with
+    re-allocation at dead ends), searched on the first call; and the dict that then holds its result."""
+    from rad_core.sequencing.actions import AllocationActions
+    from rad_core.sequencing.exact import exact_search
+    from rad_core.sequencing.reallocation import ReallocationConfig, Reallocator
+    if renv is None:
+        raise RadError('the exact planner needs the robot (it searches with GAMP and physics)')
+    config = reallocation or ReallocationConfig()
+    env, holder = renv.env, {}
+
+    def on_dead_end(_renv):
+        sub = AllocationActions(env, space.guide.placements)   # a copy: the parent line keeps its space
+        event = Reallocator(sub, simulated_check(renv), config).stalled(env, 'exact search: dead end')
+        return sub if event.changed else None
+
+    def decide(env_: AssemblyEnv, rng) -> Decision:
+        if 'line' not in holder:
+            holder['result'] = exact_search(renv, space, agent.time_limit_s,
+                                            on_dead_end=on_dead_end if agent.reallocate else None)
+            holder['line'] = list(holder['result'].actions)
+        return Decision(holder['line'].pop(0)) if holder['line'] else stop()
+    return decide, holder
 
 
 def summarize(rows: list[dict]) -> dict:
@@ -304,7 +362,8 @@ def summarize(rows: list[dict]) -> dict:
 
 def evaluate(agent: str | Agent, scenes: Iterable[tuple[str, Scene]], robot: bool, seed: int,
              progress: Callable[[dict], None] | None = None, execution: str = 'teleport',
-             policy: Policy | None = None, allocation: AllocationParams | None = None) -> dict:
+             policy: Policy | None = None, allocation: AllocationParams | None = None,
+             reallocation=None) -> dict:
     """Run the agent once on every (name, scene); scene i seeds the policy with seed + i.
 
     Returns exactly KEYS: R, R_std (mean and std of the discounted return), d, e, f
@@ -316,6 +375,7 @@ def evaluate(agent: str | Agent, scenes: Iterable[tuple[str, Scene]], robot: boo
     progress(row) is called after each episode. policy: an already built policy
     (default: the agent's, built once for the run). allocation: CP-SAT settings,
     e.g. AllocationParams(support='stable') (default: the agent's, usually the paper's MILP).
+    reallocation: the `ReallocationConfig` of re-allocating agents (default: its defaults).
     """
     agent = get_agent(agent)
     policy = policy if policy is not None else agent.make_policy()
@@ -331,7 +391,8 @@ def evaluate(agent: str | Agent, scenes: Iterable[tuple[str, Scene]], robot: boo
     try:
         for i, (name, scene) in enumerate(scenes):
             row = {'name': name, **scene_episode(agent, scene, robot, seed + i, execution, policy,
-                                                 allocation=allocation, stability=stability)}
+                                                 allocation=allocation, stability=stability,
+                                                 reallocation=reallocation)}
             rows.append(row)
             if progress is not None:
                 progress(row)

@@ -176,6 +176,7 @@ class PlanDoc:
     steps: tuple[PlanStep, ...]
     timings: dict[str, float] = field(default_factory=dict)
     predicted_coverage: float | None = None
+    reallocations: tuple[dict, ...] = ()   # Reallocation.to_dict() of each re-allocation, in order
 
 
 def _check_cells(value, where: str) -> None:
@@ -228,8 +229,13 @@ def parse_plan(text: str) -> PlanDoc:
     if coverage is not None and (not isinstance(coverage, (int, float)) or isinstance(coverage, bool)
                                  or not math.isfinite(coverage)):
         raise RadError('predicted_coverage must be a finite number')
+    reallocations = doc.get('reallocations') or []
+    if not isinstance(reallocations, list) or not all(
+            isinstance(e, dict) and isinstance(e.get('step'), int) and isinstance(e.get('reason'), str)
+            and isinstance(e.get('no_goods', []), list) for e in reallocations):
+        raise RadError('reallocations must be a list of objects with an integer step, a reason and no_goods')
     return PlanDoc(allocation, tuple(steps), {str(k): float(v) for k, v in timings.items()},
-                   None if coverage is None else float(coverage))
+                   None if coverage is None else float(coverage), tuple(reallocations))
 
 
 def step_text(i: int, step: PlanStep) -> str:
@@ -248,6 +254,14 @@ def plan_summary(plan: PlanDoc) -> str:
         lines.append(f'\npredicted coverage: {plan.predicted_coverage:.3f}')
     lines += ['', f'{len(plan.steps)} steps:', '']
     lines += [f'{i + 1}. {s.block} ({s.type}) -> {s.target} yaw {s.yaw}' for i, s in enumerate(plan.steps)]
+    if plan.reallocations:
+        lines += ['', f'{len(plan.reallocations)} re-allocations (sequencing stalled):', '']
+        for e in plan.reallocations:
+            excluded = '; '.join(f"{d.get('type')} {d.get('cells')}: {d.get('reason', '')}" for d in e['no_goods'])
+            outcome = (f"{len(e.get('placements', []))} new poses ({e.get('status', '')})" if e.get('changed')
+                       else 'nothing new')
+            lines.append(f"- after step {e['step']}: {e['reason']}; excluded {len(e['no_goods'])} poses"
+                         + (f' ({excluded})' if excluded else '') + f'; {outcome}')
     if plan.timings:
         lines += ['', '| stage | seconds |', '|---|---|']
         lines += [f'| {k} | {v:.4f} |' for k, v in plan.timings.items()]

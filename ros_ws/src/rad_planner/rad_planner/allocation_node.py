@@ -1,5 +1,10 @@
 """The /allocate service: CP-SAT allocation of a scene (the paper's Sec. IV-A).
 
+Parameters: time_limit_s, seed, num_workers (CP-SAT), support ('none': the paper's
+MILP, the default; 'stable': every allocated block can rest on something) and
+prefer ('none' or 'fewer'); a request may set support, prefer and no-goods
+(exclude) of its own: the assembly node re-allocates through this service.
+
 Every failure comes back as success=false with a reason; the node keeps serving.
 """
 
@@ -10,9 +15,10 @@ import math
 from rclpy.node import Node
 
 from rad_core.allocation import AllocationParams, solve
+from rad_core.allocation.cpsat import PREFER_MODES, SUPPORT_MODES
 from rad_core.errors import RadError
 from rad_msgs.srv import Allocate
-from rad_ros.conversions import fill_allocation_response, scene_from_request
+from rad_ros.conversions import fill_allocation_response, placement_from_msg, scene_from_request
 from rad_ros.node_main import main_for
 
 
@@ -22,25 +28,32 @@ class AllocationNode(Node):
         self.declare_parameter('time_limit_s', 10.0)
         self.declare_parameter('seed', 0)
         self.declare_parameter('num_workers', 1)
+        self.declare_parameter('support', 'none')
+        self.declare_parameter('prefer', 'none')
         self.service = self.create_service(Allocate, 'allocate', self.allocate_callback)
         self.get_logger().info('allocation service ready')
 
-    def params_for(self, request_time_limit: float) -> AllocationParams:
+    def params_for(self, request_time_limit: float, support: str = '', prefer: str = '') -> AllocationParams:
+        for name, value, modes in (('support', support, SUPPORT_MODES), ('prefer', prefer, PREFER_MODES)):
+            if value and value not in modes:
+                raise RadError(f'{name} must be one of {", ".join(modes)} or empty (the node\'s), got {value!r}')
         limit = request_time_limit
         if not math.isfinite(limit) or limit < 0:
             raise RadError(f'time_limit_s must be 0 (node default) or a positive number of seconds, got {limit}')
         if limit == 0:
             limit = self.get_parameter('time_limit_s').value
         params = AllocationParams(time_limit_s=float(limit), seed=int(self.get_parameter('seed').value),
-                                  num_workers=int(self.get_parameter('num_workers').value))
+                                  num_workers=int(self.get_parameter('num_workers').value),
+                                  support=support or str(self.get_parameter('support').value),
+                                  prefer=prefer or str(self.get_parameter('prefer').value))
         params.validate()
         return params
 
     def allocate_callback(self, request, response):
         try:
-            params = self.params_for(request.time_limit_s)
+            params = self.params_for(request.time_limit_s, request.support, request.prefer)
             scene = scene_from_request(request.scene, request.scene_json)
-            result = solve(scene, params)
+            result = solve(scene, params, [placement_from_msg(p) for p in request.exclude])
         except RadError as e:
             response.success, response.reason, response.status = False, str(e), 'INVALID_REQUEST'
             self.get_logger().warning(f'allocate refused: {e}')

@@ -5,7 +5,10 @@ request has none, registered from motion capture (`rigid_bodies`) against the ta
 (`task_file` parameter, else the latched `scene` topic); the robot from
 `joint_states`; allocation from `/allocate`; the order from the sequencer node
 (`/sequence`, asked at every step for a ranking of the next actions); motions from
-`/plan_action` (the first ranked action GAMP finds feasible is taken). So the twin
+`/plan_action` (the first ranked action GAMP finds feasible is taken). When nothing
+can be built next while allocated poses remain, it re-allocates through `/allocate`
+(no-goods excluded, parameters `reallocate`, `max_reallocations`; the first
+allocation's mode is `allocation_support`, 'stable' by default). So the twin
 can be replaced by a real cell, and the policy by another, without touching this node.
 A sequencer that is down or does not answer within `sequencer_timeout_s` fails the
 request with a reason naming it.
@@ -40,13 +43,14 @@ from rad_core.errors import RadError
 from rad_core.scene import Scene
 from rad_core.sequencing.execute import ExecuteConfig, execute_assembly
 from rad_core.sequencing.plan import MotionPlan, plan_assembly
+from rad_core.sequencing.reallocation import ReallocationConfig
 from rad_core.sequencing.sequencer import Ranking
 from rad_core.sim import panda
 from rad_core.sim.mocap import RegistrationConfig, RigidBodyPose, body_map_for, register_scene
 from rad_msgs.action import ExecuteAssembly
 from rad_msgs.msg import RigidBodies, Scene as SceneMsg
 from rad_msgs.srv import Allocate, PlanAction, PlanAssembly, Sequence
-from rad_ros.conversions import (allocation_from_response, scene_from_msg, scene_from_request,
+from rad_ros.conversions import (allocation_from_response, placement_to_msg, scene_from_msg, scene_from_request,
                                  scene_msg_is_empty)
 from rad_ros.node_main import run_node
 from rad_ros.plan_msgs import fill_plan_response, plan_json
@@ -61,7 +65,8 @@ class AssemblyNode(Node):
         for name, value in (('time_limit_s', 120.0), ('allocation_time_limit_s', 10.0), ('seed', 0),
                             ('task_file', ''), ('service_timeout_s', 60.0), ('stale_after_s', 2.0),
                             ('settle_s', 0.5), ('position_tol', 0.005), ('max_replans', 3),
-                            ('step_timeout_factor', 3.0), ('frame_id', 'world'), ('sequencer_timeout_s', 20.0)):
+                            ('step_timeout_factor', 3.0), ('frame_id', 'world'), ('sequencer_timeout_s', 20.0),
+                            ('allocation_support', 'stable'), ('reallocate', True), ('max_reallocations', 10)):
             self.declare_parameter(name, value)
         self.lock = threading.Lock()
         self.joints: tuple[float, JointState] | None = None
@@ -175,12 +180,21 @@ class AssemblyNode(Node):
                              f'the sequencer node (service {self.sequence_client.srv_name})')
         return ranking_from_response(response)
 
-    def allocate(self, scene: Scene):
-        response = self.call(self.allocate_client, Allocate.Request(
-            scene_json=scene.dumps(), time_limit_s=float(self.param('allocation_time_limit_s'))))
+    def allocate(self, scene: Scene, exclude=(), time_limit_s: float | None = None, support: str | None = None):
+        """/allocate for a scene state; exclude: no-goods (re-allocation)."""
+        limit = float(self.param('allocation_time_limit_s')) if time_limit_s is None \
+            else min(float(time_limit_s), float(self.param('allocation_time_limit_s')))
+        request = Allocate.Request(scene_json=scene.dumps(), time_limit_s=max(limit, 1e-3),
+                                   support=support or str(self.param('allocation_support')))
+        request.exclude = [placement_to_msg(p) for p in exclude]
+        response = self.call(self.allocate_client, request)
         if response.status == 'INVALID_REQUEST':
             raise RadError(response.reason)
         return allocation_from_response(response)
+
+    def reallocate(self, scene: Scene, exclude, time_limit_s: float | None = None):
+        """The re-solve on stall: always the stable allocation (every new block can rest on something)."""
+        return self.allocate(scene, exclude, time_limit_s, support='stable')
 
     def plan_motion(self, scene: Scene, action, start) -> MotionPlan:
         request = PlanAction.Request(scene_json=scene.dumps(),
@@ -195,8 +209,14 @@ class AssemblyNode(Node):
                           trajectory_from_msg(response.trajectory))
 
     def plan(self, scene: Scene, time_limit: float, start):
+        reallocation = None
+        if self.param('reallocate'):
+            reallocation = ReallocationConfig(max_reallocations=int(self.param('max_reallocations')))
+            reallocation.validate()
         plan = plan_assembly(scene, self.allocate, self.plan_motion, self.rank, seed=int(self.param('seed')),
-                             start=start, time_limit_s=time_limit)
+                             start=start, time_limit_s=time_limit,
+                             reallocate=self.reallocate if reallocation is not None else None,
+                             reallocation=reallocation)
         self.plan_pub.publish(String(data=json.dumps(plan_json(plan))))
         return plan
 

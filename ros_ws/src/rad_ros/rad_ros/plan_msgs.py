@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
-from rad_msgs.msg import PlanStep, StageTiming
+from rad_msgs.msg import PlanStep, Reallocation, StageTiming
 
 from rad_core.sequencing.plan import AssemblyPlan
 from rad_core.transforms import yaw_quaternion
+from rad_core.allocation import Placement
 from rad_ros.conversions import cells_msg, placement_to_msg
 from rad_ros.motion import pose_msg, trajectory_to_msg
 
@@ -20,6 +21,17 @@ def step_to_msg(step, frame_id: str) -> PlanStep:
     return msg
 
 
+def reallocation_to_msg(event) -> Reallocation:
+    """A `sequencing.reallocation.Reallocation` as a message."""
+    return Reallocation(
+        step=int(event.step), reason=event.reason,
+        no_goods=[placement_to_msg(Placement(d['type'], d['target'], 0, tuple(tuple(c) for c in d['cells'])))
+                  for d in event.no_goods],
+        no_good_reasons=[d['reason'] for d in event.no_goods], status=event.status,
+        objective=float(event.objective), bound=float(event.bound), solve_time_s=float(event.solve_time_s),
+        placements=[placement_to_msg(p) for p in event.placements], changed=bool(event.changed))
+
+
 def fill_plan_response(response, plan: AssemblyPlan, timings: dict, frame_id: str):
     response.success, response.reason = plan.success, plan.reason
     if plan.allocation is not None:
@@ -31,6 +43,7 @@ def fill_plan_response(response, plan: AssemblyPlan, timings: dict, frame_id: st
     response.predicted_coverage = float(plan.predicted_coverage)
     response.timings = [StageTiming(stage=k, seconds=float(v)) for k, v in timings.items()]
     response.scene_json = plan.scene.dumps()
+    response.reallocations = [reallocation_to_msg(e) for e in plan.reallocations]
     return response
 
 
@@ -39,4 +52,5 @@ def plan_json(plan: AssemblyPlan) -> dict:
     return {'allocation': plan.allocation.to_dict() if plan.allocation is not None else None,
             'steps': [{k: v for k, v in s.to_dict().items() if k != 'trajectory'} for s in plan.steps],
             'timings': plan.timings, 'predicted_coverage': plan.predicted_coverage,
-            'success': plan.success, 'reason': plan.reason}
+            'success': plan.success, 'reason': plan.reason,
+            'reallocations': [e.to_dict() for e in plan.reallocations]}

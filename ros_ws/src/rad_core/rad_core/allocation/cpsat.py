@@ -27,6 +27,17 @@ allocations of equal c^T g the one covering more target cells wins (a
 lexicographic second objective): a filler under an overhang costs nothing in
 c^T g and makes the target cell above it buildable. The reported objective and
 bound are c^T g's.
+
+`prefer='fewer'` (rad's, with 'stable' only) adds a third level: among
+allocations equal in c^T g and coverage, the one with fewer poses, i.e. fewer
+placements for the robot to get right and larger blocks (ablated in
+docs/results/reallocation.md).
+
+`exclude` (no-goods) removes (block type, pose) pairs from the model: poses
+the robot or physics already failed to build from the current state, when
+sequencing stalled and the allocation is solved again over the cells still
+free (`rad_core.sequencing.reallocation`). Blocks already in target cells of
+the scene are fixed: their cells are occupied and they are not available.
 """
 
 from __future__ import annotations
@@ -48,6 +59,7 @@ from rad_core.scene import Scene
 
 
 SUPPORT_MODES = ('none', 'stable')
+PREFER_MODES = ('none', 'fewer')
 
 
 @dataclass(frozen=True)
@@ -65,10 +77,16 @@ class AllocationParams:
     num_workers: int = 1
     support: str = 'none'
     """'none' (the paper's MILP) or 'stable' (every allocated block can stand where it goes)."""
+    prefer: str = 'none'
+    """Tie-break among equally good stable allocations: 'none' or 'fewer' (fewer poses)."""
 
     def validate(self) -> None:
         if self.support not in SUPPORT_MODES:
             raise RadError(f'support must be one of {", ".join(SUPPORT_MODES)}, got {self.support!r}')
+        if self.prefer not in PREFER_MODES:
+            raise RadError(f'prefer must be one of {", ".join(PREFER_MODES)}, got {self.prefer!r}')
+        if self.prefer != 'none' and self.support != 'stable':
+            raise RadError(f"prefer={self.prefer!r} needs support='stable'")
         if not (isinstance(self.time_limit_s, (int, float)) and math.isfinite(self.time_limit_s)
                 and self.time_limit_s > 0):
             raise RadError(f'time_limit_s must be a positive number of seconds, got {self.time_limit_s!r}')
@@ -89,12 +107,13 @@ def available_counts(scene: Scene, grid: Grid) -> dict[str, int]:
 
 
 def build_model(candidates: list[Candidate], counts: dict[str, int], support: str = 'none',
-                grid: Grid | None = None, occupied=None):
+                grid: Grid | None = None, occupied=None, prefer: str = 'none'):
     """CP-SAT model and its decision variables, one per candidate pose.
 
     support='stable' needs the grid and the cells already occupied (bool per cell).
     Returns (model, w, scale): the model's objective is scale * c^T g plus the
-    support preference (scale 1 without it)."""
+    lower levels (coverage, then the preference), each worth less than one unit
+    of the level above (scale 1 without them)."""
     model = cp_model.CpModel()
     w = [model.new_bool_var(f'w{n}') for n in range(len(candidates))]
     by_cell, by_type = defaultdict(list), defaultdict(list)
@@ -114,8 +133,13 @@ def build_model(candidates: list[Candidate], counts: dict[str, int], support: st
         return model, w, 1
     _add_support(model, candidates, w, by_cell, grid, occupied)
     covered = [int(grid.is_target[list(cand.cell_ids)].sum()) for cand in candidates]
-    scale = sum(covered) + 1   # the coverage preference never outweighs one unit of c^T g
-    model.maximize(scale * primary + sum(k * w[n] for n, k in enumerate(covered)))
+    poses = sum(w)
+    fewer = len(candidates) + 1 if prefer == 'fewer' else 1   # (fewer - 1) - #poses in 0..fewer-1
+    second = fewer * sum(k * w[n] for n, k in enumerate(covered)) + (fewer - 1 - poses if prefer == 'fewer' else 0)
+    # The lower levels never outweigh one unit of c^T g (without a preference the scale is
+    # the loose sum(covered) + 1 it always was, so allocations stay as they were).
+    scale = fewer * (int(grid.is_target.sum()) + 1) if prefer == 'fewer' else sum(covered) + 1
+    model.maximize(scale * primary + second)
     return model, w, scale
 
 
@@ -123,11 +147,7 @@ def _add_support(model, candidates, w, by_cell, grid: Grid, occupied) -> None:
     """The 'stable' constraints (see the module docstring)."""
     for n, cand in enumerate(candidates):
         ids = list(cand.cell_ids)
-        own = set(ids)
-        below = [int(grid.below_idx[c]) for c in ids]
-        bottom = [i for i, b in enumerate(below) if b not in own]
-        trivial = {i for i in bottom if grid.on_table[ids[i]] or (below[i] >= 0 and occupied[below[i]])}
-        sets = support.sufficient_supports(grid.ijk[ids], bottom)
+        below, sets, trivial = _support_sets(grid, ids, occupied)
         if any(set(S) <= trivial for S in sets):
             continue                                   # stands whatever else is chosen
         options = []
@@ -141,6 +161,23 @@ def _add_support(model, candidates, w, by_cell, grid: Grid, occupied) -> None:
                 model.add(z <= sum(u))
             options.append(z)
         model.add(sum(options) >= w[n])
+
+
+def _support_sets(grid: Grid, ids: list[int], occupied):
+    """(cell below each unit, the sufficient support sets of the pose's bottom units,
+    the bottom units already resting on the table or an occupied cell)."""
+    own = set(ids)
+    below = [int(grid.below_idx[c]) for c in ids]
+    bottom = [i for i, b in enumerate(below) if b not in own]
+    trivial = {i for i in bottom if grid.on_table[ids[i]] or (below[i] >= 0 and occupied[below[i]])}
+    return below, support.sufficient_supports(grid.ijk[ids], bottom), trivial
+
+
+def rests_now(grid: Grid, ids, occupied) -> bool:
+    """Whether a pose (its cell ids) would stand on what is there now: some sufficient set
+    of its bottom units rests on the table or on occupied cells (the 'stable' rule)."""
+    _, sets, trivial = _support_sets(grid, [int(i) for i in ids], occupied)
+    return any(set(S) <= trivial for S in sets)
 
 
 def greedy(candidates: list[Candidate], counts: dict[str, int]) -> list[int]:
@@ -157,8 +194,16 @@ def greedy(candidates: list[Candidate], counts: dict[str, int]) -> list[int]:
     return chosen
 
 
-def solve(scene: Scene, params: AllocationParams = AllocationParams()) -> AllocationResult:
+def pose_key(type_name: str, target: str, cells) -> tuple:
+    """What identifies a (block type, pose) pair: type, region and the set of its cells."""
+    return type_name, target, frozenset(tuple(int(v) for v in c) for c in cells)
+
+
+def solve(scene: Scene, params: AllocationParams = AllocationParams(), exclude=()) -> AllocationResult:
     """Build and solve the allocation for a scene; never raises on solver trouble.
+
+    exclude: Placements that must not be chosen (no-goods; their yaw is ignored, the
+    type and cells name the pose). Blocks already in the scene's target cells are fixed.
 
     Anytime: the greedy allocation is the solver's hint, and if the time limit
     ends the search before CP-SAT reports a solution (it can, during presolve of a
@@ -171,13 +216,21 @@ def solve(scene: Scene, params: AllocationParams = AllocationParams()) -> Alloca
         candidates = enumerate_candidates(scene, grid)
     else:   # fillers worth 0 may hold up target cells
         candidates = [c for c in enumerate_candidates(scene, grid, positive_only=False) if c.value >= 0]
+    names = {t.name for t in scene.targets}
+    for p in exclude:
+        if p.target not in names:
+            raise RadError(f'exclude names target region {p.target!r}, which the scene does not have')
+    banned = {pose_key(p.type, p.target, p.cells) for p in exclude}
+    if banned:
+        candidates = [c for c in candidates
+                      if pose_key(c.placement.type, c.placement.target, c.placement.cells) not in banned]
     counts = available_counts(scene, grid)
     occupied = None
     if params.support != 'none':
         occupied = np.zeros(grid.num_cells, dtype=bool)
         for cells in blocks_on_grid(scene, grid).values():
             occupied[cells] = True
-    model, w, scale = build_model(candidates, counts, params.support, grid, occupied)
+    model, w, scale = build_model(candidates, counts, params.support, grid, occupied, params.prefer)
     incumbent = set(greedy(candidates, counts)) if params.support == 'none' else set()
     for n, var in enumerate(w):
         model.add_hint(var, n in incumbent)

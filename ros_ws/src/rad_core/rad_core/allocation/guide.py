@@ -69,16 +69,14 @@ class AllocationGuide:
         occ = state.occupancy
         return [k for k, cells in enumerate(self.pose_cells) if np.all(occ[cells] < 0)]
 
+    def pose_actions(self, k: int, state: AssemblyState) -> list[Action]:
+        """The actions that fill pose k with a block still on the table in `state`."""
+        return [a for b, actions in self._actions[k] if b not in state.placed for a in actions]
+
     def allowed_actions(self, state: AssemblyState) -> list[Action]:
         """Allocation actions available in `state` (the termination action is not included).
 
         A block placed in an earlier step keeps its yaw; the actions are computed
         from the scene's initial yaws, so they are only offered for unplaced blocks.
         """
-        placed = state.placed
-        out = []
-        for k in self.open_poses(state):
-            for b, actions in self._actions[k]:
-                if b not in placed:
-                    out.extend(actions)
-        return out
+        return [a for k in self.open_poses(state) for a in self.pose_actions(k, state)]

@@ -58,6 +58,7 @@ class ExecutionResult:
     replans: int = 0
     final_scene: Scene | None = None               # registered at the end (or the last one known)
     allocation: AllocationResult | None = None     # the first plan's
+    reallocations: list[dict] = field(default_factory=list)   # of every plan, Reallocation.to_dict()
 
     @property
     def coverage(self) -> float:
@@ -65,7 +66,8 @@ class ExecutionResult:
 
     def document(self, timings: dict) -> dict:
         """The rad-result/1 document of the run."""
-        return result_document(self.scene, self.allocation, self.steps, self.final_scene, timings)
+        return result_document(self.scene, self.allocation, self.steps, self.final_scene, timings,
+                               self.reallocations)
 
 
 Plan = Callable[[Scene, 'np.ndarray | None'], AssemblyPlan]   # scene, start joints (None: home)
@@ -97,6 +99,7 @@ def execute_assembly(scene: Scene, plan: Plan, send: Send, register: Register,
             assembly = plan(current, start)
             if result.allocation is None:
                 result.allocation = assembly.allocation
+            result.reallocations += [e.to_dict() for e in assembly.reallocations]
             problem = None
             for step in assembly.steps:
                 if cancelled():

@@ -14,6 +14,13 @@ The sequencer is either a `Policy` scoring the MDP state in-process, or a `Rank`
 callable asked with the planning copy's scene, the allocation and the start joints
 (`Sequencer(...).rank` in-process, the sequencer node's service over DDS). A
 ranked action outside the allocation's allowed actions is never taken.
+
+With `reallocate` (an allocation callable that takes the scene state, no-goods and a
+time limit), a step where nothing can be built while allocated poses remain does not
+end the plan: the open poses are checked with GAMP from the planning copy, those
+that fail become no-goods, the allocation is solved again over the free cells
+(`sequencing.reallocation`) and sequencing goes on; each event is in
+`AssemblyPlan.reallocations`.
 """
 
 from __future__ import annotations
@@ -98,6 +105,7 @@ class AssemblyPlan:
     predicted_coverage: float = 0.0
     final_scene: Scene | None = None
     timings: dict = field(default_factory=dict)
+    reallocations: list = field(default_factory=list)   # sequencing.reallocation.Reallocation, in order
 
 
 Allocate = Callable[[Scene], AllocationResult]
@@ -114,9 +122,12 @@ def moved(scene: Scene, block_id: str, position, yaw: int) -> Scene:
 
 
 def plan_assembly(scene: Scene, allocate: Allocate, plan_motion: PlanMotion, sequencer: Policy | Rank,
-                  seed: int = 0, start=None, time_limit_s: float = 60.0) -> AssemblyPlan:
+                  seed: int = 0, start=None, time_limit_s: float = 60.0, reallocate=None,
+                  reallocation=None) -> AssemblyPlan:
     """sequencer: a Policy (in-process scores of the MDP state) or a Rank callable.
-    A Rank callable's RadError (say, the sequencer node is down) propagates."""
+    A Rank callable's RadError (say, the sequencer node is down) propagates.
+    reallocate: (scene state, no-goods, time limit) -> AllocationResult, to re-allocate on
+    stall (None: never); reallocation: its `ReallocationConfig` (default: the defaults)."""
     t0 = time.perf_counter()
     timings = {'allocation': 0.0, 'sequencing': 0.0, 'motion': 0.0}
     allocation = allocate(scene)
@@ -126,8 +137,7 @@ def plan_assembly(scene: Scene, allocate: Allocate, plan_motion: PlanMotion, seq
         plan.reason = f'allocation failed: {allocation.status}'
         return _done(plan, t0)
     env = AssemblyEnv(scene, EnvConfig(stability='none'))
-    allowed_actions = AllocationActions(env, allocation.placements)
-    guide = allowed_actions.guide
+    allowed_actions = AllocationActions(env, allocation.placements)   # its guide changes on re-allocation
     world = {'scene': scene, 'q': start}   # the planning copy: scene and arm joints
 
     def rank_by_policy(env: AssemblyEnv, allowed, rng) -> list | str:
@@ -135,13 +145,13 @@ def plan_assembly(scene: Scene, allocate: Allocate, plan_motion: PlanMotion, seq
         ranked = ranked_actions(sequencer, env, allowed, rng)
         timings['sequencing'] += time.perf_counter() - ts
         if not ranked:
-            return (f'{len(guide.open_poses(env.state))} allocated poses left, none of them can be built next '
+            return (f'{len(allowed_actions.guide.open_poses(env.state))} allocated poses left, none of them can be built next '
                     f'({getattr(sequencer, "why_none", sequencer.name + " values stopping more")})')
         return ranked
 
     def rank_by_sequencer(env: AssemblyEnv, allowed, rng) -> list | str:
         ts = time.perf_counter()
-        ranking = sequencer(world['scene'], list(allocation.placements), world['q'])
+        ranking = sequencer(world['scene'], list(allowed_actions.guide.placements), world['q'])
         timings['sequencer_call'] = timings.get('sequencer_call', 0.0) + time.perf_counter() - ts
         timings['sequencing'] += float(ranking.timings.get('sequencing', 0.0))
         if not ranking.actions:
@@ -174,14 +184,30 @@ def plan_assembly(scene: Scene, allocate: Allocate, plan_motion: PlanMotion, seq
             world['q'] = np.asarray(step.trajectory['points'][-1]['positions'])
         return result
 
+    reallocator = None
+    if reallocate is not None:
+        from rad_core.sequencing.reallocation import ReallocationConfig, Reallocator, with_reallocation
+
+        def gamp_check(action) -> MotionPlan:
+            ts = time.perf_counter()
+            motion = plan_motion(world['scene'], scene_action(env, action), world['q'])
+            timings['motion'] += time.perf_counter() - ts
+            return motion
+        reallocator = Reallocator(allowed_actions, gamp_check, reallocation or ReallocationConfig(),
+                                  scene_of=lambda _: world['scene'], allocate=reallocate,
+                                  deadline=t0 + time_limit_s)
+        decide = with_reallocation(decide, reallocator)
     episode = run_episode(env, decide, np.random.default_rng(seed), act, deadline=t0 + time_limit_s)
+    if reallocator is not None:
+        plan.reallocations = reallocator.events
+        timings['reallocation'] = reallocator.seconds
     if episode.timed_out:
         plan.reason = f'time limit of {time_limit_s:g} s reached after {len(plan.steps)} steps'
     else:
         plan.reason = episode.reason
     plan.final_scene = world['scene']
     plan.predicted_coverage = env.coverage()
-    plan.success = not plan.reason and not guide.open_poses(env.state)
+    plan.success = not plan.reason and not allowed_actions.guide.open_poses(env.state)
     if not plan.success and not plan.reason:
         plan.reason = 'allocated poses remain unbuilt'
     return _done(plan, t0)

@@ -38,8 +38,9 @@ def deviation(expected: Scene, measured: Scene, tol: float) -> str | None:
 
 
 def result_document(scene: Scene, allocation: AllocationResult | None, steps: list[dict], final: Scene | None,
-                    timings: dict) -> dict:
-    """The rad-result/1 document of a run (steps: PlanStep.to_dict() of executed steps)."""
+                    timings: dict, reallocations: list[dict] = ()) -> dict:
+    """The rad-result/1 document of a run (steps: PlanStep.to_dict() of executed steps;
+    reallocations: `Reallocation.to_dict()` of every re-allocation its plans made)."""
     return {
         'format': FORMAT,
         'scene': scene.to_dict(),
@@ -48,4 +49,5 @@ def result_document(scene: Scene, allocation: AllocationResult | None, steps: li
         'final_blocks': [b.to_dict() for b in final.blocks] if final is not None else [],
         'coverage': measured_coverage(final) if final is not None else 0.0,
         'timings': timings,
+        'reallocations': list(reallocations),
     }
