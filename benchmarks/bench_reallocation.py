@@ -7,8 +7,9 @@ Every agent runs with the robot (GAMP + twin, teleporting execution) on generate
 two-sided scenes, seeds 0..N-1, through `rad_core.evaluation.evaluate` (the code
 behind `rad eval`). Labels: an agent name, then '+verify' (take only actions the
 planning copy finds feasible), '+realloc' (re-allocate on stall, `rad eval
---reallocate`), '+realloc-fewer' (the same, with the re-solve preferring fewer
-poses among equally good allocations: the preference ablation), 'exact' (the exact
+--reallocate`), '+realloc-fewer' / '+realloc-flat' (the same, with the re-solve
+preferring fewer poses / flatter blocks among equally good allocations: the
+preference ablation), '+flat' (the first allocation stable and flat too), 'exact' (the exact
 planner over orders and re-allocations, g <= 4 only: the robot-feasible ceiling).
 
 Columns: the paper's metrics, a-bar (coverage of the whole target), 'of paper'
@@ -56,12 +57,15 @@ def run(label: str, grid: int, n: int, clearance: float, cache: Path, force: boo
     parts = label.split('+')
     agent = get_agent(parts[0], verify='verify' in parts,
                       reallocate=any(p.startswith('realloc') for p in parts))
-    realloc = ReallocationConfig()
-    if 'realloc-fewer' in parts:
-        realloc = replace(realloc, params=replace(realloc.params, prefer='fewer'))
+    realloc, allocation = ReallocationConfig(), None
+    for prefer in ('fewer', 'flat'):
+        if f'realloc-{prefer}' in parts:
+            realloc = replace(realloc, params=replace(realloc.params, prefer=prefer))
+        if prefer in parts:
+            allocation = AllocationParams(support='stable', prefer=prefer)
     t0 = time.perf_counter()
     result = evaluate(agent, scenes(grid, n, clearance), robot=True, seed=0, reallocation=realloc,
-                      progress=ProgressBar(n, f'{label} g={grid} c={clearance:g}'))
+                      allocation=allocation, progress=ProgressBar(n, f'{label} g={grid} c={clearance:g}'))
     result['seconds'] = time.perf_counter() - t0
     cache.mkdir(parents=True, exist_ok=True)
     path.write_text(jsonfmt.dumps(result))

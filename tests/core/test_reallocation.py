@@ -58,6 +58,20 @@ def test_fewer_prefers_one_big_block_over_two_cubes():
     assert [p.type for p in solve(scene, replace(STABLE, prefer='fewer')).placements] == ['I2']
 
 
+def test_flat_prefers_lying_blocks_over_standing_ones():
+    types = {'I2': [[0, 0, 0], [1, 0, 0]], 'I2_up': [[0, 0, 0], [0, 0, 1]]}
+    blocks = [{'id': f'{t}{n}', 'type': t, 'position': [0.3 + 0.1 * n + (0.25 if t == 'I2' else 0), -0.2, U / 2],
+               'yaw': 0} for t in ('I2', 'I2_up') for n in range(2)]
+    square = [{'name': 'front', 'origin': [0.45, 0.1, U / 2], 'size': [2, 1, 2],
+               'filled': [[0, 0, 0], [1, 0, 0], [0, 0, 1], [1, 0, 1]]}]
+    scene = small_scene(blocks=blocks, targets=square, types=types)
+    flat = solve(scene, replace(STABLE, prefer='flat'))
+    assert flat.objective == 4 and [p.type for p in flat.placements] == ['I2', 'I2']
+    tall = {'I2': [[0, 0, 0], [1, 0, 0]], 'I2_up': [[0, 0, 0], [0, 0, 1]]}
+    assert solve(small_scene(blocks=blocks[2:], targets=square, types=tall), replace(STABLE, prefer='flat')) \
+        .objective == 4    # standing blocks only: still the best coverage, the preference only breaks ties
+
+
 def test_prefer_needs_the_stable_allocation():
     with pytest.raises(RadError, match="prefer='fewer' needs support='stable'"):
         AllocationParams(prefer='fewer').validate()

@@ -82,7 +82,7 @@ class Agent:
     reallocate: bool = False
     """Re-solve the allocation when sequencing stalls (`sequencing.reallocation`)."""
     time_limit_s: float = 60.0
-    """The exact planner's search time per scene (search='exact')."""
+    """Search time per scene of the branch and bound (search='exact' or 'dfs')."""
 
 
 def _learned(name: str, actions: str, checkpoint=None, support: str = 'none', network: str | None = None,
@@ -116,6 +116,9 @@ AGENTS = {
     # The robot-feasible ceiling: branch and bound over orders and re-allocations (`sequencing.exact`).
     'exact': Agent('exact', HeurPolicy, robot=True, verified=True, support='stable', search='exact',
                    reallocate=True),
+    # The same branch and bound as a time-bounded test-time search, children in the network's order.
+    'milp-dqn-mixed-dfs': _learned('milp-dqn-mixed-dfs', 'milp', support='stable', network='milp-dqn-mixed',
+                                   search='dfs', robot=True, verified=True, time_limit_s=10.0),
     'milp-dqn-mixed-lookahead': _learned('milp-dqn-mixed-lookahead', 'milp', support='stable',
                                          network='milp-dqn-mixed', search='lookahead'),
 }
@@ -232,6 +235,14 @@ def search_decider(policy: Policy, actions: ActionSpace, stepper, agent: Agent, 
     return decide
 
 
+def policy_order(policy: Policy, rng: np.random.Generator):
+    """order(env, actions) for a search: all actions, best score first (ties keep their order)."""
+    def order(env: AssemblyEnv, actions: list) -> list:
+        scores = np.asarray(policy.scores(env, actions, rng), dtype=float)[:-1]
+        return [actions[i] for i in np.argsort(-scores, kind='stable')]
+    return order
+
+
 def simulated_check(stepper):
     """A check that steps the action in a snapshot of the planning copy and goes back:
     success when the step is valid (with the robot: GAMP, execution and physics)."""
@@ -277,14 +288,15 @@ def scene_episode(agent: str | Agent, scene: Scene, robot: bool, seed: int, exec
         verify = None
         if agent.verified:
             verify = renv.plan if with_robot else stability_check(env)
-        if agent.search == 'exact':
-            decide, exact = exact_decider(renv, space, agent, reallocation)
+        if agent.search in ('exact', 'dfs'):
+            decide, exact = exact_decider(renv, space, agent, policy if agent.search == 'dfs' else None,
+                                          reallocation)
         elif agent.search:
             decide = search_decider(policy, space, renv if with_robot else env, agent, verify)
         else:
             decide = policy_decider(policy, space, verify)
         reallocator = None
-        if agent.reallocate and agent.search != 'exact':
+        if agent.reallocate and agent.search not in ('exact', 'dfs'):
             from rad_core.sequencing.reallocation import ReallocationConfig, Reallocator, with_reallocation
             reallocator = Reallocator(space, simulated_check(renv) if with_robot else stability_check(env),
                                       reallocation or ReallocationConfig())
@@ -302,16 +314,18 @@ def scene_episode(agent: str | Agent, scene: Scene, robot: bool, seed: int, exec
     if reallocator is not None:
         row['reallocations'] = [e.to_dict() for e in reallocator.events]
         row['reallocation_s'] = reallocator.seconds
-    if agent.search == 'exact':
+    if agent.search in ('exact', 'dfs'):
         found = exact['result']
         row.update(exact_coverage=found.coverage, exact_complete=found.complete, exact_bound=found.bound,
                    exact_states=found.states, exact_s=found.elapsed_s, exact_reason=found.reason)
     return row
 
 
-def exact_decider(renv, space, agent: Agent, reallocation=None):
-    """decide() that plays the exact planner's best line (`sequencing.exact.exact_search`, with
-    re-allocation at dead ends), searched on the first call; and the dict that then holds its result."""
+def exact_decider(renv, space, agent: Agent, policy: Policy | None = None, reallocation=None):
+    """decide() that plays the best line of the branch and bound (`sequencing.exact.exact_search`,
+    with re-allocation at dead ends when the agent re-allocates), searched on the first call within
+    `agent.time_limit_s`; and the dict that then holds its result. policy: the children's order
+    (best score first; None: the search's default, most target cells then lowest first)."""
     from rad_core.sequencing.actions import AllocationActions
     from rad_core.sequencing.exact import exact_search
     from rad_core.sequencing.reallocation import ReallocationConfig, Reallocator
@@ -325,9 +339,10 @@ def exact_decider(renv, space, agent: Agent, reallocation=None):
         event = Reallocator(sub, simulated_check(renv), config).stalled(env, 'exact search: dead end')
         return sub if event.changed else None
 
-    def decide(env_: AssemblyEnv, rng) -> Decision:
+    def decide(env_: AssemblyEnv, rng: np.random.Generator) -> Decision:
         if 'line' not in holder:
             holder['result'] = exact_search(renv, space, agent.time_limit_s,
+                                            order=None if policy is None else policy_order(policy, rng),
                                             on_dead_end=on_dead_end if agent.reallocate else None)
             holder['line'] = list(holder['result'].actions)
         return Decision(holder['line'].pop(0)) if holder['line'] else stop()

@@ -28,10 +28,12 @@ lexicographic second objective): a filler under an overhang costs nothing in
 c^T g and makes the target cell above it buildable. The reported objective and
 bound are c^T g's.
 
-`prefer='fewer'` (rad's, with 'stable' only) adds a third level: among
-allocations equal in c^T g and coverage, the one with fewer poses, i.e. fewer
-placements for the robot to get right and larger blocks (ablated in
-docs/results/reallocation.md).
+`prefer` (rad's, with 'stable' only) adds a third level: among allocations
+equal in c^T g and coverage, 'fewer' takes the one with fewer poses (fewer
+placements for the robot to get right, larger blocks), 'flat' the one whose
+blocks span fewer levels (a top-down hand places a block beside lower or equal
+neighbours, not beside taller ones: its palm passes 10 mm above the block's top).
+Ablated in docs/results/reallocation.md.
 
 `exclude` (no-goods) removes (block type, pose) pairs from the model: poses
 the robot or physics already failed to build from the current state, when
@@ -59,7 +61,7 @@ from rad_core.scene import Scene
 
 
 SUPPORT_MODES = ('none', 'stable')
-PREFER_MODES = ('none', 'fewer')
+PREFER_MODES = ('none', 'fewer', 'flat')
 
 
 @dataclass(frozen=True)
@@ -78,7 +80,8 @@ class AllocationParams:
     support: str = 'none'
     """'none' (the paper's MILP) or 'stable' (every allocated block can stand where it goes)."""
     prefer: str = 'none'
-    """Tie-break among equally good stable allocations: 'none' or 'fewer' (fewer poses)."""
+    """Tie-break among equally good stable allocations: 'none', 'fewer' (fewer poses) or 'flat'
+    (blocks spanning fewer levels)."""
 
     def validate(self) -> None:
         if self.support not in SUPPORT_MODES:
@@ -133,14 +136,26 @@ def build_model(candidates: list[Candidate], counts: dict[str, int], support: st
         return model, w, 1
     _add_support(model, candidates, w, by_cell, grid, occupied)
     covered = [int(grid.is_target[list(cand.cell_ids)].sum()) for cand in candidates]
-    poses = sum(w)
-    fewer = len(candidates) + 1 if prefer == 'fewer' else 1   # (fewer - 1) - #poses in 0..fewer-1
-    second = fewer * sum(k * w[n] for n, k in enumerate(covered)) + (fewer - 1 - poses if prefer == 'fewer' else 0)
+    # The preference as a cost per pose, minimized below coverage: 'fewer' 1 per pose, 'flat'
+    # the levels a pose spans above its lowest (a tall block next to a lower one blocks the palm).
+    cost = [_pose_cost(cand, grid, prefer) for cand in candidates]
+    levels = sum(cost) + 1                       # the cost level spans 0..levels-1
+    second = levels * sum(k * w[n] for n, k in enumerate(covered)) + (levels - 1) - sum(
+        c * w[n] for n, c in enumerate(cost) if c)
     # The lower levels never outweigh one unit of c^T g (without a preference the scale is
     # the loose sum(covered) + 1 it always was, so allocations stay as they were).
-    scale = fewer * (int(grid.is_target.sum()) + 1) if prefer == 'fewer' else sum(covered) + 1
+    scale = levels * (int(grid.is_target.sum()) + 1) if prefer != 'none' else sum(covered) + 1
     model.maximize(scale * primary + second)
     return model, w, scale
+
+
+def _pose_cost(cand: Candidate, grid: Grid, prefer: str) -> int:
+    if prefer == 'fewer':
+        return 1
+    if prefer == 'flat':
+        z = grid.ijk[list(cand.cell_ids)][:, 2]
+        return int(z.max() - z.min())
+    return 0
 
 
 def _add_support(model, candidates, w, by_cell, grid: Grid, occupied) -> None:

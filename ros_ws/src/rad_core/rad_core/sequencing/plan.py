@@ -161,6 +161,17 @@ def plan_assembly(scene: Scene, allocate: Allocate, plan_motion: PlanMotion, seq
                           f'{len(allowed)} the allocation allows now')
 
     rank = rank_by_policy if hasattr(sequencer, 'scores') else rank_by_sequencer
+    # GAMP's answers from the current planning state (the state changes only with a step):
+    # a re-allocation's checks reuse what the step's own choice already planned.
+    memo: dict = {}
+
+    def planned_motion(scene_now: Scene, action: SceneAction, q) -> MotionPlan:
+        key = (len(plan.steps), action)
+        if key not in memo:
+            if len(memo) > 4096:
+                memo.clear()
+            memo[key] = plan_motion(scene_now, action, q)
+        return memo[key]
 
     def decide(env: AssemblyEnv, rng) -> Decision:
         allowed = allowed_actions(env)
@@ -169,7 +180,7 @@ def plan_assembly(scene: Scene, allocate: Allocate, plan_motion: PlanMotion, seq
         ranked = rank(env, allowed, rng)
         if isinstance(ranked, str):
             return stop(ranked)
-        found = _first_feasible(env, world['scene'], ranked, plan_motion, world['q'], timings)
+        found = _first_feasible(env, world['scene'], ranked, planned_motion, world['q'], timings)
         if isinstance(found, str):
             return stop(found)
         action, step = found
@@ -190,7 +201,7 @@ def plan_assembly(scene: Scene, allocate: Allocate, plan_motion: PlanMotion, seq
 
         def gamp_check(action) -> MotionPlan:
             ts = time.perf_counter()
-            motion = plan_motion(world['scene'], scene_action(env, action), world['q'])
+            motion = planned_motion(world['scene'], scene_action(env, action), world['q'])
             timings['motion'] += time.perf_counter() - ts
             return motion
         reallocator = Reallocator(allowed_actions, gamp_check, reallocation or ReallocationConfig(),
