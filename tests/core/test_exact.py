@@ -128,3 +128,26 @@ def test_bad_limits_and_orders_are_refused_and_the_env_is_left_as_given():
         with pytest.raises(RuntimeError, match='ranking failed'):
             exact_search(renv, space, order=fails_below_the_root)
         assert calls[-1] == 1 and not renv.env.state.placed and not renv.env.state.done
+
+
+def test_rad_eval_exact_plays_its_best_line_and_reports_the_search():
+    from rad_core.evaluation import evaluate, get_agent
+    scene = row_scene(2, far=True)      # two cubes within reach, one out of it: 2 of 3 cells at best
+    result = evaluate(get_agent('exact'), [('row', scene)], robot=True, seed=0)
+    row = result['scenes'][0]
+    assert result['f'] == 0.0 and row['coverage'] == pytest.approx(2 / 3)
+    assert row['exact_coverage'] == row['coverage'] and row['exact_complete'] is True
+    assert row['exact_states'] >= 1 and row['exact_reason'] == ''
+
+
+def test_the_dfs_agent_searches_in_the_networks_order_within_its_time():
+    from dataclasses import replace
+    from rad_core.evaluation import evaluate, get_agent
+    agent = get_agent('milp-dqn-mixed-dfs')
+    assert agent.search == 'dfs' and agent.verified and agent.robot
+    result = evaluate(agent, [('row', row_scene(3))], robot=True, seed=0)
+    assert result['scenes'][0]['coverage'] == 1.0 and result['scenes'][0]['exact_complete']
+    cut = evaluate(replace(agent, time_limit_s=1e-6), [('row', row_scene(3))], robot=True, seed=0)
+    row = cut['scenes'][0]
+    assert row['exact_complete'] is False and 'time limit' in row['exact_reason'] and row['coverage'] < 1.0
+    assert cut['f'] == 0.0          # whatever it found is played without failing

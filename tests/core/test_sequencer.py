@@ -104,3 +104,29 @@ def test_budget_only_for_search_agents():
         get_agent('milp-dqn', budget=3)
     with pytest.raises(RadError, match='>= 1'):
         get_agent('milp-dqn-mcts', budget=0)
+
+
+def test_dfs_answers_along_its_best_line_without_searching_again():
+    from rad_core.gamp.action import MotionPlanner
+    from rad_core.sequencing.plan import local_motion_planner, plan_assembly
+    s = Sequencer(SequencerConfig(policy='milp-dqn-dfs', search_time_s=30.0))
+    scene = generate_scene(GeneratorConfig(grid=3), 1)
+    stable = solve(scene, AllocationParams(support='stable')).placements
+    first = s.rank(scene, stable)
+    assert first.search is not None and first.search['complete'] and first.search['coverage'] == 1.0
+    assert first.values[0] == 1.0 and 'search' in first.timings
+    planner = MotionPlanner()
+    try:
+        asked = []
+
+        def rank(scene, placements, start):
+            ranking = s.rank(scene, placements, start)
+            asked.append(ranking)
+            return ranking
+        plan = plan_assembly(scene, lambda sc: solve(sc, AllocationParams(support='stable')),
+                             local_motion_planner(planner), rank)
+    finally:
+        planner.close()
+    assert plan.success and plan.predicted_coverage == 1.0
+    assert all('search' not in r.timings for r in asked)     # every state was on the known line
+    assert [st.block for st in plan.steps][0] == first.actions[0].block_id

@@ -147,8 +147,9 @@ def get_agent(agent: str | Agent, checkpoint: str | None = None, verify: bool = 
         raise RadError(f'unknown agent {agent!r}; one of {", ".join(AGENTS)}')
     found = AGENTS[agent]
     if budget is not None:
-        if not found.search:
-            raise RadError(f'--budget applies to the search agents, not {agent!r}')
+        if found.search not in ('mcts', 'halving', 'lookahead'):
+            raise RadError(f'--budget applies to the search agents with a simulation budget (*-mcts, *-halving, '
+                           f'*-lookahead), not {agent!r}')
         if budget < 1:
             raise RadError(f'--budget must be >= 1, got {budget}')
         found = replace(found, name=f'{agent}@{budget}', budget=budget)

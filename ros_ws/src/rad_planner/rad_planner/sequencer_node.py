@@ -8,7 +8,8 @@ takes the first action GAMP finds feasible, so the policy never commands anythin
   srv  sequence  rad_msgs/Sequence
 
 Parameters: policy (milp-dqn-lookahead, the default; milp-dqn-halving, milp-dqn-mcts, milp-dqn, heur), checkpoint
-('' = the shipped network), budget (search simulations per decision), seed.
+('' = the shipped network), budget (search simulations per decision), search_time_s
+(milp-dqn-dfs: the branch and bound's time per search), seed.
 A bad policy or checkpoint: the node does not start (one line on stderr, exit 1).
 """
 
@@ -28,10 +29,12 @@ from rad_ros.sequencer_msgs import fill_sequence_response, sequence_inputs
 class SequencerNode(Node):
     def __init__(self):
         super().__init__('sequencer')
-        for name, value in (('policy', DEFAULT_POLICY), ('checkpoint', ''), ('budget', 5), ('seed', 0)):
+        for name, value in (('policy', DEFAULT_POLICY), ('checkpoint', ''), ('budget', 5), ('seed', 0),
+                            ('search_time_s', 10.0)):
             self.declare_parameter(name, value)
         config = SequencerConfig(policy=str(self.param('policy')), checkpoint=str(self.param('checkpoint')),
-                                 budget=int(self.param('budget')), seed=int(self.param('seed')))
+                                 budget=int(self.param('budget')), seed=int(self.param('seed')),
+                                 search_time_s=float(self.param('search_time_s')))
         t0 = time.perf_counter()
         self.sequencer = Sequencer(config)   # RadError (a bad checkpoint names its file): the node does not start
         self.policy = config.policy if config.policy == 'heur' else f'{config.policy} ({self.sequencer.source})'

@@ -12,6 +12,9 @@ Policies:
 - milp-dqn-mcts: the paper's MILP-DQN-MCTS (search.mcts, budget 5, epsilon 0.05).
 - milp-dqn-halving: rad's sequential halving with deepening lines (search.halving).
 - milp-dqn-lookahead: verified greedy with a look-ahead veto (search.lookahead).
+- milp-dqn-dfs: the branch and bound of `sequencing.exact` for `search_time_s`, children
+  in the network's order, over whole lines from the state; the best line is kept, so
+  later requests along it answer at once (a state off the line searches again).
 - milp-dqn: the network's Q-values alone (no search).
 - heur: the paper's heuristic (uniform among fully supported allocated actions).
 """
@@ -26,13 +29,13 @@ import numpy as np
 from rad_core.allocation.guide import AllocationGuide
 from rad_core.errors import RadError
 from rad_core.gamp.action import SceneAction, start_joints
-from rad_core.mdp import AssemblyEnv
+from rad_core.mdp import AssemblyEnv, EnvConfig
 from rad_core.scene import Scene
 from rad_core.sequencing.actions import AllocationActions, scene_action
 from rad_core.sequencing.policy import HeurPolicy, ranked_indices
 from rad_core.sequencing.search import SEARCHES, EnvModel
 
-POLICIES = ('milp-dqn-mcts', 'milp-dqn-halving', 'milp-dqn-lookahead', 'milp-dqn', 'heur')
+POLICIES = ('milp-dqn-mcts', 'milp-dqn-halving', 'milp-dqn-lookahead', 'milp-dqn-dfs', 'milp-dqn', 'heur')
 SEARCH_OF = {'milp-dqn-mcts': 'mcts', 'milp-dqn-halving': 'halving', 'milp-dqn-lookahead': 'lookahead'}
 # What the sequencer node runs unless told otherwise (docs/results/table2.md: the searches
 # tie on average; lookahead is never worse than the verified greedy policy within its budget).
@@ -54,12 +57,16 @@ class SequencerConfig:
     budget: int = 5
     seed: int = 0
     epsilon: float | None = None
+    search_time_s: float = 10.0
+    """milp-dqn-dfs: the branch and bound's time per search (a state not on a known line)."""
 
     def validate(self) -> None:
         if self.policy not in POLICIES:
             raise RadError(f'policy must be one of {", ".join(POLICIES)}, got {self.policy!r}')
         if not isinstance(self.budget, int) or self.budget < 1:
             raise RadError(f'budget must be a positive integer, got {self.budget!r}')
+        if not (isinstance(self.search_time_s, (int, float)) and 0 < self.search_time_s < 3600):
+            raise RadError(f'search_time_s must be a positive number of seconds under 3600, got {self.search_time_s!r}')
         if self.epsilon is not None and not 0.0 <= self.epsilon <= 1.0:
             raise RadError(f'epsilon must be in [0, 1], got {self.epsilon!r}')
         if self.policy == 'heur' and self.checkpoint:
@@ -90,6 +97,8 @@ class Sequencer:
         config.validate()
         self.config = config
         self._renv = None   # the planning twin, made on the first search
+        # milp-dqn-dfs: state -> (the rest of its best line, the coverage the line reaches)
+        self._lines: dict[tuple, tuple[list[SceneAction], float]] = {}
         if config.policy == 'heur':
             self.policy = HeurPolicy()
         else:
@@ -129,6 +138,8 @@ class Sequencer:
             ranking.terminate = True
             ranking.reason = ('every allocated pose is built' if left == 0
                               else f'{left} allocated poses left, no unplaced block of their types')
+        elif self.config.policy == 'milp-dqn-dfs':
+            self._dfs(scene, env, space, q0, rng, ranking, left)
         elif self.config.policy in SEARCH_OF:
             self._search(scene, space, q0, rng, ranking, left)
         else:
@@ -171,6 +182,52 @@ class Sequencer:
                               + (f'the {tried} the search tried failed in the planning twin or are valued '
                                  f'below stopping)' if tried else 'stopping is valued above all of them)'))
 
+    def _dfs(self, scene: Scene, env: AssemblyEnv, space: AllocationActions, q0, rng, ranking: Ranking,
+             left: int) -> None:
+        """The first action of the best line from here (searched, or known from an earlier
+        search along it), then the other allowed actions by Q as the caller's fallbacks."""
+        from rad_core.evaluation import policy_order
+        from rad_core.sequencing.exact import exact_search
+        key = _line_key(env, space.guide.placements)
+        known = self._lines.get(key)
+        if known is None:
+            ts = time.perf_counter()
+            renv = self._twin(scene)
+            renv.reset()
+            if q0 is not None:
+                renv.world.set_joint_positions(q0)
+                renv.twin.sync()
+            found = exact_search(renv, space, self.config.search_time_s, order=policy_order(self.policy, rng))
+            ranking.timings['search'] = time.perf_counter() - ts
+            ranking.search = {'coverage': found.coverage, 'complete': found.complete, 'bound': found.bound,
+                              'states': found.states, 'reason': found.reason}
+            if len(self._lines) > 10_000:
+                self._lines.clear()
+            self._remember_line(scene, space, found.actions, found.coverage)
+            known = self._lines[key]
+        line, coverage = known
+        allowed = space(env)
+        scores = np.asarray(self.policy.scores(env, allowed, rng), dtype=float)
+        first = [line[0]] if line else []
+        ranking.actions = first + [a for a in (scene_action(env, allowed[i]) for i in ranked_indices(scores))
+                                   if a not in first]
+        ranking.values = [coverage] * len(first) + [float(scores[i]) for i in ranked_indices(scores)
+                                                         if scene_action(env, allowed[i]) not in first]
+        if not line:
+            ranking.actions, ranking.values, ranking.terminate = [], [], True
+            ranking.reason = (f'{left} allocated poses left, none of them can be built next (the search '
+                              f'found no order that fills more of the target from here)')
+
+    def _remember_line(self, scene: Scene, space: AllocationActions, actions, coverage: float) -> None:
+        """The rest of the line for its first state and for every state along it
+        (bookkeeping only: the line's steps were judged by the search)."""
+        env = AssemblyEnv(scene, EnvConfig(stability='none'))
+        for n in range(len(actions) + 1):
+            self._lines[_line_key(env, space.guide.placements)] = ([scene_action(env, a) for a in actions[n:]],
+                                                                   float(coverage))
+            if n < len(actions):
+                env.step(actions[n])
+
     def _twin(self, scene: Scene):
         """The planning twin, one PyBullet world reused across requests."""
         if self._renv is None:
@@ -179,6 +236,16 @@ class Sequencer:
         else:
             self._renv.load(scene)
         return self._renv
+
+
+def _line_key(env: AssemblyEnv, placements) -> tuple:
+    """What a best line depends on: the allocation, what is placed where, and where the
+    blocks still on the table lie."""
+    from rad_core.allocation.cpsat import pose_key
+    placed = env.state.placed
+    return (frozenset(pose_key(p.type, p.target, p.cells) for p in placements),
+            frozenset((env.scene.blocks[b].id, tuple(sorted(int(c) for c in cells))) for b, (cells, _) in placed.items()),
+            tuple((blk.id, blk.type, blk.position, blk.yaw) for b, blk in enumerate(env.scene.blocks) if b not in placed))
 
 
 def _check_placements(scene: Scene, placements) -> None:
