@@ -1,7 +1,7 @@
 """Re-allocation on stall and the robot-feasible ceiling (issue 9), robot in the loop.
 
     python benchmarks/bench_reallocation.py [--scenes 30] [--grids 4,5] [--clearances 0,0.2]
-        [--agents LABEL,...] [--force] [--out docs/results/reallocation.md]
+        [--shapes train,holdout,tight] [--agents LABEL,...] [--force] [--out docs/results/reallocation.md]
 
 Every agent runs with the robot (GAMP + twin, teleporting execution) on generated
 two-sided scenes, seeds 0..N-1, through `rad_core.evaluation.evaluate` (the code
@@ -36,22 +36,35 @@ from rad_core import jsonfmt
 from rad_core.allocation import AllocationParams, solve
 from rad_core.evaluation import ProgressBar, evaluate, get_agent
 
+from bench_table2 import scenes   # the same generated scenes as Table II
+
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_AGENTS = ('heur-verified', 'heur-verified+realloc', 'milp-dqn-mcts+verify', 'milp-dqn-mcts+verify+realloc',
                   'milp-dqn-mixed-lookahead+verify', 'milp-dqn-mixed-lookahead+verify+realloc',
                   'milp-dqn-mixed-lookahead+verify+realloc-fewer', 'exact')
 
 
-def scenes(grid: int, n: int, clearance: float):
-    from rad_core.generator import GeneratorConfig, generate_scene
-    kw = {'clearance': clearance} if clearance else {}
-    config = GeneratorConfig(grid=grid, sides=2, **kw)
-    for s in range(n):
-        yield f'g{grid}-c{clearance:g}-seed{s}', generate_scene(config, s)
+def shape_scenes(split: str):
+    """Hand-made shapes (rad_core.shapes): 'train', 'holdout', or 'tight' (the held-out shapes
+    with their blocks packed 2 cm apart on the table instead of 5 cm: the fingers barely fit)."""
+    from rad_core import shapes
+    if split == 'tight':
+        return [(f'{name}-tight', shapes.build_scene(shapes.SPECS[name], 0, config=shapes.LayoutConfig(gap=0.02)))
+                for name in shapes.SPLITS['holdout']]
+    return [(name, shapes.shape_scene(name)) for name in shapes.SPLITS[split]]
 
 
-def run(label: str, grid: int, n: int, clearance: float, cache: Path, force: bool) -> dict:
-    path = cache / f'{label}-g{grid}-c{clearance:g}-n{n}.json'
+def cell_scenes(grid, n: int, clearance: float):
+    """A cell's scenes: generated at grid g (an int), or a shape split (a str)."""
+    return scenes(grid, n, clearance) if isinstance(grid, int) else shape_scenes(grid)
+
+
+def cell_name(grid, n: int, clearance: float) -> str:
+    return f'g{grid}-c{clearance:g}-n{n}' if isinstance(grid, int) else f'shapes-{grid}'
+
+
+def run(label: str, grid, n: int, clearance: float, cache: Path, force: bool) -> dict:
+    path = cache / f'{label}-{cell_name(grid, n, clearance)}.json'
     if path.exists() and not force:
         return json.loads(path.read_text())
     from rad_core.sequencing.reallocation import ReallocationConfig
@@ -65,22 +78,22 @@ def run(label: str, grid: int, n: int, clearance: float, cache: Path, force: boo
         if prefer in parts:
             allocation = AllocationParams(support='stable', prefer=prefer)
     t0 = time.perf_counter()
-    result = evaluate(agent, scenes(grid, n, clearance), robot=True, seed=0, reallocation=realloc,
-                      allocation=allocation, progress=ProgressBar(n, f'{label} g={grid} c={clearance:g}'))
+    result = evaluate(agent, cell_scenes(grid, n, clearance), robot=True, seed=0, reallocation=realloc,
+                      allocation=allocation, progress=ProgressBar(n, f'{label} {cell_name(grid, n, clearance)}'))
     result['seconds'] = time.perf_counter() - t0
     cache.mkdir(parents=True, exist_ok=True)
     path.write_text(jsonfmt.dumps(result))
     return result
 
 
-def paper_fill(grid: int, n: int, clearance: float, cache: Path) -> list[float]:
+def paper_fill(grid, n: int, clearance: float, cache: Path) -> list[float]:
     """Per scene: the target fraction the paper's unconstrained allocation fills."""
-    path = cache / f'paper-fill-g{grid}-c{clearance:g}-n{n}.json'
+    path = cache / f'paper-fill-{cell_name(grid, n, clearance)}.json'
     if path.exists():
         return json.loads(path.read_text())
     from rad_core.grid import Grid
     out = []
-    for _, scene in scenes(grid, n, clearance):
+    for _, scene in cell_scenes(grid, n, clearance):
         grid_ = Grid(scene)
         filled = np.zeros(grid_.num_cells, dtype=bool)
         for p in solve(scene, AllocationParams()).placements:
@@ -101,13 +114,14 @@ def main() -> int:
     p.add_argument('--scenes', type=int, default=30)
     p.add_argument('--grids', default='4,5')
     p.add_argument('--clearances', default='0,0.2')
+    p.add_argument('--shapes', default='', help="hand-made shape sets too: train,holdout,tight")
     p.add_argument('--agents', default=','.join(DEFAULT_AGENTS))
     p.add_argument('--force', action='store_true')
     p.add_argument('--out', default=str(ROOT / 'docs' / 'results' / 'reallocation.md'))
     args = p.parse_args()
     out = Path(args.out)
     cache = out.parent / 'reallocation'
-    grids = [int(g) for g in args.grids.split(',')]
+    grids = [int(g) for g in args.grids.split(',') if g] + [s for s in args.shapes.split(',') if s]
     clearances = [float(c) for c in args.clearances.split(',')]
     labels = [a for a in args.agents.split(',') if a]
     lines = ['# Re-allocation on stall and the robot-feasible ceiling', '',
@@ -116,9 +130,13 @@ def main() -> int:
              's/scene: wall time on the shared 2-core machine.', '']
     for clearance in clearances:
         for grid in grids:
+            if not isinstance(grid, int) and clearance != clearances[0]:
+                continue   # the shapes are flush
             fill = paper_fill(grid, args.scenes, clearance, cache)
             exact = None
-            lines += [f'## g = {grid}, clearance {clearance:g}' + (' (flush)' if not clearance else ''), '',
+            title = (f'## g = {grid}, clearance {clearance:g}' + (' (flush)' if not clearance else '')
+                     if isinstance(grid, int) else f'## shapes: {grid}')
+            lines += [title, '',
                       f'The paper\'s allocation fills {np.mean(fill):.3f} of the target on average.', '',
                       '| agent | R | e | f | a-bar | of paper | to ceiling | re-alloc/scene | re-alloc time | s/scene |',
                       '|---|---|---|---|---|---|---|---|---|---|']
@@ -142,7 +160,7 @@ def main() -> int:
                 lines.append(f'| {label} | {fmt(r["R"])} | {fmt(r["e"])} | {fmt(r["f"])} | {fmt(r["coverage"])} '
                              f'| {of_paper:.3f} | {fmt(gap)} | {np.mean(events):.1f} | {share:.0%} '
                              f'| {r["seconds"] / r["n"]:.1f} |')
-                print(f'{label:48s} g={grid} c={clearance:g} cov={r["coverage"]:.3f} of_paper={of_paper:.3f} '
+                print(f'{label:48s} {cell_name(grid, args.scenes, clearance)} cov={r["coverage"]:.3f} of_paper={of_paper:.3f} '
                       f'gap={fmt(gap)} realloc={np.mean(events):.1f} share={share:.0%}', flush=True)
             if exact is not None:
                 complete = sum(1 for e in exact if e.get('complete'))

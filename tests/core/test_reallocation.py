@@ -218,3 +218,17 @@ def test_with_the_robot_an_unreachable_block_is_excluded_and_another_type_fills_
     no_good = row['reallocations'][0]['no_goods'][0]
     assert no_good['type'] == 'I2' and 'i0' in no_good['reason'] and 'unreachable' in no_good['reason']
     assert row['reallocation_s'] > 0
+
+
+def test_a_used_up_allocation_with_free_target_cells_is_solved_again():
+    blocks = [{'id': f'c{n}', 'type': 'cube', 'position': [0.4 + 0.1 * n, -0.2, U / 2], 'yaw': 0} for n in range(2)]
+    scene = small_scene(blocks=blocks, targets=ROW)
+    env = AssemblyEnv(scene, EnvConfig(stability='support'))
+    only_one = [p for p in solve(scene, STABLE).placements if p.cells == ((0, 0, 0),)]
+    space = AllocationActions(env, only_one)
+    realloc = Reallocator(space, lambda a: Check(True))
+    episode = run_episode(env, with_reallocation(policy_decider(HeurPolicy(), space), realloc),
+                          np.random.default_rng(0))
+    assert episode.coverage == 1.0
+    assert [e.reason for e in realloc.events][0] == 'the allocation is built and target cells are still free'
+    assert realloc.events[0].changed and realloc.events[0].step == 1

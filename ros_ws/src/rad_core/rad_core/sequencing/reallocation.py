@@ -12,7 +12,8 @@ still open, the `Reallocator`:
    so they stay excluded for the rest of the episode. A pose that fails only
    because what should hold it up is not built yet is not a no-good; the
    re-solved allocation must give it new support or drop it;
-3. solves the allocation again (CP-SAT, proven optimal for each problem it
+3. solves the allocation again (also when the allocation is used up while target
+   cells are still free: what is built now may hold up poses it could not) (CP-SAT, proven optimal for each problem it
    solves, or the anytime bound) over the cells still free, with the placed
    blocks fixed, the blocks still on the table available and the no-goods
    excluded, by default with the 'stable' support constraints whatever the first
@@ -133,8 +134,12 @@ class Reallocator:
         self.seconds = 0.0
 
     def can_retry(self, env: AssemblyEnv) -> bool:
+        """Whether to re-allocate instead of stopping: blocks are left, and allocated poses
+        are open or target cells are still free (the allocation is used up, but what is
+        built now may hold up poses the first one could not have), within the limits."""
+        free_targets = bool((env.grid.is_target & (env.state.occupancy < 0)).any())
         return (len(self.events) < self.config.max_reallocations and bool(env.unplaced())
-                and bool(self.space.guide.open_poses(env.state))
+                and (bool(self.space.guide.open_poses(env.state)) or free_targets)
                 and (self.deadline is None or time.perf_counter() < self.deadline))
 
     def stalled(self, env: AssemblyEnv, reason: str) -> Reallocation:
@@ -142,7 +147,9 @@ class Reallocator:
         t0 = time.perf_counter()
         guide: AllocationGuide = self.space.guide
         occupied = env.state.occupancy >= 0
-        event = Reallocation(len(env.state.placed), reason or 'no allocated pose can be built next')
+        default = ('no allocated pose can be built next' if guide.open_poses(env.state)
+                   else 'the allocation is built and target cells are still free')
+        event = Reallocation(len(env.state.placed), reason or default)
         for k in guide.open_poses(env.state):
             failure = self._pose_failure(env, guide, k)
             if failure is None or not rests_now(env.grid, guide.pose_cells[k], occupied):

@@ -160,11 +160,7 @@ class Sequencer:
 
     def _search(self, scene: Scene, space: AllocationActions, q0, rng, ranking: Ranking, left: int) -> None:
         ts = time.perf_counter()
-        renv = self._twin(scene)
-        renv.reset()
-        if q0 is not None:
-            renv.world.set_joint_positions(q0)
-            renv.twin.sync()
+        renv = self._twin_at(scene, q0)
         ranking.timings['twin'] = time.perf_counter() - ts
         ts = time.perf_counter()
         model = EnvModel(renv, self.policy, space)   # the space is stateless: it serves the twin's env too
@@ -192,11 +188,7 @@ class Sequencer:
         known = self._lines.get(key)
         if known is None:
             ts = time.perf_counter()
-            renv = self._twin(scene)
-            renv.reset()
-            if q0 is not None:
-                renv.world.set_joint_positions(q0)
-                renv.twin.sync()
+            renv = self._twin_at(scene, q0)
             found = exact_search(renv, space, self.config.search_time_s, order=policy_order(self.policy, rng))
             ranking.timings['search'] = time.perf_counter() - ts
             ranking.search = {'coverage': found.coverage, 'complete': found.complete, 'bound': found.bound,
@@ -227,6 +219,15 @@ class Sequencer:
                                                                    float(coverage))
             if n < len(actions):
                 env.step(actions[n])
+
+    def _twin_at(self, scene: Scene, q0):
+        """The planning twin reset to the scene, the arm at q0 (None: home)."""
+        renv = self._twin(scene)
+        renv.reset()
+        if q0 is not None:
+            renv.world.set_joint_positions(q0)
+            renv.twin.sync()
+        return renv
 
     def _twin(self, scene: Scene):
         """The planning twin, one PyBullet world reused across requests."""
