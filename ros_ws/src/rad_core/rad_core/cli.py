@@ -7,6 +7,7 @@
     rad allocate scene.json [--time-limit S] [--seed N] [--workers W] [--solver cp-sat|highs]
     rad demo [--scene FILE] [--out DIR] [--rtf X]
     rad eval --agent AGENT [--checkpoint FILE] --grid G [--robot] --scenes N --seed S --json FILE
+             [--workers N [--dashboard] | --scheduler ADDR [--workers N]]
     rad dataset build --grids 3 --scenes 50000 -o data/train-g3.jsonl.gz [--shapes train]
     rad train --method milp-dqn|dqn|dqn-rel --out runs/NAME [--resume] [--<config field> VALUE ...]
 
@@ -121,6 +122,11 @@ def cmd_demo(args) -> int:
 
 def cmd_eval(args) -> int:
     from rad_core.evaluation import ProgressBar, evaluate, generated_scenes, get_agent, scene_dir, uses_robot
+    distributed = args.workers is not None or args.scheduler is not None
+    if args.workers is not None and args.workers < 1:
+        raise RadError(f'--workers must be at least 1, got {args.workers}')
+    if args.dashboard and (args.workers is None or args.scheduler is not None):
+        raise RadError('--dashboard applies to the cluster --workers N starts, not to the serial run or --scheduler')
     agent = get_agent(args.agent, args.checkpoint, verify=args.verify, budget=args.budget,
                       reallocate=args.reallocate)
     policy = agent.make_policy()   # a bad checkpoint fails here, before any scene runs
@@ -137,10 +143,20 @@ def cmd_eval(args) -> int:
     t0 = time.perf_counter()
     from rad_core.allocation import AllocationParams
     allocation = AllocationParams(support=args.support) if args.support else None
-    result = evaluate(agent, scenes, robot, args.seed, progress=ProgressBar(total, args.agent),
-                      execution=args.execution, policy=policy, allocation=allocation)
+    bar = ProgressBar(total, args.agent)
+    if distributed:
+        from rad_core.distributed import AgentArgs, evaluate_distributed
+        agent_args = AgentArgs(args.agent, args.checkpoint, args.verify, args.budget, args.reallocate)
+        result = evaluate_distributed(agent_args, scenes, robot, args.seed, progress=bar, workers=args.workers,
+                                      scheduler=args.scheduler, execution=args.execution, allocation=allocation,
+                                      dashboard=args.dashboard, policy=policy)
+    else:
+        result = evaluate(agent, scenes, robot, args.seed, progress=bar, execution=args.execution, policy=policy,
+                          allocation=allocation)
     elapsed = time.perf_counter() - t0
     mode = f'robot ({args.execution})' if robot else 'no robot'
+    if distributed:
+        mode += f', Dask scheduler {args.scheduler}' if args.scheduler else f', {args.workers} Dask workers'
     print(f'{agent.name} on {result["n"]} scenes ({source}), {mode}, {elapsed:.1f} s')
     print(f'{"R":>13} {"d":>5} {"e":>5} {"f":>5} {"f_g":>5} {"f_p":>5} {"cov":>5} {"cov_rel":>7}')
     print(f'{result["R"]:6.2f} ({result["R_std"]:.2f}) {result["d"]:5.2f} {result["e"]:5.2f} {result["f"]:5.2f} '
@@ -304,6 +320,14 @@ def build_parser() -> argparse.ArgumentParser:
                    help="allocation: the paper's MILP (none) or every allocated block able to stand (stable); "
                         "default: the agent's (stable for milp-dqn-mixed, none for the others)")
     p.add_argument('--json', metavar='FILE', help='write the metrics and per-scene rows here')
+    p.add_argument('--workers', type=int, metavar='N',
+                   help='run the scenes on a Dask cluster of N worker processes on 127.0.0.1 (the same rows and '
+                        'metrics as the serial run); with --scheduler: wait for at least N workers there')
+    p.add_argument('--scheduler', metavar='ADDR',
+                   help='run the scenes on the workers of an existing Dask scheduler, e.g. tcp://127.0.0.1:8786 '
+                        '(they need the same rad installed)')
+    p.add_argument('--dashboard', action='store_true',
+                   help='with --workers: serve the Dask dashboard on 127.0.0.1:8787 (needs bokeh)')
     p.set_defaults(func=cmd_eval)
 
     dataset = sub.add_parser('dataset', help='training scenes with precomputed allocations').add_subparsers(

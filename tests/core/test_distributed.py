@@ -1,0 +1,177 @@
+"""`rad eval --workers N` (rad_core.distributed): the serial run's rows from Dask workers on loopback.
+
+One cluster of two worker processes, started by rad's own `dask_client` on 127.0.0.1, serves the
+whole module; the kill test leaves it whole again (the nanny restarts the worker it kills).
+"""
+
+import ipaddress
+import json
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import time
+
+import psutil
+import pytest
+
+from rad_core.distributed import AgentArgs, dask_client, evaluate_distributed
+from rad_core.errors import RadError
+from rad_core.evaluation import evaluate, generated_scenes
+
+SCENES = list(generated_scenes(3, 2, 6, 0))
+SEED = 5
+
+
+def rad(*args, timeout=120):
+    exe = shutil.which('rad')
+    cmd = [exe] if exe else [sys.executable, '-m', 'rad_core.cli']
+    return subprocess.run(cmd + list(args), check=False, capture_output=True, text=True, timeout=timeout)
+
+
+@pytest.fixture(scope='module')
+def client():
+    with dask_client(workers=2) as c:
+        yield c
+
+
+@pytest.fixture(scope='module')
+def serial():
+    """The serial results the distributed runs must reproduce, by agent."""
+    return {'heur-norobot': evaluate('heur-norobot', SCENES, robot=False, seed=SEED),
+            'heur': evaluate('heur', SCENES, robot=True, seed=SEED)}
+
+
+@pytest.mark.parametrize('agent, robot', [('heur-norobot', False), ('heur', True)])
+def test_two_workers_give_exactly_the_serial_rows_and_metrics(client, serial, agent, robot):
+    seen = []
+    result = evaluate_distributed(AgentArgs(agent), SCENES, robot, SEED, progress=seen.append, client=client)
+    assert result == serial[agent]
+    assert [r['name'] for r in result['scenes']] == [name for name, _ in SCENES]
+    assert sorted(r['name'] for r in seen) == sorted(name for name, _ in SCENES)
+
+
+def is_loopback(ip: str) -> bool:
+    address = ipaddress.ip_address(ip.split('%')[0])
+    mapped = getattr(address, 'ipv4_mapped', None)
+    return (mapped or address).is_loopback
+
+
+def sockets_of(pids):
+    """(pid, kind, local, remote, status) of every inet socket of the processes."""
+    found = []
+    for pid in pids:
+        for c in psutil.Process(pid).net_connections(kind='inet'):
+            found.append((pid, c.type, c.laddr, c.raddr, c.status))
+    return found
+
+
+def test_every_socket_of_the_cluster_is_on_loopback_while_it_runs(client):
+    worker_pids = set(client.run(os.getpid).values())
+    assert len(worker_pids) == 2
+    snapshots = []
+
+    def look(_row):   # during the run: the scheduler and nannies live in this process
+        if not snapshots:
+            procs = {os.getpid(), *worker_pids, *(p.pid for p in psutil.Process().children(recursive=True))}
+            snapshots.append(sockets_of(procs))
+
+    evaluate_distributed(AgentArgs('heur'), SCENES, True, SEED, progress=look, client=client)
+    found = snapshots[0]
+    listening = [s for s in found if s[4] == psutil.CONN_LISTEN]
+    assert {pid for pid, *_ in listening} >= worker_pids | {os.getpid()}, 'expected the cluster\'s listeners'
+    assert all(is_loopback(s[2].ip) for s in listening), [s for s in listening if not is_loopback(s[2].ip)]
+    bound_udp = [s for s in found if s[1] == socket.SOCK_DGRAM]
+    assert all(is_loopback(s[2].ip) for s in bound_udp), bound_udp
+    remote = [s for s in found if s[3]]
+    assert remote and all(is_loopback(s[3].ip) for s in remote), [s for s in remote if not is_loopback(s[3].ip)]
+
+
+def test_a_worker_killed_mid_run_loses_no_scene_and_counts_none_twice(client, serial):
+    killed = {}
+
+    def kill_a_busy_worker(_row):
+        if killed:
+            return
+        busy = {w: keys for w, keys in client.processing().items() if keys}
+        if not busy:
+            return
+        address, keys = next(iter(busy.items()))
+        pid = client.run(os.getpid, workers=[address])[address]
+        os.kill(pid, signal.SIGKILL)
+        killed.update(address=address, keys=keys, pid=pid)
+
+    seen = []
+
+    def progress(row):
+        seen.append(row['name'])
+        kill_a_busy_worker(row)
+
+    result = evaluate_distributed(AgentArgs('heur'), SCENES, True, SEED, progress=progress, client=client)
+    assert killed, 'no worker was busy after the first row: nothing was killed'
+    assert not psutil.pid_exists(killed['pid']) or psutil.Process(killed['pid']).status() == psutil.STATUS_ZOMBIE
+    assert result == serial['heur']
+    assert sorted(seen) == sorted(name for name, _ in SCENES)
+
+    def story(dask_scheduler, key=killed['keys'][0]):
+        return [(start, finish) for _, start, finish, *_ in dask_scheduler.story(key)]
+    transitions = client.run_on_scheduler(story)
+    assert transitions.count(('waiting', 'processing')) + transitions.count(('queued', 'processing')) >= 2, \
+        f'the killed worker\'s task was not run again: {transitions}'
+    client.wait_for_workers(2, timeout=60)   # the nanny's replacement, for the tests after this one
+
+
+def test_cli_workers_and_scheduler_give_the_serial_json(client, tmp_path):
+    expected = evaluate('heur-norobot', SCENES[:3], robot=False, seed=0)
+    for flags in (['--workers', '2'], ['--scheduler', client.cluster.scheduler_address, '--workers', '2']):
+        out = tmp_path / 'out.json'
+        r = rad('eval', '--agent', 'heur-norobot', '--grid', '3', '--scenes', '3', '--seed', '0',
+                '--json', str(out), *flags)
+        assert r.returncode == 0, r.stderr
+        assert 'heur-norobot on 3 scenes' in r.stdout and 'Dask' in r.stdout
+        assert json.loads(out.read_text()) == expected
+
+
+def closed_port() -> int:
+    with socket.socket() as s:
+        s.bind(('127.0.0.1', 0))
+        return s.getsockname()[1]
+
+
+def test_cli_bad_workers_and_an_unreachable_scheduler_are_one_line_errors():
+    r = rad('eval', '--agent', 'heur-norobot', '--grid', '3', '--scenes', '1', '--workers', '0')
+    assert r.returncode == 2 and r.stderr.strip().count('\n') == 0, r.stderr
+    assert '--workers must be at least 1' in r.stderr
+    t0 = time.perf_counter()
+    r = rad('eval', '--agent', 'heur-norobot', '--grid', '3', '--scenes', '1',
+            '--scheduler', f'tcp://127.0.0.1:{closed_port()}', timeout=60)
+    assert r.returncode == 2 and r.stderr.strip().count('\n') == 0, r.stderr
+    assert 'cannot reach the Dask scheduler' in r.stderr
+    assert time.perf_counter() - t0 < 30
+
+
+def test_a_scheduler_that_accepts_but_never_answers_times_out():
+    with socket.socket() as silent:
+        silent.bind(('127.0.0.1', 0))
+        silent.listen()
+        address = f'tcp://127.0.0.1:{silent.getsockname()[1]}'
+        t0 = time.perf_counter()
+        with pytest.raises(RadError, match='cannot reach the Dask scheduler'):
+            with dask_client(scheduler=address, connect_timeout_s=1.0):
+                pass
+        assert time.perf_counter() - t0 < 10
+
+
+def test_bad_arguments_fail_before_any_cluster_starts():
+    for workers in (0, -1):
+        with pytest.raises(RadError, match='--workers'):
+            evaluate_distributed(AgentArgs('heur-norobot'), SCENES, False, 0, workers=workers)
+    with pytest.raises(RadError, match='no scenes'):
+        evaluate_distributed(AgentArgs('heur-norobot'), [], False, 0, workers=1)
+    with pytest.raises(RadError, match='unknown agent'):
+        evaluate_distributed(AgentArgs('nobody'), SCENES, False, 0, workers=1)
+    with pytest.raises(RadError, match='--dashboard'):
+        with dask_client(scheduler='tcp://127.0.0.1:1', dashboard=True):
+            pass
