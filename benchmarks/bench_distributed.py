@@ -15,6 +15,14 @@ world), as in a real run and as the serial run's first scene does. Worker proces
 torch on one thread each (Dask's OMP_NUM_THREADS=1); the serial run uses torch's default.
 
 Not yet measured on an idle machine; a 4-scene smoke run only shows the script works.
+
+    python benchmarks/bench_distributed.py --train [--train-steps 400] [--actors 1 2] [--dataset FILE]
+
+Training (`rad train --actors N`): environment steps per second of a short run of the serial
+trainer (for reference) and of the learner fed by 1 and 2 actors (cluster start-up counted
+apart), with the gradient steps taken, on a small network and a dataset of 24 g=3 scenes built
+on the fly unless --dataset is given. Only a tiny smoke run so far (CPUs busy with other
+benchmarks): it shows the script works, not the speed-up.
 """
 
 from __future__ import annotations
@@ -34,7 +42,13 @@ def main() -> int:
     p.add_argument('--agent', default='heur-verified', help='an agent of rad eval, e.g. milp-dqn-mixed-lookahead')
     p.add_argument('--verify', action='store_true', help="the agent's --verify variant")
     p.add_argument('--workers', type=int, nargs='+', default=[1, 2])
+    p.add_argument('--train', action='store_true', help='benchmark training (--actors) instead of evaluation')
+    p.add_argument('--train-steps', type=int, default=400, help='with --train: environment steps per run')
+    p.add_argument('--actors', type=int, nargs='+', default=[1, 2], help='with --train: actor counts')
+    p.add_argument('--dataset', help='with --train: training scenes (default: 24 g=3 scenes built now)')
     args = p.parse_args()
+    if args.train:
+        return bench_train(args)
 
     agent_args = AgentArgs(args.agent, verify=args.verify)
     agent = agent_args.build()
@@ -59,6 +73,44 @@ def main() -> int:
         same = 'identical' if result == serial else 'DIFFER'
         print(f'{f"{n} worker" + "s" * (n > 1):<10} {startup_s:10.2f} {run_s:8.2f} {args.scenes / run_s:9.3f} '
               f'{serial_s / run_s:9.2f} {serial_s / (run_s + startup_s):14.2f}  {same}')
+    return 0
+
+
+def bench_train(args) -> int:
+    import tempfile
+    from pathlib import Path
+
+    from rad_core.learning.actors import ActorConfig, train_with_actors
+    from rad_core.learning.dataset import build
+    from rad_core.learning.dqn import TrainConfig, train
+
+    with tempfile.TemporaryDirectory() as tmp:
+        dataset = args.dataset
+        if dataset is None:
+            dataset = str(Path(tmp) / 'tiny.jsonl.gz')
+            build(dataset, [3], 24)
+        n = args.train_steps
+        cfg = dict(dataset=dataset, total_steps=n, learning_starts=min(100, n // 4), train_every=2,
+                   target_update=100, batch_size=16, buffer_size=5000, eval_every=10 * n, eval_scenes=1,
+                   checkpoint_every_s=1e9, dim=32, heads=4, rounds=2, ff=64, readout=32, seed=args.seed)
+        print(f'training: {n} environment steps, small network, train_every 2 (evaluation: 1 scene at the end)')
+        print(f'{"run":<10} {"start-up s":>10} {"run s":>8} {"env steps/s":>12} {"grad steps":>11} {"speed-up":>9}')
+        t0 = time.perf_counter()
+        r = train(TrainConfig(**cfg), Path(tmp) / 'serial')
+        serial_rate = r['env_steps'] / (time.perf_counter() - t0)
+        print(f'{"serial":<10} {"-":>10} {time.perf_counter() - t0:8.2f} {serial_rate:12.1f} {r["grad_steps"]:11d} '
+              f'{1.0:9.2f}')
+        for k in args.actors:
+            t0 = time.perf_counter()
+            with dask_client(workers=k) as client:
+                startup_s = time.perf_counter() - t0
+                t1 = time.perf_counter()
+                r = train_with_actors(TrainConfig(**cfg), Path(tmp) / f'actors-{k}', ActorConfig(actors=k),
+                                      client=client)
+                run_s = time.perf_counter() - t1
+            rate = r['env_steps'] / run_s
+            print(f'{f"{k} actor" + "s" * (k > 1):<10} {startup_s:10.2f} {run_s:8.2f} {rate:12.1f} '
+                  f'{r["grad_steps"]:11d} {rate / serial_rate:9.2f}')
     return 0
 
 

@@ -10,6 +10,7 @@
              [--workers N [--dashboard] | --scheduler ADDR [--workers N]]
     rad dataset build --grids 3 --scenes 50000 -o data/train-g3.jsonl.gz [--shapes train]
     rad train --method milp-dqn|dqn|dqn-rel --out runs/NAME [--resume] [--<config field> VALUE ...]
+              [--actors N [--chunk-steps S] [--refresh-every K] | --seeds S1,S2,...] [--scheduler ADDR]
 
 Bad input ends with exit code 2 and one line on stderr naming the problem.
 """
@@ -208,18 +209,63 @@ def cmd_train(args) -> int:
     else:
         config = TrainConfig(**given)
         config.validate()
+    seeds = _train_mode(args, given)
     total = given.get('total_steps', config.total_steps)
+    if seeds is not None:
+        from rad_core.learning.actors import seed_folder, train_seeds
+
+        def finished(seed: int, result: dict) -> None:
+            print(f'seed {seed}: {result["env_steps"]} environment steps, {result["grad_steps"]} gradient steps, '
+                  f'{result["wall_s"]:.0f} s; model: {seed_folder(args.out, seed) / "model.pt"}', flush=True)
+
+        train_seeds(config, args.out, seeds, resume=args.resume, total_steps=given.get('total_steps'),
+                    scheduler=args.scheduler, progress=finished)
+        print(f'done: {len(seeds)} seeds in {args.out}/seed-*')
+        return 0
     bar = ProgressBar(total, f'train {given.get("method", config.method)}')
 
     def progress(steps: int) -> None:   # the bar counts environment steps
         bar.done = min(steps, bar.total) - 1
         bar()
 
-    result = train(config, args.out, resume=args.resume, total_steps=given.get('total_steps'), progress=progress)
+    if args.actors is not None:
+        from rad_core.learning.actors import ActorConfig, train_with_actors
+        actor = ActorConfig(args.actors, args.chunk_steps or ActorConfig.chunk_steps,
+                            args.refresh_every or ActorConfig.refresh_every)
+        result = train_with_actors(config, args.out, actor, resume=args.resume,
+                                   total_steps=given.get('total_steps'), progress=progress, scheduler=args.scheduler)
+    else:
+        result = train(config, args.out, resume=args.resume, total_steps=given.get('total_steps'), progress=progress)
     state = 'interrupted, checkpointed' if result['interrupted'] else 'done'
     print(f'{state}: {result["env_steps"]} environment steps, {result["grad_steps"]} gradient steps, '
           f'{result["episodes"]} episodes, {result["wall_s"]:.0f} s; model: {Path(args.out) / "model.pt"}')
     return 130 if result['interrupted'] else 0
+
+
+def _train_mode(args, given: dict) -> list[int] | None:
+    """Check the --actors/--seeds/--scheduler combination; the seeds of --seeds, else None."""
+    if args.actors is not None and args.actors < 1:
+        raise RadError(f'--actors must be at least 1, got {args.actors}')
+    if args.actors is not None and args.seeds is not None:
+        raise RadError('--actors and --seeds do not combine: --seeds trains each seed serially, in parallel')
+    for flag, value in (('--chunk-steps', args.chunk_steps), ('--refresh-every', args.refresh_every)):
+        if value is not None and args.actors is None:
+            raise RadError(f'{flag} applies to --actors N only')
+        if value is not None and value < 1:
+            raise RadError(f'{flag} must be at least 1, got {value}')
+    if args.scheduler is not None and args.actors is None and args.seeds is None:
+        raise RadError('--scheduler applies to --actors N or --seeds, not to the serial run')
+    if args.seeds is None:
+        return None
+    if 'seed' in given:
+        raise RadError('--seed and --seeds do not combine: give the seeds as --seeds S1,S2,...')
+    try:
+        seeds = [int(s) for s in args.seeds.split(',') if s.strip()]
+    except ValueError:
+        raise RadError(f'--seeds takes whole numbers separated by commas, e.g. 1,2,3; got {args.seeds!r}') from None
+    if not seeds:
+        raise RadError('--seeds needs at least one seed, e.g. --seeds 1,2,3')
+    return seeds
 
 
 def _add_train_args(p: argparse.ArgumentParser) -> None:
@@ -347,6 +393,19 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser('train', help='train a sequencing policy with DQN (milp-dqn, dqn, dqn-rel)')
     p.add_argument('--out', required=True, help='run folder: progress.csv, tb/, checkpoint.pt, model.pt, curves.png')
     p.add_argument('--resume', action='store_true', help="continue the run in --out from its checkpoint")
+    p.add_argument('--actors', type=int, metavar='N',
+                   help='collect experience with N Dask actors (a LocalCluster on 127.0.0.1 unless --scheduler) '
+                        'while this process learns; not bit-deterministic')
+    p.add_argument('--chunk-steps', type=int, metavar='STEPS',
+                   help='with --actors: environment steps an actor plays per task (default: 32)')
+    p.add_argument('--refresh-every', type=int, metavar='GRAD_STEPS',
+                   help='with --actors: gradient steps between the weights the actors get (default: 10)')
+    p.add_argument('--seeds', metavar='S1,S2,...',
+                   help='train these seeds in parallel (one Dask task each), each the serial run of --seed S '
+                        'into OUT/seed-S')
+    p.add_argument('--scheduler', metavar='ADDR',
+                   help='with --actors or --seeds: use the workers of an existing Dask scheduler, '
+                        'e.g. tcp://127.0.0.1:8786')
     _add_train_args(p)
     p.set_defaults(func=cmd_train)
     return parser

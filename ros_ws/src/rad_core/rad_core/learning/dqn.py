@@ -35,6 +35,7 @@ import csv
 import math
 import resource
 import signal
+import threading
 import time
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
@@ -383,7 +384,10 @@ class Trainer:
     def run(self, progress=None) -> dict:
         c = self.cfg
         self.out.mkdir(parents=True, exist_ok=True)
-        previous = signal.signal(signal.SIGINT, self._on_sigint)
+        # Python handles signals in the main thread only: a run in a worker thread (a Dask
+        # task of `rad train --seeds`) is stopped by its process instead.
+        main = threading.current_thread() is threading.main_thread()
+        previous = signal.signal(signal.SIGINT, self._on_sigint) if main else None
         t_start, last_ckpt = time.perf_counter() - self.pos['wall_s'], time.perf_counter()
         mark = (time.perf_counter(), self.pos['env_steps'], self.pos['grad_steps'])
         interrupted = False
@@ -408,7 +412,8 @@ class Trainer:
                     last_ckpt = time.perf_counter()
             self.save()
         finally:
-            signal.signal(signal.SIGINT, previous)
+            if main:
+                signal.signal(signal.SIGINT, previous)
             self.close()
             if self._writer is not None:
                 self._writer.close()
