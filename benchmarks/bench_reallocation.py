@@ -9,7 +9,8 @@ behind `rad eval`). Labels: an agent name, then '+verify' (take only actions the
 planning copy finds feasible), '+realloc' (re-allocate on stall, `rad eval
 --reallocate`), '+realloc-fewer' / '+realloc-flat' (the same, with the re-solve
 preferring fewer poses / flatter blocks among equally good allocations: the
-preference ablation), '+flat' (the first allocation stable and flat too), 'exact' (the exact
+preference ablation), '+stable' / '+flat' (the first allocation stable / stable and flat,
+whatever the agent's own), 'exact' (the exact
 planner over orders and re-allocations, 60 s per scene: the robot-feasible ceiling where
 its search completes, a lower bound elsewhere).
 
@@ -72,6 +73,8 @@ def run(label: str, grid, n: int, clearance: float, cache: Path, force: bool) ->
     agent = get_agent(parts[0], verify='verify' in parts,
                       reallocate=any(p.startswith('realloc') for p in parts))
     realloc, allocation = ReallocationConfig(), None
+    if 'stable' in parts:
+        allocation = AllocationParams(support='stable')
     for prefer in ('fewer', 'flat'):
         if f'realloc-{prefer}' in parts:
             realloc = replace(realloc, params=replace(realloc.params, prefer=prefer))

@@ -232,3 +232,16 @@ def test_a_used_up_allocation_with_free_target_cells_is_solved_again():
     assert episode.coverage == 1.0
     assert [e.reason for e in realloc.events][0] == 'the allocation is built and target cells are still free'
     assert realloc.events[0].changed and realloc.events[0].step == 1
+
+
+def test_the_coverage_bound_counts_what_the_blocks_left_could_cover():
+    from rad_core.allocation.cpsat import coverage_bound
+    three = [{'name': 'front', 'origin': [0.45, 0.1, U / 2], 'size': [3, 1, 1],
+              'filled': [[0, 0, 0], [1, 0, 0], [2, 0, 0]]}]
+    two_cubes = [{'id': f'c{n}', 'type': 'cube', 'position': [0.4 + 0.1 * n, -0.2, U / 2], 'yaw': 0}
+                 for n in range(2)]
+    assert coverage_bound(small_scene(blocks=two_cubes, targets=three)) == pytest.approx(2 / 3)
+    placed = [dict(two_cubes[0], position=[0.45, 0.1, U / 2]), two_cubes[1]]   # one cube already in a cell
+    assert coverage_bound(small_scene(blocks=placed, targets=three)) == pytest.approx(2 / 3)
+    bar = two_cubes + [{'id': 'i0', 'type': 'I2', 'position': [0.7, -0.2, U / 2], 'yaw': 0}]
+    assert coverage_bound(small_scene(blocks=bar, targets=three)) == 1.0

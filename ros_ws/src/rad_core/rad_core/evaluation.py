@@ -340,11 +340,17 @@ def exact_decider(renv, space, agent: Agent, policy: Policy | None = None, reall
         event = Reallocator(sub, simulated_check(renv), config).stalled(env, 'exact search: dead end')
         return sub if event.changed else None
 
+    def bound_of(_renv) -> float:   # re-allocating: what any allocation of the free cells could cover
+        from rad_core.allocation.cpsat import coverage_bound
+        from rad_core.sequencing.reallocation import placed_scene
+        return coverage_bound(placed_scene(env))
+
     def decide(env_: AssemblyEnv, rng: np.random.Generator) -> Decision:
         if 'line' not in holder:
             holder['result'] = exact_search(renv, space, agent.time_limit_s,
                                             order=None if policy is None else policy_order(policy, rng),
-                                            on_dead_end=on_dead_end if agent.reallocate else None)
+                                            on_dead_end=on_dead_end if agent.reallocate else None,
+                                            bound_of=bound_of if agent.reallocate else None)
             holder['line'] = list(holder['result'].actions)
         return Decision(holder['line'].pop(0)) if holder['line'] else stop()
     return decide, holder

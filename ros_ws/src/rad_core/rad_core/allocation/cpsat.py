@@ -281,3 +281,39 @@ def solve(scene: Scene, params: AllocationParams = AllocationParams(), exclude=(
 
 def _filled_targets(scene: Scene, grid: Grid) -> int:
     return sum(int(grid.is_target[cells].sum()) for cells in blocks_on_grid(scene, grid).values())
+
+
+def coverage_bound(scene: Scene, time_limit_s: float = 2.0, occupied=None, counts=None) -> float:
+    """An upper bound on the target coverage any continuation from the scene state can
+    reach, whatever the allocation and order: the most target cells disjoint poses of the
+    blocks still on the table can cover (no stability, non-target cells free), plus what is
+    already filled, over all target cells. Proven by CP-SAT (its bound if the time limit
+    cuts the search). occupied / counts: the state's cells and blocks, when the scene's
+    blocks do not show them (default: from the scene)."""
+    grid = Grid(scene)
+    if occupied is None:
+        occupied = np.zeros(grid.num_cells, dtype=bool)
+        for cells in blocks_on_grid(scene, grid).values():
+            occupied[cells] = True
+    counts = counts if counts is not None else available_counts(scene, grid)
+    total = int(grid.is_target.sum())
+    filled = int((grid.is_target & occupied).sum())
+    candidates = []
+    for c in enumerate_candidates(scene, grid, positive_only=False):
+        ids = list(c.cell_ids)
+        if occupied[ids].any():
+            continue
+        k = int(grid.is_target[ids].sum())
+        if k:
+            candidates.append(Candidate(c.placement, c.cell_ids, k))
+    if not candidates or total == 0:
+        return filled / total if total else 1.0
+    model, _, _ = build_model(candidates, counts)
+    solver = cp_model.CpSolver()
+    solver.parameters.max_time_in_seconds = float(time_limit_s)
+    solver.parameters.num_workers = 1
+    solver.parameters.catch_sigint_signal = False
+    status = solver.solve(model)
+    best = float(solver.best_objective_bound) if status in (cp_model.OPTIMAL, cp_model.FEASIBLE) \
+        else float(total - filled)
+    return min(1.0, (filled + math.floor(best + 1e-9)) / total)

@@ -15,9 +15,14 @@ final pose of each block still on the table.
   poses still open cannot beat the best coverage found; the root's value of that
   (`coverage_opt`) is the bound, and reaching it ends the search at once.
 - `on_dead_end` lets the caller re-allocate where no move succeeds although
-  allocated poses remain; the search goes on from that state with the new action
-  space for that subtree (the memo does not tell spaces apart: a state reached
-  again under another space is not searched again).
+  allocated poses remain (or the allocation is used up with target cells free);
+  the search goes on from that state with the new action space for that subtree
+  (the memo does not tell spaces apart: a state reached again under another space
+  is not searched again). A re-allocation can cover cells the first allocation
+  does not, so such a search needs a bound of its own (`bound_of`, e.g.
+  `allocation.cpsat.coverage_bound`: what the blocks left could cover at most);
+  `rad eval --agent exact` uses it, so its complete answers are a true ceiling over
+  orders and re-allocations.
 
 Anytime: when the time or state limit cuts the search, the best line found so
 far comes back with complete=False and its coverage is a lower bound only.
@@ -47,9 +52,9 @@ class ExactResult:
     coverage: the best target coverage any searched order reached.
     actions: the line that reaches it, from the given state (MDP actions).
     complete: the search was exhausted or reached the bound, so no order of the
-        allocation's poses does better; False when a limit cut it (then coverage
+        allocation's poses (and, with on_dead_end, of its re-allocations) does better; False when a limit cut it (then coverage
         is a lower bound only, and `reason` says which limit).
-    bound: the root's upper bound (coverage plus open allocated target cells).
+    bound: the root's upper bound (coverage plus open allocated target cells, or bound_of's).
     states: states visited (distinct sets of placements).
     elapsed_s: wall time of the search.
     reason: why the search is not complete ('' when it is).
@@ -84,7 +89,8 @@ def by_gain_then_height(env: AssemblyEnv, actions: list[Action]) -> list[Action]
 
 
 def exact_search(renv, space: AllocationActions, time_limit_s: float = 60.0, max_states: int = 100_000,
-                 order: Order | None = None, on_dead_end: OnDeadEnd | None = None) -> ExactResult:
+                 order: Order | None = None, on_dead_end: OnDeadEnd | None = None,
+                 bound_of: Callable[[object], float] | None = None) -> ExactResult:
     """Branch and bound over the orders of the allocation's poses with the robot in
     the loop (module docstring), from renv's current state.
 
@@ -94,8 +100,12 @@ def exact_search(renv, space: AllocationActions, time_limit_s: float = 60.0, max
     order: `order(env, actions) -> the same actions, best first` (e.g. a policy's
         ranking), so good lines come first; default `by_gain_then_height`.
     on_dead_end: `on_dead_end(renv) -> new space or None`, called where no move
-        succeeds while allocated poses remain open (renv is put back in that state
-        after the call).
+        succeeds (allocated poses open, or the allocation used up with target cells
+        free; renv is put back in that state after the call).
+    bound_of: `bound_of(renv) -> coverage no continuation from this state beats`, for
+        searches that re-allocate (a re-allocation can cover cells the first allocation
+        does not: its open poses are no bound then); e.g. `allocation.cpsat.coverage_bound`
+        of the state. Default: the allocation's own, coverage plus its open target cells.
     """
     if not (isinstance(time_limit_s, (int, float)) and time_limit_s > 0):
         raise RadError(f'exact_search: time_limit_s must be a positive number of seconds, got {time_limit_s!r}')
@@ -108,7 +118,7 @@ def exact_search(renv, space: AllocationActions, time_limit_s: float = 60.0, max
     start_time = time.monotonic()
     deadline = start_time + time_limit_s
     root = renv.snapshot()
-    bound = coverage_opt(env, space.guide)
+    bound = coverage_opt(env, space.guide) if bound_of is None else bound_of(renv)
     best, best_line = env.coverage(), []
     seen: set[frozenset] = set()
 
@@ -175,11 +185,15 @@ def exact_search(renv, space: AllocationActions, time_limit_s: float = 60.0, max
             raise _AtBound()
         if env.state.done:
             return
+        if bound_of is not None and bound_of(renv) <= best + _EPS:
+            return                                             # nothing from here beats the best
         tried = set()
-        while coverage_opt(env, space.guide) > best + _EPS:   # else: cannot beat the best
+        while bound_of is not None or coverage_opt(env, space.guide) > best + _EPS:
             tried.add(open_poses(space))
-            if expand(space, line) or on_dead_end is None or not open_poses(space):
+            if expand(space, line) or on_dead_end is None:
                 return
+            if not open_poses(space) and not (env.grid.is_target & (env.state.occupancy < 0)).any():
+                return                                         # the target is full
             here = renv.snapshot()
             new = on_dead_end(renv)
             renv.restore(here)
