@@ -141,7 +141,8 @@ def main() -> int:
                      if isinstance(grid, int) else f'## shapes: {grid}')
             lines += [title, '',
                       f'The paper\'s allocation fills {np.mean(fill):.3f} of the target on average.', '',
-                      '| agent | R | e | f | a-bar | of paper | to ceiling | re-alloc/scene | re-alloc time | s/scene |',
+                      '| agent | R | e | f | a-bar | of paper | to ceiling | re-alloc/scene | re-alloc time '
+                      '| s/scene |',
                       '|---|---|---|---|---|---|---|---|---|---|']
             results = {}
             for label in labels:
@@ -163,7 +164,8 @@ def main() -> int:
                 lines.append(f'| {label} | {fmt(r["R"])} | {fmt(r["e"])} | {fmt(r["f"])} | {fmt(r["coverage"])} '
                              f'| {of_paper:.3f} | {fmt(gap)} | {np.mean(events):.1f} | {share:.0%} '
                              f'| {r["seconds"] / r["n"]:.1f} |')
-                print(f'{label:48s} {cell_name(grid, args.scenes, clearance)} cov={r["coverage"]:.3f} of_paper={of_paper:.3f} '
+                print(f'{label:48s} {cell_name(grid, args.scenes, clearance)} cov={r["coverage"]:.3f} '
+                      f'of_paper={of_paper:.3f} '
                       f'gap={fmt(gap)} realloc={np.mean(events):.1f} share={share:.0%}', flush=True)
             if exact is not None:
                 complete = sum(1 for e in exact if e.get('complete'))

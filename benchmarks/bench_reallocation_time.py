@@ -57,7 +57,8 @@ def main() -> int:
         med = {k: float(np.median(v)) for k, v in times.items()}
         print(f'g={g}: without {med[False] * 1e3:8.0f} / {np.percentile(times[False], 95) * 1e3:8.0f}   '
               f'with {med[True] * 1e3:8.0f} / {np.percentile(times[True], 95) * 1e3:8.0f}   '
-              f'median ratio {med[True] / med[False]:.2f}   mean ratio {np.mean(times[True]) / np.mean(times[False]):.2f}')
+              f'median ratio {med[True] / med[False]:.2f}   '
+              f'mean ratio {np.mean(times[True]) / np.mean(times[False]):.2f}')
         print(f'      re-allocating: {sum(realloc_s) / sum(times[True]):.0%} of the time with it, '
               f'{np.mean(events):.1f} re-allocations per plan, {sum(1 for e in events if e)} of {len(events)} '
               f'plans re-allocated')

@@ -123,7 +123,8 @@ def test_bad_actor_config_is_refused_before_any_cluster_starts(dataset, tmp_path
 def test_cli_actors_starts_its_own_loopback_cluster_and_trains(dataset, tmp_path):
     r = rad_train('--out', str(tmp_path / 'run'), '--dataset', str(dataset), '--total-steps', '60',
                   '--learning-starts', '20', '--batch-size', '8', '--eval-every', '60', '--eval-scenes', '1',
-                  '--actors', '2', '--chunk-steps', '10', *[a for k, v in SMALL_NET.items() for a in (f'--{k}', str(v))])
+                  '--actors', '2', '--chunk-steps', '10',
+                  *[a for k, v in SMALL_NET.items() for a in (f'--{k}', str(v))])
     assert r.returncode == 0, r.stderr
     assert r.stdout.startswith('done') or '\ndone:' in r.stdout, r.stdout
     assert QPolicy.load(tmp_path / 'run' / 'model.pt').actions == 'milp'

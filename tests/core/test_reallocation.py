@@ -7,7 +7,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from rad_core.allocation import AllocationParams, Placement, solve
+from rad_core.allocation import AllocationParams, solve
 from rad_core.allocation.cpsat import pose_key, rests_now
 from rad_core.errors import RadError
 from rad_core.evaluation import Check, evaluate, get_agent

@@ -52,8 +52,9 @@ class ExactResult:
     coverage: the best target coverage any searched order reached.
     actions: the line that reaches it, from the given state (MDP actions).
     complete: the search was exhausted or reached the bound, so no order of the
-        allocation's poses (and, with on_dead_end, of its re-allocations) does better; False when a limit cut it (then coverage
-        is a lower bound only, and `reason` says which limit).
+        allocation's poses (and, with on_dead_end, of its re-allocations) does better;
+        False when a limit cut it (then coverage is a lower bound only, and `reason`
+        says which limit).
     bound: the root's upper bound (coverage plus open allocated target cells, or bound_of's).
     states: states visited (distinct sets of placements).
     elapsed_s: wall time of the search.

@@ -145,7 +145,8 @@ def plan_assembly(scene: Scene, allocate: Allocate, plan_motion: PlanMotion, seq
         ranked = ranked_actions(sequencer, env, allowed, rng)
         timings['sequencing'] += time.perf_counter() - ts
         if not ranked:
-            return (f'{len(allowed_actions.guide.open_poses(env.state))} allocated poses left, none of them can be built next '
+            left = len(allowed_actions.guide.open_poses(env.state))
+            return (f'{left} allocated poses left, none of them can be built next '
                     f'({getattr(sequencer, "why_none", sequencer.name + " values stopping more")})')
         return ranked
 

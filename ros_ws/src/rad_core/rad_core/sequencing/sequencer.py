@@ -245,8 +245,10 @@ def _line_key(env: AssemblyEnv, placements) -> tuple:
     from rad_core.allocation.cpsat import pose_key
     placed = env.state.placed
     return (frozenset(pose_key(p.type, p.target, p.cells) for p in placements),
-            frozenset((env.scene.blocks[b].id, tuple(sorted(int(c) for c in cells))) for b, (cells, _) in placed.items()),
-            tuple((blk.id, blk.type, blk.position, blk.yaw) for b, blk in enumerate(env.scene.blocks) if b not in placed))
+            frozenset((env.scene.blocks[b].id, tuple(sorted(int(c) for c in cells)))
+                      for b, (cells, _) in placed.items()),
+            tuple((blk.id, blk.type, blk.position, blk.yaw) for b, blk in enumerate(env.scene.blocks)
+                  if b not in placed))
 
 
 def _check_placements(scene: Scene, placements) -> None:
