@@ -97,7 +97,8 @@ def test_on_dead_end_is_called_and_its_space_is_searched():
         cube = [Placement('cube', 't', 0, ((0, 0, 0),)), Placement('cube', 't', 0, ((1, 0, 0),))]
         calls = []
 
-        def reallocate(at):
+        def reallocate(at, space):
+            assert space.guide.placements == tuple(cube)
             calls.append(dict(at.env.state.placed))
             cells = {int(c) for cells, _ in at.env.state.placed.values() for c in cells}
             if cells != {at.env.grid.index(0, (0, 0, 0))}:

@@ -335,9 +335,13 @@ def exact_decider(renv, space, agent: Agent, policy: Policy | None = None, reall
     config = reallocation or ReallocationConfig()
     env, holder = renv.env, {}
 
-    def on_dead_end(_renv):
-        sub = AllocationActions(env, space.guide.placements)   # a copy: the parent line keeps its space
-        event = Reallocator(sub, simulated_check(renv), config).stalled(env, 'exact search: dead end')
+    def on_dead_end(_renv, current):
+        # A copy of the line's space (its parent keeps its own), with the no-goods found on the line.
+        sub = AllocationActions(env, current.guide.placements)
+        reallocator = Reallocator(sub, simulated_check(renv), config)
+        reallocator.no_goods = dict(getattr(current, 'no_goods', {}))
+        event = reallocator.stalled(env, 'exact search: dead end')
+        sub.no_goods = reallocator.no_goods
         return sub if event.changed else None
 
     def bound_of(_renv) -> float:   # re-allocating: what any allocation of the free cells could cover

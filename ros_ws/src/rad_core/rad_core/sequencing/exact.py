@@ -42,7 +42,7 @@ from rad_core.sequencing.actions import AllocationActions
 _EPS = 1e-9   # coverages are ratios of cell counts computed two ways
 
 Order = Callable[[AssemblyEnv, list[Action]], list[Action]]
-OnDeadEnd = Callable[[object], 'AllocationActions | None']
+OnDeadEnd = Callable[[object, AllocationActions], 'AllocationActions | None']
 
 
 @dataclass
@@ -100,7 +100,7 @@ def exact_search(renv, space: AllocationActions, time_limit_s: float = 60.0, max
         give the bound).
     order: `order(env, actions) -> the same actions, best first` (e.g. a policy's
         ranking), so good lines come first; default `by_gain_then_height`.
-    on_dead_end: `on_dead_end(renv) -> new space or None`, called where no move
+    on_dead_end: `on_dead_end(renv, space) -> new space or None`, called where no move
         succeeds (allocated poses open, or the allocation used up with target cells
         free; renv is put back in that state after the call).
     bound_of: `bound_of(renv) -> coverage no continuation from this state beats`, for
@@ -196,7 +196,7 @@ def exact_search(renv, space: AllocationActions, time_limit_s: float = 60.0, max
             if not open_poses(space) and not (env.grid.is_target & (env.state.occupancy < 0)).any():
                 return                                         # the target is full
             here = renv.snapshot()
-            new = on_dead_end(renv)
+            new = on_dead_end(renv, space)
             renv.restore(here)
             if new is None or open_poses(new) in tried:
                 return   # no new space, or the same open poses again: nothing new to try
