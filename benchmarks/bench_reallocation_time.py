@@ -46,6 +46,7 @@ def main() -> int:
         for s in range(args.seed, args.seed + args.scenes):
             scene = generate_scene(GeneratorConfig(grid=g), s)
             for on in (False, True):
+                sequencer.forget()   # milp-dqn-dfs would otherwise answer the second run from its kept line
                 t0 = time.perf_counter()
                 plan = plan_assembly(scene, lambda sc: solve(sc, stable), local, sequencer.rank, seed=0,
                                      reallocate=local_allocate(stable) if on else None)

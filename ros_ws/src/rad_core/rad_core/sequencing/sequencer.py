@@ -112,6 +112,10 @@ class Sequencer:
     def source(self) -> str:
         return getattr(self.policy, 'source', self.config.policy)
 
+    def forget(self) -> None:
+        """Drop the best lines milp-dqn-dfs keeps (e.g. between benchmark runs of one scene)."""
+        self._lines.clear()
+
     def close(self) -> None:
         if self._renv is not None:
             self._renv.close()
