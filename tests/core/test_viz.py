@@ -86,6 +86,21 @@ def test_parse_plan_reads_allocation_steps_timings_coverage():
     assert empty.allocation is None and empty.steps == () and empty.timings == {}
 
 
+def test_re_allocations_in_plan_json_are_read_and_shown_in_the_summary():
+    from rad_core.sequencing.reallocation import Reallocation
+    event = Reallocation(2, 'no feasible next action (1 tried): b3: placement: hand hits block b1',
+                         [{'type': 'cube', 'target': 'front', 'cells': [[1, 0, 0]],
+                           'reason': 'b3: hand hits block b1'}],
+                         'OPTIMAL', 3.0, 3.0, 0.02, [Placement('I2', 'front', 0, ((1, 0, 0), (2, 0, 0)))], True)
+    plan = viz.parse_plan(json.dumps({'reallocations': [event.to_dict()]}))
+    assert plan.reallocations[0]['step'] == 2
+    text = viz.plan_summary(plan)
+    assert '1 re-allocations' in text and 'after step 2' in text and 'hand hits block b1' in text
+    assert '1 new poses (OPTIMAL)' in text
+    with pytest.raises(RadError, match='reallocations must be a list'):
+        viz.parse_plan(json.dumps({'reallocations': [{'step': 'two'}]}))
+
+
 def test_plan_json_steps_are_read_back_as_the_planners_plan_steps():
     """One PlanStep: what sequencing.plan makes and plan_json carries is what viz reads back."""
     step = PlanStep('b0', 'L3_up', 'front', 90, [[0, 0, 0], [0, 1, 0]], 2, [0, 0, 0], 1, (1, 180),
