@@ -163,7 +163,10 @@ def test_solving_leaves_the_process_sigint_handling_alone():
     # a node that had solved once died by Ctrl-C instead of shutting down.
     import subprocess
     import sys
+    # The child starts with Python's own SIGINT handler even when this run was started in the
+    # background (a shell's & makes children ignore SIGINT, and Python then keeps it ignored).
     code = ('import os, signal, time, json\n'
+            'signal.signal(signal.SIGINT, signal.default_int_handler)\n'
             'from rad_core.allocation import solve\n'
             'from rad_core.scene import Scene\n'
             f'solve(Scene.loads({json.dumps(doc())!r}))\n'

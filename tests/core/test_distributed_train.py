@@ -5,6 +5,7 @@ Tiny configs and a small network keep each training to seconds. The serial path'
 determinism and resume tests are tests/core/test_dqn.py's.
 """
 
+import socket
 import subprocess
 import sys
 
@@ -121,10 +122,38 @@ def test_bad_actor_config_is_refused_before_any_cluster_starts(dataset, tmp_path
 
 
 def test_cli_actors_starts_its_own_loopback_cluster_and_trains(dataset, tmp_path):
-    r = rad_train('--out', str(tmp_path / 'run'), '--dataset', str(dataset), '--total-steps', '60',
-                  '--learning-starts', '20', '--batch-size', '8', '--eval-every', '60', '--eval-scenes', '1',
-                  '--actors', '2', '--chunk-steps', '10',
-                  *[a for k, v in SMALL_NET.items() for a in (f'--{k}', str(v))])
-    assert r.returncode == 0, r.stderr
-    assert r.stdout.startswith('done') or '\ndone:' in r.stdout, r.stdout
+    """A real `rad train --actors 2`: while it runs, every listening or bound socket of its process
+    tree is on loopback, and no packet leaves by a non-loopback interface."""
+    import ipaddress
+    import time
+
+    import psutil
+    from ros_harness import interface_tx_packets, non_loopback
+    argv = [sys.executable, '-m', 'rad_core.cli', 'train', '--out', str(tmp_path / 'run'), '--dataset', str(dataset),
+            '--total-steps', '60', '--learning-starts', '20', '--batch-size', '8', '--eval-every', '60',
+            '--eval-scenes', '1', '--actors', '2', '--chunk-steps', '10',
+            *[a for k, v in SMALL_NET.items() for a in (f'--{k}', str(v))]]
+    before = non_loopback(interface_tx_packets())
+    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    seen, deadline = [], time.monotonic() + 120
+    while proc.poll() is None and time.monotonic() < deadline:
+        try:
+            tree = [psutil.Process(proc.pid), *psutil.Process(proc.pid).children(recursive=True)]
+            for p in tree:
+                seen += [c for c in p.net_connections(kind='inet')
+                         if c.status == psutil.CONN_LISTEN or c.type == socket.SOCK_DGRAM]
+        except psutil.Error:
+            pass   # a process of the tree ended between the listing and the look
+        time.sleep(0.2)
+    out, err = proc.communicate(timeout=30)
+    sent = {name: n for name, n in non_loopback(interface_tx_packets()).items() if n > before.get(name, 0)}
+    assert proc.returncode == 0, err
+    assert out.startswith('done') or '\ndone:' in out, out
+    assert any(c.status == psutil.CONN_LISTEN for c in seen), 'expected the cluster\'s listeners'
+    def loopback(ip: str) -> bool:
+        address = ipaddress.ip_address(ip.split('%')[0])
+        return (getattr(address, 'ipv4_mapped', None) or address).is_loopback
+    off = [c for c in seen if not loopback(c.laddr.ip)]
+    assert off == [], off
+    assert sent == {}, f'packets sent on non-loopback interfaces during training: {sent}'
     assert QPolicy.load(tmp_path / 'run' / 'model.pt').actions == 'milp'

@@ -91,11 +91,14 @@ def test_a_pose_the_robot_cannot_build_is_reallocated(graph):
     row = [{'name': 'front', 'origin': [0.45, 0.1, U / 2], 'size': [2, 1, 1], 'filled': [[0, 0, 0], [1, 0, 0]]}]
     r = graph.plan(scene_json=json.dumps(doc(blocks=blocks, targets=row)))
     assert [p.type for p in r.allocation] == ['I2']
-    assert len(r.reallocations) == 1, r.reason
-    event = r.reallocations[0]
+    assert len(r.reallocations) == 2, r.reason
+    event, used_up = r.reallocations
     assert event.step == 0 and event.changed and event.status == 'OPTIMAL'
     assert [p.type for p in event.no_goods] == ['I2'] and 'unreachable' in event.no_good_reasons[0]
     assert [p.type for p in event.placements] == ['cube']
+    # After the cube: the allocation is built, a target cell is free, nothing left could fill it.
+    assert used_up.step == 1 and not used_up.changed and not used_up.placements
+    assert used_up.reason == 'the allocation is built and target cells are still free'
     assert r.success and [s.block_id for s in r.steps] == ['c0'] and r.predicted_coverage == 0.5
     assert 'reallocation' in {t.stage for t in r.timings}
 
@@ -141,7 +144,9 @@ def test_execute_builds_the_scene_and_reports_each_step(graph):
     assert {'planning', 'executing', 'verifying', 'done'} <= set(phases)
     doc_ = json.loads(result.result_json)
     assert doc_['format'] == 'rad-result/1' and doc_['coverage'] == 1.0
-    assert set(doc_) == {'format', 'scene', 'allocation', 'steps', 'final_blocks', 'coverage', 'timings'}
+    assert set(doc_) == {'format', 'scene', 'allocation', 'steps', 'final_blocks', 'coverage', 'timings',
+                         'reallocations'}
+    assert doc_['reallocations'] == []      # the demo scene builds without a stall
     step = doc_['steps'][0]
     assert {'block', 'type', 'target', 'yaw', 'cells', 'trajectory'} <= set(step)
     assert set(step['trajectory']) == {'joint_names', 'points'}
