@@ -16,7 +16,9 @@ torch on one thread each (Dask's OMP_NUM_THREADS=1); the serial run uses torch's
 
 Measured on this 2-core machine, nothing else running (2026-12-02, `--scenes 20 --grid 4 --agent
 milp-dqn-mixed-lookahead --verify`): serial 0.687 scenes/s, 1 worker 0.614 (0.89x), 2 workers
-1.074 (1.56x; 1.47x with the 1.2 s start-up): below the 1.7x target; rows identical.
+1.074 (1.56x; 1.47x with the 1.2 s start-up): below the 1.7x target; rows identical. With
+`--scenes 40`: serial 0.709, 1 worker 0.768 (1.08x), 2 workers 1.400 (1.97x; 1.90x with the 1.1 s
+start-up), rows identical: each worker's cold start (network, PyBullet world) weighs less.
 
     python benchmarks/bench_distributed.py --train [--train-steps 400] [--actors 1 2] [--dataset FILE]
 
