@@ -38,7 +38,7 @@ from rad_core import jsonfmt
 from rad_core.allocation import AllocationParams, solve
 from rad_core.evaluation import ProgressBar, evaluate, get_agent
 
-from bench_table2 import scenes   # the same generated scenes as Table II
+from bench_table2 import fmt, scenes   # the same generated scenes as Table II, the same number format
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_AGENTS = ('heur-verified', 'heur-verified+stable', 'heur-verified+realloc', 'milp-dqn-mcts+verify',
@@ -97,22 +97,12 @@ def paper_fill(grid, n: int, clearance: float, cache: Path) -> list[float]:
     path = cache / f'paper-fill-{cell_name(grid, n, clearance)}.json'
     if path.exists():
         return json.loads(path.read_text())
-    from rad_core.grid import Grid
-    out = []
-    for _, scene in cell_scenes(grid, n, clearance):
-        grid_ = Grid(scene)
-        filled = np.zeros(grid_.num_cells, dtype=bool)
-        for p in solve(scene, AllocationParams()).placements:
-            r = [t.name for t in scene.targets].index(p.target)
-            filled[[grid_.index(r, c) for c in p.cells]] = True
-        out.append(float((filled & grid_.is_target).sum() / grid_.is_target.sum()))
+    from rad_core.shapes import target_coverage
+    out = [target_coverage(scene, solve(scene, AllocationParams()).placements)
+           for _, scene in cell_scenes(grid, n, clearance)]
     cache.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(out))
     return out
-
-
-def fmt(v) -> str:
-    return '' if v is None else f'{v:.2f}'
 
 
 def main() -> int:

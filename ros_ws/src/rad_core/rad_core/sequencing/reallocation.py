@@ -42,6 +42,7 @@ from rad_core.errors import RadError
 from rad_core.mdp import AssemblyEnv
 from rad_core.scene import Block, Scene
 from rad_core.sequencing.episode import Decide, Decision
+from rad_core.sequencing.policy import first_feasible
 
 Check = Callable[[object], object]   # action -> a result with .success and .reason
 # (scene state, no-goods, time limit in s or None) -> the allocation of the cells still free
@@ -183,19 +184,15 @@ class Reallocator:
         return event
 
     def _pose_failure(self, env: AssemblyEnv, guide: AllocationGuide, k: int) -> str | None:
-        """None when some block can fill pose k now, else the first failure's reason."""
-        tried, first = set(), None
-        for action in guide.pose_actions(k, env.state):
-            cells, yaw = env.resulting_cells(action)
-            key = (action.block, tuple(sorted(int(c) for c in np.asarray(cells))), yaw)
-            if key in tried:
-                continue
-            tried.add(key)
-            result = self.check(action)
-            if result.success:
-                return None
-            first = first or f'{env.scene.blocks[action.block].id}: {result.reason}'
-        return first or 'no block of its type is left'
+        """None when some block can fill pose k now, else the first failure's reason
+        (each distinct motion checked once, as a verified agent goes down its ranking)."""
+        action, _, failed = first_feasible(env, guide.pose_actions(k, env.state), self.check)
+        if action is not None:
+            return None
+        if not failed:
+            return 'no block of its type is left'
+        first, result = failed[0]
+        return f'{env.scene.blocks[first.block].id}: {result.reason}'
 
 
 def with_reallocation(decide: Decide, reallocator: Reallocator) -> Decide:
