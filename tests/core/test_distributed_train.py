@@ -15,18 +15,14 @@ import torch
 from rad_core.distributed import dask_client
 from rad_core.errors import RadError
 from rad_core.learning.actors import ActorConfig, DistributedTrainer, seed_folder, train_seeds, train_with_actors
-from rad_core.learning.dataset import build
 from rad_core.learning.dqn import TrainConfig, train
 from rad_core.learning.policy import QPolicy
-
-SMALL_NET = dict(dim=32, heads=4, rounds=2, ff=64, readout=32)
-
+from training import SMALL_NET_FLAGS, tiny_dataset
+from training import tiny as tiny_config
 
 @pytest.fixture(scope='module')
 def dataset(tmp_path_factory):
-    path = tmp_path_factory.mktemp('data') / 'tiny.jsonl.gz'
-    build(path, [3], 24)
-    return path
+    return tiny_dataset(tmp_path_factory.mktemp('data'))
 
 
 @pytest.fixture(scope='module')
@@ -36,10 +32,7 @@ def client():
 
 
 def tiny(dataset, **kw) -> TrainConfig:
-    base = dict(dataset=str(dataset), total_steps=120, learning_starts=40, train_every=2, target_update=40,
-                batch_size=8, buffer_size=500, eval_every=60, eval_scenes=2, checkpoint_every_s=1e9, **SMALL_NET)
-    base.update(kw)
-    return TrainConfig(**base)
+    return tiny_config(dataset, **{'eval_scenes': 2, **kw})
 
 
 def same_weights(a, b) -> bool:
@@ -132,7 +125,7 @@ def test_cli_actors_starts_its_own_loopback_cluster_and_trains(dataset, tmp_path
     argv = [sys.executable, '-m', 'rad_core.cli', 'train', '--out', str(tmp_path / 'run'), '--dataset', str(dataset),
             '--total-steps', '60', '--learning-starts', '20', '--batch-size', '8', '--eval-every', '60',
             '--eval-scenes', '1', '--actors', '2', '--chunk-steps', '10',
-            *[a for k, v in SMALL_NET.items() for a in (f'--{k}', str(v))]]
+            *SMALL_NET_FLAGS]
     before = non_loopback(interface_tx_packets())
     proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     seen, deadline = [], time.monotonic() + 120

@@ -16,29 +16,18 @@ import pytest
 import torch
 
 from rad_core.learning import checkpoint as ckpt
-from rad_core.learning.dataset import Dataset, build
+from rad_core.learning.dataset import Dataset
 from rad_core.learning.dqn import TrainConfig, Trainer, train
 from rad_core.learning.policy import QPolicy
 from rad_core.mdp import AssemblyEnv, EnvConfig
 from rad_core.sequencing.actions import action_space
 from rad_core.sequencing.episode import Decision, run_episode
 from rad_core.mdp import TERMINATE
-
-SMALL_NET = dict(dim=32, heads=4, rounds=2, ff=64, readout=32)
-
+from training import SMALL_NET_FLAGS, tiny, tiny_dataset
 
 @pytest.fixture(scope='module')
 def dataset(tmp_path_factory):
-    path = tmp_path_factory.mktemp('data') / 'tiny.jsonl.gz'
-    build(path, [3], 24)
-    return path
-
-
-def tiny(dataset, **kw) -> TrainConfig:
-    base = dict(dataset=str(dataset), total_steps=120, learning_starts=40, train_every=2, target_update=40,
-                batch_size=8, buffer_size=500, eval_every=60, eval_scenes=3, checkpoint_every_s=1e9, **SMALL_NET)
-    base.update(kw)
-    return TrainConfig(**base)
+    return tiny_dataset(tmp_path_factory.mktemp('data'))
 
 
 def weights(path) -> dict:
@@ -80,7 +69,7 @@ def test_a_killed_run_resumes_and_ends_as_if_never_stopped(dataset, tmp_path):
             '--dataset', str(dataset), '--total-steps', '400', '--learning-starts', '40', '--train-every', '2',
             '--target-update', '40', '--batch-size', '8', '--buffer-size', '500', '--eval-every', '200',
             '--eval-scenes', '3', '--checkpoint-every-s', '0.2',
-            *[a for k, v in SMALL_NET.items() for a in (f'--{k}', str(v))]]
+            *SMALL_NET_FLAGS]
     proc = subprocess.Popen(args, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     ckpt_file = tmp_path / 'killed' / 'checkpoint.pt'
     deadline = time.monotonic() + 120
@@ -100,7 +89,7 @@ def test_a_killed_run_resumes_and_ends_as_if_never_stopped(dataset, tmp_path):
 def test_sigint_checkpoints_and_exits_130(dataset, tmp_path):
     args = [sys.executable, '-m', 'rad_core.cli', 'train', '--out', str(tmp_path / 'run'), '--dataset', str(dataset),
             '--total-steps', '100000', '--learning-starts', '40', '--batch-size', '8', '--eval-every', '100000',
-            *[a for k, v in SMALL_NET.items() for a in (f'--{k}', str(v))]]
+            *SMALL_NET_FLAGS]
     proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     # Interrupt once training runs (the run folder appears when it starts), not at a fixed
     # time: start-up (torch, pybullet) takes longer than any fixed sleep on a loaded machine.
