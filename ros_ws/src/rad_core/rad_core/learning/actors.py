@@ -210,17 +210,8 @@ class DistributedTrainer(Trainer):
                     del inflight[f]
                     self._receive(f, version)
                     submit()
-                    self.pos['wall_s'] = time.perf_counter() - t_start
-                    if progress is not None:
-                        progress(self.pos['env_steps'])
-                    if self.pos['env_steps'] >= self.pos['next_eval'] or self.pos['env_steps'] >= c.total_steps:
-                        self.pos['next_eval'] += c.eval_every
-                        row = self._report(mark)
-                        mark = (time.perf_counter(), self.pos['env_steps'], self.pos['grad_steps'])
-                        self.log(row)
-                    if time.perf_counter() - last_ckpt > c.checkpoint_every_s:
-                        self.save()
-                        last_ckpt = time.perf_counter()
+                    mark = self._after_steps(t_start, mark, progress)
+                    last_ckpt = self._checkpoint_due(last_ckpt)
                     if self.pos['env_steps'] >= c.total_steps:
                         break
                 if self.pos['env_steps'] >= c.total_steps:

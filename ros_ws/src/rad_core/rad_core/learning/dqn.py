@@ -396,20 +396,11 @@ class Trainer:
                 self.log(self._report(mark))   # where the starting model stands, at step 0
             while self.pos['env_steps'] < c.total_steps:
                 self.episode()
-                self.pos['wall_s'] = time.perf_counter() - t_start
-                if progress is not None:
-                    progress(self.pos['env_steps'])
-                if self.pos['env_steps'] >= self.pos['next_eval'] or self.pos['env_steps'] >= c.total_steps:
-                    self.pos['next_eval'] += c.eval_every
-                    row = self._report(mark)
-                    mark = (time.perf_counter(), self.pos['env_steps'], self.pos['grad_steps'])
-                    self.log(row)
+                mark = self._after_steps(t_start, mark, progress)
                 if self._stop:
                     interrupted = True
                     break
-                if time.perf_counter() - last_ckpt > c.checkpoint_every_s:
-                    self.save()
-                    last_ckpt = time.perf_counter()
+                last_ckpt = self._checkpoint_due(last_ckpt)
             self.save()
         finally:
             if main:
@@ -427,6 +418,27 @@ class Trainer:
         # Finish the episode in progress, checkpoint, then stop (a second Ctrl-C kills).
         self._stop = True
         signal.signal(signal.SIGINT, signal.default_int_handler)
+
+    def _after_steps(self, t_start: float, mark: tuple, progress) -> tuple:
+        """After new environment steps: wall time, the progress callback, and at each
+        eval_every (and the end) a validation row logged. Returns the new eval mark."""
+        c = self.cfg
+        self.pos['wall_s'] = time.perf_counter() - t_start
+        if progress is not None:
+            progress(self.pos['env_steps'])
+        if self.pos['env_steps'] >= self.pos['next_eval'] or self.pos['env_steps'] >= c.total_steps:
+            self.pos['next_eval'] += c.eval_every
+            row = self._report(mark)
+            mark = (time.perf_counter(), self.pos['env_steps'], self.pos['grad_steps'])
+            self.log(row)
+        return mark
+
+    def _checkpoint_due(self, last_ckpt: float) -> float:
+        """Save when checkpoint_every_s has passed since last_ckpt; the time of the last save."""
+        if time.perf_counter() - last_ckpt > self.cfg.checkpoint_every_s:
+            self.save()
+            return time.perf_counter()
+        return last_ckpt
 
     def _report(self, mark) -> dict:
         t0, s0, g0 = mark
