@@ -9,7 +9,10 @@ from ros_harness import call_service, ros_args, wait_for_service
 
 from rad_core.allocation import solve
 from rad_core.generator import GeneratorConfig, generate_scene
-from rad_core.sim.panda import HOME, JOINT_NAMES, LOWER, UPPER
+from rad_core.robot_model import FR3, PANDA
+from rad_core.sim.panda import ARM_JOINT_NAMES, HOME, LOWER, UPPER
+from rad_core.trajectory import limit_violation
+from rad_ros.motion import trajectory_from_msg
 
 
 @pytest.fixture
@@ -36,19 +39,29 @@ def first_action(scene):
     return block.id, 0, p.target, p.cells[0], rotation
 
 
-def test_plans_a_feasible_action_with_a_timed_nine_joint_trajectory(gamp):
+def test_plans_a_feasible_action_as_arm_trajectories_and_gripper_commands(gamp):
     proc, plan = gamp
     scene = generate_scene(GeneratorConfig(grid=3), 5)
     r = plan(scene, *first_action(scene))
     assert r.success, r.reason
     assert r.failure == '' and r.planning_time_s > 0
-    traj = r.trajectory
-    assert list(traj.joint_names) == list(JOINT_NAMES)
-    times = [p.time_from_start.sec + p.time_from_start.nanosec * 1e-9 for p in traj.points]
-    assert times[0] > 0 and all(b > a for a, b in zip(times, times[1:]))
-    q = np.array([p.positions for p in traj.points])
-    assert np.all(q >= LOWER - 1e-6) and np.all(q <= UPPER + 1e-6)
-    assert all(len(p.velocities) == 9 for p in traj.points)
+    actions = [g.action for g in r.gripper]
+    assert actions[-2:] == ['grasp', 'release'] and set(actions) <= {'open', 'grasp', 'release'}
+    grasp = r.gripper[actions.index('grasp')]
+    assert 0 < grasp.command.position < grasp.expected_position and grasp.command.max_effort > 0
+    assert [g.before for g in r.gripper][-2:] == [1, 2] and len(r.trajectories) == 3
+    q_prev = HOME[:7]
+    for traj in r.trajectories:
+        assert list(traj.joint_names) == list(ARM_JOINT_NAMES)      # no finger joints: those are the gripper's
+        times = [p.time_from_start.sec + p.time_from_start.nanosec * 1e-9 for p in traj.points]
+        assert times[0] > 0 and all(b > a for a, b in zip(times, times[1:]))
+        q = np.array([p.positions for p in traj.points])
+        assert np.all(q >= LOWER[:7] - 1e-6) and np.all(q <= UPPER[:7] + 1e-6)
+        assert all(len(p.velocities) == len(p.accelerations) == 7 for p in traj.points)
+        assert list(traj.points[-1].velocities) == [0.0] * 7
+        doc = trajectory_from_msg(traj)
+        assert limit_violation(doc, q_prev, PANDA) == '' and limit_violation(doc, q_prev, FR3) == ''
+        q_prev = q[-1]
 
 
 @pytest.mark.parametrize('change,expected', [

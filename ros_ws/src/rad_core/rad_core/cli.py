@@ -6,6 +6,7 @@
     rad scene stats --grid G --sides S --scenes N
     rad allocate scene.json [--time-limit S] [--seed N] [--workers W] [--solver cp-sat|highs]
     rad demo [--scene FILE] [--out DIR] [--rtf X]
+    rad limits RESULT.json [--robot panda|fr3] [--joint-prefix P]
     rad eval --agent AGENT [--checkpoint FILE] --grid G [--robot] --scenes N --seed S --json FILE
              [--workers N [--dashboard] | --scheduler ADDR [--workers N]]
     rad dataset build --grids 3 --scenes 50000 -o data/train-g3.jsonl.gz [--shapes train]
@@ -120,6 +121,45 @@ def cmd_demo(args) -> int:
         argv += ['--scene', args.scene]
     os.execv(str(exe), argv)
     return 1
+
+def cmd_limits(args) -> int:
+    """Would a real Franka take these arm trajectories? Every trajectory of a rad-result document
+    (result.json of `rad demo` or /execute_assembly) or a plan (steps with trajectories), in order,
+    each from where the previous one ended (HOME first), through `trajectory.limit_violation`."""
+    import numpy as np
+    from rad_core.robot_model import robot_model
+    from rad_core.sim.panda import HOME
+    from rad_core.trajectory import limit_ratios, limit_violation
+    model = robot_model(args.robot, args.joint_prefix)
+    try:
+        doc = json.loads(Path(args.result).read_text() if args.result != '-' else sys.stdin.read())
+    except (OSError, ValueError) as e:
+        raise RadError(f'cannot read {args.result!r}: {e}') from None
+    steps = doc.get('steps') if isinstance(doc, dict) else None
+    if not isinstance(steps, list):
+        raise RadError(f'{args.result}: not a rad-result or plan document (no "steps" list)')
+    q = np.asarray(HOME[:7])
+    worst = {'velocity': 0.0, 'acceleration': 0.0, 'jerk': 0.0}
+    problems, count = [], 0
+    for i, step in enumerate(steps):
+        for k, traj in enumerate(step.get('trajectories') or []):
+            count += 1
+            try:
+                why = limit_violation(traj, q, model)
+            except RadError as e:      # refused before any motion: names, points, positions
+                why = str(e)
+            if why:
+                problems.append(f'step {i} ({step.get("block", "?")}) trajectory {k}: {why}')
+            else:
+                for key, value in limit_ratios(traj, q, model).items():
+                    worst[key] = max(worst[key], value)
+            q = np.asarray(traj['points'][-1]['positions'], dtype=float)[:7]
+    print(json.dumps({'robot': model.name, 'trajectories': count, 'refused': len(problems),
+                      'worst_ratio': {k: round(v, 3) for k, v in worst.items()}, 'problems': problems}))
+    if count == 0:
+        raise RadError(f'{args.result}: no arm trajectories to check')
+    return 0 if not problems else 1
+
 
 def cmd_eval(args) -> int:
     from rad_core.evaluation import ProgressBar, evaluate, generated_scenes, get_agent, scene_dir, uses_robot
@@ -339,6 +379,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--time-limit', type=float, default=120.0, help='planning time limit, s')
     p.set_defaults(func=cmd_demo)
 
+    p = sub.add_parser('limits', help="check a result's or plan's arm trajectories against a Franka's limits")
+    p.add_argument('result', help='rad-result/1 JSON (out/demo/result.json) or a plan with steps, - for stdin')
+    p.add_argument('--robot', default='panda', choices=['panda', 'fr3'])
+    p.add_argument('--joint-prefix', default='', help="arm joints <prefix>_joint1..7 ('' = the model's)")
+    p.set_defaults(func=cmd_limits)
     p = sub.add_parser('eval', help="the paper's metrics (R, d, e, f, f_g, f_p, coverage) of a sequencer over scenes")
     from rad_core.evaluation import AGENTS
     p.add_argument('--agent', choices=list(AGENTS), default='heur')

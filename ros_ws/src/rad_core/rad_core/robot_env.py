@@ -277,10 +277,10 @@ class RobotAssemblyEnv:
     def _execute(self, plan, block_id: str, position, yaw) -> None:
         twin = self.twin
         if self.config.execution == 'simulate':
-            twin.execute(plan.trajectory.to_dict())
+            twin.execute_motion(plan.motion)     # what went wrong shows in the world, judged after
         else:
             self.world.set_block_pose(block_id, position, yaw_quaternion(yaw))
-            self.world.set_joint_positions(plan.trajectory.points[-1].positions)
+            self.world.set_joint_positions(plan.motion.final_joints())
             twin.sync()
         twin.settle(self.config.settle_s)
 

@@ -1,17 +1,21 @@
-"""Joint trajectories: the one type GAMP plans and the twin executes.
+"""Joint trajectories: the one type GAMP plans and every plant executes.
 
 The shape is that of trajectory_msgs/JointTrajectory without ROS types, so the
 core stays free of rclpy and the dict form goes straight into result files and
 through rad_ros.motion: ``{"joint_names": [...], "points": [{"positions": [...],
-"velocities": [...], "time_from_start": seconds}]}``. Velocities may be empty
-(or, in the dict form, left out): an executor then interpolates linearly.
+"velocities": [...], "accelerations": [...], "time_from_start": seconds}]}``.
+Velocities and accelerations may be empty (or, in the dict form, left out).
 
-`parse_trajectory` is what an executor accepts, checked against the Panda
-before anything moves, the way a ros2_control joint_trajectory_controller
-checks a goal: joint names known and not repeated (any order, a subset
-allowed), one position per name, all velocities or none, finite numbers,
-positions within the joint limits, times strictly increasing. A bad trajectory
-raises RadError naming the point and what is wrong.
+`Spline` interpolates the way a ros2_control joint_trajectory_controller does:
+from the state the arm is in (at rest) to the first point, then between points
+linearly (positions only), cubic (with velocities) or quintic (with velocities and
+accelerations). `limit_violation` samples that motion at Franka's 1 kHz and
+compares it with a `rad_core.robot_model.RobotModel`: what a real Franka would
+refuse. The twin, the dry run and the benchmarks all check through it.
+
+`parse_trajectory` is what an executor accepts before anything moves; a bad
+trajectory raises `TrajectoryRejected` (a RadError with the controller's error
+code) naming the point and what is wrong.
 """
 
 from __future__ import annotations
@@ -22,11 +26,28 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from rad_core.errors import RadError
-from rad_core.sim import panda
-from rad_core.sim.panda import JOINT_NAMES
+from rad_core.robot_model import PANDA, RobotModel
 
 MAX_POINTS = 10_000
 MAX_DURATION = 3600.0
+CONTROL_PERIOD = 1e-3
+"""Franka's control period (s): limits are checked on samples this far apart."""
+
+# control_msgs/action/FollowJointTrajectory result codes, as a controller answers.
+SUCCESSFUL = 0
+INVALID_GOAL = -1
+INVALID_JOINTS = -2
+OLD_HEADER_TIMESTAMP = -3
+PATH_TOLERANCE_VIOLATED = -4
+GOAL_TOLERANCE_VIOLATED = -5
+
+
+class TrajectoryRejected(RadError):
+    """A plant refused a trajectory; `code` is the FollowJointTrajectory error code."""
+
+    def __init__(self, code: int, message: str):
+        super().__init__(message)
+        self.code = code
 
 
 @dataclass
@@ -34,9 +55,11 @@ class TrajectoryPoint:
     positions: list[float]
     velocities: list[float]      # empty when not given
     time_from_start: float
+    accelerations: list[float] = field(default_factory=list)   # empty when not given
 
     def to_dict(self) -> dict:
         return {'positions': list(map(float, self.positions)), 'velocities': list(map(float, self.velocities)),
+                'accelerations': list(map(float, self.accelerations)),
                 'time_from_start': float(self.time_from_start)}
 
 
@@ -64,82 +87,211 @@ class Trajectory:
         """The inverse of `to_dict`; checks the shape only (see `parse_trajectory` for the rest)."""
         try:
             names = tuple(str(n) for n in doc['joint_names'])
-            points = [TrajectoryPoint([float(v) for v in pt['positions']], [float(v) for v in pt['velocities']],
-                                      float(pt['time_from_start'])) for pt in doc['points']]
-        except (KeyError, TypeError, ValueError) as e:
+            points = [TrajectoryPoint([float(v) for v in pt['positions']],
+                                      [float(v) for v in pt.get('velocities') or []],
+                                      float(pt['time_from_start']),
+                                      [float(v) for v in pt.get('accelerations') or []]) for pt in doc['points']]
+        except (KeyError, TypeError, ValueError, AttributeError) as e:
             raise RadError(f'not a trajectory document: {e}') from None
         return cls(names, points)
 
 
-def parse_trajectory(doc: Trajectory | dict, limit_tol: float = 1e-3) -> Trajectory:
-    """The trajectory (or its dict form), checked for the Panda; RadError says what is wrong.
+def parse_trajectory(doc: Trajectory | dict, model: RobotModel = PANDA, limit_tol: float = 1e-3) -> Trajectory:
+    """An arm trajectory (or its dict form), checked as a Franka arm controller checks a goal.
 
-    Positions up to `limit_tol` (rad or m) past a joint limit are accepted and
-    clipped to it (rounding in planners); velocities come back empty unless
-    every point gives them.
+    The joint names must be the model's 7 arm joints, each once, in any order
+    (INVALID_JOINTS otherwise: a franka_ros2 arm controller knows no others, the
+    fingers belong to the gripper); the rest is INVALID_GOAL: one position per
+    name, all velocities or none, accelerations only with velocities, finite
+    numbers, positions within the model's joint range (up to `limit_tol` past it
+    is clipped: rounding in planners), times strictly increasing. The result is in
+    the model's joint order. Raises `TrajectoryRejected` naming the point.
     """
     if isinstance(doc, Trajectory):
         names, points = doc.joint_names, doc.points
     elif not isinstance(doc, dict) or 'joint_names' not in doc or 'points' not in doc:
-        raise RadError('trajectory: expected {"joint_names": [...], "points": [...]}')
+        raise TrajectoryRejected(INVALID_GOAL, 'trajectory: expected {"joint_names": [...], "points": [...]}')
     else:
         names, points = doc['joint_names'], doc['points']
     if not isinstance(names, (list, tuple)) or not names or not all(isinstance(n, str) for n in names):
-        raise RadError('trajectory: joint_names must be a non-empty list of strings')
-    unknown = [n for n in names if n not in JOINT_NAMES]
+        raise TrajectoryRejected(INVALID_JOINTS, 'trajectory: joint_names must be a non-empty list of strings')
+    expected = model.arm_joint_names
+    unknown = [n for n in names if n not in expected]
     if unknown:
-        raise RadError(f'trajectory: unknown joint name {unknown[0]!r} (the Panda has {", ".join(JOINT_NAMES)})')
+        raise TrajectoryRejected(INVALID_JOINTS, f'trajectory: incoming joint {unknown[0]!r} does not match the '
+                                 f'controller\'s joints ({", ".join(expected)})')
     dup = sorted({n for n in names if list(names).count(n) > 1})
     if dup:
-        raise RadError(f'trajectory: joint {dup[0]!r} is named twice')
+        raise TrajectoryRejected(INVALID_JOINTS, f'trajectory: joint {dup[0]!r} is named twice')
+    missing = [n for n in expected if n not in names]
+    if missing:
+        raise TrajectoryRejected(INVALID_JOINTS, f'trajectory: joint {missing[0]!r} is missing (the controller '
+                                 f'takes only goals for all of {", ".join(expected)})')
     if not isinstance(points, (list, tuple)) or not points:
-        raise RadError('trajectory: has no points')
+        raise TrajectoryRejected(INVALID_GOAL, 'trajectory: has no points')
     if len(points) > MAX_POINTS:
-        raise RadError(f'trajectory: {len(points)} points exceed the limit of {MAX_POINTS}')
+        raise TrajectoryRejected(INVALID_GOAL, f'trajectory: {len(points)} points exceed the limit of {MAX_POINTS}')
     k = len(names)
-    joints = np.array([JOINT_NAMES.index(n) for n in names])
-    lower, upper = panda.LOWER[joints] - limit_tol, panda.UPPER[joints] + limit_tol
+    order = [list(names).index(n) for n in expected]
+    lower, upper = np.asarray(model.q_min), np.asarray(model.q_max)
     out = []
     for i, p in enumerate(points):
         where = f'trajectory point {i}'
         if isinstance(p, TrajectoryPoint):
-            q, v, t = p.positions, p.velocities, p.time_from_start
+            q, v, a, t = p.positions, p.velocities, p.accelerations, p.time_from_start
         elif isinstance(p, dict):
-            q, v, t = p.get('positions'), p.get('velocities') or [], p.get('time_from_start')
+            q, v, a, t = (p.get('positions'), p.get('velocities') or [], p.get('accelerations') or [],
+                          p.get('time_from_start'))
         else:
-            raise RadError(f'{where}: expected an object with positions and time_from_start')
+            raise TrajectoryRejected(INVALID_GOAL, f'{where}: expected an object with positions and time_from_start')
         q = _vector(q, f'{where} positions')
         v = _vector(v, f'{where} velocities')
+        a = _vector(a, f'{where} accelerations')
         if not isinstance(t, (int, float)) or isinstance(t, bool) or not math.isfinite(t):
-            raise RadError(f'{where}: time_from_start must be a finite number of seconds, got {t!r}')
+            raise TrajectoryRejected(INVALID_GOAL, f'{where}: time_from_start must be a finite number of seconds, '
+                                     f'got {t!r}')
         if len(q) != k:
-            raise RadError(f'{where}: {len(q)} positions for {k} joint names')
+            raise TrajectoryRejected(INVALID_GOAL, f'{where}: {len(q)} positions for {k} joint names')
         if len(v) not in (0, k):
-            raise RadError(f'{where}: {len(v)} velocities for {k} joint names (give all or none)')
-        bad = np.flatnonzero((q < lower) | (q > upper))
+            raise TrajectoryRejected(INVALID_GOAL, f'{where}: {len(v)} velocities for {k} joint names '
+                                     '(give all or none)')
+        if len(a) not in (0, k) or (len(a) and not len(v)):
+            raise TrajectoryRejected(INVALID_GOAL, f'{where}: {len(a)} accelerations for {k} joint names '
+                                     '(all or none, and only with velocities)')
+        q, v, a = q[order], (v[order] if len(v) else v), (a[order] if len(a) else a)
+        bad = np.flatnonzero((q < lower - limit_tol) | (q > upper + limit_tol))
         if len(bad):
             j = bad[0]
-            raise RadError(f'{where}: {names[j]} = {q[j]:.4f} is outside its limits '
-                           f'[{panda.LOWER[joints[j]]:.4f}, {panda.UPPER[joints[j]]:.4f}]')
+            raise TrajectoryRejected(INVALID_GOAL, f'{where}: {expected[j]} = {q[j]:.4f} is outside its limits '
+                                     f'[{lower[j]:.4f}, {upper[j]:.4f}] ({model.name})')
         if i == 0 and t < 0:
-            raise RadError(f'{where}: time_from_start {t} is negative')
+            raise TrajectoryRejected(INVALID_GOAL, f'{where}: time_from_start {t} is negative')
         if i > 0 and not t > out[-1].time_from_start:
-            raise RadError(f'{where}: time_from_start {t} does not increase (previous {out[-1].time_from_start})')
+            raise TrajectoryRejected(INVALID_GOAL, f'{where}: time_from_start {t} does not increase '
+                                     f'(previous {out[-1].time_from_start})')
         if t > MAX_DURATION:
-            raise RadError(f'{where}: time_from_start {t} s exceeds the limit of {MAX_DURATION:g} s')
-        out.append(TrajectoryPoint(np.clip(q, panda.LOWER[joints], panda.UPPER[joints]).tolist(), v.tolist(),
-                                   float(t)))
+            raise TrajectoryRejected(INVALID_GOAL, f'{where}: time_from_start {t} s exceeds the limit of '
+                                     f'{MAX_DURATION:g} s')
+        out.append(TrajectoryPoint(np.clip(q, lower, upper).tolist(), v.tolist(), float(t), a.tolist()))
     if not all(pt.velocities for pt in out):
         for pt in out:
-            pt.velocities = []
-    return Trajectory(tuple(names), out)
+            pt.velocities, pt.accelerations = [], []
+    elif not all(pt.accelerations for pt in out):
+        for pt in out:
+            pt.accelerations = []
+    return Trajectory(expected, out)
+
+
+class Spline:
+    """The motion a joint_trajectory_controller makes of a parsed trajectory.
+
+    It starts from `start` at rest at t = 0 (when the first point lies later) and
+    interpolates each segment by what the points give: quintic Hermite with
+    velocities and accelerations, cubic with velocities, linear with positions only.
+    After the last point it holds there.
+    """
+
+    def __init__(self, traj: Trajectory, start):
+        times, pos = traj.times(), traj.positions()
+        k = pos.shape[1]
+        vel = np.array([p.velocities for p in traj.points]) if traj.points[0].velocities else None
+        acc = np.array([p.accelerations for p in traj.points]) if traj.points[0].accelerations else None
+        if times[0] > 0:
+            times = np.concatenate([[0.0], times])
+            pos = np.vstack([np.asarray(start, dtype=float)[:k], pos])
+            vel = None if vel is None else np.vstack([np.zeros(k), vel])
+            acc = None if acc is None else np.vstack([np.zeros(k), acc])
+        self.times, self.pos, self.vel, self.acc = times, pos, vel, acc
+
+    @property
+    def duration(self) -> float:
+        return float(self.times[-1])
+
+    def __call__(self, t) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Positions, velocities and accelerations at time(s) t: (k,) each for a scalar, (n, k) for an array."""
+        ts = np.atleast_1d(np.asarray(t, dtype=float))
+        times, n = self.times, len(self.times)
+        if n == 1:
+            q = np.repeat(self.pos[:1], len(ts), axis=0)
+            zero = np.zeros_like(q)
+            out = (q, zero, zero)
+        else:
+            seg = np.clip(np.searchsorted(times, ts, side='right') - 1, 0, n - 2)
+            h = (times[seg + 1] - times[seg])[:, None]
+            s = np.clip((ts - times[seg])[:, None] / h, 0.0, 1.0)
+            p0, p1 = self.pos[seg], self.pos[seg + 1]
+            if self.acc is not None:
+                v0, v1 = self.vel[seg] * h, self.vel[seg + 1] * h
+                a0, a1 = self.acc[seg] * h * h, self.acc[seg + 1] * h * h
+                d = p1 - p0
+                c = [p0, v0, a0 / 2, 10 * d - 6 * v0 - 4 * v1 - 1.5 * a0 + 0.5 * a1,
+                     -15 * d + 8 * v0 + 7 * v1 + 1.5 * a0 - a1, 6 * d - 3 * v0 - 3 * v1 - 0.5 * a0 + 0.5 * a1]
+            elif self.vel is not None:
+                v0, v1 = self.vel[seg] * h, self.vel[seg + 1] * h
+                d = p1 - p0
+                c = [p0, v0, 3 * d - 2 * v0 - v1, -2 * d + v0 + v1]
+            else:
+                c = [p0, p1 - p0]
+            q = sum(ck * s ** k for k, ck in enumerate(c))
+            dq = sum(k * c[k] * s ** (k - 1) for k in range(1, len(c))) / h
+            ddq = (sum(k * (k - 1) * c[k] * s ** (k - 2) for k in range(2, len(c))) / h ** 2
+                   if len(c) > 2 else np.zeros_like(q))
+            after = ts >= times[-1]
+            q[after], dq[after], ddq[after] = self.pos[-1], 0.0, 0.0
+            out = (q, dq, ddq)
+        return tuple(x[0] for x in out) if np.ndim(t) == 0 else out
+
+
+def limit_violation(traj: Trajectory | dict, start, model: RobotModel = PANDA, slack: float = 1.0,
+                    dt: float = CONTROL_PERIOD) -> str:
+    """Why a real Franka would refuse this arm trajectory from `start` (at rest), or ''.
+
+    The trajectory is parsed as the controller parses it, then its interpolated
+    motion (`Spline`) is sampled every `dt` (1 kHz) and compared with the model's
+    velocity, acceleration and jerk limits (jerk as the finite difference of the
+    sampled acceleration, as the robot's 1 kHz loop sees it) times `slack`. A
+    first point at t = 0 away from the start is a jump the robot cannot make.
+    """
+    parsed = parse_trajectory(traj, model)
+    start = np.asarray(start, dtype=float)[:7]
+    first = parsed.points[0]
+    if first.time_from_start <= 0 and np.abs(np.asarray(first.positions) - start).max() > 1e-3:
+        j = int(np.abs(np.asarray(first.positions) - start).argmax())
+        return (f'{model.arm_joint_names[j]}: the first point at t = 0 is {first.positions[j] - start[j]:+.4f} rad '
+                f'from where the arm is (a jump)')
+    ts, peaks = _sampled(parsed, start, model, dt)
+    for label, (ratio, values) in peaks.items():
+        if ratio.size and ratio.max() > slack:
+            i, k = np.unravel_index(int(ratio.argmax()), ratio.shape)
+            limit = abs(values[i, k]) / ratio[i, k]
+            return (f'{model.arm_joint_names[k]}: {label} {abs(values[i, k]):.4g} exceeds the {model.name} '
+                    f'limit {limit * slack:.4g} ({ratio[i, k]:.2f}x its limit) at t = {ts[min(i, len(ts) - 1)]:.3f} s')
+    return ''
+
+
+def limit_ratios(traj: Trajectory | dict, start, model: RobotModel = PANDA,
+                 dt: float = CONTROL_PERIOD) -> dict[str, float]:
+    """Peak |v|, |a|, |jerk| of the interpolated motion as ratios to the model's limits (1 kHz samples)."""
+    _, peaks = _sampled(parse_trajectory(traj, model), start, model, dt)
+    return {label: float(ratio.max()) if ratio.size else 0.0 for label, (ratio, _) in peaks.items()}
+
+
+def _sampled(parsed: Trajectory, start, model: RobotModel, dt: float):
+    """Sample times and, per quantity, (ratio to the model's limit, value) arrays of the controller's motion."""
+    spline = Spline(parsed, np.asarray(start, dtype=float)[:7])
+    ts = np.arange(0.0, spline.duration + dt / 2, dt)
+    _, v, a = spline(ts)
+    j = np.diff(a, axis=0) / dt if len(a) > 1 else np.zeros((0, 7))
+    v_max, a_max, j_max = model.limits()
+    return ts, {'velocity': (np.abs(v) / v_max, v), 'acceleration': (np.abs(a) / a_max, a),
+                'jerk': (np.abs(j) / j_max, j)}
 
 
 def _vector(v, where: str) -> np.ndarray:
     try:
         a = np.asarray(v, dtype=float).reshape(-1)
     except (TypeError, ValueError):
-        raise RadError(f'{where}: expected a list of numbers') from None
+        raise TrajectoryRejected(INVALID_GOAL, f'{where}: expected a list of numbers') from None
     if not np.all(np.isfinite(a)):
-        raise RadError(f'{where}: contains NaN or infinity')
+        raise TrajectoryRejected(INVALID_GOAL, f'{where}: contains NaN or infinity')
     return a

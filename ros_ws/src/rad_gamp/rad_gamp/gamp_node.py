@@ -1,10 +1,12 @@
 """Grasp and motion planning as a service (the paper's Sec. IV-C).
 
   srv  plan_action   rad_msgs/PlanAction: can this action be executed from this scene
-                     state, with which grasp and which trajectory? On failure,
-                     failure = 'grasp' (f_g) or 'placement' (f_p) and a reason.
-  pub  joint_trajectory_controller/joint_trajectory  trajectory_msgs/JointTrajectory
-                     the planned trajectory, when the request asks to execute it
+                     state, with which grasp and which motion (arm trajectories of the
+                     robot model's 7 joints, timed within its limits x speed_scale, and
+                     the gripper commands between them)? On failure, failure = 'grasp'
+                     (f_g) or 'placement' (f_p) and a reason. With `execute`, the motion
+                     is also sent (in the background) through the arm controller's and
+                     the gripper's actions (parameters arm_controller, gripper_action).
 
 The node keeps one planning world (its own PyBullet client) and loads each
 request's scene into it; the world is never stepped, only probed.
@@ -12,17 +14,20 @@ request's scene into it; the world is never stepped, only probed.
 
 from __future__ import annotations
 
+import threading
 import time
 
 from rclpy.node import Node
-from trajectory_msgs.msg import JointTrajectory
 
 from rad_core.errors import RadError
 from rad_core.gamp.action import MotionPlanner, SceneAction
 from rad_core.gamp.planner import GampConfig
+from rad_core.gamp.trajectory import TimingConfig
+from rad_core.motion import run_motion
 from rad_msgs.srv import PlanAction
 from rad_ros.conversions import scene_from_request
-from rad_ros.motion import trajectory_to_msg
+from rad_ros.motion import motion_to_msgs
+from rad_ros.plant import ActionPlant
 from rad_ros.node_main import main_for
 
 
@@ -31,9 +36,16 @@ class GampNode(Node):
         super().__init__('gamp')
         self.declare_parameter('frame_id', 'world')
         self.declare_parameter('seed', 0)
-        self.planner = MotionPlanner(GampConfig(seed=int(self.get_parameter('seed').value)))
-        self.trajectory_pub = self.create_publisher(
-            JointTrajectory, 'joint_trajectory_controller/joint_trajectory', 10)
+        for name, value in (('robot', 'panda'), ('joint_prefix', ''), ('speed_scale', 0.5), ('grasp_force', 20.0),
+                            ('arm_controller', 'joint_trajectory_controller'),
+                            ('gripper_action', 'franka_gripper/gripper_action')):
+            self.declare_parameter(name, value)
+        param = lambda name: self.get_parameter(name).value  # noqa: E731
+        timing = TimingConfig(str(param('robot')), str(param('joint_prefix')), float(param('speed_scale')),
+                              float(param('grasp_force')))
+        timing.model.limits(timing.speed_scale)    # a bad robot or speed_scale stops the node here
+        self.planner = MotionPlanner(GampConfig(seed=int(param('seed')), timing=timing))
+        self.plant = ActionPlant(self, timing.model, str(param('arm_controller')), str(param('gripper_action')))
         self.create_service(PlanAction, 'plan_action', self.plan_action_callback)
         self.get_logger().info('grasp and motion planning ready')
 
@@ -62,13 +74,26 @@ class GampNode(Node):
             self.get_logger().info(f'{request.action.block_id}: {result.reason}')
             return response
         response.grasp.unit, response.grasp.yaw_deg = int(result.grasp.unit), int(result.grasp.yaw)
-        response.trajectory = trajectory_to_msg(result.trajectory.to_dict(), self.get_parameter('frame_id').value)
+        response.trajectories, response.gripper = motion_to_msgs(result.motion.to_dict(),
+                                                                 self.get_parameter('frame_id').value)
         if request.execute:
-            self.trajectory_pub.publish(response.trajectory)
-        self.get_logger().info(f'{request.action.block_id}: planned {len(result.trajectory.points)} points, '
-                               f'{result.trajectory.duration:.1f} s, in {response.planning_time_s * 1e3:.0f} ms'
-                               + (' (sent for execution)' if request.execute else ''))
+            threading.Thread(target=self.execute, args=(request.action.block_id, result.motion), daemon=True).start()
+        sent = ' (sent for execution)' if request.execute else ''
+        self.get_logger().info(f'{request.action.block_id}: planned {len(result.motion.trajectories)} trajectories, '
+                               f'{result.motion.duration:.1f} s of arm motion, in '
+                               f'{response.planning_time_s * 1e3:.0f} ms{sent}')
         return response
+
+    def execute(self, block_id: str, motion) -> None:
+        """Run a planned motion through the controllers' actions (the node's executor serves the futures)."""
+        try:
+            problem = run_motion(motion, self.plant.move_arm, self.plant.move_gripper)
+        except RadError as e:
+            problem = str(e)
+        if problem:
+            self.get_logger().error(f'{block_id}: execution failed: {problem}')
+        else:
+            self.get_logger().info(f'{block_id}: executed')
 
 
 main = main_for(GampNode)

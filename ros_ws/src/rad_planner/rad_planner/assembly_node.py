@@ -14,11 +14,19 @@ A sequencer that is down or does not answer within `sequencer_timeout_s` fails t
 request with a reason naming it.
 
   srv  plan_assembly     rad_msgs/PlanAssembly
-  act  execute_assembly  rad_msgs/ExecuteAssembly: plan, execute step by step via the
-                         trajectory topic, re-register after each step, replan on deviation
-                         (the loop is rad_core.sequencing.execute; this node supplies the plant)
+  act  execute_assembly  rad_msgs/ExecuteAssembly: plan, execute step by step through the
+                         arm controller's FollowJointTrajectory action (<arm_controller>/
+                         follow_joint_trajectory) and the hand's GripperCommand action
+                         (<gripper_action>), re-register after each step, replan on deviation
+                         or a failed grasp (the loop is rad_core.sequencing.execute; this node
+                         supplies the plant: rad_ros.plant.ActionPlant); cancelling it cancels
+                         the running goal and the arm stops
   pub  plan_json         std_msgs/String (latched): the latest plan, for the visualizer
-  pub  joint_trajectory_controller/joint_trajectory  the steps' trajectories
+
+The robot's state comes from joint_states by name (the model's arm and finger joints,
+parameters robot and joint_prefix): a missing joint or a stamp older than stale_after_s
+fails the request with that reason (require_joint_states; false plans from home when
+no joint states are heard, and says so in the log).
 """
 
 from __future__ import annotations
@@ -37,7 +45,6 @@ from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
-from trajectory_msgs.msg import JointTrajectory
 
 from rad_core.errors import RadError
 from rad_core.scene import Scene
@@ -45,7 +52,9 @@ from rad_core.sequencing.execute import ExecuteConfig, execute_assembly
 from rad_core.sequencing.plan import MotionPlan, plan_assembly
 from rad_core.sequencing.reallocation import ReallocationConfig
 from rad_core.sequencing.sequencer import Ranking
+from rad_core.robot_model import robot_model
 from rad_core.sim import panda
+from rad_core.trajectory import limit_violation
 from rad_core.sim.mocap import RegistrationConfig, RigidBodyPose, body_map_for, register_scene
 from rad_msgs.action import ExecuteAssembly
 from rad_msgs.msg import RigidBodies, Scene as SceneMsg
@@ -55,7 +64,8 @@ from rad_ros.conversions import (allocation_from_response, placement_to_msg, sce
 from rad_ros.node_main import run_node
 from rad_ros.plan_msgs import fill_plan_response, plan_json
 from rad_ros.sequencer_msgs import action_to_msg, ranking_from_response, sequence_request
-from rad_ros.motion import pose_from_msg, trajectory_from_msg, trajectory_to_msg
+from rad_ros.motion import motion_from_msgs, pose_from_msg
+from rad_ros.plant import ActionPlant
 from rad_ros.qos import LATCHED
 
 
@@ -66,8 +76,13 @@ class AssemblyNode(Node):
                             ('task_file', ''), ('service_timeout_s', 60.0), ('stale_after_s', 2.0),
                             ('settle_s', 0.5), ('position_tol', 0.005), ('max_replans', 3),
                             ('step_timeout_factor', 3.0), ('frame_id', 'world'), ('sequencer_timeout_s', 20.0),
-                            ('allocation_support', 'stable'), ('reallocate', True), ('max_reallocations', 10)):
+                            ('allocation_support', 'stable'), ('reallocate', True), ('max_reallocations', 10),
+                            ('robot', 'panda'), ('joint_prefix', ''), ('arm_controller', 'joint_trajectory_controller'),
+                            ('gripper_action', 'franka_gripper/gripper_action'), ('gripper_result_is_width', False),
+                            ('path_tolerance', 0.05), ('goal_tolerance', 0.01), ('goal_time_tolerance', 1.0),
+                            ('require_joint_states', True)):
             self.declare_parameter(name, value)
+        self.model = robot_model(str(self.param('robot')), str(self.param('joint_prefix')))
         self.lock = threading.Lock()
         self.joints: tuple[float, JointState] | None = None
         self.bodies = None
@@ -91,7 +106,6 @@ class AssemblyNode(Node):
         self.io_thread = threading.Thread(target=self.io_executor.spin, daemon=True)
         self.io_thread.start()
         group = ReentrantCallbackGroup()
-        self.trajectory_pub = self.create_publisher(JointTrajectory, 'joint_trajectory_controller/joint_trajectory', 10)
         self.plan_pub = self.create_publisher(String, 'plan_json', LATCHED)
         self.create_service(PlanAssembly, 'plan_assembly', self.plan_assembly_callback, callback_group=group)
         self.action_server = ActionServer(self, ExecuteAssembly, 'execute_assembly', self.execute_callback,
@@ -134,13 +148,23 @@ class AssemblyNode(Node):
         return entry[1]
 
     def current_joints(self) -> np.ndarray:
+        """The model's 7 arm and 2 finger joints from joint_states, by name; RadError when a joint is
+        missing or the message is stale by its stamp."""
         with self.lock:
             msg = self.fresh(self.joints, '/joint_states')
+        stale = float(self.param('stale_after_s'))
+        stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+        age = self.get_clock().now().nanoseconds * 1e-9 - stamp
+        if stamp == 0.0 or age > stale:
+            raise RadError(f'/joint_states is stale: its stamp is {age:.1f} s old (limit {stale:g} s)'
+                           if stamp else '/joint_states carries no stamp')
+        names = self.model.arm_joint_names + self.model.finger_joint_names
         by_name = dict(zip(msg.name, msg.position))
-        missing = [n for n in panda.JOINT_NAMES if n not in by_name]
+        missing = [n for n in names if n not in by_name]
         if missing:
-            raise RadError(f'/joint_states lacks {", ".join(missing)}')
-        return np.array([by_name[n] for n in panda.JOINT_NAMES])
+            raise RadError(f'/joint_states lacks {", ".join(missing)} (robot {self.model.name}, '
+                           f'joint_prefix {self.model.prefix!r}); it has {", ".join(msg.name) or "no joints"}')
+        return np.array([by_name[n] for n in names])
 
     def registered_scene(self) -> Scene:
         if self.task is None:
@@ -205,8 +229,15 @@ class AssemblyNode(Node):
             raise RadError(f'plan_action: {response.reason}')
         if not response.success:
             return MotionPlan(False, response.failure, response.reason)
-        return MotionPlan(True, '', '', (response.grasp.unit, response.grasp.yaw_deg),
-                          trajectory_from_msg(response.trajectory))
+        motion = motion_from_msgs(response.trajectories, response.gripper)
+        start_q = panda.HOME if start is None else np.asarray(start, dtype=float)
+        for k, traj in enumerate(motion['trajectories']):
+            why = limit_violation(traj, start_q, self.model)
+            if why:
+                raise RadError(f'plan_action answered a trajectory the {self.model.name} would refuse '
+                               f'(trajectory {k}): {why}')
+            start_q = np.asarray(traj['points'][-1]['positions'])
+        return MotionPlan(True, '', '', (response.grasp.unit, response.grasp.yaw_deg), motion)
 
     def plan(self, scene: Scene, time_limit: float, start):
         reallocation = None
@@ -231,10 +262,21 @@ class AssemblyNode(Node):
     def start_joints(self, requested):
         if len(requested):
             return list(requested)
-        try:
-            return self.current_joints()
-        except RadError:
-            return None   # no robot heard from: plan from home
+        if not self.param('require_joint_states'):
+            try:
+                return self.current_joints()
+            except RadError as e:
+                self.get_logger().warning(f'planning from home (require_joint_states is false): {e}')
+                return None
+        return self.current_joints()
+
+    def plant(self, cancelled) -> ActionPlant:
+        return ActionPlant(self.io, self.model, str(self.param('arm_controller')), str(self.param('gripper_action')),
+                           path_tolerance=float(self.param('path_tolerance')),
+                           goal_tolerance=float(self.param('goal_tolerance')),
+                           goal_time_tolerance=float(self.param('goal_time_tolerance')),
+                           gripper_result_is_width=bool(self.param('gripper_result_is_width')),
+                           timeout_factor=float(self.param('step_timeout_factor')), cancelled=cancelled)
 
     # ---- /plan_assembly ------------------------------------------------------------
     def plan_assembly_callback(self, request, response):
@@ -260,8 +302,8 @@ class AssemblyNode(Node):
 
     # ---- /execute_assembly -------------------------------------------------------------
     def execute_callback(self, goal_handle):
-        """Glue for rad_core.sequencing.execute: the plant is the trajectory topic, joint states
-        and motion capture; feedback and cancel go through the goal handle."""
+        """Glue for rad_core.sequencing.execute: the plant is the arm controller's and the hand's
+        actions, joint states and motion capture; feedback and cancel go through the goal handle."""
         goal = goal_handle.request
         result = ExecuteAssembly.Result()
         t0 = time.perf_counter()
@@ -272,16 +314,14 @@ class AssemblyNode(Node):
             feedback.phase, feedback.message = phase, message
             goal_handle.publish_feedback(feedback)
 
-        def send(trajectory: dict) -> None:
-            self.trajectory_pub.publish(trajectory_to_msg(trajectory, self.param('frame_id')))
-            self.wait_until_done(trajectory)
-
         try:
             limit = self.time_limit(goal.time_limit_s)
             scene, _ = self.scene_of(goal.scene, goal.scene_json)
             config = ExecuteConfig(float(self.param('settle_s')), float(self.param('position_tol')),
                                    int(self.param('max_replans')), bool(goal.replan))
-            run = execute_assembly(scene, lambda current, start: self.plan(current, limit, start), send,
+            plant = self.plant(lambda: goal_handle.is_cancel_requested)
+            run = execute_assembly(scene, lambda current, start: self.plan(current, limit, start),
+                                   plant.move_arm, plant.move_gripper,
                                    self.registered_scene, config, joints=lambda: self.start_joints([]),
                                    cancelled=lambda: goal_handle.is_cancel_requested, report=report)
         except RadError as e:
@@ -299,27 +339,11 @@ class AssemblyNode(Node):
         result.steps_executed = len(run.steps)
         result.coverage = run.coverage
         result.result_json = json.dumps(run.document({'total': time.perf_counter() - t0}))
-        (goal_handle.succeed if result.success else goal_handle.abort)()
+        if goal_handle.is_cancel_requested:
+            goal_handle.canceled()
+        else:
+            (goal_handle.succeed if result.success else goal_handle.abort)()
         return result
-
-    def wait_until_done(self, trajectory: dict) -> None:
-        """Until the robot rests at the trajectory's last point; fails if the robot
-        goes quiet (joint states stop) or takes far longer than the trajectory."""
-        final = np.asarray(trajectory['points'][-1]['positions'])
-        names = list(trajectory['joint_names'])
-        duration = float(trajectory['points'][-1]['time_from_start'])
-        deadline = time.monotonic() + duration * float(self.param('step_timeout_factor')) + 10.0
-        index = [panda.JOINT_NAMES.index(n) for n in names]
-        while True:
-            q = self.current_joints()
-            with self.lock:
-                velocity = np.asarray(self.joints[1].velocity) if self.joints[1].velocity else np.zeros(9)
-            if np.all(np.abs(q[index] - final) < 0.01) and np.all(np.abs(velocity) < 0.02):
-                return
-            if time.monotonic() > deadline:
-                raise RadError(f'the robot did not reach the end of the step within {duration:.1f} s x '
-                               f'{self.param("step_timeout_factor")} + 10 s')
-            time.sleep(0.05)
 
 
 def main(args=None):

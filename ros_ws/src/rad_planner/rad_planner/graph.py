@@ -1,11 +1,13 @@
 """Bring the whole rad node graph up with one parameter file, without ros2 launch.
 
-    graph [--params FILE] [--no-viz] [-p node.param:=value ...]
+    graph [--params FILE] [--no-viz] [--no-twin] [-p node.param:=value ...]
 
 Starts, as separate processes, each installed node exactly as `ros2 run` would
 (the executable under <prefix>/lib/<package>/), all with the same parameter file
 (each node reads its own section), and stops them all together on Ctrl-C. On a full
-ROS 2 install, `ros2 launch rad_planner graph.launch.py` does the same.
+ROS 2 install, `ros2 launch rad_planner graph.launch.py` does the same. --no-twin starts
+every node but the twin, for a real cell (franka_ros2 serves the arm and the hand; see
+rad_planner/config/franka.yaml and franka.launch.py).
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -69,11 +72,14 @@ class Graph:
 
 
 def start_graph(params: Path, overrides: dict[str, dict[str, str]] | None = None, viz: bool = True,
-                log_dir: Path | None = None) -> Graph:
-    """Start every node of the graph. overrides: node name -> {param: value}."""
+                log_dir: Path | None = None, skip: Iterable[str] = ()) -> Graph:
+    """Start every node of the graph but those named in skip. overrides: node name -> {param: value}."""
     overrides = overrides or {}
+    skip = set(skip)
     processes = {}
     for package, exe, name in NODES:
+        if name in skip:
+            continue
         path = executable(package, exe)
         if path is None:
             if package == 'rad_viz':
@@ -109,6 +115,8 @@ def main(argv=None) -> int:
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('--params', type=Path, help='parameter file (default: rad_planner/config/graph.yaml)')
     parser.add_argument('--no-viz', action='store_true', help='do not start the Rerun visualizer')
+    parser.add_argument('--no-twin', action='store_true',
+                        help='do not start the twin (a real cell: the robot\'s driver serves the arm and the hand)')
     parser.add_argument('--log-dir', type=Path, help='write each node\'s output to DIR/<node>.log')
     parser.add_argument('-p', dest='overrides', action='append', default=[], metavar='NODE.PARAM:=VALUE')
     args = parser.parse_args(argv)
@@ -116,7 +124,8 @@ def main(argv=None) -> int:
     if not params.is_file():
         print(f'graph: no parameter file {params}', file=sys.stderr)
         return 2
-    graph = start_graph(params, parse_overrides(args.overrides), viz=not args.no_viz, log_dir=args.log_dir)
+    graph = start_graph(params, parse_overrides(args.overrides), viz=not args.no_viz, log_dir=args.log_dir,
+                        skip=('twin',) if args.no_twin else ())
     print(f'graph: started {", ".join(graph.processes)} with {params}; Ctrl-C stops them', flush=True)
     signal.signal(signal.SIGTERM, signal.default_int_handler)
     try:

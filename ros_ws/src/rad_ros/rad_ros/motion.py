@@ -1,7 +1,8 @@
-"""Trajectory and motion-capture message conversions (message types only, no rclpy).
+"""Trajectory, motion and motion-capture message conversions (message types only, no rclpy).
 
 Trajectories travel inside rad_core as plain dicts of the result.json shape:
-{"joint_names": [...], "points": [{"positions", "velocities", "time_from_start"}]}.
+{"joint_names": [...], "points": [{"positions", "velocities", "accelerations", "time_from_start"}]};
+a step's motion as {"trajectories": [...], "gripper": [...]} (`rad_core.motion.Motion`).
 """
 
 from __future__ import annotations
@@ -10,7 +11,8 @@ import math
 
 from builtin_interfaces.msg import Duration
 from geometry_msgs.msg import Point, Pose, PoseStamped, Quaternion
-from rad_msgs.msg import RigidBodies, RigidBody
+from control_msgs.msg import GripperCommand
+from rad_msgs.msg import GripperStep, RigidBodies, RigidBody
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 
@@ -34,7 +36,8 @@ def trajectory_to_msg(traj: dict, frame_id: str = '') -> JointTrajectory:
     msg.joint_names = list(traj['joint_names'])
     for p in traj['points']:
         point = JointTrajectoryPoint(positions=[float(v) for v in p['positions']],
-                                     velocities=[float(v) for v in p.get('velocities', [])])
+                                     velocities=[float(v) for v in p.get('velocities') or []],
+                                     accelerations=[float(v) for v in p.get('accelerations') or []])
         point.time_from_start = s_to_duration(float(p['time_from_start']))
         msg.points.append(point)
     return msg
@@ -44,7 +47,29 @@ def trajectory_from_msg(msg: JointTrajectory) -> dict:
     """The dict form; no validation here (the executor validates before it moves)."""
     return {'joint_names': list(msg.joint_names),
             'points': [{'positions': list(p.positions), 'velocities': list(p.velocities),
+                        'accelerations': list(p.accelerations),
                         'time_from_start': duration_to_s(p.time_from_start)} for p in msg.points]}
+
+
+def motion_to_msgs(motion: dict, frame_id: str = '') -> tuple[list[JointTrajectory], list[GripperStep]]:
+    """A motion's arm trajectories and gripper steps as messages (a PlanStep's or PlanAction's fields)."""
+    gripper = [GripperStep(before=int(g['before']), action=str(g['action']),
+                           command=GripperCommand(position=float(g['position']), max_effort=float(g['max_effort'])),
+                           expected_position=float(g.get('expected_position', math.nan)))
+               for g in motion.get('gripper') or []]
+    return [trajectory_to_msg(t, frame_id) for t in motion['trajectories']], gripper
+
+
+def motion_from_msgs(trajectories, gripper) -> dict:
+    """The inverse of `motion_to_msgs` (no validation: `rad_core.motion.Motion.from_dict` checks)."""
+    steps = []
+    for g in gripper:
+        d = {'before': g.before, 'action': g.action, 'position': g.command.position,
+             'max_effort': g.command.max_effort}
+        if math.isfinite(g.expected_position):
+            d['expected_position'] = g.expected_position
+        steps.append(d)
+    return {'trajectories': [trajectory_from_msg(t) for t in trajectories], 'gripper': steps}
 
 
 def pose_msg(position, quaternion) -> Pose:

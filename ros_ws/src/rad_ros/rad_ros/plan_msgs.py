@@ -8,7 +8,7 @@ from rad_core.sequencing.plan import AssemblyPlan
 from rad_core.transforms import yaw_quaternion
 from rad_core.allocation import Placement
 from rad_ros.conversions import cells_msg, placement_to_msg
-from rad_ros.motion import pose_msg, trajectory_to_msg
+from rad_ros.motion import motion_to_msgs, pose_msg
 
 
 def step_to_msg(step, frame_id: str) -> PlanStep:
@@ -17,7 +17,8 @@ def step_to_msg(step, frame_id: str) -> PlanStep:
     msg.cell.i, msg.cell.j, msg.cell.k = (int(v) for v in step.cell)
     msg.grasp.unit, msg.grasp.yaw_deg = (int(v) for v in step.grasp)
     msg.target_pose = pose_msg(step.position, yaw_quaternion(step.yaw))
-    msg.trajectory = trajectory_to_msg(step.trajectory, frame_id)
+    if step.motion:
+        msg.trajectories, msg.gripper = motion_to_msgs(step.motion, frame_id)
     return msg
 
 
@@ -50,7 +51,8 @@ def fill_plan_response(response, plan: AssemblyPlan, timings: dict, frame_id: st
 def plan_json(plan: AssemblyPlan) -> dict:
     """What the visualizer reads from the latched plan_json topic."""
     return {'allocation': plan.allocation.to_dict() if plan.allocation is not None else None,
-            'steps': [{k: v for k, v in s.to_dict().items() if k != 'trajectory'} for s in plan.steps],
+            'steps': [{k: v for k, v in s.to_dict().items() if k not in ('trajectories', 'gripper')}
+                      for s in plan.steps],
             'timings': plan.timings, 'predicted_coverage': plan.predicted_coverage,
             'success': plan.success, 'reason': plan.reason,
             'reallocations': [e.to_dict() for e in plan.reallocations]}

@@ -1,10 +1,18 @@
 """The digital twin as a plant node: it behaves like the real cell does.
 
-Endpoints (relative names, so namespaces and remaps work):
-  sub  joint_trajectory_controller/joint_trajectory  trajectory_msgs/JointTrajectory
-       (the ros2_control joint_trajectory_controller's topic; a new one replaces the
-       one executing, as that controller does)
-  pub  joint_states                    sensor_msgs/JointState, publish_rate_hz
+Endpoints (relative names, so namespaces and remaps work); <arm_controller> and
+<gripper_action> are parameters, named as on a franka_ros2 cell:
+  act  <arm_controller>/follow_joint_trajectory  control_msgs/FollowJointTrajectory: the
+       robot model's 7 arm joints only; a goal a Franka would refuse (joint names, points,
+       the interpolated motion over its limits at 1 kHz, a jump from where the arm is) is
+       aborted at once with the controller's error code and a reason; path and goal
+       tolerances are honoured; cancel stops the arm where it is
+  act  <gripper_action>                control_msgs/GripperCommand: position per finger (m),
+       closing is a grasp with max_effort (N); the result reports where the fingers stopped
+  sub  <arm_controller>/joint_trajectory  trajectory_msgs/JointTrajectory (the controller's
+       topic interface, no feedback; checked the same way, a refusal only logged)
+  pub  joint_states                    sensor_msgs/JointState (the model's arm and finger joints),
+                                       publish_rate_hz
   pub  <mocap_prefix>/<body>/pose      geometry_msgs/PoseStamped per block (sensor-data QoS)
   pub  rigid_bodies                    rad_msgs/RigidBodies, all bodies + frame number
   pub  scene                           rad_msgs/Scene, latched: the scene last loaded
@@ -15,7 +23,8 @@ Endpoints (relative names, so namespaces and remaps work):
   srv  set_block_pose                  rad_msgs/SetBlockPose: move one block (a disturbance)
 
 Physics runs all the time at real_time_factor x wall time, in the timer callback,
-so service calls and trajectories interleave with it on one thread.
+so service calls and trajectories interleave with it on one thread; the action
+goals are coroutines on that thread that wait for the twin to finish them.
 """
 
 from __future__ import annotations
@@ -24,7 +33,10 @@ import json
 import time
 
 from geometry_msgs.msg import PoseStamped
+from control_msgs.action import FollowJointTrajectory, GripperCommand
+from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.node import Node
+from rclpy.task import Future
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
@@ -32,14 +44,16 @@ from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
 from rad_core.errors import RadError
+from rad_core.motion import GripperResult
 from rad_core.scene import Scene
-from rad_core.sim.twin import Twin, TwinConfig
+from rad_core.sim.twin import Tolerances, Twin, TwinConfig
+from rad_core.trajectory import TrajectoryRejected
 from rad_core.sim.workspace import Workspace
 from rad_core.sim.world import World
 from rad_msgs.msg import RigidBodies, Scene as SceneMsg
 from rad_msgs.srv import GetSceneState, LoadScene, SetBlockPose
 from rad_ros.conversions import scene_from_request, scene_to_msg
-from rad_ros.motion import pose_from_msg, pose_stamped, rigid_bodies_msg, trajectory_from_msg
+from rad_ros.motion import duration_to_s, pose_from_msg, pose_stamped, rigid_bodies_msg, trajectory_from_msg
 from rad_ros.node_main import main_for
 from rad_ros.qos import LATCHED
 
@@ -52,6 +66,10 @@ class TwinNode(Node):
         self.declare_parameter('real_time_factor', 1.0)
         self.declare_parameter('frame_id', 'world')
         self.declare_parameter('mocap_prefix', 'mocap')
+        self.declare_parameter('robot', 'panda')
+        self.declare_parameter('joint_prefix', '')
+        self.declare_parameter('arm_controller', 'joint_trajectory_controller')
+        self.declare_parameter('gripper_action', 'franka_gripper/gripper_action')
         self.frame_id = self.get_parameter('frame_id').value
         self.rtf = float(self.get_parameter('real_time_factor').value)
         rate = float(self.get_parameter('publish_rate_hz').value)
@@ -60,7 +78,11 @@ class TwinNode(Node):
 
         self.workspace = Workspace()
         self.world = World()
-        self.twin = Twin(self.world, TwinConfig())
+        self.twin = Twin(self.world, TwinConfig(robot=str(self.get_parameter('robot').value),
+                                                joint_prefix=str(self.get_parameter('joint_prefix').value)))
+        self.arm_done: Future | None = None       # completed by the timer when the running trajectory ends
+        self.wakers: list[Future] = []             # action coroutines waiting for the next tick
+        self.gripper_done: Future | None = None
         self.scene: Scene | None = None
         self.frame_number = 0
         self.pose_pubs: dict[str, object] = {}
@@ -69,8 +91,16 @@ class TwinNode(Node):
         self.bodies_pub = self.create_publisher(RigidBodies, 'rigid_bodies', qos_profile_sensor_data)
         self.scene_pub = self.create_publisher(SceneMsg, 'scene', LATCHED)
         self.events_pub = self.create_publisher(String, '~/events', 10)
-        self.create_subscription(JointTrajectory, 'joint_trajectory_controller/joint_trajectory',
-                                 self.trajectory_callback, 10)
+        controller = str(self.get_parameter('arm_controller').value).rstrip('/')
+        self.create_subscription(JointTrajectory, f'{controller}/joint_trajectory', self.trajectory_callback, 10)
+        self.arm_server = ActionServer(self, FollowJointTrajectory, f'{controller}/follow_joint_trajectory',
+                                       self.follow_joint_trajectory_callback,
+                                       goal_callback=lambda goal: GoalResponse.ACCEPT,
+                                       cancel_callback=lambda goal: CancelResponse.ACCEPT)
+        self.gripper_server = ActionServer(self, GripperCommand, str(self.get_parameter('gripper_action').value),
+                                           self.gripper_command_callback,
+                                           goal_callback=lambda goal: GoalResponse.ACCEPT,
+                                           cancel_callback=lambda goal: CancelResponse.ACCEPT)
         self.create_service(LoadScene, 'load_scene', self.load_scene_callback)
         self.create_service(Trigger, 'reset', self.reset_callback)
         self.create_service(GetSceneState, 'get_scene_state', self.get_scene_state_callback)
@@ -87,6 +117,12 @@ class TwinNode(Node):
     def load(self, scene: Scene) -> None:
         self.workspace.check_scene(scene)
         self.twin.load_scene(scene)
+        # Goals running on the old world end: the robot was put back home.
+        if self.arm_done is not None and not self.arm_done.done():
+            self.arm_done.set_result({'error_code': FollowJointTrajectory.Result.INVALID_GOAL,
+                                      'error_string': 'the scene was reloaded while the arm moved'})
+        if self.gripper_done is not None and not self.gripper_done.done():
+            self.gripper_done.set_result(GripperResult(float(self.world.joint_positions()[7:].mean())))
         self.scene = scene
         for block in scene.blocks:
             if block.id not in self.pose_pubs:
@@ -102,10 +138,18 @@ class TwinNode(Node):
         # Never try to catch up more than a quarter second of lag in one tick.
         dt = min(now - self.last_tick, 0.25) * self.rtf
         self.last_tick = now
+        gripping = self.gripper_done is not None and self.twin.gripper_result is None
         finished = self.twin.advance(dt)
         if finished is not None:
             self.event('done', **finished)
+            if self.arm_done is not None and not self.arm_done.done():
+                self.arm_done.set_result(finished)
+        if gripping and self.twin.gripper_result is not None and not self.gripper_done.done():
+            self.gripper_done.set_result(self.twin.gripper_result)
         self.publish_state()
+        wakers, self.wakers = self.wakers, []
+        for wake in wakers:
+            wake.set_result(None)
 
     def publish_state(self) -> None:
         stamp = self.get_clock().now().to_msg()
@@ -133,6 +177,72 @@ class TwinNode(Node):
             self.event('rejected', reason=str(e))
             return
         self.event('accepted', **info)
+
+    async def follow_joint_trajectory_callback(self, goal_handle):
+        """A FollowJointTrajectory goal: checked as Franka's controller checks it, run, answered."""
+        goal = goal_handle.request
+        result = FollowJointTrajectory.Result()
+        tolerances = Tolerances(path=_tolerance(goal.path_tolerance), goal=_tolerance(goal.goal_tolerance),
+                                goal_time=duration_to_s(goal.goal_time_tolerance))
+        if self.arm_done is not None and not self.arm_done.done():
+            self.arm_done.set_result({'error_code': FollowJointTrajectory.Result.INVALID_GOAL, 'preempted': True,
+                                      'error_string': 'preempted by a new goal'})
+        try:
+            info = self.twin.start(trajectory_from_msg(goal.trajectory), tolerances)
+        except TrajectoryRejected as e:
+            self.get_logger().error(f'goal refused: {e}')
+            self.event('rejected', reason=str(e), error_code=e.code)
+            result.error_code, result.error_string = e.code, str(e)
+            goal_handle.abort()
+            return result
+        except RadError as e:
+            result.error_code, result.error_string = FollowJointTrajectory.Result.INVALID_GOAL, str(e)
+            goal_handle.abort()
+            return result
+        self.event('accepted', **info)
+        done = self.arm_done = Future()
+        while not done.done():
+            if goal_handle.is_cancel_requested:
+                self.twin.cancel()
+                goal_handle.canceled()
+                result.error_string = 'cancelled: the arm stopped where it was'
+                return result
+            await _tick(self)
+        report = done.result()
+        result.error_code = int(report.get('error_code', 0))
+        result.error_string = report.get('error_string', '')
+        if result.error_code == FollowJointTrajectory.Result.SUCCESSFUL:
+            result.error_string = result.error_string or 'goal reached'
+            goal_handle.succeed()
+        else:
+            goal_handle.abort()
+        return result
+
+    async def gripper_command_callback(self, goal_handle):
+        """A GripperCommand goal: per-finger position, grasp force; the result says where the fingers stopped."""
+        command = goal_handle.request.command
+        result = GripperCommand.Result()
+        try:
+            self.twin.grip(float(command.position), float(command.max_effort))
+        except RadError as e:
+            self.get_logger().error(f'gripper goal refused: {e}')
+            result.position = float(self.world.joint_positions()[7:].mean())
+            goal_handle.abort()
+            return result
+        self.twin.gripper_result = None
+        done = self.gripper_done = Future()
+        while not done.done():
+            if goal_handle.is_cancel_requested:
+                stopped = self.twin.cancel_gripper()
+                result.position = stopped.position if stopped else float(self.world.joint_positions()[7:].mean())
+                goal_handle.canceled()
+                return result
+            await _tick(self)
+        r = done.result()
+        result.position, result.effort, result.stalled, result.reached_goal = (
+            float(r.position), float(r.effort), bool(r.stalled), bool(r.reached_goal))
+        (goal_handle.succeed if r.reached_goal else goal_handle.abort)()
+        return result
 
     def load_scene_callback(self, request, response):
         try:
@@ -187,6 +297,20 @@ class TwinNode(Node):
         self.world.set_block_pose(request.block_id, position, quaternion)
         response.success = True
         return response
+
+
+def _tolerance(tolerances) -> float:
+    """One position tolerance for all joints from a goal's JointTolerance list: the tightest
+    positive one (0 or -1 leave the twin's default, as in joint_trajectory_controller)."""
+    values = [float(t.position) for t in tolerances if t.position > 0]
+    return min(values) if values else 0.0
+
+
+async def _tick(node: TwinNode) -> None:
+    """Wait, without blocking the node's one thread, until the next timer tick."""
+    wake = Future()
+    node.wakers.append(wake)
+    await wake
 
 
 main = main_for(TwinNode)

@@ -39,11 +39,11 @@ from rad_core.gamp.collision import (CollisionConfig, attachment_from_world, che
                                      make_collision_fn)
 from rad_core.gamp.grasps import MAX_GRASP_WIDTH, Grasp, block_grasps
 from rad_core.gamp.ik import IkConfig, hand_yaw_options, solve_top_down
-from rad_core.gamp.trajectory import TimingConfig, time_parameterize
+from rad_core.gamp.trajectory import TimingConfig, plan_motion
+from rad_core.motion import Motion
 from rad_core.scene import Scene
 from rad_core.sim import panda
 from rad_core.sim.world import World
-from rad_core.trajectory import Trajectory
 from rad_core.transforms import matrix_from_quaternion, yaw_matrix, yaw_of_quaternion, yaw_quaternion
 
 
@@ -80,9 +80,9 @@ class GampConfig:
 class GampResult:
     """What GAMP says about one action.
 
-    trajectory: all 9 joints; grasp_index is the point at which the fingers have
-    closed on the block (an executor attaches it there), release_index the point
-    at which they have opened again (detach). Timings in seconds.
+    motion: the arm trajectories (7 joints, timed within the robot model's limits)
+    and gripper commands that do it, in order (`rad_core.motion.Motion`). Timings
+    in seconds.
     """
 
     success: bool
@@ -90,9 +90,7 @@ class GampResult:
     reason: str = ''
     grasp: Grasp | None = None
     hand_yaw_deg: float = 0.0         # hand yaw at the grasp
-    trajectory: Trajectory | None = None
-    grasp_index: int = -1
-    release_index: int = -1
+    motion: Motion | None = None
     timings: dict = field(default_factory=lambda: {'ik_s': 0.0, 'collision_s': 0.0, 'total_s': 0.0})
     ik_calls: int = 0
 
@@ -200,11 +198,8 @@ def plan_action(world: World, block_id: str, position, yaw_deg: float, start=Non
                     place_reason = place_reason or str(e)
                     world.set_block_pose(block_id, block_pos, block_quat)
                     continue
-                waypoints = pick['waypoints'] + place['waypoints']
-                stops = pick['stops'] + place['stops']
-                result.trajectory = time_parameterize(start, waypoints, stops, config.timing)
-                result.grasp_index = pick['grasp_index']
-                result.release_index = len(pick['waypoints']) + place['release_index']
+                result.motion = plan_motion(start, pick['waypoints'] + place['waypoints'], config.timing,
+                                            grasp_expected=width / 2)
                 result.grasp, result.hand_yaw_deg = grasp, math.degrees(hand_yaw)
                 result.success = True
                 return _finish(result, '', '', clock, t0)
@@ -239,9 +234,8 @@ def _plan_pick(world, block_id, grasp_point, hand_yaw, start, open_f, closed_f, 
     q_closed = _with_fingers(q_grasp, closed_f)
     lift = [_with_fingers(q, closed_f) for q in column]
     _check_column(carry, q_closed, lift, config, 'lifting the block', 'lifting the block')
-    waypoints, stops = _down_and_up(column, q_grasp, q_closed, lift)
-    return {'waypoints': waypoints, 'stops': stops, 'grasp_index': len(column) + 1,
-            'attachment': attachment, 'carry': carry, 'top': lift[-1]}
+    return {'waypoints': _down_and_up(column, q_grasp, q_closed, lift), 'attachment': attachment,
+            'carry': carry, 'top': lift[-1]}
 
 
 def _plan_place(world, block_id, pick, place_point, position, yaw_deg, hand_yaw, open_f, rise, config,
@@ -260,8 +254,7 @@ def _plan_place(world, block_id, pick, place_point, position, yaw_deg, hand_yaw,
     _probe(after, q_open, 'opening the fingers')
     retreat = [_with_fingers(q, open_f) for q in column]
     _check_column(after, q_open, retreat, config, 'on the retreat', 'on the retreat')
-    waypoints, stops = _down_and_up(column, q_place, q_open, retreat)
-    return {'waypoints': waypoints, 'stops': stops, 'release_index': len(column) + 1}
+    return {'waypoints': _down_and_up(column, q_place, q_open, retreat)}
 
 
 def _ik(world, point, hand_yaw, seeds, fingers, config, clock, rng, where) -> np.ndarray:
@@ -314,13 +307,9 @@ def _check_column(fn, q_bottom, column, config, probe_where, segment_where) -> N
         q_prev = q
 
 
-def _down_and_up(column, q_at, q_gripped, up) -> tuple[list[np.ndarray], list[bool]]:
-    """Waypoints down a column (given bottom up) to q_at, the gripper acting (q_gripped), back up;
-    and their stop flags: at rest on top, at the bottom before and after the gripper acts."""
-    down = column[::-1]
-    waypoints = down + [q_at, q_gripped] + up
-    stops = [True] + [False] * (len(down) - 1) + [True, True] + [False] * (len(up) - 1) + [True]
-    return waypoints, stops
+def _down_and_up(column, q_at, q_gripped, up) -> list[np.ndarray]:
+    """Waypoints down a column (given bottom up) to q_at, the gripper acting (q_gripped), back up."""
+    return column[::-1] + [q_at, q_gripped] + up
 
 
 def _finish(result: GampResult, failure: str, reason: str, clock: _Clock, t0: float) -> GampResult:

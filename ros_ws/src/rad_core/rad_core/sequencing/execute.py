@@ -1,8 +1,15 @@
 """Execute an assembly on a plant: plan, run each step, verify it, replan on deviation.
 
 `execute_assembly` knows nothing of ROS: the plant and the planner come in as
-callables, so /execute_assembly passes DDS glue (a trajectory topic, joint states,
-motion capture) and tests pass an in-process `rad_core.sim.twin.Twin`.
+callables, so /execute_assembly passes DDS glue (the arm controller's
+FollowJointTrajectory and the hand's GripperCommand actions, joint states, motion
+capture) and tests pass an in-process `rad_core.sim.twin.Twin`.
+
+A step runs its arm trajectories and gripper commands in order
+(`rad_core.motion.run_motion`). A trajectory the controller refuses or aborts ends
+the run with the controller's reason. A grasp that holds nothing (the width the
+hand reports after closing) ends the step like a deviation: the hand opens, the
+world is registered and, with `replan`, a new plan starts from it.
 
 After each step the world is registered again and compared with what the plan
 expected (`result.deviation`). A step that left the world other than planned (a
@@ -22,8 +29,10 @@ import numpy as np
 
 from rad_core.allocation.result import AllocationResult
 from rad_core.errors import RadError
+from rad_core.motion import GripperCommand, GripperResult, Motion, run_motion
 from rad_core.scene import Scene
 from rad_core.sequencing.plan import AssemblyPlan, moved
+from rad_core.sim.panda import FINGER_OPEN
 from rad_core.sequencing.result import deviation, measured_coverage, result_document
 
 
@@ -71,19 +80,20 @@ class ExecutionResult:
 
 
 Plan = Callable[[Scene, 'np.ndarray | None'], AssemblyPlan]   # scene, start joints (None: home)
-Send = Callable[[dict], None]        # run a trajectory to its end; RadError if the plant does not finish
+MoveArm = Callable[[dict], None]     # run an arm trajectory to its end; RadError if refused or aborted
+MoveGripper = Callable[[GripperCommand], GripperResult]   # run a gripper command, return what the hand says
 Register = Callable[[], Scene]       # the world as measured now; RadError if it cannot be
 Report = Callable[[int, int, str, str, str], None]   # (steps done, steps planned, block, phase, message)
 
 
-def execute_assembly(scene: Scene, plan: Plan, send: Send, register: Register,
+def execute_assembly(scene: Scene, plan: Plan, move_arm: MoveArm, move_gripper: MoveGripper, register: Register,
                      config: ExecuteConfig = ExecuteConfig(), joints: Callable[[], 'np.ndarray | None'] | None = None,
                      cancelled: Callable[[], bool] = lambda: False, report: Report | None = None,
                      settle: Callable[[float], None] = time.sleep) -> ExecutionResult:
     """Build `scene` on the plant; never raises RadError (it becomes the result's reason).
 
-    joints: the robot's joints now, for each plan's start (None: home); without it,
-    every plan starts where the last executed trajectory ended (home at first).
+    joints: the robot's joints now (arm and fingers), for each plan's start (None: home); without
+    it, every plan starts where the last executed motion ended (home at first).
     settle(seconds): let the plant come to rest (a real plant: wait; a twin: step it).
     Phases reported: planning, executing, verifying, replanning, done.
     """
@@ -105,15 +115,22 @@ def execute_assembly(scene: Scene, plan: Plan, send: Send, register: Register,
                 if cancelled():
                     raise RadError('cancelled')
                 report(len(result.steps), len(assembly.steps), step.block, 'executing', '')
-                send(step.trajectory)
-                last_q = np.asarray(step.trajectory['points'][-1]['positions'])
+                motion = Motion.from_dict(step.motion)
+                failed = run_motion(motion, move_arm, move_gripper)
+                last_q = motion.final_joints()
+                if failed:      # let go of whatever the hand has, before the world is measured
+                    opening = next((g.position for g in motion.gripper if g.action != 'grasp'), FINGER_OPEN)
+                    move_gripper(GripperCommand('open', opening, 0.0, 0))
+                    if joints is None:
+                        raise RadError(f'{failed} (and without joint states the robot cannot replan from where '
+                                       'it stopped)')
                 settle(config.settle_s)
-                report(len(result.steps), len(assembly.steps), step.block, 'verifying', '')
+                report(len(result.steps), len(assembly.steps), step.block, 'verifying', failed)
                 expected = moved(current, step.block, step.position, step.yaw)
                 current = register()
                 result.final_scene = current
-                result.steps.append(step.to_dict())
-                problem = deviation(expected, current, config.position_tol)
+                result.steps.append({**step.to_dict(), **({'failure': failed} if failed else {})})
+                problem = failed or deviation(expected, current, config.position_tol)
                 if problem is not None:
                     break
             if problem is None:

@@ -8,7 +8,7 @@ Each step: the sequencer ranks the allocation's allowed actions; the best one
 whose motion GAMP finds feasible from the current state is taken (so a plan never
 commands an action that fails in the planning copy); the planning copy of the
 scene then has that block at its allocated pose, and the next step starts from
-the last trajectory's final joints.
+where the last step's motion left the arm and the hand.
 
 The sequencer is either a `Policy` scoring the MDP state in-process, or a `Rank`
 callable asked with the planning copy's scene, the allocation and the start joints
@@ -34,6 +34,7 @@ import numpy as np
 from rad_core.allocation.result import AllocationResult
 from rad_core.gamp.action import SceneAction
 from rad_core.mdp import Action, AssemblyEnv, EnvConfig
+from rad_core.motion import Motion
 from rad_core.scene import Block, Scene
 from rad_core.sequencing.actions import AllocationActions, scene_action
 from rad_core.sequencing.episode import Decision, run_episode, stop
@@ -48,17 +49,19 @@ class MotionPlan:
     failure: str = ''
     reason: str = ''
     grasp: tuple[int, int] = (0, 0)   # unit, yaw
-    trajectory: dict | None = None    # {"joint_names", "points": [...]}
+    motion: dict | None = None        # rad_core.motion.Motion.to_dict(): {"trajectories", "gripper"}
 
 
 @dataclass
 class PlanStep:
     """One step of a plan: a block, the allocated pose it goes to (type, target region, yaw,
-    region-local cells) and how (MDP unit, cell and rotation, grasp, anchor position, trajectory).
+    region-local cells) and how (MDP unit, cell and rotation, grasp, anchor position, and the motion:
+    arm trajectories and gripper commands in order, `rad_core.motion.Motion.to_dict()`).
 
     Its `to_dict` form is a step of rad-result/1 and of the plan_json topic (there without the
-    trajectory); `from_dict` reads it back. Only block to cells are required: a step read from a
-    document that lacks the rest has the defaults (0, empty, None for the trajectory).
+    motion); the motion's "trajectories" (exactly as sent to the arm controller) and "gripper"
+    commands are keys of the step. `from_dict` reads it back. Only block to cells are required: a
+    step read from a document that lacks the rest has the defaults (0, empty, None for the motion).
     """
 
     block: str
@@ -71,13 +74,13 @@ class PlanStep:
     rotation: int = 0
     grasp: tuple[int, int] = (0, 0)
     position: list[float] = field(default_factory=list)
-    trajectory: dict | None = None
+    motion: dict | None = None
 
     def to_dict(self) -> dict:
         return {'block': self.block, 'type': self.type, 'target': self.target, 'yaw': self.yaw,
                 'cells': self.cells, 'unit': self.unit, 'cell': self.cell, 'rotation': self.rotation,
                 'grasp': {'unit': self.grasp[0], 'yaw': self.grasp[1]}, 'position': self.position,
-                'trajectory': self.trajectory}
+                **(self.motion or {'trajectories': [], 'gripper': []})}
 
     @classmethod
     def from_dict(cls, d: dict) -> PlanStep:
@@ -92,7 +95,13 @@ class PlanStep:
                    [[int(v) for v in c] for c in d['cells']], int(d.get('unit', 0)),
                    [int(v) for v in d.get('cell', ())], int(d.get('rotation', 0)),
                    (int(grasp.get('unit', 0)), int(grasp.get('yaw', 0))),
-                   [float(v) for v in d.get('position', ())], d.get('trajectory'))
+                   [float(v) for v in d.get('position', ())],
+                   {'trajectories': d['trajectories'], 'gripper': d.get('gripper') or []}
+                   if d.get('trajectories') else None)
+
+    def final_joints(self) -> np.ndarray:
+        """The 9 joints (arm, fingers) where this step's motion leaves the robot."""
+        return Motion.from_dict(self.motion).final_joints()
 
 
 @dataclass
@@ -193,7 +202,7 @@ def plan_assembly(scene: Scene, allocate: Allocate, plan_motion: PlanMotion, seq
             step = decision.plan
             plan.steps.append(step)
             world['scene'] = moved(world['scene'], step.block, step.position, step.yaw)
-            world['q'] = np.asarray(step.trajectory['points'][-1]['positions'])
+            world['q'] = step.final_joints()
         return result
 
     reallocator = None
@@ -258,7 +267,7 @@ def _first_feasible(env: AssemblyEnv, scene: Scene, ranked, plan_motion: PlanMot
     req, block = scene_action(env, action), scene.blocks[action.block]
     anchor = env.grid.centres[cells[0]]   # cells are in unit order: the first is the anchor's
     return action, PlanStep(block.id, block.type, req.target, int(yaw), ijk, action.unit, list(req.cell),
-                            action.rotation, motion.grasp, [float(v) for v in anchor], motion.trajectory)
+                            action.rotation, motion.grasp, [float(v) for v in anchor], motion.motion)
 
 
 def _done(plan: AssemblyPlan, t0: float) -> AssemblyPlan:
@@ -273,5 +282,5 @@ def local_motion_planner(planner) -> PlanMotion:
         if not result.success:
             return MotionPlan(False, result.failure, result.reason)
         return MotionPlan(True, '', '', (int(result.grasp.unit), int(result.grasp.yaw)),
-                          result.trajectory.to_dict())
+                          result.motion.to_dict())
     return plan_motion

@@ -1,8 +1,10 @@
 """The Franka Panda of pybullet_data (franka_panda/panda.urdf) as rad uses it.
 
-Fixed base at the world origin, standing on the table top (z = 0). Joint limits
-and velocity limits are read from the URDF itself (plain XML, no pybullet
-import), so they always match the model that is simulated.
+Fixed base at the world origin, standing on the table top (z = 0). Joint
+position limits: the arm's are Franka's published ranges, narrower than the
+URDF's by about 0.07 rad (`rad_core.robot_model.PLANNING_LOWER`/`UPPER`: valid on
+the Panda and the FR3); the fingers' and the velocity limits are read from the URDF
+itself (plain XML, no pybullet import).
 
 Geometry worth knowing (measured in pybullet):
 - link indices: arm joints 0-6, fixed panda_joint8 (7) and panda_hand_joint (8),
@@ -24,6 +26,8 @@ from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
+
+from rad_core.robot_model import PLANNING_LOWER, PLANNING_UPPER
 
 URDF_RELATIVE = 'franka_panda/panda.urdf'
 
@@ -69,14 +73,17 @@ def _limits() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return np.array(lower), np.array(upper), np.array(velocity)
 
 
-LOWER, UPPER, VELOCITY_LIMITS = (a.copy() for a in _limits())
-"""Joint limits (rad, or m for the fingers) and velocity limits, (9,) in JOINT_NAMES order."""
-for _a in (LOWER, UPPER, VELOCITY_LIMITS):
+URDF_LOWER, URDF_UPPER, VELOCITY_LIMITS = (a.copy() for a in _limits())
+"""The URDF's joint limits (rad, or m for the fingers) and velocity limits, (9,) in JOINT_NAMES order."""
+LOWER = np.concatenate([np.maximum(PLANNING_LOWER, URDF_LOWER[:7]), URDF_LOWER[7:]])
+UPPER = np.concatenate([np.minimum(PLANNING_UPPER, URDF_UPPER[:7]), URDF_UPPER[7:]])
+"""The joint range every plan keeps to, (9,) in JOINT_NAMES order: Franka's published arm limits."""
+for _a in (URDF_LOWER, URDF_UPPER, LOWER, UPPER, VELOCITY_LIMITS):
     _a.setflags(write=False)
 
 
 def within_limits(q, tol: float = 1e-6) -> bool:
-    """True when every joint of a (9,) or (7,) vector is inside its URDF limits."""
+    """True when every joint of a (9,) or (7,) vector is inside the planning range (LOWER, UPPER)."""
     q = np.asarray(q, dtype=float)
     n = len(q)
     return bool(np.all(q >= LOWER[:n] - tol) and np.all(q <= UPPER[:n] + tol))

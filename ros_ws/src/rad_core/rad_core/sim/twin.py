@@ -1,36 +1,41 @@
-"""The twin's execution core: a World driven like the real cell's controllers.
+"""The twin's execution core: a World driven like a real Franka cell's controllers.
 
-`Twin` is the plant the rad_sim node wraps. It accepts joint trajectories the
-way a ros2_control joint_trajectory_controller does (joint names in any order,
-a subset allowed, points at ``time_from_start``; a new trajectory replaces the
-running one; joints not named hold their last command) and steps physics with
-position control, so the arm moves with the Panda's torque limits and blocks
-react to it.
+`Twin` is the plant the rad_sim node wraps, as strict as the real robot. The arm
+takes trajectories the way a franka_ros2 joint_trajectory_controller does: the
+robot model's 7 arm joints only (any order; finger joints are refused, they
+belong to the gripper), checked before anything moves (`parse_trajectory`), and
+the interpolated motion from where the arm is, sampled at 1 kHz, within the
+model's velocity, acceleration and jerk limits (`limit_violation`): a trajectory
+a real Franka would stop on is refused with the controller's error code
+(`TrajectoryRejected`). It is followed by the controller's interpolation
+(`rad_core.trajectory.Spline`: quintic with accelerations), with path and goal
+tolerances; the report carries the FollowJointTrajectory error code. A new
+trajectory replaces the running one; `cancel` stops the arm where it is.
+
+The hand takes GripperCommand goals as franka_gripper's gripper_action does:
+`position` per finger (m), opening is a move at the gripper's speed, closing is a
+grasp with `max_effort` (N) that succeeds when the fingers stop within
+`grasp_epsilon` (of the width) of the commanded width; the result reports where
+the fingers stopped.
 
 Two ways to drive it, both on the same state:
-- ``start(trajectory)`` then ``advance(seconds)`` in slices: a node calls
-  advance from its timer with wall time x a real-time factor, publishing joint
-  states and motion capture between slices, so ROS callbacks interleave.
-- ``execute(trajectory, callback=..., real_time_factor=...)``: runs to the end
-  in one call (tests, benchmarks, the MDP), optionally paced to wall time.
-
-A trajectory is a `rad_core.trajectory.Trajectory` (as GAMP plans it) or its
-dict form (as rad_ros.motion converts a JointTrajectory message). Each is
-validated in full (`parse_trajectory`) before anything moves; a bad one raises
-RadError and leaves the world as it was.
+- ``start(trajectory)`` / ``grip(position, effort)`` then ``advance(seconds)`` in
+  slices: a node calls advance from its timer with wall time x a real-time factor,
+  publishing joint states and motion capture between slices.
+- ``execute(trajectory)``, ``execute_gripper(command)``, ``execute_motion(motion)``:
+  run to the end in one call (tests, benchmarks, the MDP), optionally paced.
 
 Grasping is a contact-checked attachment, as in the predecessor. When the
-gripper is commanded to close (the finger targets fall below the open width and
-below where the fingers are) and both finger links touch the same block, that
-block is fixed to the hand with a JOINT_FIXED constraint at its current relative
-pose; when the fingers are commanded open past the width they held it at, the
-constraint is removed. The fingers still close physically (20 N each) and the
-block still collides with everything, so a grasp of a block that is not between
-the fingers, or a carried block that hits something, behaves as it would. Why
-not pure friction: friction grasps in Bullet slip and rotate slowly under
-transport (and differently from run to run as contact sets change), which
-would make a placement's outcome depend on solver noise rather than on the
-plan; the attachment makes transport stable and reproducible.
+fingers are closing and both finger links touch the same block, that block is
+fixed to the hand with a JOINT_FIXED constraint at its current relative pose;
+when the fingers open past the width they held it at, the constraint is removed.
+The fingers still close physically (with the grasp's force) and the block still
+collides with everything, so a grasp of a block that is not between the fingers,
+or a carried block that hits something, behaves as it would. Why not pure
+friction: friction grasps in Bullet slip and rotate slowly under transport (and
+differently from run to run as contact sets change), which would make a
+placement's outcome depend on solver noise rather than on the plan; the
+attachment makes transport stable and reproducible.
 """
 
 from __future__ import annotations
@@ -42,21 +47,46 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from rad_core.errors import RadError
+from rad_core.motion import GripperCommand, GripperResult, Motion, run_motion
+from rad_core.robot_model import RobotModel, robot_model
 from rad_core.scene import Scene
 from rad_core.sim import panda
 from rad_core.sim.mocap import RegistrationConfig, RigidBodyPose, register_scene
-from rad_core.sim.panda import JOINT_NAMES
 from rad_core.sim.world import World
-from rad_core.trajectory import Trajectory, parse_trajectory
+from rad_core.trajectory import (GOAL_TOLERANCE_VIOLATED, INVALID_GOAL, PATH_TOLERANCE_VIOLATED, SUCCESSFUL,
+                                 Spline, Trajectory, TrajectoryRejected, limit_violation, parse_trajectory)
+
+
+@dataclass(frozen=True)
+class Tolerances:
+    """A FollowJointTrajectory goal's tolerances (one value for every arm joint; 0 = the twin's default)."""
+
+    path: float = 0.0
+    """Largest |actual - desired| (rad) of any arm joint while the trajectory runs."""
+    goal: float = 0.0
+    """Largest |actual - last point| (rad) at the end."""
+    goal_time: float = 0.0
+    """How long (s) after the last point's time the arm may take to come within `goal`."""
+
 
 @dataclass(frozen=True)
 class TwinConfig:
     """Controller and gripper settings (SI units; fingers in metres per finger)."""
 
+    robot: str = 'panda'
+    """Robot model whose joint names and limits the twin enforces ('panda' | 'fr3'); the simulated
+    arm is the Panda URDF (the FR3 shares its kinematics)."""
+    joint_prefix: str = ''
+    """Joint names `<prefix>_joint1..7` ('' = the model's)."""
+
     arm_forces: tuple[float, ...] = (87.0, 87.0, 87.0, 87.0, 12.0, 12.0, 12.0)
     """Motor torque limits (N m) of joints 1-7: the Panda's rated maxima."""
     finger_force: float = 20.0
-    """Force of each finger motor (N); a Panda hand squeezes with up to 70 N continuous."""
+    """Force of each finger motor (N) when moving (not grasping)."""
+    gripper_speed: float = 0.05
+    """Finger speed (m/s per finger; franka_gripper's default 0.1 m/s of width)."""
+    grasp_epsilon: float = 0.005
+    """A grasp succeeds when the width stops this close (m) to the commanded width (franka_gripper's default)."""
     position_gain: float = 0.3
     """Bullet position-control gain kp (fraction of the position error removed per step)."""
     velocity_gain: float = 1.0
@@ -64,9 +94,11 @@ class TwinConfig:
     limit_tol: float = 1e-3
     """Positions this far (rad or m) beyond a joint limit are still accepted (rounding in planners)."""
     goal_time: float = 0.5
-    """After the last point, hold at most this long (s) for the arm to reach it."""
+    """After the last point, hold at most this long (s) for the arm to reach it (unless a goal says)."""
     goal_tol: float = 1e-3
-    """The arm counts as arrived when every named arm joint is this close (rad) to the last point."""
+    """The arm counts as arrived when every arm joint is this close (rad) to the last point (unless a goal says)."""
+    path_tol: float = 0.0
+    """Largest tracking error (rad) while moving before the run aborts (0: not enforced, unless a goal says)."""
     close_margin: float = 5e-4
     """Closing = finger target this far (m) below both the open width and the finger position."""
     release_margin: float = 2e-3
@@ -75,9 +107,11 @@ class TwinConfig:
     """Strength (N) of the attachment constraint; far above any load a block puts on it."""
 
     def __post_init__(self):
+        robot_model(self.robot, self.joint_prefix)
         values = list(self.arm_forces) + [self.finger_force, self.position_gain, self.velocity_gain,
                                           self.limit_tol, self.goal_time, self.goal_tol, self.close_margin,
-                                          self.release_margin, self.attach_max_force]
+                                          self.release_margin, self.attach_max_force, self.gripper_speed,
+                                          self.grasp_epsilon, self.path_tol]
         if len(self.arm_forces) != 7 or not all(isinstance(v, (int, float)) and math.isfinite(v) and v >= 0
                                                  for v in values):
             raise RadError('twin config: expected 7 arm forces and finite, non-negative settings')
@@ -98,6 +132,8 @@ class ExecutionReport:
     compute_time: float = 0.0             # of which stepping and control (s)
     steps: int = 0
     preempted: bool = False
+    error_code: int = SUCCESSFUL          # control_msgs/FollowJointTrajectory result code
+    error_string: str = ''
 
     @property
     def real_time_factor(self) -> float:
@@ -114,45 +150,38 @@ class ExecutionReport:
                 'final_error': self.final_error, 'max_tracking_error': self.max_tracking_error,
                 'grasp_events': list(self.grasp_events), 'duration': self.duration, 'sim_time': self.sim_time,
                 'wall_time': self.wall_time, 'real_time_factor': self.real_time_factor,
-                'compute_factor': self.compute_factor, 'steps': self.steps, 'preempted': self.preempted}
+                'compute_factor': self.compute_factor, 'steps': self.steps, 'preempted': self.preempted,
+                'error_code': self.error_code, 'error_string': self.error_string}
 
 
 class _Run:
-    """One trajectory being executed: its interpolant and its running figures."""
+    """One arm trajectory being executed: the controller's interpolant and the running figures."""
 
-    def __init__(self, traj: Trajectory, start_q: np.ndarray):
-        """traj: validated (`parse_trajectory`)."""
-        self.joints = np.array([JOINT_NAMES.index(n) for n in traj.joint_names])
-        k = len(self.joints)
-        times, pos = traj.times(), traj.positions()
-        vel = np.array([pt.velocities for pt in traj.points]) if traj.points[0].velocities else None
-        if times[0] > 0:               # the controller starts from where the joints are
-            times = np.concatenate([[0.0], times])
-            pos = np.vstack([start_q[self.joints], pos])
-            vel = None if vel is None else np.vstack([np.zeros(k), vel])
-        self.times, self.pos, self.vel = times, pos, vel
+    def __init__(self, traj: Trajectory, start_q: np.ndarray, tolerances: Tolerances, config: TwinConfig):
+        """traj: parsed (`parse_trajectory`), in the model's joint order."""
+        self.spline = Spline(traj, start_q[:7])
+        self.path_tol = tolerances.path or config.path_tol
+        self.goal_tol = tolerances.goal or config.goal_tol
+        self.goal_time = tolerances.goal_time or config.goal_time
         self.t = 0.0
         self.max_error = 0.0
-        self.arm = self.joints < 7
         self.report = ExecutionReport(traj.joint_names, start_q, math.nan, 0.0, duration=traj.duration)
         self.wall_start = time.perf_counter()
 
     def command(self, t: float) -> tuple[np.ndarray, np.ndarray]:
-        """Commanded positions and velocities of the named joints at time t."""
-        times = self.times
-        if t >= times[-1] or len(times) == 1:
-            return self.pos[-1], np.zeros(len(self.joints))
-        i = max(int(np.searchsorted(times, t, side='right')) - 1, 0)
-        h = times[i + 1] - times[i]
-        s = (t - times[i]) / h
-        p0, p1 = self.pos[i], self.pos[i + 1]
-        if self.vel is None:
-            return p0 + s * (p1 - p0), (p1 - p0) / h
-        m0, m1 = self.vel[i] * h, self.vel[i + 1] * h      # cubic Hermite on [0, 1]
-        s2, s3 = s * s, s * s * s
-        q = (2 * s3 - 3 * s2 + 1) * p0 + (s3 - 2 * s2 + s) * m0 + (-2 * s3 + 3 * s2) * p1 + (s3 - s2) * m1
-        dq = ((6 * s2 - 6 * s) * p0 + (3 * s2 - 4 * s + 1) * m0 + (-6 * s2 + 6 * s) * p1 + (3 * s2 - 2 * s) * m1) / h
+        """Commanded arm positions and velocities at time t."""
+        q, dq, _ = self.spline(t)
         return q, dq
+
+
+class _Grip:
+    """One gripper command being executed."""
+
+    def __init__(self, position: float, max_effort: float, start: float, closing: bool):
+        self.goal, self.effort, self.closing = position, max_effort, closing
+        self.target = start            # the finger command, moving to the goal at the gripper's speed
+        self.t = 0.0
+        self.still = 0.0               # s the fingers have not moved
 
 
 class Twin:
@@ -169,10 +198,13 @@ class Twin:
         self.world = world
         self.config = config
         self.dt = float(world.config.physics.time_step)
+        self.model: RobotModel = robot_model(config.robot, config.joint_prefix)
         self._forces = [*config.arm_forces, config.finger_force, config.finger_force]
         self._target = world.joint_positions()
         self._target_vel = np.zeros(9)
         self._run: _Run | None = None
+        self._grip: _Grip | None = None
+        self.gripper_result: GripperResult | None = None   # of the last gripper command that finished
         self._carry = 0.0             # simulated time owed to advance() (less than one step)
         self.time = 0.0               # simulated seconds since the twin was made
         self.attached: tuple[str, int] | None = None   # (block id, constraint id)
@@ -185,6 +217,8 @@ class Twin:
         """Hold the joints where they are now and forget a grasp whose block is gone."""
         self._target = self.world.joint_positions()
         self._target_vel = np.zeros(9)
+        self._grip = None
+        self._forces[7:] = [self.config.finger_force] * 2
         if self.attached is not None and self.attached[0] not in self.world.blocks:
             self.attached = None
         self._apply()
@@ -192,16 +226,21 @@ class Twin:
     def load_scene(self, scene: Scene) -> None:
         """Replace the blocks (robot back at HOME); a running trajectory is dropped."""
         self._release()
-        self._run = None
+        self._run = self._grip = None
         self.world.load_scene(scene)
         self.sync()
 
     @property
     def busy(self) -> bool:
-        return self._run is not None
+        return self._run is not None or self._grip is not None
+
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        """The model's 7 arm and 2 finger joints, in world order."""
+        return self.model.arm_joint_names + self.model.finger_joint_names
 
     def joint_state(self) -> tuple[tuple[str, ...], np.ndarray, np.ndarray]:
-        return JOINT_NAMES, self.world.joint_positions(), self.world.joint_velocities()
+        return self.joint_names, self.world.joint_positions(), self.world.joint_velocities()
 
     def block_poses(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
         return {bid: self.world.block_pose(bid) for bid in self.world.blocks}
@@ -227,34 +266,59 @@ class Twin:
         return register_scene(self.bodies(), template, config)
 
     # ---- commands ----------------------------------------------------------
-    def start(self, trajectory: Trajectory | dict) -> dict:
-        """Validate and begin a trajectory, replacing any running one; returns a summary.
+    def start(self, trajectory: Trajectory | dict, tolerances: Tolerances = Tolerances()) -> dict:
+        """Check and begin an arm trajectory, replacing any running one; returns a summary.
 
-        Raises RadError (nothing changes) when the trajectory is invalid.
+        Raises `TrajectoryRejected` (nothing changes) when the controller would
+        refuse it: joint names (INVALID_JOINTS), or points, positions, or the
+        interpolated motion from where the arm is over the model's limits (INVALID_GOAL).
         """
-        traj = parse_trajectory(trajectory, self.config.limit_tol)
+        traj = parse_trajectory(trajectory, self.model, self.config.limit_tol)
+        if not all(math.isfinite(x) and x >= 0 for x in (tolerances.path, tolerances.goal, tolerances.goal_time)):
+            raise TrajectoryRejected(INVALID_GOAL, 'tolerances must be finite and >= 0')
+        start_q = self._target[:7].copy()
+        why = limit_violation(traj, start_q, self.model)
+        if why:
+            raise TrajectoryRejected(INVALID_GOAL, f'over the {self.model.name}\'s limits: {why}')
         if self._run is not None:
             self._finish(preempted=True)
-        self._run = _Run(traj, self._target.copy())
+        self._run = _Run(traj, start_q, tolerances, self.config)
         self._events = []
         return {'joints': list(traj.joint_names), 'points': len(traj.points), 'duration': traj.duration}
 
     def cancel(self) -> ExecutionReport | None:
-        """Stop the running trajectory and hold where the joints are."""
+        """Stop the running arm trajectory and hold where the joints are."""
         if self._run is None:
             return None
         report = self._finish(preempted=True)
-        q = self.world.joint_positions()
-        self._target[:7] = q[:7]
-        self._target_vel[:] = 0.0
-        self._apply()
+        self._hold_here()
         return report
+
+    def grip(self, position: float, max_effort: float) -> None:
+        """Begin a gripper command (per-finger position, m; grasp force, N), replacing a running one."""
+        if not (math.isfinite(position) and 0.0 <= position <= panda.FINGER_OPEN + 1e-6):
+            raise RadError(f'gripper: position {position} is outside the hand\'s range '
+                           f'[0, {panda.FINGER_OPEN}] m per finger')
+        if not (math.isfinite(max_effort) and max_effort >= 0):
+            raise RadError(f'gripper: max_effort must be finite and >= 0, got {max_effort}')
+        now = float(self.world.joint_positions()[7:].mean())
+        closing = position < now - 1e-4
+        self._grip = _Grip(min(position, panda.FINGER_OPEN), max_effort, float(self._target[7:].mean()), closing)
+        force = max_effort if closing and max_effort > 0 else self.config.finger_force
+        self._forces[7:] = [force, force]
+
+    def cancel_gripper(self) -> GripperResult | None:
+        """Stop the hand where it is."""
+        if self._grip is None:
+            return None
+        return self._finish_grip(stop=True)
 
     def advance(self, seconds: float) -> dict | None:
         """Simulate `seconds` more (whole steps; the remainder carries over).
 
-        Returns the finished trajectory's report as a dict when one completes
-        within this slice, else None. Without a trajectory the robot holds.
+        Returns the finished arm trajectory's report as a dict when one completes
+        within this slice, else None (a finished gripper command leaves its result
+        in `gripper_result`). Without commands the robot holds.
         """
         if not (math.isfinite(seconds) and seconds >= 0):
             raise RadError(f'advance: seconds must be finite and >= 0, got {seconds!r}')
@@ -265,31 +329,62 @@ class Twin:
         return None if report is None else report.as_dict()
 
     def settle(self, seconds: float) -> None:
-        """Let physics run for `seconds`: the robot holds its command (a running trajectory goes on)."""
+        """Let physics run for `seconds`: the robot holds its command (a running one goes on)."""
         self.advance(seconds)
 
     def execute(self, trajectory: Trajectory | dict, callback=None, callback_period: float = 0.02,
-                real_time_factor: float | None = None) -> ExecutionReport:
-        """Run a trajectory to its end (goal hold included) and report.
+                real_time_factor: float | None = None, tolerances: Tolerances = Tolerances()) -> ExecutionReport:
+        """Run an arm trajectory to its end (goal hold included) and report (its error_code says how it ended).
 
         callback(twin) is called every `callback_period` simulated seconds (to
         publish state); real_time_factor paces the run to that many simulated
         seconds per wall second (1.0 = real time, None = as fast as possible).
+        Raises `TrajectoryRejected` when the trajectory is refused.
         """
-        self.start(trajectory)
+        self.start(trajectory, tolerances)
+        wall0 = time.perf_counter()
+        report = self._run_until(lambda: self._run is None, callback, callback_period, real_time_factor)
+        report.wall_time = time.perf_counter() - wall0
+        return report
+
+    def execute_gripper(self, command: GripperCommand, callback=None, callback_period: float = 0.02,
+                        real_time_factor: float | None = None) -> GripperResult:
+        """Run a gripper command to its end and return what the gripper action would answer."""
+        self.grip(command.position, command.max_effort)
+        self._run_until(lambda: self._grip is None, callback, callback_period, real_time_factor)
+        return self.gripper_result
+
+    def execute_motion(self, motion: Motion, callback=None, real_time_factor: float | None = None) -> str:
+        """Run a step's commands in order (`rad_core.motion.run_motion`); '' when all went through, else
+        why the step stopped: a refused or aborted trajectory, or a grasp that holds nothing."""
+        def move_arm(trajectory):
+            report = self.execute(trajectory, callback, real_time_factor=real_time_factor)
+            if report.error_code != SUCCESSFUL:
+                raise RadError(f'trajectory aborted (error code {report.error_code}): {report.error_string}')
+
+        try:
+            return run_motion(motion, move_arm, lambda c: self.execute_gripper(c, callback,
+                                                                               real_time_factor=real_time_factor))
+        except TrajectoryRejected as e:
+            return f'trajectory refused (error code {e.code}): {e}'
+        except RadError as e:
+            return str(e)
+
+    def _run_until(self, done, callback, callback_period, real_time_factor) -> ExecutionReport | None:
         slice_steps = max(1, round(callback_period / self.dt))
         wall0, sim0 = time.perf_counter(), self.time
+        last = None
         while True:
             report = self._steps(slice_steps)
+            last = report or last
             if callback is not None:
                 callback(self)
             if real_time_factor:
                 ahead = (self.time - sim0) / real_time_factor - (time.perf_counter() - wall0)
                 if ahead > 0:
                     time.sleep(ahead)
-            if report is not None:
-                report.wall_time = time.perf_counter() - wall0
-                return report
+            if done():
+                return last
 
     # ---- stepping ------------------------------------------------------------
     def _apply(self) -> None:
@@ -299,6 +394,11 @@ class Twin:
                                     positionGains=[self.config.position_gain] * 9,
                                     velocityGains=[self.config.velocity_gain] * 9, physicsClientId=w.client)
 
+    def _hold_here(self) -> None:
+        self._target[:7] = self.world.joint_positions()[:7]
+        self._target_vel[:] = 0.0
+        self._apply()
+
     def _steps(self, n: int) -> ExecutionReport | None:
         finished = None
         t0 = time.perf_counter()
@@ -306,13 +406,19 @@ class Twin:
             run = self._run
             if run is not None:
                 q_cmd, dq_cmd = run.command(run.t + self.dt)
-                self._target[run.joints] = q_cmd
-                self._target_vel[:] = 0.0
-                self._target_vel[run.joints] = dq_cmd
+                self._target[:7] = q_cmd
+                self._target_vel[:7] = dq_cmd
+            grip = self._grip
+            if grip is not None:
+                step = self.config.gripper_speed * self.dt
+                grip.target += float(np.clip(grip.goal - grip.target, -step, step))
+                self._target[7:] = grip.target
             self._apply()
             self.world.step()
             self.time += self.dt
             self._grasp_update()
+            if grip is not None:
+                self._grip_progress(grip)
             if run is not None:
                 run.t += self.dt
                 if self._progress(run):
@@ -324,40 +430,77 @@ class Twin:
         return finished
 
     def _progress(self, run: _Run) -> bool:
-        """Track the error; True once the trajectory is over and the arm has arrived."""
-        q = self.world.joint_positions()[run.joints]
-        arm = run.arm
-        if not arm.any():
-            err = 0.0
-        else:
-            q_cmd, _ = run.command(run.t)
-            err = float(np.abs(q - q_cmd)[arm].max())
-        duration = run.times[-1]
+        """Track the error; True once the run is over: arrived, or a tolerance violated (report says)."""
+        q = self.world.joint_positions()[:7]
+        q_cmd, _ = run.command(run.t)
+        err = float(np.abs(q - q_cmd).max())
+        duration = run.spline.duration
         if run.t < duration - 1e-9:
             run.max_error = max(run.max_error, err)
+            if run.path_tol > 0 and err > run.path_tol:
+                j = int(np.abs(q - q_cmd).argmax())
+                run.report.error_code = PATH_TOLERANCE_VIOLATED
+                run.report.error_string = (f'path tolerance violated: {run.report.joint_names[j]} is {err:.4f} rad '
+                                           f'from the command (tolerance {run.path_tol:.4f}) at t = {run.t:.3f} s')
+                run.report.final_error = err
+                return True
             return False
         run.report.final_error = err
-        fingers_still = np.all(np.abs(self.world.joint_velocities()[7:]) < 1e-3)
-        return (err <= self.config.goal_tol and fingers_still) or run.t >= duration + self.config.goal_time - 1e-9
+        if err <= run.goal_tol:
+            return True
+        if run.t >= duration + run.goal_time - 1e-9:
+            run.report.error_code = GOAL_TOLERANCE_VIOLATED
+            run.report.error_string = (f'goal tolerance violated: {err:.4f} rad from the last point after '
+                                       f'{run.goal_time:.2f} s (tolerance {run.goal_tol:.4f})')
+            return True
+        return False
 
     def _finish(self, preempted: bool) -> ExecutionReport:
         run, self._run = self._run, None
         r = run.report
         r.final_positions = self.world.joint_positions()
         if math.isnan(r.final_error):
-            q_cmd = run.pos[-1]
-            q = r.final_positions[run.joints]
-            r.final_error = float(np.abs(q - q_cmd)[run.arm].max()) if run.arm.any() else 0.0
+            r.final_error = float(np.abs(r.final_positions[:7] - run.spline.pos[-1]).max())
         r.max_tracking_error = run.max_error
         r.grasp_events = list(self._events)
         r.sim_time = run.t
         r.steps = round(run.t / self.dt)
         r.wall_time = time.perf_counter() - run.wall_start
         r.preempted = preempted
-        # Hold exactly the last command (zero velocity), as the controller does at the end.
-        self._target_vel[:] = 0.0
-        self._apply()
+        if r.error_code != SUCCESSFUL:
+            self._hold_here()           # an aborted run holds where the arm is, as the controller does
+        else:
+            # Hold exactly the last command (zero velocity), as the controller does at the end.
+            self._target_vel[:] = 0.0
+            self._apply()
         return r
+
+    def _grip_progress(self, grip: _Grip) -> None:
+        grip.t += self.dt
+        fingers = self.world.joint_positions()[7:]
+        moving = np.abs(self.world.joint_velocities()[7:]).max() > 1e-3
+        grip.still = 0.0 if moving else grip.still + self.dt
+        commanded = abs(grip.target - grip.goal) < 1e-9
+        arrived = commanded and np.abs(fingers - grip.goal).max() < 2e-4
+        stalled = grip.still >= 0.05 and (commanded or grip.closing)
+        timeout = grip.t > abs(grip.goal - fingers.mean()) / self.config.gripper_speed + 2.0
+        if arrived or stalled or timeout:
+            self._finish_grip(stop=False)
+
+    def _finish_grip(self, stop: bool) -> GripperResult:
+        grip, self._grip = self._grip, None
+        position = float(self.world.joint_positions()[7:].mean())
+        if grip.closing:
+            reached = abs(2 * position - 2 * grip.goal) <= self.config.grasp_epsilon
+        else:
+            reached = abs(position - grip.goal) < 5e-4
+        if stop or not grip.closing:
+            # A move that stopped (cancelled, blocked) holds where the fingers are; a grasp keeps squeezing.
+            self._target[7:] = position if (stop or not reached) else grip.goal
+        self._apply()
+        self.gripper_result = GripperResult(position, grip.effort if grip.closing else 0.0,
+                                            stalled=abs(position - grip.goal) >= 2e-4, reached_goal=bool(reached))
+        return self.gripper_result
 
     # ---- grasping --------------------------------------------------------------
     def _grasp_update(self) -> None:

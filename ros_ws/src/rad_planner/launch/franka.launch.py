@@ -1,0 +1,52 @@
+"""ros2 launch rad_planner franka.launch.py [params_file:=...] [use_twin:=true] [robot:=fr3|panda]
+
+rad next to franka_ros2 (full ROS 2 Jazzy installs). use_twin:=false (the default) starts every
+node but the twin: franka_ros2 serves the arm's FollowJointTrajectory and the hand's
+GripperCommand actions and /joint_states. use_twin:=true adds the twin, which serves the same
+actions under the profile's names, for a dry run of the same profile in simulation (the
+assembly node is then told that gripper results are per finger, as the twin reports them).
+robot (panda or fr3; '' = the parameter file's) overrides `robot` of the twin, gamp and assembly.
+Without ros2 launch: graph --params <franka.yaml> [--no-twin] [-p node.param:=value ...].
+"""
+
+from ament_index_python.packages import get_package_share_directory
+from launch import LaunchDescription
+from launch.actions import DeclareLaunchArgument, OpaqueFunction
+from launch.substitutions import LaunchConfiguration
+from launch_ros.actions import Node
+
+NODES = (('rad_sim', 'twin_node', 'twin'), ('rad_planner', 'allocation_node', 'allocation'),
+         ('rad_gamp', 'gamp_node', 'gamp'), ('rad_planner', 'sequencer_node', 'sequencer'),
+         ('rad_planner', 'assembly_node', 'assembly'), ('rad_viz', 'viz_node', 'viz'))
+ROBOT_NODES = ('twin', 'gamp', 'assembly')   # the nodes with a `robot` parameter
+
+
+def _nodes(context):
+    params = LaunchConfiguration('params_file').perform(context)
+    use_twin = LaunchConfiguration('use_twin').perform(context).strip().lower() in ('true', '1', 'yes')
+    robot = LaunchConfiguration('robot').perform(context).strip()
+    nodes = []
+    for pkg, exe, name in NODES:
+        if name == 'twin' and not use_twin:
+            continue
+        overrides = {}
+        if robot and name in ROBOT_NODES:
+            overrides['robot'] = robot
+        if name == 'assembly' and use_twin:
+            overrides['gripper_result_is_width'] = False   # the twin reports per finger
+        parameters = [params] + ([overrides] if overrides else [])
+        nodes.append(Node(package=pkg, executable=exe, name=name, parameters=parameters, output='screen'))
+    return nodes
+
+
+def generate_launch_description():
+    default = get_package_share_directory('rad_planner') + '/config/franka.yaml'
+    return LaunchDescription([
+        DeclareLaunchArgument('params_file', default_value=default,
+                              description='parameter file, one section per node (default: the FR3 cell profile)'),
+        DeclareLaunchArgument('use_twin', default_value='false',
+                              description='true: start the twin in place of franka_ros2 (simulation)'),
+        DeclareLaunchArgument('robot', default_value='',
+                              description="panda or fr3 for the twin, gamp and assembly ('' = the parameter file's)"),
+        OpaqueFunction(function=_nodes),
+    ])

@@ -1,0 +1,113 @@
+"""A Franka cell as the planners see it: the arm controller's and the hand's actions.
+
+`ActionPlant` sends a step's commands the way ROS 2 users drive a franka_ros2 cell:
+arm trajectories as `control_msgs/action/FollowJointTrajectory` goals to
+``<arm_controller>/follow_joint_trajectory`` (the robot model's 7 arm joints, with
+path and goal tolerances and goal_time_tolerance), gripper commands as
+`control_msgs/action/GripperCommand` goals to ``<gripper_action>``. The controller's
+answer decides: a rejected goal, or a result whose error_code is not SUCCESSFUL,
+raises RadError naming the code and the controller's error_string; `cancelled()`
+turning true while a goal runs cancels it (the controller stops the arm) and raises.
+
+The node given must be spun by an executor on another thread (the calls here block
+until the futures complete).
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from typing import Callable
+
+from action_msgs.msg import GoalStatus
+from control_msgs.action import FollowJointTrajectory, GripperCommand
+from control_msgs.msg import JointTolerance
+from rclpy.action import ActionClient
+
+from rad_core.errors import RadError
+from rad_core.motion import GripperCommand as GripperStep, GripperResult
+from rad_core.robot_model import RobotModel
+from rad_core.trajectory import Trajectory
+from rad_ros.motion import s_to_duration, trajectory_to_msg
+
+ERROR_NAMES = {0: 'SUCCESSFUL', -1: 'INVALID_GOAL', -2: 'INVALID_JOINTS', -3: 'OLD_HEADER_TIMESTAMP',
+               -4: 'PATH_TOLERANCE_VIOLATED', -5: 'GOAL_TOLERANCE_VIOLATED'}
+
+
+class ActionPlant:
+    """move_arm / move_gripper over the two actions (see the module docstring)."""
+
+    def __init__(self, node, model: RobotModel, arm_controller: str, gripper_action: str, *,
+                 path_tolerance: float = 0.05, goal_tolerance: float = 0.01, goal_time_tolerance: float = 1.0,
+                 gripper_result_is_width: bool = False, server_timeout_s: float = 5.0,
+                 timeout_factor: float = 3.0, cancelled: Callable[[], bool] = lambda: False):
+        self.model = model
+        self.arm_name = f'{arm_controller.rstrip("/")}/follow_joint_trajectory'
+        self.gripper_name = gripper_action
+        self.arm = ActionClient(node, FollowJointTrajectory, self.arm_name)
+        self.gripper = ActionClient(node, GripperCommand, gripper_action)
+        self.path_tolerance, self.goal_tolerance = path_tolerance, goal_tolerance
+        self.goal_time_tolerance = goal_time_tolerance
+        self.gripper_result_is_width = gripper_result_is_width
+        self.server_timeout_s, self.timeout_factor = server_timeout_s, timeout_factor
+        self.cancelled = cancelled
+
+    def move_arm(self, trajectory: Trajectory | dict, frame_id: str = '') -> None:
+        traj = trajectory if isinstance(trajectory, Trajectory) else Trajectory.from_dict(trajectory)
+        goal = FollowJointTrajectory.Goal()
+        goal.trajectory = trajectory_to_msg(traj.to_dict(), frame_id)
+        names = list(traj.joint_names)
+        goal.path_tolerance = [JointTolerance(name=n, position=self.path_tolerance) for n in names]
+        goal.goal_tolerance = [JointTolerance(name=n, position=self.goal_tolerance) for n in names]
+        goal.goal_time_tolerance = s_to_duration(self.goal_time_tolerance)
+        wait = traj.duration * self.timeout_factor + self.goal_time_tolerance + 10.0
+        result = self._run(self.arm, self.arm_name, goal, wait, 'the arm controller')
+        code = int(result.error_code)
+        if code != FollowJointTrajectory.Result.SUCCESSFUL:
+            raise RadError(f'the arm controller ({self.arm_name}) failed the trajectory: '
+                           f'{ERROR_NAMES.get(code, "error")} ({code}): {result.error_string or "no reason given"}')
+
+    def move_gripper(self, command: GripperStep) -> GripperResult:
+        goal = GripperCommand.Goal()
+        goal.command.position, goal.command.max_effort = float(command.position), float(command.max_effort)
+        travel = 0.08 / 0.05      # the whole stroke at a slow hand's speed
+        result = self._run(self.gripper, self.gripper_name, goal, travel * self.timeout_factor + 10.0,
+                           'the gripper', accept_aborted=True)
+        position = float(result.position) / (2.0 if self.gripper_result_is_width else 1.0)
+        return GripperResult(position, float(result.effort), bool(result.stalled), bool(result.reached_goal))
+
+    def _run(self, client, name, goal, timeout_s, what, accept_aborted=False):
+        if not client.wait_for_server(timeout_sec=self.server_timeout_s):
+            raise RadError(f'{what} action {name} is not available (is the controller running?)')
+        handle = _wait(client.send_goal_async(goal), self.server_timeout_s)
+        if handle is None:
+            raise RadError(f'{what} ({name}) did not answer the goal within {self.server_timeout_s:g} s')
+        if not handle.accepted:
+            raise RadError(f'{what} ({name}) rejected the goal (its log says why)')
+        future = handle.get_result_async()
+        deadline = time.monotonic() + timeout_s
+        while not future.done():
+            if self.cancelled():
+                _wait(handle.cancel_goal_async(), self.server_timeout_s)
+                _wait(future, self.server_timeout_s)
+                raise RadError('cancelled')
+            if time.monotonic() > deadline:
+                _wait(handle.cancel_goal_async(), self.server_timeout_s)
+                raise RadError(f'{what} ({name}) did not finish within {timeout_s:.1f} s')
+            time.sleep(0.01)
+        wrapped = future.result()
+        if wrapped.status == GoalStatus.STATUS_CANCELED:
+            raise RadError(f'{what} ({name}) cancelled the goal')
+        if wrapped.status != GoalStatus.STATUS_SUCCEEDED and not accept_aborted and \
+                int(getattr(wrapped.result, 'error_code', 0)) == 0:
+            raise RadError(f'{what} ({name}) aborted the goal without an error code')
+        return wrapped.result
+
+
+def _wait(future, timeout_s: float):
+    done = threading.Event()
+    future.add_done_callback(lambda _: done.set())
+    if not done.wait(timeout_s if math.isfinite(timeout_s) else None):
+        return None
+    return future.result()
