@@ -202,10 +202,12 @@ def test_gamp_plans_a_pick_and_place_with_the_fingers_on_the_narrower_faces():
     with World(scene_) as world:
         r = plan_action(world, block.id, position, yaw)
     assert r.success, r.reason
-    q = r.trajectory.positions()
     width = U * (1 - C)
-    assert q[r.grasp_index, 7] == pytest.approx(width / 2 - 0.001)             # closed on the 4 cm unit
-    assert q[r.grasp_index - 1, 7] == pytest.approx(width / 2 + 0.01)          # open 1 cm off its faces
+    grasp = next(g for g in r.motion.gripper if g.action == 'grasp')
+    opening = next(g for g in r.motion.gripper if g.action == 'open')
+    assert grasp.position == pytest.approx(width / 2 - 0.001)                   # closed on the 4 cm unit
+    assert grasp.expected_position == pytest.approx(width / 2)                  # and held at its faces
+    assert opening.position == pytest.approx(width / 2 + 0.01)                  # open 1 cm off its faces
 
 
 # ---- registration and the twin ------------------------------------------------

@@ -2,7 +2,8 @@
 
 The plant is a real twin (physics, contact grasps), the plans come from real CP-SAT
 and GAMP; only the faults the real parts will not produce on demand are injected
-(a block moved by hand mid-run, a plant that never finishes, a cancel).
+(a block moved by hand mid-run, a block taken away before the hand closes on it, a plant
+that never finishes, a cancel).
 """
 
 import numpy as np
@@ -35,10 +36,11 @@ def twin():
 
 
 class Run:
-    """The callables a node would build from DDS, here on the in-process twin."""
+    """The callables a node would build from DDS (the arm controller's and the gripper's actions),
+    here on the in-process twin."""
 
     def __init__(self, twin, motion):
-        self.twin, self.plans, self.sent, self.phases = twin, [], [], []
+        self.twin, self.plans, self.sent, self.grips, self.phases = twin, [], [], [], []
         self.motion = motion
 
     def plan(self, scene, start):
@@ -46,9 +48,20 @@ class Run:
         self.plans.append((scene, start, plan))
         return plan
 
-    def send(self, trajectory):
+    def move_arm(self, trajectory):
         self.sent.append(trajectory)
-        self.twin.execute(trajectory)
+        report = self.twin.execute(trajectory)
+        if report.error_code:
+            raise RadError(f'aborted ({report.error_code}): {report.error_string}')
+
+    def move_gripper(self, command):
+        self.grips.append(command)
+        return self.twin.execute_gripper(command)
+
+    @property
+    def placed(self) -> int:
+        """Steps whose block has been released."""
+        return sum(g.action == 'release' for g in self.grips)
 
     def register(self):
         return self.twin.current_scene()
@@ -57,7 +70,8 @@ class Run:
         self.phases.append((phase, message))
 
     def __call__(self, config=ExecuteConfig(settle_s=0.2), **kw):
-        kw = {'plan': self.plan, 'send': self.send, 'register': self.register, 'report': self.report,
+        kw = {'plan': self.plan, 'move_arm': self.move_arm, 'move_gripper': self.move_gripper,
+              'register': self.register, 'report': self.report,
               'settle': self.twin.settle, **kw}
         return execute_assembly(SCENE, config=config, **kw)
 
@@ -67,7 +81,11 @@ def test_builds_the_scene_step_by_step_and_documents_it(twin, motion):
     result = run()
     assert result.success, result.reason
     assert result.replans == 0 and len(run.plans) == 1
-    assert len(result.steps) == len(result.allocation.placements) == len(run.sent)
+    assert len(result.steps) == len(result.allocation.placements) == run.placed
+    # Arm and hand apart: three arm trajectories of the 7 arm joints per step, grasp and release between.
+    assert len(run.sent) == 3 * len(result.steps)
+    assert all(list(t.joint_names) == [f'panda_joint{k}' for k in range(1, 8)] for t in run.sent)
+    assert [g.action for g in run.grips if g.action in ('grasp', 'release')] == ['grasp', 'release'] * len(result.steps)
     assert result.coverage == 1.0
     phases = [p for p, _ in run.phases]
     assert phases[0] == 'planning' and phases[-1] == 'done'
@@ -80,40 +98,41 @@ def test_builds_the_scene_step_by_step_and_documents_it(twin, motion):
 
 def test_a_block_moved_mid_run_replans_from_the_measured_world(twin, motion):
     run = Run(twin, motion)
-    send = run.send
+    move_arm = run.move_arm
 
-    def send_and_disturb(trajectory):
-        send(trajectory)
-        if len(run.sent) == 1:   # after the first step, someone moves a block the plan does not use
+    def move_and_disturb(trajectory):
+        move_arm(trajectory)
+        if len(run.sent) == 3:   # after the first step, someone moves a block the plan does not use
             used = {s.block for s in run.plans[0][2].steps}
             block = next(b for b in SCENE.blocks if b.id not in used)
             pos, q = twin.world.block_pose(block.id)
             twin.world.set_block_pose(block.id, [pos[0] + 0.02, pos[1] - 0.06, pos[2]], q)
             run.moved = block.id
-    result = run(send=send_and_disturb)
+    result = run(move_arm=move_and_disturb)
     assert result.replans == 1, result.reason
     assert [p for p, _ in run.phases].count('replanning') == 1
     message = next(m for p, m in run.phases if p == 'replanning')
     assert run.moved in message and 'mm from where the plan put it' in message
     # The replan starts from the measured world (the moved block where it now is) and the
-    # last trajectory's end joints.
+    # last trajectory's end joints (and the hand as the release left it).
     replanned_scene, start, _ = run.plans[-1]
     assert replanned_scene.block(run.moved).position != SCENE.block(run.moved).position
-    assert np.allclose(start, run.sent[0]['points'][-1]['positions'])
+    assert np.allclose(start[:7], run.sent[2].points[-1].positions)
+    assert np.allclose(start[7:], run.grips[-1].position)
     assert result.success, result.reason
     assert result.coverage == 1.0
 
 
 def test_without_replan_a_deviation_is_the_reason(twin, motion):
     run = Run(twin, motion)
-    send = run.send
+    move_arm = run.move_arm
 
-    def send_and_disturb(trajectory):
-        send(trajectory)
+    def move_and_disturb(trajectory):
+        move_arm(trajectory)
         block = next(b for b in SCENE.blocks if b.id not in {s.block for s in run.plans[0][2].steps})
         pos, q = twin.world.block_pose(block.id)
         twin.world.set_block_pose(block.id, [pos[0], pos[1] - 0.05, pos[2]], q)
-    result = run(config=ExecuteConfig(settle_s=0.1, replan=False), send=send_and_disturb)
+    result = run(config=ExecuteConfig(settle_s=0.1, replan=False), move_arm=move_and_disturb)
     assert not result.success and result.reason.startswith('the world differs from the plan')
     assert len(result.steps) == 1 and result.replans == 0
 
@@ -123,17 +142,40 @@ def test_a_plant_that_never_finishes_is_a_timeout_reason(twin, motion):
 
     def never_finishes(trajectory):
         run.sent.append(trajectory)
-        raise RadError('the robot did not reach the end of the step within 3.0 s x 3 + 10 s')
-    result = run(send=never_finishes)
-    assert not result.success and 'did not reach the end of the step' in result.reason
+        raise RadError('the arm controller (joint_trajectory_controller/follow_joint_trajectory) did not '
+                       'finish within 12.0 s')
+    result = run(move_arm=never_finishes)
+    assert not result.success and 'did not finish within' in result.reason
     assert result.steps == [] and len(run.sent) == 1
     assert result.final_scene is not None and result.coverage == 0.0
     assert run.phases[-1] == ('done', result.reason)
 
 
+def test_a_grasp_on_nothing_fails_the_step_and_the_loop_replans(twin, motion):
+    """The block is taken away while the hand comes down: the hand closes on air, the width it
+    reports says nothing is held, it opens, the world is measured and a new plan builds it."""
+    run = Run(twin, motion)
+    move_gripper = run.move_gripper
+
+    def take_the_block_away(command):
+        if command.action == 'grasp' and not hasattr(run, 'taken'):
+            block = run.plans[0][2].steps[0].block
+            pos, q = twin.world.block_pose(block)
+            twin.world.set_block_pose(block, [pos[0], pos[1] + 0.1 if pos[1] < 0 else pos[1] - 0.1, pos[2]], q)
+            run.taken = block
+        return move_gripper(command)
+    result = run(move_gripper=take_the_block_away, joints=lambda: twin.world.joint_positions())
+    failed = result.steps[0]
+    assert failed['block'] == run.taken and 'nothing is held' in failed['failure']
+    assert result.replans == 1 and [p for p, _ in run.phases].count('replanning') == 1
+    assert run.grips[run.grips.index(next(g for g in run.grips if g.action == 'grasp')) + 1].action == 'open'
+    assert result.success, result.reason
+    assert result.coverage == 1.0
+
+
 def test_cancel_stops_before_the_next_step(twin, motion):
     run = Run(twin, motion)
-    result = run(cancelled=lambda: len(run.sent) >= 1)
+    result = run(cancelled=lambda: run.placed >= 1 and len(run.sent) >= 3)
     assert not result.success and result.reason == 'cancelled'
     assert len(result.steps) == 1 and 0 < result.coverage < 1.0
 
@@ -145,7 +187,7 @@ def test_a_plan_that_cannot_be_made_is_the_reason_and_nothing_moves(twin):
         raise RadError('service allocate is not available')
     result = run(plan=plan)
     assert not result.success and result.reason == 'service allocate is not available'
-    assert run.sent == [] and result.allocation is None
+    assert run.sent == [] and run.grips == [] and result.allocation is None
 
 
 def test_config_is_checked(twin):

@@ -11,6 +11,9 @@ from rad_core.errors import RadError
 from rad_core.gamp import GampResult, Grasp, allocated_pose, block_grasps, placement_pose, plan_action
 from rad_core.gamp.collision import attachment_from_world, place_attached
 from rad_core.generator import GeneratorConfig, generate_scene
+from rad_core.motion import GripperCommand, Motion
+from rad_core.robot_model import PANDA
+from rad_core.trajectory import limit_ratios
 from rad_core.scene import Scene
 from rad_core.sim import panda
 from rad_core.sim.world import World
@@ -61,16 +64,26 @@ def generated():
 
 
 def _replay(world, result, block_id):
-    """Kinematic execution: joints to each point; the block rides with the hand between
-    grasp_index and release_index. Returns the block's final pose."""
+    """Kinematic execution of the motion: the arm to each point of each trajectory, the fingers as
+    the gripper commands set them; the block rides with the hand from the grasp to the release.
+    Returns the block's final pose."""
     with world.preserved():
         attachment = None
-        for k, pt in enumerate(result.trajectory.points):
-            world.set_joint_positions(pt.positions)
-            if k == result.grasp_index:
-                attachment = attachment_from_world(world, block_id)
-            if attachment is not None and k < result.release_index:
-                place_attached(world, attachment)
+        q = world.joint_positions()
+        for command in result.motion.sequence():
+            if isinstance(command, GripperCommand):
+                q[7:] = command.expected_position if command.action == 'grasp' else command.position
+                world.set_joint_positions(q)
+                if command.action == 'grasp':
+                    attachment = attachment_from_world(world, block_id)
+                elif command.action == 'release':
+                    attachment = None
+                continue
+            for pt in command.points:
+                q[:7] = pt.positions
+                world.set_joint_positions(q)
+                if attachment is not None:
+                    place_attached(world, attachment)
         return world.block_pose(block_id)
 
 
@@ -85,32 +98,37 @@ def test_free_block_is_picked_and_placed_at_its_allocated_pose(generated):
     r = plan_action(world, block.id, position, yaw)
     assert isinstance(r, GampResult)
     assert r.success and r.failure == '' and r.reason == '', r.reason
-    traj = r.trajectory
-    assert traj.joint_names == panda.JOINT_NAMES and len(traj.joint_names) == 9
-    times = traj.times()
-    assert times[0] > 0 and np.all(np.diff(times) > 0)
-    q = traj.positions()
-    assert q.shape[1] == 9 and all(panda.within_limits(row) for row in q)
-    # Segments respect the velocity limits at the configured scale.
-    dq = np.abs(np.diff(np.vstack([joints_before, q]), axis=0))
-    dt = np.diff(np.concatenate([[0.0], times]))
-    assert np.all(dq / dt[:, None] <= panda.VELOCITY_LIMITS * 0.5 + 1e-9)
-    # Fingers: open before the grasp point, closed on the block from it to the release.
-    g, rel = r.grasp_index, r.release_index
-    assert 0 < g < rel < len(q) - 1
-    assert q[g - 1, 7] > q[g, 7] and q[g, 7] == pytest.approx(U / 2 - 0.001)
-    assert np.allclose(q[g, :7], q[g - 1, :7]) and np.allclose(q[rel, :7], q[rel - 1, :7])
-    assert q[rel, 7] > q[rel - 1, 7]
-    for k in (g - 1, g, rel - 1, rel, len(q) - 1):
-        assert not np.any(traj.points[k].velocities), k
+    motion = r.motion
+    # Arm and hand apart: three arm trajectories (approach, carry, retreat) of the 7 arm joints, the
+    # hand set to the approach opening first, then grasp and release between them.
+    assert len(motion.trajectories) == 3
+    assert [(g.action, g.before) for g in motion.gripper] == [('close', 0), ('open', 0), ('grasp', 1), ('release', 2)]
+    grasp = motion.gripper[2]
+    assert grasp.expected_position == pytest.approx(U / 2) and grasp.position == pytest.approx(U / 2 - 0.001)
+    assert motion.gripper[1].position == motion.gripper[3].position == pytest.approx(U / 2 + 0.01)
+    start = joints_before[:7]
+    for traj in motion.trajectories:
+        assert traj.joint_names == panda.ARM_JOINT_NAMES
+        times = traj.times()
+        assert times[0] > 0 and np.all(np.diff(times) > 0)
+        q = traj.positions()
+        assert q.shape[1] == 7 and all(panda.within_limits(row) for row in q)
+        assert all(len(p.velocities) == len(p.accelerations) == 7 for p in traj.points)
+        assert not np.any(traj.points[-1].velocities) and not np.any(traj.points[-1].accelerations)
+        # Within the Panda's limits at the configured scales, as the controller interpolates it at 1 kHz.
+        ratios = limit_ratios(traj, start, PANDA)
+        assert ratios['velocity'] <= 0.5 and ratios['acceleration'] <= 1.0 and ratios['jerk'] <= 1.0, ratios
+        start = q[-1]
     # Executed kinematically, the block ends at the allocated pose.
     final_pos, final_quat = _replay(world, r, block.id)
     assert np.linalg.norm(final_pos - position) < 0.002
     assert abs(((yaw_of_quaternion(final_quat) - yaw) + 180) % 360 - 180) < 2.0
-    # The result's dict form is the JointTrajectory shape result.json uses.
-    doc = traj.to_dict()
-    assert set(doc) == {'joint_names', 'points'}
-    assert set(doc['points'][0]) == {'positions', 'velocities', 'time_from_start'}
+    # The result's dict form is the JointTrajectory shape result.json uses, with accelerations.
+    doc = motion.to_dict()
+    assert set(doc) == {'trajectories', 'gripper'}
+    assert set(doc['trajectories'][0]) == {'joint_names', 'points'}
+    assert set(doc['trajectories'][0]['points'][0]) == {'positions', 'velocities', 'accelerations', 'time_from_start'}
+    assert Motion.from_dict(doc).to_dict() == doc
     assert set(r.timings) == {'ik_s', 'collision_s', 'total_s'} and r.timings['total_s'] < 2.0
     # Planning left the world as it was.
     assert np.array_equal(world.joint_positions(), joints_before)
@@ -126,7 +144,7 @@ def test_planning_is_deterministic(generated):
     b = plan_action(world, block.id, position, yaw)
     assert a.success == b.success and a.reason == b.reason
     if a.success:
-        assert a.trajectory.to_dict() == b.trajectory.to_dict()
+        assert a.motion.to_dict() == b.motion.to_dict()
 
 
 def test_placement_pose_of_an_mdp_action():
@@ -149,7 +167,7 @@ def test_buried_block_fails_on_grasp():
     scene = _scene([('target', 'cube', c)] + [(f'n{i}', 'cube', p) for i, p in enumerate(around)])
     with World(scene) as world:
         r = plan_action(world, 'target', [0.45, 0.2, U / 2], 0)
-    assert not r.success and r.failure == 'grasp' and r.trajectory is None
+    assert not r.success and r.failure == 'grasp' and r.motion is None
     assert r.reason.startswith('grasp: all 2 grasps blocked') and 'hits block n' in r.reason, r.reason
 
 

@@ -43,9 +43,9 @@ def test_a_complete_plan_puts_every_allocated_pose_in_order(motion):
     assert len(plan.steps) == len(plan.allocation.placements)
     assert {(s.type, s.target, tuple(map(tuple, sorted(s.cells)))) for s in plan.steps} == \
         {(p.type, p.target, tuple(sorted(p.cells))) for p in plan.allocation.placements}
-    # Each step starts where the previous trajectory ended.
+    # Each step's motion starts where the previous one ended (the controller starts from the arm's state).
     for before, after in zip(plan.steps, plan.steps[1:]):
-        assert after.trajectory['points'][0]['time_from_start'] > 0
+        assert after.motion['trajectories'][0]['points'][0]['time_from_start'] > 0
         assert before.block != after.block
     for stage in ('allocation', 'sequencing', 'motion', 'total'):
         assert plan.timings[stage] >= 0
@@ -89,7 +89,8 @@ def test_a_plan_can_ask_a_ranking_callable_as_the_sequencer_node_is_asked(motion
     # Each question carries the planning copy: the blocks placed so far at their poses, the arm where it ended.
     placed = {b.id: b for b in asked[1][0].blocks}[plan.steps[0].block]
     assert np.allclose(placed.position, plan.steps[0].position)
-    assert np.allclose(asked[1][1], plan.steps[0].trajectory['points'][-1]['positions'])
+    assert np.allclose(asked[1][1][:7], plan.steps[0].motion['trajectories'][-1]['points'][-1]['positions'])
+    assert np.allclose(asked[1][1][7:], plan.steps[0].motion['gripper'][-1]['position'])   # the hand as released
     assert plan.timings['sequencing'] > 0 and plan.timings['sequencer_call'] >= plan.timings['sequencing']
 
 

@@ -78,7 +78,7 @@ def test_parse_plan_reads_allocation_steps_timings_coverage():
     doc = _plan_doc(s)
     plan = viz.parse_plan(json.dumps(doc))
     assert plan.allocation is not None and len(plan.allocation.placements) == len(doc['steps']) > 0
-    assert plan.steps[0].cells == doc['steps'][0]['cells'] and plan.steps[0].trajectory is None
+    assert plan.steps[0].cells == doc['steps'][0]['cells'] and plan.steps[0].motion is None
     assert plan.timings == {'allocate': 0.01, 'sequence': 0.2} and plan.predicted_coverage == 0.75
     text = viz.plan_summary(plan)
     assert 'allocate' in text and '0.750' in text and plan.allocation.status in text
@@ -104,11 +104,15 @@ def test_re_allocations_in_plan_json_are_read_and_shown_in_the_summary():
 def test_plan_json_steps_are_read_back_as_the_planners_plan_steps():
     """One PlanStep: what sequencing.plan makes and plan_json carries is what viz reads back."""
     step = PlanStep('b0', 'L3_up', 'front', 90, [[0, 0, 0], [0, 1, 0]], 2, [0, 0, 0], 1, (1, 180),
-                    [0.4, 0.1, 0.025], {'joint_names': ['j'], 'points': []})
+                    [0.4, 0.1, 0.025], {'trajectories': [{'joint_names': ['j'], 'points': []}],
+                                        'gripper': [{'before': 1, 'action': 'release', 'position': 0.03,
+                                                     'max_effort': 20.0}]})
     assert PlanStep.from_dict(json.loads(json.dumps(step.to_dict()))) == step
-    published = {k: v for k, v in step.to_dict().items() if k != 'trajectory'}    # rad_ros.plan_msgs.plan_json
+    # rad_ros.plan_msgs.plan_json leaves the motion out
+    published = {k: v for k, v in step.to_dict().items() if k not in ('trajectories', 'gripper')}
     (read,) = viz.parse_plan(json.dumps({'steps': [published]})).steps
-    assert isinstance(read, PlanStep) and read.to_dict() == {**step.to_dict(), 'trajectory': None}
+    assert isinstance(read, PlanStep) and read.motion is None
+    assert read.to_dict() == {**step.to_dict(), 'trajectories': [], 'gripper': []}
     with pytest.raises(RadError, match=r'steps\[0\]: not a plan step'):
         viz.parse_plan(json.dumps({'steps': [{**published, 'grasp': [1, 2]}]}))
 

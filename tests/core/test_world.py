@@ -24,11 +24,16 @@ def world(scene):
         yield w
 
 
-def test_panda_constants_come_from_the_urdf():
+def test_panda_constants_come_from_the_urdf_and_franka():
     assert len(panda.JOINT_NAMES) == 9 and panda.ARM_JOINT_NAMES == panda.JOINT_NAMES[:7]
     assert panda.LOWER.shape == panda.UPPER.shape == panda.VELOCITY_LIMITS.shape == (9,)
     # pybullet_data's model: joint 4 in [-3.1416, 0], joint 6 in [-0.0873, 3.8223] (wider than a real Panda).
-    assert panda.LOWER[3] == pytest.approx(-3.1416) and panda.UPPER[5] == pytest.approx(3.8223)
+    assert panda.URDF_LOWER[3] == pytest.approx(-3.1416) and panda.URDF_UPPER[5] == pytest.approx(3.8223)
+    # Plans keep to Franka's published ranges, of the Panda and the FR3 both: joint 4 up to the Panda's
+    # -0.0698 and the FR3's -0.1518, joint 6 from the FR3's 0.5445 to the Panda's 3.7525.
+    assert panda.UPPER[3] == pytest.approx(-0.1518) and panda.LOWER[5] == pytest.approx(0.5445)
+    assert panda.UPPER[5] == pytest.approx(3.7525) and panda.LOWER[0] == pytest.approx(-2.7437)
+    assert np.all(panda.LOWER >= panda.URDF_LOWER) and np.all(panda.UPPER <= panda.URDF_UPPER)
     assert panda.UPPER[7] == panda.UPPER[8] == 0.04
     assert panda.within_limits(panda.HOME)
 

@@ -46,7 +46,7 @@ def test_plans_a_feasible_action_as_arm_trajectories_and_gripper_commands(gamp):
     assert r.success, r.reason
     assert r.failure == '' and r.planning_time_s > 0
     actions = [g.action for g in r.gripper]
-    assert actions[-2:] == ['grasp', 'release'] and set(actions) <= {'open', 'grasp', 'release'}
+    assert actions[-2:] == ['grasp', 'release'] and set(actions) <= {'close', 'open', 'grasp', 'release'}
     grasp = r.gripper[actions.index('grasp')]
     assert 0 < grasp.command.position < grasp.expected_position and grasp.command.max_effort > 0
     assert [g.before for g in r.gripper][-2:] == [1, 2] and len(r.trajectories) == 3

@@ -97,7 +97,8 @@ class KinematicPlant(Node):
         result = GripperCommand.Result()
         with self.lock:
             closing = goal < self.q[7]
-            stop = max(goal, self.block_between_fingers()) if closing else goal
+            # A grasp closes until a unit's faces stop the fingers (fully on air), as franka_gripper's does.
+            stop = self.block_between_fingers() if closing else goal
             self.q[7:] = stop
             self.world.set_joint_positions(self.q)
             if closing and stop > goal:

@@ -7,6 +7,10 @@ place is a program of both:
     gripper open (pre-grasp width) -> arm: approach and descend -> gripper grasp
     -> arm: lift, carry, descend -> gripper release -> arm: retreat
 
+(A first step whose hand is wider than the approach opening closes the empty hand
+before it opens: franka_gripper's gripper_action moves only when opening; a command
+to a narrower width is a grasp, which on air closes fully and fails.)
+
 `Motion` holds the arm trajectories in execution order and the gripper commands,
 each placed before the arm trajectory with index `before` (len(trajectories):
 after the last). Its dict form is what plans and rad-result documents carry:
@@ -29,16 +33,16 @@ import numpy as np
 
 from rad_core.errors import RadError
 from rad_core.sim.panda import FINGER_OPEN
-from rad_core.trajectory import Trajectory
+from rad_core.trajectory import Trajectory, reversed_trajectory
 
-GRIPPER_ACTIONS = ('open', 'grasp', 'release')
+GRIPPER_ACTIONS = ('close', 'open', 'grasp', 'release')
 
 
 @dataclass(frozen=True)
 class GripperCommand:
     """One command to the hand."""
 
-    action: str                  # 'open' (before a grasp) | 'grasp' | 'release'
+    action: str                  # 'close' (the empty hand) | 'open' (before a grasp) | 'grasp' | 'release'
     position: float              # per finger (m)
     max_effort: float            # N; the grasp force
     before: int                  # runs before trajectories[before]
@@ -90,6 +94,11 @@ class Motion:
         return np.concatenate([self.final_arm, [fingers, fingers]])
 
     @property
+    def opening(self) -> float:
+        """The hand's opening (per finger) on the approach: what it opens to before a grasp."""
+        return next((g.position for g in self.gripper if g.action in ('open', 'release')), FINGER_OPEN)
+
+    @property
     def duration(self) -> float:
         """Seconds of arm motion (gripper moves come on top)."""
         return float(sum(t.duration for t in self.trajectories))
@@ -139,19 +148,27 @@ def grasp_problem(command: GripperCommand, result: GripperResult, tol: float = 0
     return ''
 
 
-def run_motion(motion: Motion, move_arm, move_gripper) -> str:
+def run_motion(motion: Motion, move_arm, move_gripper, start=None) -> str:
     """Run a step's commands in order through a plant's two actions.
 
     move_arm(trajectory) runs an arm trajectory to its end and raises RadError when
     the controller refuses or aborts it (a fault to stop on); move_gripper(command)
     returns the gripper's `GripperResult`. Returns '' when the step went through, or
-    why its grasp failed (the robot stops there: a fault to re-register and replan on).
+    why its grasp failed (a fault to re-register and replan on). After a failed grasp
+    the hand opens again and, given `start` (the arm's 7 joints when the step began),
+    the arm backs out along the approach it came down (the checked path, reversed)
+    to where the step began.
     """
+    done: list[Trajectory] = []
     for command in motion.sequence():
         if isinstance(command, GripperCommand):
             problem = grasp_problem(command, move_gripper(command))
             if problem:
+                move_gripper(GripperCommand('open', motion.opening, 0.0, command.before))
+                if start is not None and len(done) == 1:
+                    move_arm(reversed_trajectory(done[0], start))
                 return f'grasp failed: {problem}'
         else:
             move_arm(command)
+            done.append(command)
     return ''

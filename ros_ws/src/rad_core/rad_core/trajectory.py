@@ -96,6 +96,20 @@ class Trajectory:
         return cls(names, points)
 
 
+def reversed_trajectory(traj: Trajectory, start) -> Trajectory:
+    """The same motion backwards, from traj's last point (at rest) to `start` (where traj began, at
+    rest): positions in reverse order at T - t, velocities negated, accelerations as they were. The
+    path is the one already checked, and |v|, |a|, |jerk| are those of the forward motion."""
+    T = traj.duration
+    back = [TrajectoryPoint(list(p.positions), [-v for v in p.velocities], T - p.time_from_start,
+                            list(p.accelerations)) for p in traj.points[-2::-1]]
+    k = len(traj.joint_names)
+    end = TrajectoryPoint([float(v) for v in np.asarray(start, dtype=float)[:k]],
+                          [0.0] * k if traj.points[0].velocities else [], T,
+                          [0.0] * k if traj.points[0].accelerations else [])
+    return Trajectory(traj.joint_names, back + [end])
+
+
 def parse_trajectory(doc: Trajectory | dict, model: RobotModel = PANDA, limit_tol: float = 1e-3) -> Trajectory:
     """An arm trajectory (or its dict form), checked as a Franka arm controller checks a goal.
 
@@ -247,10 +261,10 @@ def limit_violation(traj: Trajectory | dict, start, model: RobotModel = PANDA, s
     """Why a real Franka would refuse this arm trajectory from `start` (at rest), or ''.
 
     The trajectory is parsed as the controller parses it, then its interpolated
-    motion (`Spline`) is sampled every `dt` (1 kHz) and compared with the model's
-    velocity, acceleration and jerk limits (jerk as the finite difference of the
-    sampled acceleration, as the robot's 1 kHz loop sees it) times `slack`. A
-    first point at t = 0 away from the start is a jump the robot cannot make.
+    motion (`Spline`) is sampled every `dt` (1 kHz) and its velocity, acceleration
+    and jerk, the finite differences of the sampled positions as the robot's 1 kHz
+    loop sees them, are compared with the model's limits times `slack`. A first
+    point at t = 0 away from the start is a jump the robot cannot make.
     """
     parsed = parse_trajectory(traj, model)
     start = np.asarray(start, dtype=float)[:7]
@@ -265,7 +279,7 @@ def limit_violation(traj: Trajectory | dict, start, model: RobotModel = PANDA, s
             i, k = np.unravel_index(int(ratio.argmax()), ratio.shape)
             limit = abs(values[i, k]) / ratio[i, k]
             return (f'{model.arm_joint_names[k]}: {label} {abs(values[i, k]):.4g} exceeds the {model.name} '
-                    f'limit {limit * slack:.4g} ({ratio[i, k]:.2f}x its limit) at t = {ts[min(i, len(ts) - 1)]:.3f} s')
+                    f'limit {limit * slack:.4g} ({ratio[i, k]:.2f}x its limit) at t = {max(ts[i], 0.0):.3f} s')
     return ''
 
 
@@ -277,14 +291,26 @@ def limit_ratios(traj: Trajectory | dict, start, model: RobotModel = PANDA,
 
 
 def _sampled(parsed: Trajectory, start, model: RobotModel, dt: float):
-    """Sample times and, per quantity, (ratio to the model's limit, value) arrays of the controller's motion."""
+    """Sample times and, per quantity, (ratio to the model's limit, value) arrays of the controller's motion.
+
+    Positions are sampled every dt, from a few samples at rest before the start to a few held
+    after the end. Each quantity is judged both ways a 1 kHz check may take it, and the worse
+    counts: as finite differences of the sampled positions (what the robot's loop sees of a
+    command, so a position-only trajectory's velocity steps count), and from the interpolant's
+    own velocity and acceleration (jerk as the difference of the sampled acceleration: stricter
+    where a jerk phase lasts only a few milliseconds)."""
     spline = Spline(parsed, np.asarray(start, dtype=float)[:7])
-    ts = np.arange(0.0, spline.duration + dt / 2, dt)
-    _, v, a = spline(ts)
-    j = np.diff(a, axis=0) / dt if len(a) > 1 else np.zeros((0, 7))
-    v_max, a_max, j_max = model.limits()
-    return ts, {'velocity': (np.abs(v) / v_max, v), 'acceleration': (np.abs(a) / a_max, a),
-                'jerk': (np.abs(j) / j_max, j)}
+    ts = np.arange(-3 * dt, spline.duration + 3.5 * dt, dt)
+    q, v_an, a_an = spline(np.clip(ts, 0.0, None))
+    v_fd = np.diff(q, axis=0) / dt
+    a_fd = np.diff(v_fd, axis=0) / dt
+    limits = model.limits()
+    out = {}
+    for label, values, limit in (('velocity', (v_fd, v_an), limits[0]), ('acceleration', (a_fd, a_an), limits[1]),
+                                 ('jerk', (np.diff(a_fd, axis=0) / dt, np.diff(a_an, axis=0) / dt), limits[2])):
+        both = np.vstack(values)
+        out[label] = (np.abs(both) / limit, both)
+    return np.concatenate([ts, ts]), out
 
 
 def _vector(v, where: str) -> np.ndarray:

@@ -50,7 +50,11 @@ class TimingConfig:
     joint_prefix: str = ''
     """Joint names `<prefix>_joint1..7` ('' = the model's)."""
     speed_scale: float = 0.5
-    """Fraction of the model's velocity, acceleration and jerk limits the motion may use (0, 1]."""
+    """Fraction of the model's velocity limits the motion may use (0, 1]."""
+    acceleration_scale: float = 1.0
+    """Fraction of the model's acceleration and jerk limits the motion may use (0, 1] (as MoveIt's
+    velocity and acceleration scaling factors, the two are separate; the motions are short, so
+    acceleration decides their time more than the top speed does)."""
     grasp_force: float = 20.0
     """max_effort (N) of a grasp: the hand squeezes the block with this force (a Panda hand: up to 70 N)."""
 
@@ -58,17 +62,28 @@ class TimingConfig:
     def model(self) -> RobotModel:
         return robot_model(self.robot, self.joint_prefix)
 
+    def validate(self) -> None:
+        """RadError naming a bad robot, joint prefix, scale or force."""
+        self.model.limits(self.speed_scale)
+        self.model.limits(self.acceleration_scale)
+        if not (np.isfinite(self.grasp_force) and self.grasp_force > 0):
+            raise RadError(f'grasp_force must be a positive number of newtons, got {self.grasp_force}')
+
 
 def retime(waypoints: Sequence[np.ndarray], model: RobotModel, speed_scale: float,
-           joint_names: Sequence[str] | None = None) -> Trajectory:
-    """A trajectory through (7,) waypoints from waypoints[0] (not a point: where the arm is), at rest at each."""
+           joint_names: Sequence[str] | None = None, acceleration_scale: float | None = None) -> Trajectory:
+    """A trajectory through (7,) waypoints from waypoints[0] (not a point: where the arm is), at rest at each;
+    velocities within speed_scale x the model's limits, accelerations and jerks within acceleration_scale x
+    theirs (default: speed_scale)."""
     from ruckig import InputParameter, Result, Ruckig
     from ruckig import Trajectory as RuckigTrajectory
     qs = [np.asarray(w, dtype=float)[:7] for w in waypoints]
     if len(qs) < 2:
         raise RadError('retime needs a start and at least one waypoint')
     # 0.1 % under the limits: rounding (at the points, in the controller) never crosses them.
-    v_max, a_max, j_max = (x * (1.0 - _MARGIN) for x in model.limits(speed_scale))
+    v_max = model.limits(speed_scale)[0] * (1.0 - _MARGIN)
+    _, a_max, j_max = (x * (1.0 - _MARGIN) for x in model.limits(speed_scale if acceleration_scale is None
+                                                                else acceleration_scale))
     otg = Ruckig(1)
     points: list[TrajectoryPoint] = []
     t0 = 0.0
@@ -107,8 +122,8 @@ def plan_motion(start: np.ndarray, waypoints: Sequence[np.ndarray], config: Timi
                 grasp_expected: float = float('nan')) -> Motion:
     """The Motion through GAMP's (9,) waypoints from `start` (9,): arm where the arm moves, gripper where only
     the fingers move (closing = 'grasp', expecting the fingers to stop at `grasp_expected`; opening after a grasp
-    = 'release'; opening before it = 'open'). The first command opens the hand to the approach's width if the
-    start's fingers differ from it."""
+    = 'release'; opening before it = 'open'). The first commands set the hand to the approach's opening if the
+    start's fingers differ from it ('close' first when it is narrower)."""
     model = config.model
     qs = [np.asarray(start, dtype=float)] + [np.asarray(w, dtype=float) for w in waypoints]
     motion = Motion()
@@ -119,7 +134,8 @@ def plan_motion(start: np.ndarray, waypoints: Sequence[np.ndarray], config: Timi
     def flush():
         nonlocal arm_path
         if len(arm_path) > 1:
-            motion.trajectories.append(retime(arm_path, model, config.speed_scale))
+            motion.trajectories.append(retime(arm_path, model, config.speed_scale,
+                                              acceleration_scale=config.acceleration_scale))
         arm_path = [arm_path[-1]]
 
     for q in qs[1:]:
@@ -128,7 +144,11 @@ def plan_motion(start: np.ndarray, waypoints: Sequence[np.ndarray], config: Timi
         if abs(f - fingers) > 1e-9:
             if arm_moves:
                 if len(arm_path) == 1 and not motion.trajectories and not held:
-                    # The approach's opening differs from the start's: open first.
+                    # The approach's opening differs from the start's: set it first. A Franka hand's
+                    # gripper_action only moves when opening (a closing command is a grasp, which fails
+                    # on air), so a narrower opening is reached by closing the empty hand, then opening.
+                    if f < fingers:
+                        motion.gripper.append(GripperCommand('close', 0.0, config.grasp_force, 0))
                     motion.gripper.append(GripperCommand('open', f, config.grasp_force, 0))
                     fingers = f
                 else:

@@ -8,8 +8,9 @@ capture) and tests pass an in-process `rad_core.sim.twin.Twin`.
 A step runs its arm trajectories and gripper commands in order
 (`rad_core.motion.run_motion`). A trajectory the controller refuses or aborts ends
 the run with the controller's reason. A grasp that holds nothing (the width the
-hand reports after closing) ends the step like a deviation: the hand opens, the
-world is registered and, with `replan`, a new plan starts from it.
+hand reports after closing) ends the step like a deviation: the hand opens, the arm
+backs out along its approach to where the step began, the world is registered and,
+with `replan`, a new plan starts from it.
 
 After each step the world is registered again and compared with what the plan
 expected (`result.deviation`). A step that left the world other than planned (a
@@ -32,7 +33,7 @@ from rad_core.errors import RadError
 from rad_core.motion import GripperCommand, GripperResult, Motion, run_motion
 from rad_core.scene import Scene
 from rad_core.sequencing.plan import AssemblyPlan, moved
-from rad_core.sim.panda import FINGER_OPEN
+from rad_core.sim.panda import HOME
 from rad_core.sequencing.result import deviation, measured_coverage, result_document
 
 
@@ -106,6 +107,7 @@ def execute_assembly(scene: Scene, plan: Plan, move_arm: MoveArm, move_gripper: 
         while True:
             report(len(result.steps), 0, '', 'planning', '')
             start = joints() if joints is not None else last_q
+            last_q = None if start is None else np.asarray(start, dtype=float)
             assembly = plan(current, start)
             if result.allocation is None:
                 result.allocation = assembly.allocation
@@ -116,14 +118,11 @@ def execute_assembly(scene: Scene, plan: Plan, move_arm: MoveArm, move_gripper: 
                     raise RadError('cancelled')
                 report(len(result.steps), len(assembly.steps), step.block, 'executing', '')
                 motion = Motion.from_dict(step.motion)
-                failed = run_motion(motion, move_arm, move_gripper)
-                last_q = motion.final_joints()
-                if failed:      # let go of whatever the hand has, before the world is measured
-                    opening = next((g.position for g in motion.gripper if g.action != 'grasp'), FINGER_OPEN)
-                    move_gripper(GripperCommand('open', opening, 0.0, 0))
-                    if joints is None:
-                        raise RadError(f'{failed} (and without joint states the robot cannot replan from where '
-                                       'it stopped)')
+                step_start = HOME if last_q is None else last_q
+                failed = run_motion(motion, move_arm, move_gripper, start=step_start[:7])
+                # A failed grasp has opened the hand and backed the arm out to where the step began.
+                last_q = motion.final_joints() if not failed else np.concatenate(
+                    [step_start[:7], [motion.opening] * 2])
                 settle(config.settle_s)
                 report(len(result.steps), len(assembly.steps), step.block, 'verifying', failed)
                 expected = moved(current, step.block, step.position, step.yaw)

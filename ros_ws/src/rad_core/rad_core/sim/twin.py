@@ -175,11 +175,13 @@ class _Run:
 
 
 class _Grip:
-    """One gripper command being executed."""
+    """One gripper command being executed: a move to `goal`, or (closing) a grasp that squeezes
+    with the force until the fingers stop, judged against `goal` (franka_gripper's grasp)."""
 
     def __init__(self, position: float, max_effort: float, start: float, closing: bool):
         self.goal, self.effort, self.closing = position, max_effort, closing
-        self.target = start            # the finger command, moving to the goal at the gripper's speed
+        self.drive = 0.0 if closing else position     # a grasp closes until something stops the fingers
+        self.target = start            # the finger command, moving to `drive` at the gripper's speed
         self.t = 0.0
         self.still = 0.0               # s the fingers have not moved
 
@@ -362,9 +364,11 @@ class Twin:
             if report.error_code != SUCCESSFUL:
                 raise RadError(f'trajectory aborted (error code {report.error_code}): {report.error_string}')
 
+        start = self.world.joint_positions()[:7]
         try:
             return run_motion(motion, move_arm, lambda c: self.execute_gripper(c, callback,
-                                                                               real_time_factor=real_time_factor))
+                                                                               real_time_factor=real_time_factor),
+                              start=start)
         except TrajectoryRejected as e:
             return f'trajectory refused (error code {e.code}): {e}'
         except RadError as e:
@@ -411,7 +415,7 @@ class Twin:
             grip = self._grip
             if grip is not None:
                 step = self.config.gripper_speed * self.dt
-                grip.target += float(np.clip(grip.goal - grip.target, -step, step))
+                grip.target += float(np.clip(grip.drive - grip.target, -step, step))
                 self._target[7:] = grip.target
             self._apply()
             self.world.step()
@@ -480,10 +484,10 @@ class Twin:
         fingers = self.world.joint_positions()[7:]
         moving = np.abs(self.world.joint_velocities()[7:]).max() > 1e-3
         grip.still = 0.0 if moving else grip.still + self.dt
-        commanded = abs(grip.target - grip.goal) < 1e-9
-        arrived = commanded and np.abs(fingers - grip.goal).max() < 2e-4
+        commanded = abs(grip.target - grip.drive) < 1e-9
+        arrived = commanded and np.abs(fingers - grip.drive).max() < 2e-4
         stalled = grip.still >= 0.05 and (commanded or grip.closing)
-        timeout = grip.t > abs(grip.goal - fingers.mean()) / self.config.gripper_speed + 2.0
+        timeout = grip.t > abs(grip.drive - fingers.mean()) / self.config.gripper_speed + 2.0
         if arrived or stalled or timeout:
             self._finish_grip(stop=False)
 
@@ -496,7 +500,7 @@ class Twin:
             reached = abs(position - grip.goal) < 5e-4
         if stop or not grip.closing:
             # A move that stopped (cancelled, blocked) holds where the fingers are; a grasp keeps squeezing.
-            self._target[7:] = position if (stop or not reached) else grip.goal
+            self._target[7:] = position if (stop or not reached) else grip.drive
         self._apply()
         self.gripper_result = GripperResult(position, grip.effort if grip.closing else 0.0,
                                             stalled=abs(position - grip.goal) >= 2e-4, reached_goal=bool(reached))
