@@ -39,6 +39,8 @@ from rad_core.trajectory import Trajectory, TrajectoryPoint
 
 _MIN_PHASE = 1e-6     # s: ruckig phases shorter than this add no point
 _MARGIN = 1e-3
+LEAD_IN_S = 0.05
+"""s: the first point, the planned start at rest (see `retime`)."""
 
 
 @dataclass(frozen=True)
@@ -85,8 +87,11 @@ def retime(waypoints: Sequence[np.ndarray], model: RobotModel, speed_scale: floa
     _, a_max, j_max = (x * (1.0 - _MARGIN) for x in model.limits(speed_scale if acceleration_scale is None
                                                                 else acceleration_scale))
     otg = Ruckig(1)
-    points: list[TrajectoryPoint] = []
-    t0 = 0.0
+    # The controller starts from where the arm actually is, a little off the planned start (tracking,
+    # a stale joint state): the first point holds the planned start after LEAD_IN_S, so catching up is a
+    # gentle quintic (1 mrad: 2.3 rad/s^2, 480 rad/s^3) and never rides on the motion's own jerk ramp.
+    points: list[TrajectoryPoint] = [TrajectoryPoint(qs[0].tolist(), [0.0] * 7, LEAD_IN_S, [0.0] * 7)]
+    t0 = LEAD_IN_S
     for a, b in zip(qs[:-1], qs[1:]):
         d = b - a
         moving = np.abs(d) > 1e-12
@@ -113,7 +118,7 @@ def retime(waypoints: Sequence[np.ndarray], model: RobotModel, speed_scale: floa
                 q, v, acc = b, np.zeros(7), np.zeros(7)
             points.append(TrajectoryPoint(q.tolist(), v.tolist(), t0 + float(k), acc.tolist()))
         t0 += traj.duration
-    if not points:
+    if len(points) == 1:
         raise RadError('retime: the arm does not move')
     return Trajectory(tuple(joint_names or model.arm_joint_names), points)
 
