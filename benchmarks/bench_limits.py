@@ -11,9 +11,10 @@ Scenes: generated two-sided scenes of grid 4 and 5 (`generate_scene(GeneratorCon
 seeds 1000.. by default: neither the evaluation seeds 0.. nor training's 1 000 000..) and a few of the
 hand-made shapes (`rad_core.shapes.shape_scene`).
 
-For each scene and each variant (after-panda, after-fr3: the current code with
-`TimingConfig(robot=R)`; before: the old code in a subprocess with PYTHONPATH set to
-`--before-src`) the HEUR sequencer plans the whole assembly in-process (CP-SAT
+For each scene and each variant (after-panda: the current code's default timing,
+`TimingConfig(robot='panda')`, within the Panda's and the FR3's limits at once; after-fr3:
+`TimingConfig(robot='fr3', limits='robot')`, within the FR3's own; before: the old code in a
+subprocess with PYTHONPATH set to `--before-src`) the HEUR sequencer plans the whole assembly in-process (CP-SAT
 allocation, GAMP), then the in-process twin executes the plan step by step (stopping at
 the first step that fails) and settles 0.3 s; the coverage is measured on the twin's
 registered scene (`measured_coverage`; a block that registration refuses, one that fell
@@ -28,8 +29,7 @@ before, the old 9-joint trajectories' arm columns, cubic with velocities
 (`rad_core.trajectory.Spline`), with the acceleration at rest before t = 0 (the step
 into the first cubic is a jerk the robot sees). A trajectory is over when any ratio
 exceeds 1 (the twin's rule, `limit_violation`); "over 1.001" counts those over by more than
-rounding (a Panda plan at speed 0.5 sits exactly on the FR3's acceleration and jerk limits of
-joints 6 and 7).
+rounding.
 
 Motion time per build: after, the arm trajectories' durations plus the gripper's moves
 (|travel| at 0.05 m/s per finger, at least 0.1 s each); before, the trajectories'
@@ -106,7 +106,9 @@ def worker(variant: str, scenes_file: str, out_file: str) -> None:
         from rad_core.gamp.trajectory import TimingConfig
         from rad_core.motion import Motion
         from rad_core.sim.twin import TwinConfig
-        planner = MotionPlanner(GampConfig(timing=TimingConfig(robot=variant)))
+        # panda: the default timing (within both robots' limits); fr3: the FR3's own limits only.
+        timing = TimingConfig(robot=variant, limits='both' if variant == 'panda' else 'robot')
+        planner = MotionPlanner(GampConfig(timing=timing))
     else:
         planner = MotionPlanner()
     plan_motion = local_motion_planner(planner)

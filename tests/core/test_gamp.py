@@ -12,7 +12,7 @@ from rad_core.gamp import GampResult, Grasp, allocated_pose, block_grasps, place
 from rad_core.gamp.collision import attachment_from_world, place_attached
 from rad_core.generator import GeneratorConfig, generate_scene
 from rad_core.motion import GripperCommand, Motion
-from rad_core.robot_model import PANDA
+from rad_core.robot_model import PANDA, robot_model
 from rad_core.trajectory import limit_ratios
 from rad_core.scene import Scene
 from rad_core.sim import panda
@@ -115,9 +115,11 @@ def test_free_block_is_picked_and_placed_at_its_allocated_pose(generated):
         assert q.shape[1] == 7 and all(panda.within_limits(row) for row in q)
         assert all(len(p.velocities) == len(p.accelerations) == 7 for p in traj.points)
         assert not np.any(traj.points[-1].velocities) and not np.any(traj.points[-1].accelerations)
-        # Within the Panda's limits at the configured scales, as the controller interpolates it at 1 kHz.
-        ratios = limit_ratios(traj, start, PANDA)
-        assert ratios['velocity'] <= 0.5 and ratios['acceleration'] <= 1.0 and ratios['jerk'] <= 1.0, ratios
+        # Within the Panda's and the FR3's limits at the configured scales (velocity 0.7), as the
+        # controller interpolates it at 1 kHz.
+        for model in (PANDA, robot_model('fr3', 'panda')):
+            ratios = limit_ratios(traj, start, model)
+            assert ratios['velocity'] <= 0.7 and ratios['acceleration'] <= 1.0 and ratios['jerk'] <= 1.0, ratios
         start = q[-1]
     # Executed kinematically, the block ends at the allocated pose.
     final_pos, final_quat = _replay(world, r, block.id)

@@ -180,3 +180,43 @@ def test_retime_refuses_what_it_cannot_time():
         retime([np.zeros(7), np.zeros(7)], PANDA, 0.5)
     with pytest.raises(RadError, match='speed_scale'):
         retime([np.zeros(7), np.ones(7) * 0.1], PANDA, 1.5)
+
+
+@pytest.mark.parametrize('grid, seed', [(3, 2), (4, 1003)])
+def test_planned_scenes_stay_within_both_robots_limits_at_1khz(grid, seed):
+    """Whole plans as GAMP times them by default (limits='both'): every arm trajectory, each from where
+    the previous one ended, within the Panda's and the FR3's velocity, acceleration and jerk limits
+    as this test's own 1 kHz sampler sees them; and within the FR3's when timed for the FR3 alone."""
+    from rad_core.allocation import solve
+    from rad_core.gamp.action import MotionPlanner
+    from rad_core.gamp.planner import GampConfig
+    from rad_core.gamp.trajectory import TimingConfig
+    from rad_core.generator import GeneratorConfig, generate_scene
+    from rad_core.motion import Motion
+    from rad_core.robot_model import robot_model
+    from rad_core.sequencing import HeurPolicy
+    from rad_core.sequencing.plan import local_motion_planner, plan_assembly
+    from rad_core.sim.panda import HOME
+    scene = generate_scene(GeneratorConfig(grid=grid), seed)
+    for timing, models in ((TimingConfig(), (PANDA, robot_model('fr3', 'panda'))),
+                           (TimingConfig(robot='fr3', limits='robot', speed_scale=1.0), (FR3,))):
+        planner = MotionPlanner(GampConfig(timing=timing))
+        try:
+            plan = plan_assembly(scene, solve, local_motion_planner(planner), HeurPolicy(), seed=1)
+        finally:
+            planner.close()
+        assert len(plan.steps) >= 2, plan.reason
+        q, count = HOME[:7], 0
+        for step in plan.steps:
+            for traj in Motion.from_dict(step.motion).trajectories:
+                assert list(traj.joint_names) == list(models[0].arm_joint_names)
+                for model in models:
+                    v_max, a_max, j_max = model.limits()
+                    _, (_, v, a, j) = sample(traj, q)
+                    assert (np.abs(v) / v_max).max() <= 1 + ROUNDING
+                    assert (np.abs(a) / a_max).max() <= 1 + ROUNDING
+                    assert (np.abs(j) / j_max).max() <= 1 + ROUNDING
+                    assert limit_violation(traj, q, model) == ''
+                q = np.asarray(traj.points[-1].positions)
+                count += 1
+        assert count == 3 * len(plan.steps)

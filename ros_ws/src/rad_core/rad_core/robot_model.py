@@ -74,6 +74,16 @@ FR3 = RobotModel(
 
 MODELS = {m.name: m for m in (PANDA, FR3)}
 
+
+def envelope(model: RobotModel) -> RobotModel:
+    """`model` (its name and joint names) with the limits both the Panda and the FR3 keep: the
+    smaller velocity, acceleration and jerk of each joint, the narrower position range. A motion
+    timed within it is one either robot takes."""
+    pick = {f: tuple(float(v) for v in (np.minimum if f != 'q_min' else np.maximum)(
+        np.asarray(getattr(PANDA, f)), np.asarray(getattr(FR3, f)))) for f in ('q_min', 'q_max', 'v_max', 'a_max',
+                                                                              'j_max')}
+    return replace(model, **pick)
+
 PLANNING_LOWER = np.maximum(np.asarray(PANDA.q_min), np.asarray(FR3.q_min))
 PLANNING_UPPER = np.minimum(np.asarray(PANDA.q_max), np.asarray(FR3.q_max))
 """The arm's position range every plan keeps to: valid on the Panda and on the FR3."""

@@ -36,14 +36,14 @@ class GampNode(Node):
         super().__init__('gamp')
         self.declare_parameter('frame_id', 'world')
         self.declare_parameter('seed', 0)
-        for name, value in (('robot', 'panda'), ('joint_prefix', ''), ('speed_scale', 0.5),
+        for name, value in (('robot', 'panda'), ('joint_prefix', ''), ('speed_scale', 0.7), ('limits', 'both'),
                             ('acceleration_scale', 1.0), ('grasp_force', 20.0),
                             ('arm_controller', 'joint_trajectory_controller'),
                             ('gripper_action', 'franka_gripper/gripper_action')):
             self.declare_parameter(name, value)
         param = lambda name: self.get_parameter(name).value  # noqa: E731
         timing = TimingConfig(robot=str(param('robot')), joint_prefix=str(param('joint_prefix')),
-                              speed_scale=float(param('speed_scale')),
+                              limits=str(param('limits')), speed_scale=float(param('speed_scale')),
                               acceleration_scale=float(param('acceleration_scale')),
                               grasp_force=float(param('grasp_force')))
         timing.validate()    # a bad robot, scale or force stops the node here with the reason

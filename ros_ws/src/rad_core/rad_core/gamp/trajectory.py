@@ -34,7 +34,7 @@ import numpy as np
 
 from rad_core.errors import RadError
 from rad_core.motion import GripperCommand, Motion
-from rad_core.robot_model import RobotModel, robot_model
+from rad_core.robot_model import RobotModel, envelope, robot_model
 from rad_core.trajectory import Trajectory, TrajectoryPoint
 
 _MIN_PHASE = 1e-6     # s: ruckig phases shorter than this add no point
@@ -48,11 +48,16 @@ class TimingConfig:
     """How fast a planned motion runs, and on which robot."""
 
     robot: str = 'panda'
-    """Robot model whose limits bound the motion and whose joint names it carries ('panda' | 'fr3')."""
+    """Robot model whose joint names the motion carries ('panda' | 'fr3') and, with limits='robot',
+    whose limits bound it."""
+    limits: str = 'both'
+    """'both': time within the limits of the Panda and the FR3 at once (`robot_model.envelope`), so a
+    plan suits either robot; 'robot': within the robot's own (faster on a Panda)."""
     joint_prefix: str = ''
     """Joint names `<prefix>_joint1..7` ('' = the model's)."""
-    speed_scale: float = 0.5
-    """Fraction of the model's velocity limits the motion may use (0, 1]."""
+    speed_scale: float = 0.7
+    """Fraction of the model's velocity limits the motion may use (0, 1] (the old velocity rule's
+    cubic segments peaked at 0.75 of the URDF's)."""
     acceleration_scale: float = 1.0
     """Fraction of the model's acceleration and jerk limits the motion may use (0, 1] (as MoveIt's
     velocity and acceleration scaling factors, the two are separate; the motions are short, so
@@ -62,10 +67,18 @@ class TimingConfig:
 
     @property
     def model(self) -> RobotModel:
+        """The robot model whose joint names the motion carries."""
         return robot_model(self.robot, self.joint_prefix)
 
+    @property
+    def timing_model(self) -> RobotModel:
+        """The model whose limits bound the motion (names as `model`'s)."""
+        return envelope(self.model) if self.limits == 'both' else self.model
+
     def validate(self) -> None:
-        """RadError naming a bad robot, joint prefix, scale or force."""
+        """RadError naming a bad robot, joint prefix, limits, scale or force."""
+        if self.limits not in ('both', 'robot'):
+            raise RadError(f"limits must be 'both' or 'robot', got {self.limits!r}")
         self.model.limits(self.speed_scale)
         self.model.limits(self.acceleration_scale)
         if not (np.isfinite(self.grasp_force) and self.grasp_force > 0):
@@ -129,7 +142,7 @@ def plan_motion(start: np.ndarray, waypoints: Sequence[np.ndarray], config: Timi
     the fingers move (closing = 'grasp', expecting the fingers to stop at `grasp_expected`; opening after a grasp
     = 'release'; opening before it = 'open'). The first commands set the hand to the approach's opening if the
     start's fingers differ from it ('close' first when it is narrower)."""
-    model = config.model
+    model = config.timing_model
     qs = [np.asarray(start, dtype=float)] + [np.asarray(w, dtype=float) for w in waypoints]
     motion = Motion()
     arm_path = [qs[0]]

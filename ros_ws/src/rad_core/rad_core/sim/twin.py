@@ -96,7 +96,8 @@ class TwinConfig:
     goal_time: float = 0.5
     """After the last point, hold at most this long (s) for the arm to reach it (unless a goal says)."""
     goal_tol: float = 1e-3
-    """The arm counts as arrived when every arm joint is this close (rad) to the last point (unless a goal says)."""
+    """The arm counts as arrived when every arm joint is this close (rad) to the last point (unless a goal
+    says); only a goal tolerance given with the trajectory is enforced (GOAL_TOLERANCE_VIOLATED)."""
     path_tol: float = 0.0
     """Largest tracking error (rad) while moving before the run aborts (0: not enforced, unless a goal says)."""
     close_margin: float = 5e-4
@@ -162,6 +163,7 @@ class _Run:
         self.spline = Spline(traj, start_q[:7])
         self.path_tol = tolerances.path or config.path_tol
         self.goal_tol = tolerances.goal or config.goal_tol
+        self.goal_enforced = tolerances.goal > 0      # as in joint_trajectory_controller: 0 = not enforced
         self.goal_time = tolerances.goal_time or config.goal_time
         self.t = 0.0
         self.max_error = 0.0
@@ -453,6 +455,8 @@ class Twin:
         if err <= run.goal_tol:
             return True
         if run.t >= duration + run.goal_time - 1e-9:
+            if not run.goal_enforced:      # no goal tolerance asked for: done, as the controller is
+                return True
             run.report.error_code = GOAL_TOLERANCE_VIOLATED
             run.report.error_string = (f'goal tolerance violated: {err:.4f} rad from the last point after '
                                        f'{run.goal_time:.2f} s (tolerance {run.goal_tol:.4f})')
