@@ -20,6 +20,7 @@ code) naming the point and what is wrong.
 
 from __future__ import annotations
 
+import bisect
 import math
 from dataclasses import dataclass, field
 
@@ -202,7 +203,8 @@ class Spline:
     It starts from `start` at rest at t = 0 (when the first point lies later) and
     interpolates each segment by what the points give: quintic Hermite with
     velocities and accelerations, cubic with velocities, linear with positions only.
-    After the last point it holds there.
+    After the last point it holds there. Each segment's polynomial is computed once
+    (the twin evaluates it at every physics step).
     """
 
     def __init__(self, traj: Trajectory, start):
@@ -216,44 +218,72 @@ class Spline:
             vel = None if vel is None else np.vstack([np.zeros(k), vel])
             acc = None if acc is None else np.vstack([np.zeros(k), acc])
         self.times, self.pos, self.vel, self.acc = times, pos, vel, acc
+        # Coefficients in s = (t - t_i) / h, lowest power first: (segments, 6, joints).
+        h = np.diff(times)[:, None]
+        p0, p1 = pos[:-1], pos[1:]
+        d, zero = p1 - p0, np.zeros_like(p0)
+        if acc is not None:
+            v0, v1, a0, a1 = vel[:-1] * h, vel[1:] * h, acc[:-1] * h * h, acc[1:] * h * h
+            c = [p0, v0, a0 / 2, 10 * d - 6 * v0 - 4 * v1 - 1.5 * a0 + 0.5 * a1,
+                 -15 * d + 8 * v0 + 7 * v1 + 1.5 * a0 - a1, 6 * d - 3 * v0 - 3 * v1 - 0.5 * a0 + 0.5 * a1]
+        elif vel is not None:
+            v0, v1 = vel[:-1] * h, vel[1:] * h
+            c = [p0, v0, 3 * d - 2 * v0 - v1, -2 * d + v0 + v1, zero, zero]
+        else:
+            c = [p0, d, zero, zero, zero, zero]
+        self._coef = np.stack(c, axis=1) if len(times) > 1 else np.zeros((0, 6, k))
+        self._h = h[:, 0]
+        self._times_list = [float(x) for x in times]
 
     @property
     def duration(self) -> float:
         return float(self.times[-1])
 
+    def at(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Positions, velocities and accelerations at one time t (the fast path of a physics step)."""
+        times = self._times_list
+        if len(times) == 1 or t >= times[-1]:
+            zero = np.zeros(self.pos.shape[1])
+            return self.pos[-1], zero, zero
+        i = min(max(bisect.bisect_right(times, t) - 1, 0), len(times) - 2)
+        h = times[i + 1] - times[i]
+        s = min(max((t - times[i]) / h, 0.0), 1.0)
+        c = self._coef[i]
+        q = ((((c[5] * s + c[4]) * s + c[3]) * s + c[2]) * s + c[1]) * s + c[0]
+        dq = ((((5 * c[5] * s + 4 * c[4]) * s + 3 * c[3]) * s + 2 * c[2]) * s + c[1]) / h
+        ddq = (((20 * c[5] * s + 12 * c[4]) * s + 6 * c[3]) * s + 2 * c[2]) / (h * h)
+        return q, dq, ddq
+
     def __call__(self, t) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Positions, velocities and accelerations at time(s) t: (k,) each for a scalar, (n, k) for an array."""
+        if np.ndim(t) == 0:
+            return self.at(float(t))
         ts = np.atleast_1d(np.asarray(t, dtype=float))
-        times, n = self.times, len(self.times)
+        n = len(self.times)
         if n == 1:
             q = np.repeat(self.pos[:1], len(ts), axis=0)
             zero = np.zeros_like(q)
             out = (q, zero, zero)
         else:
-            seg = np.clip(np.searchsorted(times, ts, side='right') - 1, 0, n - 2)
-            h = (times[seg + 1] - times[seg])[:, None]
-            s = np.clip((ts - times[seg])[:, None] / h, 0.0, 1.0)
-            p0, p1 = self.pos[seg], self.pos[seg + 1]
-            if self.acc is not None:
-                v0, v1 = self.vel[seg] * h, self.vel[seg + 1] * h
-                a0, a1 = self.acc[seg] * h * h, self.acc[seg + 1] * h * h
-                d = p1 - p0
-                c = [p0, v0, a0 / 2, 10 * d - 6 * v0 - 4 * v1 - 1.5 * a0 + 0.5 * a1,
-                     -15 * d + 8 * v0 + 7 * v1 + 1.5 * a0 - a1, 6 * d - 3 * v0 - 3 * v1 - 0.5 * a0 + 0.5 * a1]
-            elif self.vel is not None:
-                v0, v1 = self.vel[seg] * h, self.vel[seg + 1] * h
-                d = p1 - p0
-                c = [p0, v0, 3 * d - 2 * v0 - v1, -2 * d + v0 + v1]
-            else:
-                c = [p0, p1 - p0]
-            q = sum(ck * s ** k for k, ck in enumerate(c))
-            dq = sum(k * c[k] * s ** (k - 1) for k in range(1, len(c))) / h
-            ddq = (sum(k * (k - 1) * c[k] * s ** (k - 2) for k in range(2, len(c))) / h ** 2
-                   if len(c) > 2 else np.zeros_like(q))
-            after = ts >= times[-1]
-            q[after], dq[after], ddq[after] = self.pos[-1], 0.0, 0.0
+            seg = np.clip(np.searchsorted(self.times, ts, side='right') - 1, 0, n - 2)
+            h = self._h[seg][:, None]
+            s = np.clip((ts - self.times[seg])[:, None] / h, 0.0, 1.0)
+            c = self._coef[seg]                                   # (m, 6, k)
+            q = c[:, 5]
+            dq = 5 * c[:, 5]
+            ddq = 20 * c[:, 5]
+            for p in (4, 3, 2):                                   # Horner, with the derivatives alongside
+                q = q * s + c[:, p]
+                dq = dq * s + p * c[:, p]
+                ddq = ddq * s + p * (p - 1) * c[:, p]
+            q = (q * s + c[:, 1]) * s + c[:, 0]
+            dq = (dq * s + c[:, 1]) / h
+            ddq = ddq / (h * h)
+            after = ts >= self.times[-1]
+            if after.any():
+                q[after], dq[after], ddq[after] = self.pos[-1], 0.0, 0.0
             out = (q, dq, ddq)
-        return tuple(x[0] for x in out) if np.ndim(t) == 0 else out
+        return out
 
 
 def limit_violation(traj: Trajectory | dict, start, model: RobotModel = PANDA, slack: float = 1.0,
