@@ -8,6 +8,7 @@ import threading
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 import rclpy
 from rclpy.action import ActionClient
@@ -31,18 +32,19 @@ def rss_mb(pid: int) -> float:
     return math.nan
 
 
-@pytest.fixture
-def graph(node_process, ros_node, tmp_path):
+def start_graph(node_process, ros_node, tmp_path, scene: Scene = DEMO_SCENE, twin=None, gamp=None, assembly=None):
+    """The node graph as separate processes; twin/gamp/assembly: parameters on top of the defaults here."""
     from rad_msgs.action import ExecuteAssembly
     from rad_msgs.srv import PlanAssembly, Sequence
     path = tmp_path / 'scene.json'
-    path.write_text(DEMO_SCENE.dumps())
-    twin_args = ros_args({'scene_file': str(path), 'real_time_factor': 8.0})
+    path.write_text(scene.dumps())
+    twin_args = ros_args({'scene_file': str(path), 'real_time_factor': 8.0, **(twin or {})})
     procs = {'twin': node_process('rad_sim', 'twin_node', *twin_args),
              'allocation': node_process('rad_planner', 'allocation_node'),
-             'gamp': node_process('rad_gamp', 'gamp_node'),
+             'gamp': node_process('rad_gamp', 'gamp_node', *ros_args(gamp or {})),
              'sequencer': node_process('rad_planner', 'sequencer_node', *ros_args(SEQUENCER)),
-             'assembly': node_process('rad_planner', 'assembly_node', *ros_args({'stale_after_s': 1.5}))}
+             'assembly': node_process('rad_planner', 'assembly_node',
+                                      *ros_args({'stale_after_s': 1.5, **(assembly or {})}))}
     client = wait_for_service(ros_node, PlanAssembly, 'plan_assembly', timeout=30.0)
     wait_for_service(ros_node, Sequence, 'sequence', timeout=60.0)   # the network loads in a few seconds
     actions = ActionClient(ros_node, ExecuteAssembly, 'execute_assembly')
@@ -54,10 +56,20 @@ def graph(node_process, ros_node, tmp_path):
     g = Graph()
     g.procs, g.node, g.actions, g.twin_args = procs, ros_node, actions, twin_args
     g.plan = lambda **kw: call_service(ros_node, client, PlanAssembly.Request(**kw), timeout=120.0)
-    yield g
-    for name, proc in procs.items():
+    return g
+
+
+def stop_graph(g) -> None:
+    for proc in g.procs.values():
         if proc.is_running():
             assert proc.stop() == 0, proc.output_tail()
+
+
+@pytest.fixture
+def graph(node_process, ros_node, tmp_path):
+    g = start_graph(node_process, ros_node, tmp_path)
+    yield g
+    stop_graph(g)
 
 
 def execute(g, goal, on_feedback=None, timeout=180.0):
@@ -79,7 +91,8 @@ def test_plans_from_json_and_from_motion_capture(graph):
         stages = {t.stage for t in r.timings}
         assert {'allocation', 'sequencing', 'motion', 'registration', 'total'} <= stages
         for step in r.steps:
-            assert step.trajectory.joint_names and step.trajectory.points
+            assert step.trajectories and all(t.joint_names and t.points for t in step.trajectories)
+            assert [g.action for g in step.gripper][-2:] == ['grasp', 'release']
             assert step.block_id in {b.id for b in DEMO_SCENE.blocks}
         assert Scene.loads(r.scene_json).to_dict()['targets'] == DEMO_SCENE.to_dict()['targets']
 
@@ -148,9 +161,14 @@ def test_execute_builds_the_scene_and_reports_each_step(graph):
                          'reallocations'}
     assert doc_['reallocations'] == []      # the demo scene builds without a stall
     step = doc_['steps'][0]
-    assert {'block', 'type', 'target', 'yaw', 'cells', 'trajectory'} <= set(step)
-    assert set(step['trajectory']) == {'joint_names', 'points'}
-    assert set(step['trajectory']['points'][0]) == {'positions', 'velocities', 'time_from_start'}
+    assert {'block', 'type', 'target', 'yaw', 'cells', 'trajectories', 'gripper'} <= set(step)
+    # The arm trajectories exactly as sent (7 arm joints, accelerations for quintic interpolation) and
+    # the gripper commands between them.
+    assert set(step['trajectories'][0]) == {'joint_names', 'points'}
+    assert step['trajectories'][0]['joint_names'] == [f'panda_joint{k}' for k in range(1, 8)]
+    assert set(step['trajectories'][0]['points'][0]) == {'positions', 'velocities', 'accelerations',
+                                                        'time_from_start'}
+    assert [g['action'] for g in step['gripper']][-2:] == ['grasp', 'release']
 
 
 def test_twin_killed_mid_execution_fails_in_bounded_time_and_planning_recovers(graph, node_process):
@@ -166,10 +184,16 @@ def test_twin_killed_mid_execution_fails_in_bounded_time_and_planning_recovers(g
     result = execute(graph, ExecuteAssembly.Goal(scene_json=DEMO_SCENE.dumps(), replan=True), on_feedback,
                      timeout=60.0)
     assert killed.is_set()
-    assert not result.success and 'joint_states' in result.reason, result.reason
+    # Whatever the node was waiting for when the plant died says so: joint states, or the arm's or the
+    # hand's action (a goal unanswered, a server gone, a result that never came).
+    plant_gone = ('joint_states', 'did not answer', 'is not available', 'did not finish')
+    assert not result.success and any(p in result.reason for p in plant_gone), result.reason
     assert time.monotonic() - t0 < 30.0
     graph.procs['twin'] = node_process('rad_sim', 'twin_node', *graph.twin_args)
-    assert graph.plan(scene_json=DEMO_SCENE.dumps()).success
+    # Plans start from the robot's joint states, so planning needs the new twin up (a bounded wait).
+    wait_for_plant(graph.node)
+    r = graph.plan(scene_json=DEMO_SCENE.dumps())
+    assert r.success, r.reason
     # Planning from motion capture works again once the new twin publishes (bounded wait).
     deadline, r = time.monotonic() + 30.0, None
     while time.monotonic() < deadline:
@@ -274,3 +298,166 @@ def test_a_block_moved_during_execution_triggers_a_replan(graph):
     assert result.replans >= 1 and 'replanning' in phases, (result.replans, phases)
     assert result.success, result.reason
     assert result.coverage == 1.0
+
+
+# ---- the robot's state: fresh, complete joint_states ----------------------------------------------
+
+def test_plan_assembly_needs_fresh_and_complete_joint_states(node_process, ros_node):
+    """No twin: the test publishes joint_states. The joint check comes before any other service is asked."""
+    from rclpy.duration import Duration
+    from rad_core.sim.panda import HOME, JOINT_NAMES
+    from rad_msgs.srv import PlanAssembly
+    from sensor_msgs.msg import JointState
+    proc = node_process('rad_planner', 'assembly_node', *ros_args({'service_timeout_s': 3.0}))
+    client = wait_for_service(ros_node, PlanAssembly, 'plan_assembly', timeout=30.0)
+    pub = ros_node.create_publisher(JointState, 'joint_states', 10)
+    publishing = {'names': None, 'age': 0.0}
+
+    def publish():
+        if publishing['names'] is None:
+            return
+        names = list(publishing['names'])
+        msg = JointState(name=names, position=[float(HOME[JOINT_NAMES.index(n)]) for n in names],
+                         velocity=[0.0] * len(names))
+        msg.header.stamp = (ros_node.get_clock().now() - Duration(seconds=publishing['age'])).to_msg()
+        pub.publish(msg)
+
+    ros_node.create_timer(0.02, publish)
+
+    def plan_with(names, age=0.0):
+        publishing['names'], publishing['age'] = names, age
+        if names is not None:
+            spin_until(ros_node, lambda: False, timeout=1.0)     # the node hears the new messages
+        return call_service(ros_node, client, PlanAssembly.Request(scene_json=SMALL.dumps()), timeout=60.0)
+
+    r = plan_with(None)
+    assert not r.success and 'no /joint_states received' in r.reason, r.reason
+    r = plan_with(JOINT_NAMES[:7])                      # the arm only, as an arm controller's state broadcaster
+    assert not r.success and 'lacks panda_finger_joint1, panda_finger_joint2' in r.reason, r.reason
+    r = plan_with(JOINT_NAMES[:8])
+    assert not r.success and 'lacks panda_finger_joint2 (' in r.reason, r.reason
+    r = plan_with(JOINT_NAMES, age=10.0)                 # heard now, but stamped 10 s ago
+    assert not r.success and 'stale' in r.reason and '10.' in r.reason, r.reason
+    # Fresh and complete (in any order): the request gets past the robot's state to /allocate (not running).
+    r = plan_with(list(reversed(JOINT_NAMES)))
+    assert not r.success and 'joint_states' not in r.reason and 'allocate' in r.reason, r.reason
+    assert proc.is_running()
+    assert proc.stop() == 0, proc.output_tail()
+
+
+# ---- execution through the arm controller's and the hand's actions --------------------------------
+
+def test_a_trajectory_the_robot_refuses_fails_the_run_naming_invalid_goal(node_process, ros_node, tmp_path):
+    """The cell is an FR3 (joints named panda_*), the planners think it is a Panda and time its motions at
+    full speed within the Panda's own limits (not both robots'): the Panda's accelerations exceed the
+    FR3's 10 rad/s^2, so the arm controller refuses the goal."""
+    from rad_msgs.action import ExecuteAssembly
+    g = start_graph(node_process, ros_node, tmp_path, twin={'robot': 'fr3', 'joint_prefix': 'panda'},
+                    gamp={'robot': 'panda', 'limits': 'robot', 'speed_scale': 1.0, 'acceleration_scale': 1.0},
+                    assembly={'robot': 'panda'})
+    executing = []
+
+    def on_feedback(msg):
+        if msg.feedback.phase == 'executing' and not executing:
+            executing.append(time.monotonic())
+
+    result = execute(g, ExecuteAssembly.Goal(scene_json=DEMO_SCENE.dumps(), replan=True), on_feedback,
+                     timeout=120.0)
+    finished = time.monotonic()
+    assert executing, 'execution never started'
+    assert not result.success, result.reason
+    assert 'INVALID_GOAL' in result.reason and 'fr3' in result.reason, result.reason
+    assert finished - executing[0] < 15.0, finished - executing[0]
+    assert g.procs['twin'].wait_for_output(r"goal refused: over the fr3's limits", timeout=5.0)
+    stop_graph(g)
+
+
+def test_cancelling_execution_cancels_the_arm_goal_and_the_arm_stops(node_process, ros_node, tmp_path):
+    from action_msgs.msg import GoalStatus, GoalStatusArray
+    from rad_msgs.action import ExecuteAssembly
+    from rclpy.qos import qos_profile_action_status_default
+    from sensor_msgs.msg import JointState
+    # The twin in real time: the arm's trajectories last seconds, long enough to cancel one mid-motion.
+    g = start_graph(node_process, ros_node, tmp_path, twin={'real_time_factor': 1.0})
+    joints, arm_status = [], set()
+    ros_node.create_subscription(JointState, 'joint_states', joints.append, 10)
+    ros_node.create_subscription(GoalStatusArray, 'joint_trajectory_controller/follow_joint_trajectory/_action/status',
+                                 lambda m: arm_status.update(s.status for s in m.status_list),
+                                 qos_profile_action_status_default)
+    phases = []
+    sent = g.actions.send_goal_async(ExecuteAssembly.Goal(scene_json=DEMO_SCENE.dumps(), replan=True),
+                                     feedback_callback=lambda m: phases.append(m.feedback.phase))
+    rclpy.spin_until_future_complete(ros_node, sent, timeout_sec=30.0)
+    handle = sent.result()
+    assert handle.accepted
+
+    def arm_moving():
+        return 'executing' in phases and joints and max(abs(v) for v in joints[-1].velocity[:7]) > 0.05
+
+    assert spin_until(ros_node, arm_moving, timeout=120.0), ('the arm never moved', phases)
+    moving_at = np.asarray(joints[-1].position[:7])
+    t_cancel = time.monotonic()
+    cancel = handle.cancel_goal_async()
+    done = handle.get_result_async()
+
+    def arm_still():
+        return len(joints) >= 5 and all(max(abs(v) for v in m.velocity[:7]) < 0.01 for m in joints[-5:])
+
+    assert spin_until(ros_node, arm_still, timeout=5.0), 'the arm did not stop'
+    stopped_after = time.monotonic() - t_cancel
+    assert stopped_after < 2.0, stopped_after
+    rclpy.spin_until_future_complete(ros_node, done, timeout_sec=30.0)
+    assert done.done(), 'no result after the cancel'
+    assert time.monotonic() - t_cancel < 10.0
+    assert cancel.done() and len(cancel.result().goals_canceling) == 1
+    assert done.result().status == GoalStatus.STATUS_CANCELED, (done.result().status, done.result().result.reason)
+    result = done.result().result
+    assert not result.success and 'cancel' in result.reason, result.reason
+    # The running arm goal was cancelled on the controller, and the arm stands still where it was.
+    spin_until(ros_node, lambda: GoalStatus.STATUS_CANCELED in arm_status, timeout=2.0)
+    assert GoalStatus.STATUS_CANCELED in arm_status, arm_status
+    spin_until(ros_node, lambda: False, timeout=0.3)
+    joints.clear()
+    assert spin_until(ros_node, lambda: len(joints) >= 25, timeout=5.0)        # 0.5 s at 50 Hz
+    q = np.array([m.position[:7] for m in joints])
+    v = np.array([m.velocity[:7] for m in joints])
+    assert np.abs(v).max() < 0.02, np.abs(v).max(axis=0)
+    assert np.ptp(q, axis=0).max() < 0.003, np.ptp(q, axis=0)
+    assert np.abs(q[-1] - moving_at).max() < 0.2     # stopped near where it was cancelled, not at a goal
+    stop_graph(g)
+
+
+def test_a_grasp_on_nothing_opens_the_hand_and_replans(node_process, ros_node, tmp_path):
+    """The block about to be picked is moved away as execution starts: the hand closes on air, the run
+    notices from the width the gripper reports, opens the hand, re-registers and replans."""
+    from rad_core.transforms import yaw_quaternion
+    from rad_msgs.action import ExecuteAssembly
+    from rad_msgs.srv import SetBlockPose
+    g = start_graph(node_process, ros_node, tmp_path)
+    mover = wait_for_service(ros_node, SetBlockPose, 'set_block_pose', timeout=10.0)
+    moved = {}
+
+    def on_feedback(msg):
+        fb = msg.feedback
+        if fb.phase == 'executing' and not moved:
+            block = DEMO_SCENE.block(fb.block_id)
+            request = SetBlockPose.Request(block_id=fb.block_id)
+            # 25 cm further from the targets, where the table is free (all blocks lie at y >= -0.3).
+            p = request.pose.position
+            p.x, p.y, p.z = block.position[0], block.position[1] - 0.25, block.position[2]
+            q = yaw_quaternion(block.yaw)
+            request.pose.orientation.x, request.pose.orientation.y = float(q[0]), float(q[1])
+            request.pose.orientation.z, request.pose.orientation.w = float(q[2]), float(q[3])
+            moved.update(block=fb.block_id, future=mover.call_async(request), at=time.monotonic())
+
+    result = execute(g, ExecuteAssembly.Goal(scene_json=DEMO_SCENE.dumps(), replan=True), on_feedback)
+    assert moved, 'execution never started'
+    assert moved['future'].done() and moved['future'].result().success, moved['future'].result()
+    doc_ = json.loads(result.result_json)
+    first = doc_['steps'][0]
+    assert first['block'] == moved['block']
+    assert 'grasp failed' in first.get('failure', ''), (first.get('failure'), result.reason)
+    assert 'nothing is held' in first['failure'], first['failure']
+    assert result.success, result.reason
+    assert result.replans >= 1
+    stop_graph(g)

@@ -23,13 +23,43 @@ from typing import Callable
 from action_msgs.msg import GoalStatus
 from control_msgs.action import FollowJointTrajectory, GripperCommand
 from control_msgs.msg import JointTolerance
-from rclpy.action import ActionClient
+from rclpy.action import ActionClient as _ActionClient
 
 from rad_core.errors import RadError
 from rad_core.motion import GripperCommand as GripperStep, GripperResult
 from rad_core.robot_model import RobotModel
 from rad_core.trajectory import Trajectory
 from rad_ros.motion import s_to_duration, trajectory_to_msg
+
+class ActionClient(_ActionClient):
+    """rclpy's ActionClient, safe to send from one thread while an executor spins it on another.
+
+    rclpy 7.1 (Jazzy) registers a request's future only after the request is sent; when the
+    executor's thread takes the answer in between, the answer is dropped ("Ignoring unexpected
+    goal response") and the goal never completes (ros2/rclpy#1123, fixed upstream by a lock).
+    Here sending and registering, and taking answers, hold one lock.
+    """
+
+    def __init__(self, *args, **kwargs):
+        self._send_lock = threading.RLock()
+        super().__init__(*args, **kwargs)
+
+    def take_data(self):
+        with self._send_lock:
+            return super().take_data()
+
+    def send_goal_async(self, *args, **kwargs):
+        with self._send_lock:
+            return super().send_goal_async(*args, **kwargs)
+
+    def _cancel_goal_async(self, goal_handle):
+        with self._send_lock:
+            return super()._cancel_goal_async(goal_handle)
+
+    def _get_result_async(self, goal_handle):
+        with self._send_lock:
+            return super()._get_result_async(goal_handle)
+
 
 ERROR_NAMES = {0: 'SUCCESSFUL', -1: 'INVALID_GOAL', -2: 'INVALID_JOINTS', -3: 'OLD_HEADER_TIMESTAMP',
                -4: 'PATH_TOLERANCE_VIOLATED', -5: 'GOAL_TOLERANCE_VIOLATED'}
