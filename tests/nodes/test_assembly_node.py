@@ -190,9 +190,15 @@ def test_twin_killed_mid_execution_fails_in_bounded_time_and_planning_recovers(g
     assert not result.success and any(p in result.reason for p in plant_gone), result.reason
     assert time.monotonic() - t0 < 30.0
     graph.procs['twin'] = node_process('rad_sim', 'twin_node', *graph.twin_args)
-    # Plans start from the robot's joint states, so planning needs the new twin up (a bounded wait).
+    # Plans start from the robot's joint states, so planning needs the new twin up and heard by the
+    # assembly node (a bounded wait: discovery of the new process takes a moment under load).
     wait_for_plant(graph.node)
-    r = graph.plan(scene_json=DEMO_SCENE.dumps())
+    deadline = time.monotonic() + 30.0
+    while True:
+        r = graph.plan(scene_json=DEMO_SCENE.dumps())
+        if r.success or time.monotonic() > deadline or 'joint_states' not in r.reason:
+            break
+        time.sleep(0.5)
     assert r.success, r.reason
     # Planning from motion capture works again once the new twin publishes (bounded wait).
     deadline, r = time.monotonic() + 30.0, None

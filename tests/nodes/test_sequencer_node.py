@@ -14,6 +14,7 @@ from rad_core.allocation import solve
 from rad_core.allocation.placements import Placement
 from rad_core.generator import GeneratorConfig, generate_scene
 from rad_core.scene import Scene
+from rad_core.sim.panda import HOME
 
 DEMO_SCENE = generate_scene(GeneratorConfig(grid=4), 8)
 
@@ -89,7 +90,8 @@ def test_sequencer_killed_mid_plan_fails_the_plan_in_bounded_time_and_planning_r
     sequencer = node_process('rad_planner', 'sequencer_node', *sequencer_args)
     client = wait_for_service(ros_node, PlanAssembly, 'plan_assembly', timeout=30.0)
     wait_for_service(ros_node, Sequence, 'sequence', timeout=60.0)
-    request = PlanAssembly.Request(scene_json=DEMO_SCENE.dumps())
+    # No robot in this graph: the request gives the start joints (home) instead of /joint_states.
+    request = PlanAssembly.Request(scene_json=DEMO_SCENE.dumps(), start_positions=[float(v) for v in HOME])
     assert call_service(ros_node, client, request, timeout=120.0).success
 
     # Mid-plan: the sequencer has answered the first step of a new plan, three are left.
