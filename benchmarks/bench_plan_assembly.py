@@ -23,7 +23,7 @@ from rad_core.sequencing.plan import local_motion_planner, plan_assembly
 from rad_core.sequencing.sequencer import POLICIES, Sequencer, SequencerConfig
 from rad_planner.graph import executable
 
-HOME9 = [0.0, -0.215, 0.0, -2.57, 0.0, 2.356, 2.356, 0.04, 0.04]   # rad_core.sim.panda.HOME
+HOME9 = [0.0, -0.215, 0.0, -2.57, 0.0, 2.356, 2.356, 0.04, 0.04]   # no robot runs: plans start at home
 
 NODES = (('rad_planner', 'allocation_node'), ('rad_gamp', 'gamp_node'), ('rad_planner', 'sequencer_node'),
          ('rad_planner', 'assembly_node'))
@@ -61,7 +61,7 @@ def main():
             dds, stages, inproc, steps = [], {'allocation': [], 'motion': []}, [], []
             for scene in scenes:
                 t0 = time.perf_counter()
-                future = client.call_async(PlanAssembly.Request(scene_json=scene.dumps(), start_positions=HOME9))  # no robot: home
+                future = client.call_async(PlanAssembly.Request(scene_json=scene.dumps(), start_positions=HOME9))
                 rclpy.spin_until_future_complete(node, future, timeout_sec=120.0)
                 dds.append(time.perf_counter() - t0)
                 r = future.result()
