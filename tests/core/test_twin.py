@@ -272,6 +272,7 @@ def test_a_path_tolerance_tighter_than_the_tracking_aborts_the_run(bare):
     goal = HOME7 + [0.5, 0.3, 0, 0.3, 0, 0, 0]
     report = bare.execute(move(HOME7, goal), tolerances=Tolerances(path=1e-4))
     assert report.error_code == PATH_TOLERANCE_VIOLATED
+    assert report.error_string.endswith("(no contact)"), report.error_string   # the twin names what it touches
     assert re.search(r'path tolerance violated: panda_joint\d is 0\.\d+ rad from the command', report.error_string)
     assert report.sim_time < 0.2 and not bare.busy
     bare.settle(0.5)

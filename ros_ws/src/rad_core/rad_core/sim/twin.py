@@ -447,7 +447,8 @@ class Twin:
                 j = int(np.abs(q - q_cmd).argmax())
                 run.report.error_code = PATH_TOLERANCE_VIOLATED
                 run.report.error_string = (f'path tolerance violated: {run.report.joint_names[j]} is {err:.4f} rad '
-                                           f'from the command (tolerance {run.path_tol:.4f}) at t = {run.t:.3f} s')
+                                           f'from the command (tolerance {run.path_tol:.4f}) at t = {run.t:.3f} s'
+                                           + self._contact_note())
                 run.report.final_error = err
                 return True
             return False
@@ -557,6 +558,18 @@ class Twin:
         if c in self._constraint_ids():   # gone already when its block was removed with a scene
             self._p.removeConstraint(c, physicsClientId=self.world.client)
         self._events.append({'t': round(self._run_time(), 6), 'action': 'detach', 'block': block_id})
+
+    def _contact_note(self) -> str:
+        """What the arm touches now, for a tracking error's report (a real controller cannot say; the twin can)."""
+        p, w = self._p, self.world
+        names = {body: f'block {bid}' for bid, body in w.blocks.items()}
+        names[w.table] = 'the table'
+        links = {i: n for n, i in w.link_index.items()}
+        touched = sorted({f'{links.get(c[3], c[3])} touches {names.get(c[2], f"body {c[2]}")}'
+                          for c in p.getContactPoints(bodyA=w.robot, physicsClientId=w.client)
+                          if c[2] != w.robot and c[8] < 1e-3})
+        held = f'; holding block {self.attached[0]}' if self.attached is not None else ''
+        return (f' ({", ".join(touched)}{held})' if touched else f' (no contact{held})')
 
     def _constraint_ids(self) -> set[int]:
         p, cid = self._p, self.world.client
