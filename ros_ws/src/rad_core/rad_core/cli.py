@@ -7,6 +7,7 @@
     rad allocate scene.json [--time-limit S] [--seed N] [--workers W] [--solver cp-sat|highs]
     rad demo [--scene FILE] [--out DIR] [--rtf X]
     rad limits RESULT.json [--robot panda|fr3] [--joint-prefix P]
+    rad calibrate PAIRS.csv [--out FILE] [--max-rms M] [--mocap-frame NAME]
     rad eval --agent AGENT [--checkpoint FILE] --grid G [--robot] --scenes N --seed S --json FILE
              [--workers N [--dashboard] | --scheduler ADDR [--workers N]]
     rad dataset build --grids 3 --scenes 50000 -o data/train-g3.jsonl.gz [--shapes train]
@@ -159,6 +160,24 @@ def cmd_limits(args) -> int:
     if count == 0:
         raise RadError(f'{args.result}: no arm trajectories to check')
     return 0 if not problems else 1
+
+
+def cmd_calibrate(args) -> int:
+    """Fit the motion-capture frame to the robot's base from point pairs (rad_core.calibration); print
+    the transform and its residuals as one JSON object; --out writes the assembly node's parameters."""
+    from rad_core.calibration import fit, parse_pairs_csv, read_pairs_csv
+    if not args.mocap_frame:
+        raise RadError("--mocap-frame must name the motion-capture frame ('' means no calibration)")
+    pairs = parse_pairs_csv(sys.stdin.read(), 'stdin') if args.pairs == '-' else read_pairs_csv(args.pairs)
+    calibration = fit(pairs, args.max_rms)
+    doc = {**calibration.to_dict(), 'max_rms_m': args.max_rms, 'mocap_frame': args.mocap_frame}
+    if args.out:
+        header = (f'rad calibrate {args.pairs}: {len(pairs.base)} points, rms residual '
+                  f'{calibration.rms_m * 1e3:.3f} mm, max {max(calibration.residuals_m) * 1e3:.3f} mm')
+        _write_text(calibration.params_yaml(args.mocap_frame, header).rstrip('\n'), args.out)
+        doc['out'] = args.out
+    print(json.dumps(doc))
+    return 0
 
 
 def cmd_eval(args) -> int:
@@ -384,6 +403,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--robot', default='panda', choices=['panda', 'fr3'])
     p.add_argument('--joint-prefix', default='', help="arm joints <prefix>_joint1..7 ('' = the model's)")
     p.set_defaults(func=cmd_limits)
+    p = sub.add_parser('calibrate', help='fit the motion-capture frame to the robot base from point pairs')
+    p.add_argument('pairs', help='CSV with the header x_base,y_base,z_base,x_mocap,y_mocap,z_mocap (any order, '
+                                 'other columns ignored), - for stdin')
+    p.add_argument('--out', metavar='FILE', help="write the assembly node's parameters (ROS 2 YAML) here")
+    p.add_argument('--max-rms', type=float, default=0.005, metavar='M',
+                   help='refuse a fit whose rms residual is over this, m (default: 0.005)')
+    p.add_argument('--mocap-frame', default='mocap', metavar='NAME',
+                   help="the motion-capture frame's name, written as mocap_frame (default: mocap)")
+    p.set_defaults(func=cmd_calibrate)
     p = sub.add_parser('eval', help="the paper's metrics (R, d, e, f, f_g, f_p, coverage) of a sequencer over scenes")
     from rad_core.evaluation import AGENTS
     p.add_argument('--agent', choices=list(AGENTS), default='heur')
