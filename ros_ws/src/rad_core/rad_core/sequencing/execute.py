@@ -18,10 +18,36 @@ block nudged, a block that slid) ends that plan: with `replan`, a new plan start
 from the measured world, at most `max_replans` times; without, the run fails with
 the deviation as its reason. Every executed step is kept in the result, including
 the one that deviated, so the rad-result/1 document says what the robot did.
+
+The faults of a real cell (`rad_core.sim.faults`) all end up as one of these:
+- a block left a few millimetres off (placement error, a nudge, motion-capture
+  noise) that registration still snaps to its cell, or that stays within the
+  deviation tolerance on the table: nothing to do, the next registration carries
+  the measured pose into any later plan. The tolerance follows the tracker's
+  noise (`ExecuteConfig.mocap_noise`), so noise alone does not look like a fault;
+- a block farther off, or fallen (a slip): a deviation; the plan is repaired by
+  replanning from what is seen, where a block lying flat on the table is just a
+  block to pick again;
+- a grasp on nothing (a miss): the step fails, the hand opens and backs out, and
+  the loop replans;
+- a block a scene cannot express (on its side, on an edge, turned, off its grid
+  in a region): `register` may return a `rad_core.sim.mocap.Registration`
+  (`register_world`), which sets such blocks aside instead of failing the whole
+  frame. A set-aside block is reported lost and left out of later plans: it can
+  neither be picked nor counted. It is still there, so the cells of the targets it
+  occupies are left out of the plans too (`Registration.plannable`): no block is
+  planned into it, and coverage, measured against the real targets, shows the
+  loss. Known limit: GAMP does not see a set-aside block as an obstacle to the arm's
+  paths (one lying on the table far from the structure rarely is one).
+Nothing is counted as built that registration does not see on its cells: the
+coverage is measured from the last registration. The result counts replans,
+every fault the loop met (`faults`, with whether a new plan recovered from it)
+and the lost blocks.
 """
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field
 from typing import Callable
@@ -33,6 +59,7 @@ from rad_core.errors import RadError
 from rad_core.motion import GripperCommand, GripperResult, Motion, run_motion
 from rad_core.scene import Scene
 from rad_core.sequencing.plan import AssemblyPlan, moved
+from rad_core.sim.mocap import Registration
 from rad_core.sim.panda import HOME
 from rad_core.sequencing.result import deviation, measured_coverage, result_document
 
@@ -49,12 +76,22 @@ class ExecuteConfig:
     """At most this many new plans after deviations."""
     replan: bool = True
     """Replan on a deviation (else the run fails with it)."""
+    mocap_noise: float = 0.0
+    """Std dev (m) per axis of motion capture's positions: a block counts as off only when it is
+    off by more than 6 sigma of the difference of two measurements as well as position_tol."""
+
+    @property
+    def deviation_tol(self) -> float:
+        """How far (m) a block may be from where the plan put it and still count as there."""
+        return max(self.position_tol, 6 * math.sqrt(2) * self.mocap_noise)
 
     def validate(self) -> None:
         if not (self.settle_s >= 0 and np.isfinite(self.settle_s)):
             raise RadError(f'settle_s must be finite and >= 0, got {self.settle_s}')
         if not (self.position_tol > 0 and np.isfinite(self.position_tol)):
             raise RadError(f'position_tol must be positive, got {self.position_tol}')
+        if not (self.mocap_noise >= 0 and np.isfinite(self.mocap_noise)):
+            raise RadError(f'mocap_noise must be finite and >= 0, got {self.mocap_noise}')
         if self.max_replans < 0:
             raise RadError(f'max_replans must be >= 0, got {self.max_replans}')
 
@@ -69,21 +106,38 @@ class ExecutionResult:
     final_scene: Scene | None = None               # registered at the end (or the last one known)
     allocation: AllocationResult | None = None     # the first plan's
     reallocations: list[dict] = field(default_factory=list)   # of every plan, Reallocation.to_dict()
+    faults: list[dict] = field(default_factory=list)
+    """Every problem a step met, in order: {'step' (index into steps), 'block', 'problem', 'recovered'
+    (a new plan was made from the measured world)}."""
+    lost_blocks: dict[str, str] = field(default_factory=dict)
+    """Blocks the last registration could not express (block id -> why): not planned for, not counted."""
+    blocked_cells: dict[str, list] = field(default_factory=dict)
+    """Region name -> target cells the lost blocks occupy (left out of the plans)."""
 
     @property
     def coverage(self) -> float:
         return measured_coverage(self.final_scene) if self.final_scene is not None else 0.0
 
+    @property
+    def recovered_faults(self) -> int:
+        return sum(f['recovered'] for f in self.faults)
+
+    def execution(self) -> dict:
+        """The run's recovery figures, as the rad-result/1 document's `execution` holds them."""
+        return {'replans': self.replans, 'faults': [dict(f) for f in self.faults],
+                'recovered_faults': self.recovered_faults, 'lost_blocks': dict(self.lost_blocks),
+                'blocked_cells': {k: [list(c) for c in v] for k, v in self.blocked_cells.items()}}
+
     def document(self, timings: dict) -> dict:
         """The rad-result/1 document of the run."""
         return result_document(self.scene, self.allocation, self.steps, self.final_scene, timings,
-                               self.reallocations)
+                               self.reallocations, self.execution())
 
 
 Plan = Callable[[Scene, 'np.ndarray | None'], AssemblyPlan]   # scene, start joints (None: home)
 MoveArm = Callable[[dict], None]     # run an arm trajectory to its end; RadError if refused or aborted
 MoveGripper = Callable[[GripperCommand], GripperResult]   # run a gripper command, return what the hand says
-Register = Callable[[], Scene]       # the world as measured now; RadError if it cannot be
+Register = Callable[[], 'Scene | Registration']   # the world as measured now; RadError if it cannot be
 Report = Callable[[int, int, str, str, str], None]   # (steps done, steps planned, block, phase, message)
 
 
@@ -103,12 +157,23 @@ def execute_assembly(scene: Scene, plan: Plan, move_arm: MoveArm, move_gripper: 
     result = ExecutionResult(False, '', scene, final_scene=scene)
     last_q = None
     current = scene
+
+    def measure() -> Scene:
+        """The world as registered now (final_scene, lost_blocks), and the scene to plan from."""
+        got = register()
+        reg = got if isinstance(got, Registration) else Registration(got)
+        result.final_scene, result.lost_blocks = reg.scene, dict(reg.set_aside)
+        result.blocked_cells = {name: [list(c) for c in cells] for name, cells in reg.blocked.items()}
+        return reg.plannable()
+
     try:
         while True:
             report(len(result.steps), 0, '', 'planning', '')
             start = joints() if joints is not None else last_q
             last_q = None if start is None else np.asarray(start, dtype=float)
             assembly = plan(current, start)
+            if result.faults and result.replans:
+                result.faults[-1]['recovered'] = True     # a new plan from the measured world
             if result.allocation is None:
                 result.allocation = assembly.allocation
             result.reallocations += [e.to_dict() for e in assembly.reallocations]
@@ -126,11 +191,17 @@ def execute_assembly(scene: Scene, plan: Plan, move_arm: MoveArm, move_gripper: 
                 settle(config.settle_s)
                 report(len(result.steps), len(assembly.steps), step.block, 'verifying', failed)
                 expected = moved(current, step.block, step.position, step.yaw)
-                current = register()
-                result.final_scene = current
                 result.steps.append({**step.to_dict(), **({'failure': failed} if failed else {})})
-                problem = failed or deviation(expected, current, config.position_tol)
+                try:
+                    current = measure()
+                except RadError as e:
+                    result.faults.append({'step': len(result.steps) - 1, 'block': step.block,
+                                          'problem': str(e), 'recovered': False})
+                    raise
+                problem = failed or deviation(expected, current, config.deviation_tol, result.lost_blocks)
                 if problem is not None:
+                    result.faults.append({'step': len(result.steps) - 1, 'block': step.block, 'problem': problem,
+                                          'recovered': False})
                     break
             if problem is None:
                 result.success, result.reason = assembly.success, assembly.reason
@@ -142,8 +213,11 @@ def execute_assembly(scene: Scene, plan: Plan, move_arm: MoveArm, move_gripper: 
     except RadError as e:
         result.success, result.reason = False, str(e)
     try:
-        result.final_scene = register()
+        measure()
     except RadError:
-        pass   # the plant is gone: keep the last scene measured
+        pass   # the plant is gone, or a block is where no plan can go: keep what was measured last
+    if result.success and result.lost_blocks and not result.reason:
+        result.reason = f'built without {len(result.lost_blocks)} lost block(s): ' + '; '.join(
+            f'{b} ({why})' for b, why in sorted(result.lost_blocks.items()))
     report(len(result.steps), len(result.steps), '', 'done', result.reason)
     return result

@@ -26,12 +26,29 @@ tolerances, and refuses what it cannot express:
 
 Whatever survives is validated by `Scene.from_dict` (overlaps, blocks half in a
 region, blocks below the table), with errors translated to the body's name.
+
+`register_scene` raises for the first body a scene cannot express. During
+execution that is too strict: a block that slipped out of the hand and lies on
+its side, or one pushed off its cell, is a fact of the world to plan around, not
+a reason to stop. `register_world` registers the same way but sets such blocks
+aside with the reason (tilted, turned, off the height lattice, off its grid in a
+region, sticking into a region, overlapping another) and returns the scene of the
+rest as a `Registration`. A set-aside block is still there, physically: one
+lying over a target region occupies cells a plan would fill. The registration
+records those cells (`Registration.blocked`: every target cell a set-aside
+block's units overlap by more than `BLOCKED_OVERLAP` in each axis, at its
+measured pose, and no registered block sits on), and `Registration.plannable()`
+is the scene without them as target cells: a plan from it neither places a block
+into an obstacle nor counts on cells it cannot fill, while coverage is still
+measured against the real targets. Set-up errors (an unknown body, a body
+reported twice, a NaN or non-unit quaternion, an untracked body) still raise in
+both: they are not something the world did.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -45,6 +62,9 @@ QUAT_NORM_TOL = 1e-3
 # Snapped coordinates are rounded to a nanometre so that a round trip gives
 # bit-identical numbers for positions that were already on the lattice.
 _DECIMALS = 9
+# A set-aside block blocks a target cell when its units overlap the cell's box by more than this (m)
+# in every axis: deeper than resting contact and tracker noise, far less than any real intrusion.
+BLOCKED_OVERLAP = 0.003
 
 
 @dataclass(frozen=True)
@@ -109,6 +129,24 @@ class RegistrationConfig:
                                f'block {entry[0]!r}')
             blocks[entry[0]] = body
 
+    @classmethod
+    def for_noise(cls, position_noise: float, yaw_noise_deg: float, unit: float, **kw) -> RegistrationConfig:
+        """The tolerances `kw` gives (or the defaults), widened where a tracker's noise (std dev: m per
+        axis, deg) would otherwise push a correct pose past them: at least 5 sigma.
+        Raises RadError when the noise is too large to snap to a lattice of this unit at all."""
+        if not (math.isfinite(position_noise) and position_noise >= 0 and math.isfinite(yaw_noise_deg)
+                and yaw_noise_deg >= 0 and math.isfinite(unit) and unit > 0):
+            raise RadError(f'registration noise: expected finite, non-negative noise and a positive unit, got '
+                           f'{position_noise!r} m, {yaw_noise_deg!r} deg, unit {unit!r}')
+        base = cls(**kw)
+        position_tol = max(base.position_tol, 5 * position_noise / unit)
+        yaw_tol = max(base.yaw_tol_deg, 5 * yaw_noise_deg)
+        if position_tol >= 0.45 or yaw_tol >= 40:
+            raise RadError(f'motion-capture noise of {position_noise * 1000:.1f} mm and {yaw_noise_deg:g} deg is '
+                           f'too large to register {unit * 1000:.0f} mm blocks reliably (5 sigma must stay under '
+                           f'0.45 unit and 40 deg)')
+        return replace(base, position_tol=position_tol, yaw_tol_deg=yaw_tol)
+
 
 def body_map_for(scene: Scene, names: dict[str, str] | None = None) -> dict[str, tuple[str, str]]:
     """The body_map that registers `scene_to_bodies(scene, names)` back to scene's blocks."""
@@ -130,6 +168,42 @@ def scene_to_bodies(scene: Scene, names: dict[str, str] | None = None,
     return out
 
 
+@dataclass(frozen=True)
+class Registration:
+    """A frame registered leniently (`register_world`): the scene of the blocks a scene can express,
+    and the blocks set aside with why."""
+
+    scene: Scene
+    set_aside: dict[str, str] = field(default_factory=dict)
+    """Block id -> why it cannot be in a scene now (fallen on its side, pushed off its cell, ...)."""
+    in_regions: frozenset[str] = frozenset()
+    """The set-aside blocks that lie over a target region (below its top)."""
+    blocked: dict[str, tuple[tuple[int, int, int], ...]] = field(default_factory=dict)
+    """Region name -> the target cells set-aside blocks occupy (and no registered block does)."""
+
+    def plannable(self) -> Scene:
+        """The registered scene without the blocked cells among its targets' filled cells (a region left
+        with none is dropped); RadError when no target cell is left to build."""
+        if not self.blocked:
+            return self.scene
+        doc = self.scene.to_dict()
+        targets = []
+        for t in doc['targets']:
+            gone = set(self.blocked.get(t['name'], ()))
+            t['filled'] = [c for c in t['filled'] if tuple(c) not in gone]
+            if t['filled']:
+                targets.append(t)
+        if not targets:
+            raise RadError('every target cell is occupied by a block no scene can express ('
+                           + '; '.join(f'{b}: {why}' for b, why in sorted(self.set_aside.items())) + ')')
+        doc['targets'] = targets
+        return Scene.from_dict(doc)
+
+
+class _Unexpressible(RadError):
+    """A body whose pose is real but cannot be a block of a scene (tilted, turned, off a lattice)."""
+
+
 def register_scene(bodies: list[RigidBodyPose], template: Scene, config: RegistrationConfig) -> Scene:
     """The template's unit, block types and targets with one block per tracked body.
 
@@ -137,8 +211,21 @@ def register_scene(bodies: list[RigidBodyPose], template: Scene, config: Registr
     entries without a reported body give no block (not seen, not there).
     Raises RadError naming the body for anything that cannot be a scene.
     """
+    return _register(bodies, template, config, lenient=False).scene
+
+
+def register_world(bodies: list[RigidBodyPose], template: Scene, config: RegistrationConfig) -> Registration:
+    """As `register_scene`, but a body whose pose a scene cannot express is set aside with the
+    reason instead of raising (see the module docstring); set-up errors still raise RadError."""
+    return _register(bodies, template, config, lenient=True)
+
+
+def _register(bodies: list[RigidBodyPose], template: Scene, config: RegistrationConfig,
+              lenient: bool) -> Registration:
     seen_bodies: set[str] = set()
     blocks, names = [], []
+    set_aside: dict[str, str] = {}
+    in_regions: set[str] = set()
     for body in bodies:
         name = body.name
         if name in seen_bodies:
@@ -154,15 +241,86 @@ def register_scene(bodies: list[RigidBodyPose], template: Scene, config: Registr
         if not body.tracking_valid:
             raise RadError(f'rigid body {name!r} (block {block_id!r}) is not tracked (tracking_valid is '
                            f'false): its pose is unknown')
-        position, yaw = _snap(body, template, template.block_types[block_type], config)
+        try:
+            position, yaw = _snap(body, template, template.block_types[block_type], config)
+        except _Unexpressible as e:
+            if not lenient:
+                raise
+            set_aside[block_id] = str(e)
+            if _over_regions(body, template, template.block_types[block_type]):
+                in_regions.add(block_id)
+            continue
         blocks.append({'id': block_id, 'type': block_type, 'position': position, 'yaw': yaw})
         names.append(name)
+    by_block = {entry[0]: body for body in bodies for entry in [config.body_map.get(body.name)] if entry}
     doc = template.to_dict()
-    doc['blocks'] = blocks
-    try:
-        return Scene.from_dict(doc)
-    except SceneError as e:
-        raise RadError(_translate(e, names, blocks)) from None
+    while True:
+        doc['blocks'] = blocks
+        try:
+            scene = Scene.from_dict(doc)
+        except SceneError as e:
+            i = _blamed(e)
+            if not lenient or i is None:
+                raise RadError(_translate(e, names, blocks)) from None
+            # The scene is valid but for this block (its pose is real: it overlaps or sticks into a region).
+            set_aside[blocks[i]['id']] = _translate(e, names, blocks)
+            block = blocks.pop(i)
+            names.pop(i)
+            body = by_block[block['id']]
+            if _over_regions(body, template, template.block_types[block['type']]):
+                in_regions.add(block['id'])
+            continue
+        blocked = _blocked_cells([by_block[b] for b in set_aside], [config.body_map[by_block[b].name][1]
+                                                                    for b in set_aside], scene)
+        return Registration(scene, set_aside, frozenset(in_regions), blocked)
+
+
+def _blocked_cells(bodies: list[RigidBodyPose], types: list[str], scene: Scene) -> dict[str, tuple]:
+    """The filled target cells the bodies' units overlap (by more than BLOCKED_OVERLAP in every axis)
+    that no block of the scene occupies."""
+    u = scene.unit
+    taken = [scene.unit_positions(b) for b in scene.blocks]
+    taken = np.vstack(taken) if taken else np.zeros((0, 3))
+    out: dict[str, tuple] = {}
+    for body, type_name in zip(bodies, types):
+        pos = np.asarray(body.position, dtype=float)
+        quat = np.asarray(body.quaternion, dtype=float)
+        r = matrix_from_quaternion(quat / np.linalg.norm(quat))
+        units = pos + (np.asarray(scene.block_types[type_name].offsets, dtype=float) * u) @ r.T
+        half = u / 2 * np.abs(r).sum(axis=1)          # half extents of a turned unit cube's bounding box
+        for t in scene.targets:
+            for ijk in t.filled:
+                centre = t.cell_center(ijk, u)
+                if len(taken) and np.any(np.all(np.abs(taken - centre) < u / 2, axis=1)):
+                    continue
+                if np.any(np.all(np.abs(units - centre) < half + u / 2 - BLOCKED_OVERLAP, axis=1)):
+                    cells = out.setdefault(t.name, ())
+                    if tuple(ijk) not in cells:
+                        out[t.name] = cells + (tuple(int(v) for v in ijk),)
+    return out
+
+
+def _blamed(e: SceneError) -> int | None:
+    """The index of the block a scene error names, or None when it is not about one block."""
+    if not e.field.startswith('blocks['):
+        return None
+    return int(e.field[len('blocks['):e.field.index(']')])
+
+
+def _over_regions(body: RigidBodyPose, template: Scene, block_type) -> bool:
+    """Whether any unit of the block, at its measured pose, lies over a target region's footprint
+    (below its top: a block fallen onto the structure or into a region's cells)."""
+    pos = np.asarray(body.position, dtype=float)
+    quat = np.asarray(body.quaternion, dtype=float)
+    r = matrix_from_quaternion(quat / np.linalg.norm(quat))
+    offsets = np.asarray(block_type.offsets, dtype=float) * template.unit
+    pts = pos + offsets @ r.T
+    for t in template.targets:
+        lo, hi = t.bounds(template.unit)
+        inside = np.all((pts[:, :2] > lo[:2]) & (pts[:, :2] < hi[:2]), axis=1) & (pts[:, 2] < hi[2] + template.unit)
+        if inside.any():
+            return True
+    return False
 
 
 def _snap(body: RigidBodyPose, template: Scene, block_type, config: RegistrationConfig) -> tuple[list[float], int]:
@@ -180,19 +338,19 @@ def _snap(body: RigidBodyPose, template: Scene, block_type, config: Registration
     r = matrix_from_quaternion(quat / norm)
     tilt = math.degrees(math.acos(min(1.0, max(-1.0, r[2, 2]))))
     if tilt > config.tilt_tol_deg:
-        raise RadError(f'rigid body {name!r} is tilted {tilt:.1f} deg from upright (limit '
+        raise _Unexpressible(f'rigid body {name!r} is tilted {tilt:.1f} deg from upright (limit '
                        f'{config.tilt_tol_deg:g}): a block must lie flat, not on its side or an edge')
     yaw = math.degrees(math.atan2(r[1, 0], r[0, 0]))
     snapped_yaw = round(yaw / 90.0) * 90
     if abs(yaw - snapped_yaw) > config.yaw_tol_deg:
-        raise RadError(f'rigid body {name!r}: yaw {yaw:.1f} deg is {abs(yaw - snapped_yaw):.1f} deg from a '
+        raise _Unexpressible(f'rigid body {name!r}: yaw {yaw:.1f} deg is {abs(yaw - snapped_yaw):.1f} deg from a '
                        f'multiple of 90 (limit {config.yaw_tol_deg:g})')
     snapped_yaw %= 360
 
     height = (pos[2] - config.table_z - u / 2) / u
     level = round(height)
     if abs(height - level) > config.position_tol:
-        raise RadError(f'rigid body {name!r}: height {pos[2]:.4f} m is {abs(height - level) * u * 1000:.1f} mm '
+        raise _Unexpressible(f'rigid body {name!r}: height {pos[2]:.4f} m is {abs(height - level) * u * 1000:.1f} mm '
                        f'off the unit lattice above the table (limit {config.position_tol * u * 1000:.1f} mm)')
     out = [_quantise(pos[0], config.resolution), _quantise(pos[1], config.resolution),
            round(u / 2 + level * u, _DECIMALS)]
@@ -204,7 +362,7 @@ def _snap(body: RigidBodyPose, template: Scene, block_type, config: Registration
         off = np.abs(idx - np.round(idx))
         tol = grid_tolerance(config, template)
         if off.max() > tol:
-            raise RadError(f'rigid body {name!r} is in target region {region.name!r} but '
+            raise _Unexpressible(f'rigid body {name!r} is in target region {region.name!r} but '
                            f'{off.max() * u * 1000:.1f} mm off its grid '
                            f'(limit {tol * u * 1000:.1f} mm)')
         for a in range(2):

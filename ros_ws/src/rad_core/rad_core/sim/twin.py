@@ -36,13 +36,34 @@ friction: friction grasps in Bullet slip and rotate slowly under transport (and
 differently from run to run as contact sets change), which would make a
 placement's outcome depend on solver noise rather than on the plan; the
 attachment makes transport stable and reproducible.
+
+The faults of a real cell (`rad_core.sim.faults.FaultConfig`, off by default),
+each drawn from its own seeded stream and recorded as an event (in `fault_events`
+for the twin's life, and in the running trajectory's report with the grasp events):
+- motion capture: `bodies` adds Gaussian noise to each reported position (per
+  axis) and yaw, and drops bodies (tracking_valid false, the last reported pose,
+  as a tracker does); `current_scene` / `registration` register what motion
+  capture reports, holding a dropped body at its last pose (a body missing for a
+  frame is "not seen", not "removed"). Dropped frames are the node's business
+  (`drop_frame` says whether to skip one);
+- placement error: a released block is shifted in x/y by the error once the
+  fingers are clear of it, no farther than its neighbours allow (blocks do not
+  interpenetrate), and settles physically;
+- slip: the attachment is let go at a random moment of the carry (the next arm
+  trajectory after the grasp) and the fingers stop touching the block, so it falls;
+- miss: at the moment of grasping the fingers pass through the block, so the
+  hand closes on nothing (no attachment; the gripper reports the closed width);
+- nudge: when a block is released, a block touching or next to it is pushed
+  away from it by `nudge_distance` (as far as its own neighbours allow).
+A block the fingers pass through (slip, miss) collides with them again once it is
+clear of them.
 """
 
 from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -51,8 +72,10 @@ from rad_core.motion import GripperCommand, GripperResult, Motion, run_motion
 from rad_core.robot_model import RobotModel, robot_model
 from rad_core.scene import Scene
 from rad_core.sim import panda
-from rad_core.sim.mocap import RegistrationConfig, RigidBodyPose, register_scene
+from rad_core.sim.faults import KINDS, FaultConfig
+from rad_core.sim.mocap import Registration, RegistrationConfig, RigidBodyPose, register_scene, register_world
 from rad_core.sim.world import World
+from rad_core.transforms import yaw_quaternion
 from rad_core.trajectory import (GOAL_TOLERANCE_VIOLATED, INVALID_GOAL, PATH_TOLERANCE_VIOLATED, SUCCESSFUL,
                                  Spline, Trajectory, TrajectoryRejected, limit_violation, parse_trajectory)
 
@@ -106,8 +129,12 @@ class TwinConfig:
     """Opening = finger target this far (m) above the width the block was grasped at."""
     attach_max_force: float = 500.0
     """Strength (N) of the attachment constraint; far above any load a block puts on it."""
+    faults: FaultConfig = field(default_factory=FaultConfig)
+    """The faults of a real cell to inject (none by default)."""
 
     def __post_init__(self):
+        if not isinstance(self.faults, FaultConfig):
+            raise RadError(f'twin config: faults must be a FaultConfig, got {type(self.faults).__name__}')
         robot_model(self.robot, self.joint_prefix)
         values = list(self.arm_forces) + [self.finger_force, self.position_gain, self.velocity_gain,
                                           self.limit_tol, self.goal_time, self.goal_tol, self.close_margin,
@@ -127,6 +154,7 @@ class ExecutionReport:
     final_error: float                    # against the last point, after the goal hold
     max_tracking_error: float             # against the interpolated command, while it ran
     grasp_events: list[dict] = field(default_factory=list)   # {'t', 'action': attach|detach, 'block'}
+    # and the faults injected while it ran: {'t', 'action': 'fault', 'fault': slip|miss|placement|nudge, ...}
     duration: float = 0.0                 # the trajectory's own length (s)
     sim_time: float = 0.0                 # simulated, including the goal hold (s)
     wall_time: float = 0.0                # from start to finish (s)
@@ -214,6 +242,16 @@ class Twin:
         self.attached: tuple[str, int] | None = None   # (block id, constraint id)
         self._grip_width = 0.0
         self._events: list[dict] = []
+        faults = config.faults
+        self._rng = {kind: np.random.default_rng([faults.seed, i]) for i, kind in enumerate(KINDS)}
+        self.fault_events: list[dict] = []     # every fault injected since the twin was made
+        self.fault_counts: dict[str, int] = dict.fromkeys(KINDS, 0)
+        self._reported: dict[str, RigidBodyPose] = {}   # body name -> the pose motion capture last reported
+        self._slip: float | None = None        # fraction of the next carry at which the held block slips
+        self._slip_at: float | None = None     # simulated time at which it does
+        self._ghosts: dict[int, str] = {}      # block bodies the fingers pass through (slip, miss) until clear
+        self._miss_next = False                # the grasp under way will miss
+        self._released: tuple[str, float] | None = None   # block just let go, width it was held at
         self._apply()
 
     # ---- state -----------------------------------------------------------
@@ -231,6 +269,10 @@ class Twin:
         """Replace the blocks (robot back at HOME); a running trajectory is dropped."""
         self._release()
         self._run = self._grip = None
+        self._ghosts.clear()
+        self._reported.clear()
+        self._released = self._slip = self._slip_at = None
+        self._miss_next = False
         self.world.load_scene(scene)
         self.sync()
 
@@ -249,14 +291,54 @@ class Twin:
     def block_poses(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
         return {bid: self.world.block_pose(bid) for bid in self.world.blocks}
 
-    def bodies(self, names: dict[str, str] | None = None) -> list[RigidBodyPose]:
-        """Every block as a motion-capture rigid body (name = block id unless renamed)."""
+    def bodies(self, names: dict[str, str] | None = None, exact: bool = False) -> list[RigidBodyPose]:
+        """Every block as a motion-capture rigid body (name = block id unless renamed), as the
+        tracker reports it: with the configured noise, and a dropped body as tracking_valid false at
+        its last reported pose. exact=True: the true poses, no faults."""
         names = names or {}
-        return [RigidBodyPose(names.get(bid, bid), tuple(float(v) for v in pos), tuple(float(v) for v in q))
-                for bid, (pos, q) in self.block_poses().items()]
+        f = self.config.faults
+        out = []
+        for bid, (pos, q) in self.block_poses().items():
+            name = names.get(bid, bid)
+            if not exact and f.drop_body > 0 and self._rng['drop_body'].random() < f.drop_body \
+                    and name in self._reported:
+                last = self._reported[name]
+                out.append(replace(last, tracking_valid=False))
+                self.fault_counts['drop_body'] += 1
+                continue
+            if not exact and (f.mocap_position_noise > 0 or f.mocap_yaw_noise_deg > 0):
+                rng = self._rng['noise']
+                pos = pos + rng.normal(0.0, f.mocap_position_noise, 3)
+                turn = yaw_quaternion(float(rng.normal(0.0, f.mocap_yaw_noise_deg)))
+                q = np.array(self._p.multiplyTransforms([0, 0, 0], turn, [0, 0, 0], q.tolist())[1])
+                self.fault_counts['noise'] += 1
+            body = RigidBodyPose(name, tuple(float(v) for v in pos), tuple(float(v) for v in q))
+            if not exact:
+                self._reported[name] = body
+            out.append(body)
+        return out
+
+    def drop_frame(self) -> bool:
+        """Whether motion capture skips this frame (draw once per frame; counted when it does)."""
+        f = self.config.faults
+        dropped = f.drop_frame > 0 and bool(self._rng['drop_frame'].random() < f.drop_frame)
+        self.fault_counts['drop_frame'] += dropped
+        return dropped
+
+    def registration_config(self, template: Scene) -> RegistrationConfig:
+        """Registration of every block by its id, with tolerances that follow the motion-capture noise."""
+        types = {b.id: b.type for b in self.world.scene.blocks}
+        f = self.config.faults
+        return RegistrationConfig.for_noise(f.mocap_position_noise, f.mocap_yaw_noise_deg, template.unit,
+                                            body_map={bid: (bid, types[bid]) for bid in self.world.blocks})
+
+    def _seen(self) -> list[RigidBodyPose]:
+        """What registration gets: a body motion capture dropped is held at its last pose (not seen for a
+        frame is not gone)."""
+        return [b if b.tracking_valid else replace(b, tracking_valid=True) for b in self.bodies()]
 
     def current_scene(self, template: Scene | None = None, config: RegistrationConfig | None = None) -> Scene:
-        """The blocks where they are now, snapped as motion-capture registration snaps them.
+        """The blocks where motion capture sees them now, snapped as registration snaps them.
 
         Raises RadError when a block is somewhere a scene cannot express (carried,
         tilted, fallen over), exactly as registering real poses would.
@@ -264,10 +346,15 @@ class Twin:
         template = template or self.world.scene
         if template is None:
             raise RadError('no scene loaded')
-        if config is None:
-            types = {b.id: b.type for b in self.world.scene.blocks}
-            config = RegistrationConfig(body_map={bid: (bid, types[bid]) for bid in self.world.blocks})
-        return register_scene(self.bodies(), template, config)
+        return register_scene(self._seen(), template, config or self.registration_config(template))
+
+    def registration(self, template: Scene | None = None, config: RegistrationConfig | None = None) -> Registration:
+        """As `current_scene`, but blocks a scene cannot express are set aside with the reason
+        (`rad_core.sim.mocap.register_world`)."""
+        template = template or self.world.scene
+        if template is None:
+            raise RadError('no scene loaded')
+        return register_world(self._seen(), template, config or self.registration_config(template))
 
     # ---- commands ----------------------------------------------------------
     def start(self, trajectory: Trajectory | dict, tolerances: Tolerances = Tolerances()) -> dict:
@@ -288,6 +375,10 @@ class Twin:
             self._finish(preempted=True)
         self._run = _Run(traj, start_q, tolerances, self.config)
         self._events = []
+        if self._slip is not None and self.attached is not None:
+            # The carry after a grasp that will slip: it slips at that fraction of this trajectory.
+            self._slip_at = self.time + self._slip * traj.duration
+            self._slip = None
         return {'joints': list(traj.joint_names), 'points': len(traj.points), 'duration': traj.duration}
 
     def cancel(self) -> ExecutionReport | None:
@@ -308,6 +399,9 @@ class Twin:
         now = float(self.world.joint_positions()[7:].mean())
         closing = position < now - 1e-4
         self._grip = _Grip(min(position, panda.FINGER_OPEN), max_effort, float(self._target[7:].mean()), closing)
+        if closing:
+            miss = self.config.faults.miss
+            self._miss_next = miss > 0 and bool(self._rng['miss'].random() < miss)
         force = max_effort if closing and max_effort > 0 else self.config.finger_force
         self._forces[7:] = [force, force]
 
@@ -422,7 +516,11 @@ class Twin:
             self._apply()
             self.world.step()
             self.time += self.dt
+            if self._slip_at is not None and self.time >= self._slip_at:
+                self._slip_out()
             self._grasp_update()
+            if self._ghosts and round(self.time / self.dt) % 10 == 0:
+                self._unghost()
             if grip is not None:
                 self._grip_progress(grip)
             if run is not None:
@@ -515,17 +613,30 @@ class Twin:
     def _grasp_update(self) -> None:
         cfg, w = self.config, self.world
         target = float(self._target[7:].mean())
+        fingers = w.joint_positions()[7:]
         if self.attached is not None:
             if target > self._grip_width + cfg.release_margin:
+                released = (self.attached[0], self._grip_width)
                 self._release()
+                self._released = released
             return
-        fingers = w.joint_positions()[7:]
+        if self._released is not None:
+            block_id, width = self._released
+            if block_id not in w.blocks:
+                self._released = None
+            elif float(fingers.min()) > width + 0.003:     # the fingers are clear of the block's sides
+                self._released = None
+                self._after_release(block_id)
         closing = target < panda.FINGER_OPEN - cfg.close_margin and target < float(fingers.mean()) - cfg.close_margin
         if not closing:
             return
         touched = [self._touching(link) for link in w.finger_links]
         common = sorted(touched[0] & touched[1])
-        if common:
+        if common and self._miss_next:
+            self._miss_next = False
+            self._ghost(common[0])
+            self._fault('miss', block=common[0])
+        elif common:
             self._attach(common[0], float(fingers.mean()))
 
     def _touching(self, link: int) -> set[str]:
@@ -548,16 +659,103 @@ class Twin:
         p.changeConstraint(c, maxForce=self.config.attach_max_force, physicsClientId=w.client)
         self.attached = (block_id, c)
         self._grip_width = width
+        self._released = None
         self._events.append({'t': round(self._run_time(), 6), 'action': 'attach', 'block': block_id})
+        slip = self.config.faults.slip
+        if slip > 0 and self._rng['slip'].random() < slip:
+            # It will slip out during the carry: at this fraction of the next arm trajectory.
+            self._slip = float(self._rng['slip'].uniform(0.1, 0.6))
 
     def _release(self) -> None:
         if self.attached is None:
             return
         block_id, c = self.attached
         self.attached = None
+        self._slip = self._slip_at = None
         if c in self._constraint_ids():   # gone already when its block was removed with a scene
             self._p.removeConstraint(c, physicsClientId=self.world.client)
         self._events.append({'t': round(self._run_time(), 6), 'action': 'detach', 'block': block_id})
+
+    # ---- faults ------------------------------------------------------------------
+    def _fault(self, kind: str, **fields) -> None:
+        event = {'t': round(self._run_time(), 6), 'action': 'fault', 'fault': kind, **fields}
+        self._events.append(event)
+        self.fault_events.append({**event, 'time': round(self.time, 6)})
+        self.fault_counts[kind] += 1
+
+    def _slip_out(self) -> None:
+        """The held block slips out of the hand: let go, and the fingers no longer hold it up."""
+        self._slip_at = None
+        if self.attached is None:
+            return
+        block_id = self.attached[0]
+        self._release()
+        self._ghost(block_id)
+        self._fault('slip', block=block_id)
+
+    def _ghost(self, block_id: str) -> None:
+        """Let the fingers pass through a block (until it is clear of them, `_unghost`)."""
+        p, w = self._p, self.world
+        body = w.blocks[block_id]
+        for link in w.finger_links:
+            p.setCollisionFilterPair(w.robot, body, link, -1, 0, physicsClientId=w.client)
+        self._ghosts[body] = block_id
+
+    def _unghost(self) -> None:
+        p, w = self._p, self.world
+        for body, block_id in list(self._ghosts.items()):
+            if w.blocks.get(block_id) != body:
+                del self._ghosts[body]
+                continue
+            near = [p.getClosestPoints(w.robot, body, 0.002, linkIndexA=link, physicsClientId=w.client)
+                    for link in w.finger_links]
+            if not any(near):
+                for link in w.finger_links:
+                    p.setCollisionFilterPair(w.robot, body, link, -1, 1, physicsClientId=w.client)
+                del self._ghosts[body]
+
+    def _after_release(self, block_id: str) -> None:
+        """The fingers are clear of a block they placed: the placement error, and a nudged neighbour."""
+        f, w = self.config.faults, self.world
+        if f.placement_error > 0:
+            offset = self._rng['placement'].normal(0.0, f.placement_error, 2)
+            moved = self._shift(block_id, offset)
+            self._fault('placement', block=block_id, offset=[round(float(v), 6) for v in offset * moved])
+        if f.nudge > 0 and self._rng['nudge'].random() < f.nudge:
+            p = self._p
+            body = w.blocks[block_id]
+            near = sorted(bid for bid, other in w.blocks.items() if other != body
+                          and p.getClosestPoints(body, other, 0.005, physicsClientId=w.client))
+            if near:
+                other = near[int(self._rng['nudge'].integers(len(near)))]
+                a = np.array(p.getBasePositionAndOrientation(body, physicsClientId=w.client)[0])
+                b = np.array(p.getBasePositionAndOrientation(w.blocks[other], physicsClientId=w.client)[0])
+                d = (b - a)[:2]
+                axis = int(abs(d[1]) > abs(d[0]))     # pushed along the grid axis it mostly lies on
+                direction = np.zeros(2)
+                direction[axis] = 1.0 if d[axis] >= 0 else -1.0
+                moved = self._shift(other, direction * f.nudge_distance)
+                self._fault('nudge', block=other, by=block_id, distance=round(moved * f.nudge_distance, 6))
+
+    def _shift(self, block_id: str, dxy: np.ndarray) -> float:
+        """Move a block by dxy (m) in x/y, or the largest part of it (1, 3/4, 1/2, 1/4) that does not push it
+        deeper into anything; returns that fraction (0: it stays)."""
+        w = self.world
+        pos, q = w.block_pose(block_id)
+        body = w.blocks[block_id]
+        before = self._penetration(body)
+        for frac in (1.0, 0.75, 0.5, 0.25):
+            w.set_block_pose(block_id, [pos[0] + frac * dxy[0], pos[1] + frac * dxy[1], pos[2]], q)
+            if self._penetration(body) >= before - 2e-4:
+                return frac
+        w.set_block_pose(block_id, pos, q)
+        return 0.0
+
+    def _penetration(self, body: int) -> float:
+        """The deepest contact (m, <= 0) of a body with anything now."""
+        p, cid = self._p, self.world.client
+        p.performCollisionDetection(physicsClientId=cid)
+        return min([0.0] + [c[8] for c in p.getContactPoints(bodyA=body, physicsClientId=cid)])
 
     def _contact_note(self) -> str:
         """What the arm touches now, for a tracking error's report (a real controller cannot say; the twin can)."""
