@@ -27,6 +27,7 @@ setup(
             'sequencer_node = rad_planner.sequencer_node:main',
             'graph = rad_planner.graph:main',
             'demo = rad_planner.demo:main',
+            'calibration_recorder = rad_planner.calibration_recorder:main',
         ],
     },
 )
