@@ -12,7 +12,8 @@ from rad_core.generator import GeneratorConfig, generate_scene
 from rad_core.robot_model import PANDA
 from rad_core.sim.panda import ARM_JOINT_NAMES, HOME, LOWER, UPPER
 from rad_core.trajectory import limit_violation
-from rad_ros.motion import trajectory_from_msg
+from rad_core.transforms import yaw_matrix, yaw_quaternion
+from rad_ros.motion import pose_msg, trajectory_from_msg
 
 
 @pytest.fixture
@@ -21,8 +22,10 @@ def gamp(node_process, ros_node):
     proc = node_process('rad_gamp', 'gamp_node', *ros_args({'seed': 0}))
     client = wait_for_service(ros_node, PlanAction, 'plan_action', timeout=30.0)
 
-    def plan(scene, block_id, unit, target, cell, rotation, start=(), execute=False):
+    def plan(scene, block_id, unit, target, cell, rotation, start=(), execute=False, place=None):
         req = PlanAction.Request(scene_json=scene.dumps(), start_positions=list(start), execute=execute)
+        if place is not None:     # (position, quaternion): the anchor goes there, not to the cell
+            req.place_at_pose, req.place_pose = True, pose_msg(*place)
         req.action.block_id, req.action.unit, req.action.target, req.action.rotation = block_id, unit, target, rotation
         req.action.cell.i, req.action.cell.j, req.action.cell.k = cell
         return call_service(ros_node, client, req, timeout=60.0)
@@ -84,4 +87,31 @@ def test_bad_requests_get_a_reason_and_the_node_keeps_serving(gamp, change, expe
     assert not r.success and r.failure == 'invalid_request'
     assert expected in r.reason, r.reason
     assert plan(scene, block_id, unit, target, cell, rotation, start=list(HOME)).success
+    assert proc.is_running()
+
+
+def test_a_place_pose_puts_the_anchor_there_and_a_pose_no_scene_holds_is_refused(gamp):
+    """Taking apart puts blocks back on the table, which is no grid: the anchor goes to place_pose."""
+    from rad_core.sim.world import World
+    proc, plan = gamp
+    scene = generate_scene(GeneratorConfig(grid=3), 5)
+    block = scene.blocks[0]
+    position = np.add(block.position, [0.0, -0.12, 0.0])
+    yaw = (block.yaw + 90) % 360
+    r = plan(scene, block.id, 0, 'nowhere', (99, 0, 0), 9, place=(position, yaw_quaternion(yaw)))
+    assert r.success, r.reason
+    assert [g.action for g in r.gripper][-2:] == ['grasp', 'release'] and len(r.trajectories) == 3
+    # Where the release happens (the end of the carry), the fingertips are on the grasped unit at its new pose.
+    offset = np.asarray(scene.block_types[block.type].offsets[r.grasp.unit], dtype=float) * scene.unit
+    with World(scene) as world:
+        q = np.concatenate([r.trajectories[1].points[-1].positions, [0.02, 0.02]])
+        world.set_joint_positions(q)
+        tip, _ = world.link_pose()
+    assert np.linalg.norm(tip - (position + yaw_matrix(yaw) @ offset)) < 0.005
+    for place, expected in (((position, (0.0, 0.38268343, 0.0, 0.92387953)), 'must be upright'),
+                            ((position, yaw_quaternion(45)), 'not a multiple of 90'),
+                            ((position + [0.0, 0.0, -0.02], yaw_quaternion(0)), 'into the table'),
+                            (([3.0, 0.0, 0.025], yaw_quaternion(0)), 'outside the workspace')):
+        r = plan(scene, block.id, 0, '', (0, 0, 0), 0, place=place)
+        assert not r.success and r.failure == 'invalid_request' and expected in r.reason, r.reason
     assert proc.is_running()

@@ -4,7 +4,10 @@
                      state, with which grasp and which motion (arm trajectories of the
                      robot model's 7 joints, timed within its limits x speed_scale, and
                      the gripper commands between them)? On failure, failure = 'grasp'
-                     (f_g) or 'placement' (f_p) and a reason. With `execute`, the motion
+                     (f_g) or 'placement' (f_p) and a reason. With `place_at_pose`, the
+                     block's anchor goes to `place_pose` instead of the action's cell
+                     (upright, yaw a multiple of 90 degrees: taking a structure apart puts
+                     blocks back on the table). With `execute`, the motion
                      is also sent (in the background) through the arm controller's and
                      the gripper's actions (parameters arm_controller, gripper_action).
 
@@ -14,19 +17,23 @@ request's scene into it; the world is never stepped, only probed.
 
 from __future__ import annotations
 
+import math
 import threading
 import time
 
+import numpy as np
 from rclpy.node import Node
 
 from rad_core.errors import RadError
-from rad_core.gamp.action import MotionPlanner, SceneAction
-from rad_core.gamp.planner import GampConfig
+from rad_core.gamp.action import MotionPlanner, SceneAction, start_joints
+from rad_core.gamp.planner import GampConfig, plan_action
 from rad_core.gamp.trajectory import TimingConfig
 from rad_core.motion import run_motion
+from rad_core.sim.workspace import Workspace
+from rad_core.transforms import matrix_from_quaternion
 from rad_msgs.srv import PlanAction
 from rad_ros.conversions import scene_from_request
-from rad_ros.motion import motion_to_msgs
+from rad_ros.motion import motion_to_msgs, pose_from_msg
 from rad_ros.plant import ActionPlant
 from rad_ros.node_main import main_for
 
@@ -55,6 +62,18 @@ class GampNode(Node):
     def plan(self, request):
         scene = scene_from_request(request.scene, request.scene_json)
         a = request.action
+        if request.place_at_pose:
+            block = scene.block(a.block_id)
+            position, yaw = place_pose(request.place_pose)
+            units = position + scene.unit * scene.block_types[block.type].rotated(yaw)
+            Workspace().check_points(units, f'place_pose of block {a.block_id!r}: a unit')
+            if units[:, 2].min() < scene.unit / 4:
+                raise RadError(f'place_pose of block {a.block_id!r} puts it into the table (lowest unit centre '
+                               f'z = {units[:, 2].min():.3f} m, on the table it is {scene.unit / 2:.3f} m)')
+            start = start_joints(request.start_positions)
+            self.planner.world.load_scene(scene)
+            return plan_action(self.planner.world, a.block_id, position, yaw, start=start,
+                               config=self.planner.config)
         action = SceneAction(a.block_id, a.unit, a.target, (a.cell.i, a.cell.j, a.cell.k), a.rotation)
         result, _, _ = self.planner(scene, action, start=request.start_positions)
         return result
@@ -97,6 +116,26 @@ class GampNode(Node):
             self.get_logger().error(f'{block_id}: execution failed: {problem}')
         else:
             self.get_logger().info(f'{block_id}: executed')
+
+
+def place_pose(pose) -> tuple[np.ndarray, int]:
+    """A place pose's anchor position and yaw (deg, a multiple of 90); RadError for what a scene
+    cannot hold (not finite, not upright, turned between the quarter turns)."""
+    position, quaternion = pose_from_msg(pose)
+    q = np.asarray(quaternion, dtype=float)
+    if not (np.all(np.isfinite(position)) and np.all(np.isfinite(q))):
+        raise RadError('place_pose must be finite')
+    norm = float(np.linalg.norm(q))
+    if abs(norm - 1.0) > 1e-3:
+        raise RadError(f'place_pose: the orientation is not a unit quaternion (norm {norm:.4f})')
+    r = matrix_from_quaternion(q / norm)
+    if r[2, 2] < math.cos(math.radians(1.0)):
+        raise RadError('place_pose must be upright (a turn about z only): a block is put down flat')
+    yaw = math.degrees(math.atan2(r[1, 0], r[0, 0]))
+    quarter = round(yaw / 90.0) * 90
+    if abs(yaw - quarter) > 1.0:
+        raise RadError(f'place_pose: yaw {yaw:.1f} deg is not a multiple of 90 degrees')
+    return np.asarray(position, dtype=float), int(quarter) % 360
 
 
 main = main_for(GampNode)
