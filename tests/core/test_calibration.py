@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 import yaml
 
-from rad_core.calibration import (PAIR_COLUMNS, PointPairs, RestConfig, append_pair_row, fit, marker_in_base,
-                                  parse_pairs_csv, read_pairs_csv, still_mean)
+from rad_core.calibration import (PAIR_COLUMNS, Calibration, PointPairs, RestConfig, append_pair_row, fit,
+                                  marker_in_base, parse_pairs_csv, read_pairs_csv, still_mean)
 from rad_core.errors import RadError
 from rad_core.sim.panda import HOME
 from rad_core.transforms import matrix_from_quaternion, quaternion_angle_deg
@@ -206,6 +206,15 @@ def test_rad_calibrate_refuses_a_degenerate_set_with_exit_2_and_one_line(tmp_pat
     assert code == 2 and 'cannot read' in err
     code, out, err = rad(capsys, monkeypatch, 'calibrate', '-', '--mocap-frame', '', stdin=csv_text(base, mocap))
     assert code == 2 and '--mocap-frame must name' in err
+
+
+def test_the_parameter_file_keeps_every_value_a_float_and_needs_a_frame():
+    c = Calibration(np.eye(3), np.array([1e-05, -2e20, 0.25]), (0.0, 0.0, 0.0))
+    p = yaml.safe_load(c.params_yaml('vicon', 'two\nlines'))['assembly']['ros__parameters']
+    assert p == {'mocap_frame': 'vicon', 'mocap_to_base_translation': [1e-05, -2e20, 0.25],
+                 'mocap_to_base_quaternion': [0.0, 0.0, 0.0, 1.0]}
+    with pytest.raises(RadError, match='mocap_frame must name'):
+        c.params_yaml('')
 
 
 # ---- a pair from a live cell ----------------------------------------------------------------

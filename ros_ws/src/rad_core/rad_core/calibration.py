@@ -98,9 +98,19 @@ class Calibration:
         lines += ['# p_base = R(mocap_to_base_quaternion) p_mocap + mocap_to_base_translation (m; q: x, y, z, w)',
                   'assembly:', '  ros__parameters:',
                   f'    mocap_frame: {_yaml_string(mocap_frame)}',
-                  f'    mocap_to_base_translation: [{", ".join(repr(float(v)) for v in self.translation)}]',
-                  f'    mocap_to_base_quaternion: [{", ".join(repr(float(v)) for v in self.quaternion)}]']
+                  f'    mocap_to_base_translation: [{", ".join(_yaml_float(v) for v in self.translation)}]',
+                  f'    mocap_to_base_quaternion: [{", ".join(_yaml_float(v) for v in self.quaternion)}]']
         return '\n'.join(lines) + '\n'
+
+
+def _yaml_float(value: float) -> str:
+    """A float YAML 1.1 readers (PyYAML) also read as a float: repr, with a '.' in the mantissa
+    (they take 1e-05 for a string)."""
+    text = repr(float(value))
+    mantissa, e, exponent = text.partition('e')
+    if e and '.' not in mantissa:
+        text = f'{mantissa}.0e{exponent}'
+    return text
 
 
 def _yaml_string(text: str) -> str:

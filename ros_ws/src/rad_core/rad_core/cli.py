@@ -170,7 +170,8 @@ def cmd_calibrate(args) -> int:
         raise RadError("--mocap-frame must name the motion-capture frame ('' means no calibration)")
     pairs = parse_pairs_csv(sys.stdin.read(), 'stdin') if args.pairs == '-' else read_pairs_csv(args.pairs)
     calibration = fit(pairs, args.max_rms)
-    doc = {**calibration.to_dict(), 'max_rms_m': args.max_rms, 'mocap_frame': args.mocap_frame}
+    doc = {**calibration.to_dict(), 'max_rms_m': args.max_rms if args.max_rms != float('inf') else None,
+           'mocap_frame': args.mocap_frame}
     if args.out:
         header = (f'rad calibrate {args.pairs}: {len(pairs.base)} points, rms residual '
                   f'{calibration.rms_m * 1e3:.3f} mm, max {max(calibration.residuals_m) * 1e3:.3f} mm')
