@@ -206,6 +206,8 @@ def test_rad_calibrate_refuses_a_degenerate_set_with_exit_2_and_one_line(tmp_pat
     assert code == 2 and 'cannot read' in err
     code, out, err = rad(capsys, monkeypatch, 'calibrate', '-', '--mocap-frame', '', stdin=csv_text(base, mocap))
     assert code == 2 and '--mocap-frame must name' in err
+    code, out, err = rad(capsys, monkeypatch, 'calibrate', '-', '--out', '-', stdin=csv_text(base, mocap))
+    assert code == 2 and '--out needs a file' in err and out == ''
 
 
 def test_the_parameter_file_keeps_every_value_a_float_and_needs_a_frame():

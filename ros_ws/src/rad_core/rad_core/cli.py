@@ -168,6 +168,8 @@ def cmd_calibrate(args) -> int:
     from rad_core.calibration import fit, parse_pairs_csv, read_pairs_csv
     if not args.mocap_frame:
         raise RadError("--mocap-frame must name the motion-capture frame ('' means no calibration)")
+    if args.out == '-':
+        raise RadError('--out needs a file: stdout carries the JSON')
     pairs = parse_pairs_csv(sys.stdin.read(), 'stdin') if args.pairs == '-' else read_pairs_csv(args.pairs)
     calibration = fit(pairs, args.max_rms)
     doc = {**calibration.to_dict(), 'max_rms_m': args.max_rms if args.max_rms != float('inf') else None,
