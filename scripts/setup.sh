@@ -80,36 +80,49 @@ flock 9
 # The build needs the venv prefix on AMENT_PREFIX_PATH/CMAKE_PREFIX_PATH, but not
 # this workspace's own previous install, hence RAD_ENV_NO_WORKSPACE.
 RAD_ENV_NO_WORKSPACE=1 source "$ROOT/scripts/env.sh"
-# ros_ws/src/control_msgs is a subset of upstream control_msgs, built only where the
-# environment lacks it (PyPI has no wheel). A full ROS 2 install (/opt/ros/jazzy
-# sourced, the Docker image) provides the real one: skip ours there, and drop a
-# copy built earlier so that it cannot shadow the system's.
-control_msgs_from=workspace
+# ros_ws/src/{control_msgs,tf2_msgs,mocap4r2_msgs} define upstream interfaces (control_msgs a
+# subset) that PyPI has no wheel for; each is built only where the environment lacks it. A full
+# ROS 2 install (/opt/ros/jazzy sourced, the Docker image) provides the real ones: skip ours
+# there, and drop a copy built earlier so that it cannot shadow the system's.
+SYSTEM_PROVIDED_IF_PRESENT=(control_msgs tf2_msgs mocap4r2_msgs)
 ws_install="$(cd ros_ws/install 2>/dev/null && pwd -P || echo "$(cd ros_ws && pwd -P)/install")"
 IFS=: read -ra ament_prefixes <<<"${AMENT_PREFIX_PATH:-}"
-for prefix in "${ament_prefixes[@]}"; do
-    [ -n "$prefix" ] && [ -f "$prefix/share/control_msgs/package.xml" ] || continue
-    real="$(cd "$prefix" && pwd -P)" || continue
-    case "$real/" in "$ws_install/"*) continue ;; esac
-    control_msgs_from=system
-    break
-done
+provided_from() {  # provided_from PACKAGE: "system" when a prefix outside this workspace has it
+    local prefix real
+    for prefix in "${ament_prefixes[@]}"; do
+        [ -n "$prefix" ] && [ -f "$prefix/share/$1/package.xml" ] || continue
+        real="$(cd "$prefix" && pwd -P)" || continue
+        case "$real/" in "$ws_install/"*) continue ;; esac
+        echo system
+        return
+    done
+    echo workspace
+}
 skip_args=()
-if [ "$control_msgs_from" = system ]; then
-    skip_args=(--packages-skip control_msgs)
+from_system=()
+stamp_content=""
+for pkg in "${SYSTEM_PROVIDED_IF_PRESENT[@]}"; do
+    from="$(provided_from "$pkg")"
+    stamp_content+="${stamp_content:+ }$pkg=$from"
+    if [ "$from" = system ]; then
+        from_system+=("$pkg")
+    fi
+done
+if [ ${#from_system[@]} -gt 0 ]; then
+    skip_args=(--packages-skip "${from_system[@]}")
 fi
 # Rebuild when anything under ros_ws/src (files or directories, so additions and
-# deletions count) or the venv is newer than the last successful build, or when
-# control_msgs moved between the workspace and the system (the stamp's content).
+# deletions count) or the venv is newer than the last successful build, or when one of
+# SYSTEM_PROVIDED_IF_PRESENT moved between the workspace and the system (the stamp's content).
 # Edits to Python modules need no rebuild: --symlink-install links the sources into install/.
 build_stamp="ros_ws/install/.rad-build-stamp"
 changed="$(find ros_ws/src -newer "$build_stamp" ! -name '*.pyc' ! -name __pycache__ \
     ! \( -name '*.py' ! -name setup.py \) -print -quit 2>/dev/null || true)"
 if [ ! -f "$build_stamp" ] || [ "$pip_stamp" -nt "$build_stamp" ] || [ -n "$changed" ] \
-        || [ "$(cat "$build_stamp")" != "control_msgs=$control_msgs_from" ]; then
-    if [ "$control_msgs_from" = system ]; then
-        rm -rf ros_ws/build/control_msgs ros_ws/install/control_msgs
-    fi
+        || [ "$(cat "$build_stamp")" != "$stamp_content" ]; then
+    for pkg in "${from_system[@]}"; do
+        rm -rf "ros_ws/build/$pkg" "ros_ws/install/$pkg"
+    done
     mkdir -p ros_ws/log
     build_log="ros_ws/log/rad-setup-build.log"
     colcon --log-base ros_ws/log build \
@@ -118,5 +131,5 @@ if [ ! -f "$build_stamp" ] || [ "$pip_stamp" -nt "$build_stamp" ] || [ -n "$chan
         --cmake-args -DBUILD_TESTING=OFF -DPython3_EXECUTABLE="$VENV/bin/python" \
         >"$build_log" 2>&1 \
         || fail "colcon build failed (full log: $build_log, per package: ros_ws/log/latest_build/)" "$build_log"
-    echo "control_msgs=$control_msgs_from" >"$build_stamp"
+    echo "$stamp_content" >"$build_stamp"
 fi
