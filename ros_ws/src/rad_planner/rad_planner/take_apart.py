@@ -1,0 +1,126 @@
+"""/take_apart: take the built structure apart, back onto the table, on the assembly node.
+
+  act  take_apart  rad_msgs/TakeApart: register the world from motion capture, plan the
+                   take-apart (rad_core.sequencing.disassembly: blocks with nothing on
+                   them first, each back to its pose in the goal's heap scene or the
+                   nearest free table spot, every motion from /plan_action with a place
+                   pose), run it through the arm controller's and the hand's actions,
+                   re-register after each step and re-plan when a step deviates
+                   (bounded by the node's max_replans); cancelling it stops the arm
+
+The server lives on the assembly node (`serve_take_apart(node)`), whose plant, joint
+states, registration and parameters (settle_s, position_tol, max_replans, time_limit_s)
+it shares with /execute_assembly.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+
+import numpy as np
+from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.callback_groups import ReentrantCallbackGroup
+
+from rad_core.errors import RadError
+from rad_core.scene import Scene
+from rad_core.sequencing.disassembly import TableConfig, take_apart
+from rad_core.sequencing.execute import ExecuteConfig
+from rad_core.sequencing.plan import MotionPlan
+from rad_core.sim import panda
+from rad_core.trajectory import limit_violation
+from rad_core.transforms import yaw_quaternion
+from rad_msgs.action import TakeApart
+from rad_msgs.srv import PlanAction
+from rad_ros.motion import motion_from_msgs, pose_msg
+
+
+def place_planner(node, client):
+    """A disassembly.PlacePlanner over /plan_action (a place pose instead of a cell)."""
+    def plan_place(scene: Scene, block_id: str, position, yaw: int, start) -> MotionPlan:
+        request = PlanAction.Request(scene_json=scene.dumps(),
+                                     start_positions=[] if start is None else [float(v) for v in start])
+        request.action.block_id = block_id
+        request.place_at_pose, request.place_pose = True, pose_msg(position, yaw_quaternion(yaw))
+        response = node.call(client, request)
+        if response.failure in ('invalid_request', 'error'):
+            raise RadError(f'plan_action: {response.reason}')
+        if not response.success:
+            return MotionPlan(False, response.failure, response.reason)
+        motion = motion_from_msgs(response.trajectories, response.gripper)
+        q = panda.HOME if start is None else np.asarray(start, dtype=float)
+        for k, traj in enumerate(motion['trajectories']):
+            why = limit_violation(traj, q, node.model)
+            if why:
+                raise RadError(f'plan_action answered a trajectory the {node.model.name} would refuse '
+                               f'(trajectory {k}): {why}')
+            q = np.asarray(traj['points'][-1]['positions'])
+        return MotionPlan(True, '', '', (response.grasp.unit, response.grasp.yaw_deg), motion)
+    return plan_place
+
+
+def heap_of(node, goal) -> Scene:
+    """The goal's heap scene, or the node's task (the scene the twin loaded) when it has none."""
+    if goal.heap_json.strip():
+        return Scene.loads(goal.heap_json)
+    if node.task is None:
+        raise RadError('no heap_json in the goal and no task known: give the start scene as heap_json')
+    return node.task
+
+
+def serve_take_apart(node) -> ActionServer:
+    """Mount /take_apart on an assembly node (rad_planner.assembly_node.AssemblyNode)."""
+    client = node.io.create_client(PlanAction, 'plan_action')
+    plan_place = place_planner(node, client)
+
+    def execute_callback(goal_handle):
+        goal = goal_handle.request
+        result = TakeApart.Result()
+        feedback = TakeApart.Feedback()
+        t0 = time.perf_counter()
+        cancelled = lambda: goal_handle.is_cancel_requested  # noqa: E731
+
+        def report(step, planned, block, phase, message):
+            feedback.step, feedback.steps_planned, feedback.block_id = step, planned, block
+            feedback.phase, feedback.message = phase, message
+            goal_handle.publish_feedback(feedback)
+
+        try:
+            limit = node.time_limit(goal.time_limit_s)
+            heap = heap_of(node, goal)
+            scene = node.registered_scene()
+            if not {b.id for b in heap.blocks} & {b.id for b in scene.blocks}:
+                raise RadError('the heap scene has none of the blocks motion capture sees')
+            config = ExecuteConfig(float(node.param('settle_s')), float(node.param('position_tol')),
+                                   int(node.param('max_replans')), True)
+            plant = node.plant(cancelled)
+            run = take_apart(scene, heap, plan_place, plant.move_arm, plant.move_gripper, node.registered_scene,
+                             config, TableConfig(), build_order=list(goal.build_order), time_limit_s=limit,
+                             joints=lambda: node.start_joints([]), cancelled=cancelled, report=report)
+        except Exception as e:  # noqa: BLE001 - an action must answer, never die
+            result.success = False
+            result.reason = str(e) if isinstance(e, RadError) else f'internal error: {type(e).__name__}: {e}'
+            if not isinstance(e, RadError):
+                node.get_logger().error(f'take_apart failed: {result.reason}')
+            report(0, 0, '', 'done', result.reason)
+            goal_handle.abort()
+            return result
+        stats = run.drift_stats()
+        result.success, result.reason = run.success, run.reason
+        result.steps_executed, result.replans = len(run.steps), run.run.replans
+        result.lost = list(run.lost)
+        result.drift_mean_m, result.drift_max_m = stats['mean_mm'] / 1e3, stats['max_mm'] / 1e3
+        result.result_json = json.dumps(run.document({'total': time.perf_counter() - t0}))
+        node.get_logger().info(f'take_apart: {len(run.steps)} steps, {run.run.replans} replans, '
+                               f'{len(run.lost)} lost, drift max {stats["max_mm"]:.1f} mm'
+                               + (f': {run.reason}' if run.reason else ''))
+        if goal_handle.is_cancel_requested:
+            goal_handle.canceled()
+        else:
+            (goal_handle.succeed if result.success else goal_handle.abort)()
+        return result
+
+    return ActionServer(node, TakeApart, 'take_apart', execute_callback,
+                        goal_callback=lambda goal: GoalResponse.ACCEPT,
+                        cancel_callback=lambda goal: CancelResponse.ACCEPT,
+                        callback_group=ReentrantCallbackGroup())
