@@ -1,10 +1,23 @@
 """The main job: bring up the graph, plan and build a scene, write what happened.
 
     demo [--scene FILE] [--out DIR] [--rtf X] [--time-limit S]
+         [--faults none|realistic|FILE] [--faults-seed N] [--cycles N]
 
 Writes DIR/scene.json, DIR/result.json (rad-result/1), DIR/final.png and, when
 the Rerun visualizer is installed, DIR/recording.rrd; node logs in DIR/logs/.
 Without --scene it builds the default scene: two-sided, g = 4, generator seed 8.
+
+--faults gives the twin the faults of a real cell (rad_core.sim.faults: 'realistic'
+or a JSON/YAML file of FaultConfig fields; 'none' by default).
+
+--cycles N builds, takes the structure apart back onto the table (/take_apart: every
+block back to its heap pose or a free spot, every motion verified) and builds again
+from what motion capture sees, N times, with no reset and nothing touched by hand:
+every cycle is a build and a take-apart, so the cell ends on the heap it started from.
+One line per cycle; result.json is the last build's document with a `cycles` list of
+per-cycle figures (coverage, steps, replans, failures, blocks lost, drift from the heap
+in mm, wall time); DIR/cycles/ holds each build's and take-apart's own document.
+Without --cycles: one build, no take-apart (the demo as it always was).
 """
 
 from __future__ import annotations
@@ -26,47 +39,137 @@ from rad_planner.graph import default_params, start_graph
 DEFAULT_SCENE = (GeneratorConfig(grid=4, sides=2), 8)
 
 
-def run(scene: Scene, out: Path, rtf: float, time_limit: float) -> dict:
-    from rad_msgs.action import ExecuteAssembly
+def faults_param(spec: str, seed: int = 0) -> str:
+    """The twin's `faults` parameter for --faults: 'none', 'realistic' or a file's absolute path;
+    RadError naming the problem for anything the twin would refuse."""
+    from rad_core.sim.faults import FaultConfig
+    spec = spec.strip()
+    if spec not in ('none', 'realistic'):
+        path = Path(spec).expanduser()
+        if not path.is_file():
+            raise RadError(f'--faults: {spec!r} is neither none, realistic nor a file')
+        spec = str(path.resolve())
+    FaultConfig.parse(spec, seed)
+    return spec
+
+
+def _goal(node, client, goal, what: str, timeout_s: float):
+    """Send an action goal, print its feedback, wait for its result."""
+    def feedback(msg):
+        f = msg.feedback
+        print(f'  {what} step {f.step + 1}: {f.phase} {f.block_id} {f.message}'.rstrip(), flush=True)
+
+    sent = client.send_goal_async(goal, feedback_callback=feedback)
+    rclpy.spin_until_future_complete(node, sent, timeout_sec=30.0)
+    handle = sent.result()
+    if handle is None or not handle.accepted:
+        raise RadError(f'the {what} goal was not accepted')
+    done = handle.get_result_async()
+    rclpy.spin_until_future_complete(node, done, timeout_sec=timeout_s)
+    if done.result() is None:
+        raise RadError(f'no result from {what} in time')
+    return done.result().result
+
+
+def _failures(doc: dict) -> int:
+    return sum(1 for s in doc.get('steps', []) if s.get('failure'))
+
+
+def cycle_figures(k: int, build, build_doc: dict, build_s: float, apart=None, apart_doc=None,
+                  apart_s: float = 0.0) -> dict:
+    """One cycle's row of result.json's `cycles`."""
+    row = {'cycle': k, 'coverage': float(build.coverage),
+           'build': {'success': bool(build.success), 'reason': build.reason, 'steps': int(build.steps_executed),
+                     'replans': int(build.replans), 'failures': _failures(build_doc) + (not build.success),
+                     'wall_s': build_s}}
+    lost, drift = [], {'mean_mm': 0.0, 'max_mm': 0.0}
+    if apart is not None:
+        lost = list(apart.lost)
+        drift = {'mean_mm': 1e3 * apart.drift_mean_m, 'max_mm': 1e3 * apart.drift_max_m}
+        row['take_apart'] = {'success': bool(apart.success), 'reason': apart.reason,
+                             'steps': int(apart.steps_executed), 'replans': int(apart.replans),
+                             'failures': _failures(apart_doc or {}) + (not apart.success), 'wall_s': apart_s}
+    parts = [row['build']] + ([row['take_apart']] if apart is not None else [])
+    row.update({'steps': sum(p['steps'] for p in parts), 'replans': sum(p['replans'] for p in parts),
+                'failures': sum(p['failures'] for p in parts), 'blocks_lost': len(lost), 'lost': lost,
+                'drift_mm': drift, 'wall_s': build_s + apart_s})
+    return row
+
+
+def cycle_line(row: dict, n: int) -> str:
+    apart = row.get('take_apart')
+    steps = f'{row["build"]["steps"]} + {apart["steps"]} steps' if apart else f'{row["steps"]} steps'
+    line = (f'demo: cycle {row["cycle"]}/{n}: coverage {row["coverage"]:.2f}, {steps}, {row["replans"]} replans, '
+            f'{row["failures"]} failures, {row["blocks_lost"]} lost, drift {row["drift_mm"]["mean_mm"]:.1f} mean / '
+            f'{row["drift_mm"]["max_mm"]:.1f} max mm, {row["wall_s"]:.1f} s')
+    reasons = [p['reason'] for p in (row['build'], apart or {}) if p.get('reason')]
+    return line + (f' ({"; ".join(reasons)})' if reasons else '')
+
+
+def run(scene: Scene, out: Path, rtf: float, time_limit: float, faults: str = 'none', faults_seed: int = 0,
+        cycles: int | None = None) -> dict:
+    from rad_msgs.action import ExecuteAssembly, TakeApart
     from rad_msgs.srv import Sequence
     out.mkdir(parents=True, exist_ok=True)
     scene_path = out / 'scene.json'
     scene_path.write_text(scene.dumps() + '\n')
-    overrides = {'twin': {'scene_file': str(scene_path.resolve()), 'real_time_factor': str(rtf)},
-                 'viz': {'recording_path': str((out / 'recording.rrd').resolve())}}
+    twin = {'scene_file': str(scene_path.resolve()), 'real_time_factor': str(rtf)}
+    if faults != 'none':
+        twin.update({'faults': faults, 'faults_seed': str(int(faults_seed))})
+    overrides = {'twin': twin, 'viz': {'recording_path': str((out / 'recording.rrd').resolve())}}
     t0 = time.perf_counter()
     graph = start_graph(default_params(), overrides, log_dir=out / 'logs')
     rclpy.init()
     node = rclpy.create_node('rad_demo')
+    rows, docs = [], []
     try:
         client = ActionClient(node, ExecuteAssembly, 'execute_assembly')
         if not client.wait_for_server(timeout_sec=60.0):
             raise RadError(f'the graph did not come up (see {out / "logs"})')
         if not node.create_client(Sequence, 'sequence').wait_for_service(timeout_sec=60.0):
             raise RadError(f'the sequencer did not come up (see {out / "logs"}/sequencer.log)')
+        apart_client = None
+        if cycles is not None:
+            apart_client = ActionClient(node, TakeApart, 'take_apart')
+            if not apart_client.wait_for_server(timeout_sec=30.0):
+                raise RadError('the assembly node serves no /take_apart action: --cycles needs it')
+            (out / 'cycles').mkdir(exist_ok=True)
         time.sleep(1.0)   # let the twin publish its first motion-capture frames
-
-        def feedback(msg):
-            f = msg.feedback
-            print(f'  step {f.step + 1}: {f.phase} {f.block_id} {f.message}'.rstrip(), flush=True)
-
-        sent = client.send_goal_async(ExecuteAssembly.Goal(scene_json=scene.dumps(), time_limit_s=time_limit,
-                                                           replan=True), feedback_callback=feedback)
-        rclpy.spin_until_future_complete(node, sent, timeout_sec=30.0)
-        handle = sent.result()
-        if handle is None or not handle.accepted:
-            raise RadError('the execute_assembly goal was not accepted')
-        done = handle.get_result_async()
-        rclpy.spin_until_future_complete(node, done, timeout_sec=time_limit + 600.0)
-        if done.result() is None:
-            raise RadError('no result from execute_assembly in time')
-        result = done.result().result
+        for k in range(1, (cycles or 1) + 1):
+            if cycles is not None:
+                print(f'demo: cycle {k}/{cycles}: building', flush=True)
+            tb = time.perf_counter()
+            # The first build is of the scene as given; later ones of the world as motion capture sees it.
+            goal = ExecuteAssembly.Goal(scene_json=scene.dumps() if k == 1 else '', time_limit_s=time_limit,
+                                        replan=True)
+            result = _goal(node, client, goal, 'build', time_limit + 600.0)
+            build_s = time.perf_counter() - tb
+            doc = json.loads(result.result_json) if result.result_json else {}
+            docs.append(doc)
+            if cycles is None:
+                break
+            (out / 'cycles' / f'build_{k}.json').write_text(json.dumps(doc, indent=1) + '\n')
+            print(f'demo: cycle {k}/{cycles}: taking apart', flush=True)
+            ta = time.perf_counter()
+            order = [s['block'] for s in doc.get('steps', []) if not s.get('failure')]
+            apart = _goal(node, apart_client, TakeApart.Goal(heap_json=scene.dumps(), build_order=order,
+                                                             time_limit_s=time_limit), 'take apart',
+                          time_limit + 600.0)
+            apart_doc = json.loads(apart.result_json) if apart.result_json else {}
+            (out / 'cycles' / f'take_apart_{k}.json').write_text(json.dumps(apart_doc, indent=1) + '\n')
+            rows.append(cycle_figures(k, result, doc, build_s, apart, apart_doc, time.perf_counter() - ta))
+            print(cycle_line(rows[-1], cycles), flush=True)
+            if not apart.success:
+                print(f'demo: stopping after cycle {k}: the take-apart failed', file=sys.stderr, flush=True)
+                break
     finally:
         node.destroy_node()
         rclpy.try_shutdown()
         codes = graph.stop()
-    doc = json.loads(result.result_json) if result.result_json else {}
+    doc = dict(docs[-1]) if docs else {}
     doc.setdefault('timings', {})['demo_total'] = time.perf_counter() - t0
+    if cycles is not None:
+        doc['cycles'] = rows
     (out / 'result.json').write_text(json.dumps(doc, indent=1) + '\n')
     final = None
     if doc.get('final_blocks'):
@@ -74,7 +177,7 @@ def run(scene: Scene, out: Path, rtf: float, time_limit: float) -> dict:
         from rad_core.render import save_scene_png
         from rad_core.sim.panda import HOME
         save_scene_png(final, out / 'final.png', robot=HOME)
-    return {'result': result, 'doc': doc, 'exit_codes': codes, 'final': final}
+    return {'result': result, 'doc': doc, 'exit_codes': codes, 'final': final, 'cycles': rows}
 
 
 def main(argv=None) -> int:
@@ -84,14 +187,25 @@ def main(argv=None) -> int:
     parser.add_argument('--out', type=Path, default=Path('out/demo'))
     parser.add_argument('--rtf', type=float, default=5.0, help='twin speed, simulated s per wall s')
     parser.add_argument('--time-limit', type=float, default=120.0, help='planning time limit, s')
+    parser.add_argument('--faults', default='none', metavar='none|realistic|FILE',
+                        help="the twin's faults of a real cell (default none)")
+    parser.add_argument('--faults-seed', type=int, default=0, help="seed of the twin's faults")
+    parser.add_argument('--cycles', type=int, metavar='N',
+                        help='build, take apart, N times with no reset (default: one build, no take-apart)')
     args = parser.parse_args(argv)
     try:
         scene = Scene.load(args.scene) if args.scene else generate_scene(*DEFAULT_SCENE)
         if not args.rtf > 0 or not args.time_limit > 0:
             raise RadError('--rtf and --time-limit must be positive')
-        print(f'demo: {len(scene.blocks)} blocks, {scene.num_target_cells} target cells; starting the graph',
-              flush=True)
-        run_ = run(scene, args.out, args.rtf, args.time_limit)
+        if args.cycles is not None and args.cycles < 1:
+            raise RadError(f'--cycles must be at least 1, got {args.cycles}')
+        if args.faults_seed < 0:
+            raise RadError(f'--faults-seed must be >= 0, got {args.faults_seed}')
+        faults = faults_param(args.faults, args.faults_seed)
+        print(f'demo: {len(scene.blocks)} blocks, {scene.num_target_cells} target cells'
+              + (f', faults {args.faults}' if faults != 'none' else '')
+              + (f', {args.cycles} cycles' if args.cycles else '') + '; starting the graph', flush=True)
+        run_ = run(scene, args.out, args.rtf, args.time_limit, faults, args.faults_seed, args.cycles)
     except RadError as e:
         print(f'demo: error: {e}', file=sys.stderr)
         return 2
@@ -105,7 +219,10 @@ def main(argv=None) -> int:
     bad = {n: c for n, c in run_['exit_codes'].items() if c != 0}
     if bad:
         print(f'demo: nodes did not exit cleanly: {bad}', file=sys.stderr)
-    return 0 if result.steps_executed > 0 and not bad else 1
+    rows = run_['cycles']
+    cycles_ok = args.cycles is None or (len(rows) == args.cycles and all(
+        r['build']['steps'] > 0 and r['take_apart']['success'] and not r['blocks_lost'] for r in rows))
+    return 0 if result.steps_executed > 0 and cycles_ok and not bad else 1
 
 
 if __name__ == '__main__':
