@@ -1,8 +1,8 @@
 """/plan_assembly and /execute_assembly: the assembly planner and executor of the node graph.
 
 It knows the world only through the graph: the scene from the request or, if the
-request has none, registered from motion capture (`rigid_bodies`) against the task
-(`task_file` parameter, else the latched `scene` topic); the robot from
+request has none, registered from motion capture against the task (`task_file`
+parameter, else the latched `scene` topic); the robot from
 `joint_states`; allocation from `/allocate`; the order from the sequencer node
 (`/sequence`, asked at every step for a ranking of the next actions); motions from
 `/plan_action` (the first ranked action GAMP finds feasible is taken). When nothing
@@ -22,6 +22,20 @@ request with a reason naming it.
                          supplies the plant: rad_ros.plant.ActionPlant); cancelling it cancels
                          the running goal and the arm stops
   pub  plan_json         std_msgs/String (latched): the latest plan, for the visualizer
+  pub  /tf_static        tf2_msgs/TFMessage (latched): the calibration frame_id -> mocap_frame, when
+                         motion capture reports in a frame of its own
+  sub  <mocap_topic>     rad_msgs/RigidBodies (mocap_input 'rad', the twin's) or mocap4r2_msgs/RigidBodies
+                         ('mocap4r2'); 'pose_stamped': one geometry_msgs/PoseStamped per body on
+                         <pose_topic> with {body} replaced (natnet_ros2, vrpn_mocap)
+
+Motion capture (rad_core.mocap_input): poses arrive in mocap_frame ('' = frame_id) and are
+taken into frame_id by the calibration mocap_to_base_translation / _quaternion (p_base = R p +
+t); a message in another frame is refused, naming both. Bodies are named by block id unless
+body_map_file maps them ({bodies: {NAME: {block: ID, pivot: [x, y, z]}}, ignore: [NAME]}, the
+pivot's offset from the anchor unit's centre in the block frame); ignore_bodies lists more to
+skip; any other body is skipped and reported once. A block whose body is momentarily not seen
+(tracking_valid false, missing from a frame) is waited for, up to lost_timeout_s; one lost for
+longer fails the request naming it. table_z is the table top's height in frame_id.
 
 The robot's state comes from joint_states by name (the model's arm and finger joints,
 parameters robot and joint_prefix): a missing joint or a stamp older than stale_after_s
@@ -31,20 +45,22 @@ no joint states are heard, and says so in the log).
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import threading
 import time
 
 import numpy as np
+from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
 import rclpy
 from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
 from rclpy.node import Node
-from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
+from tf2_msgs.msg import TFMessage
 
 from rad_core.errors import RadError
 from rad_core.scene import Scene
@@ -55,16 +71,18 @@ from rad_core.sequencing.sequencer import Ranking
 from rad_core.robot_model import robot_model
 from rad_core.sim import panda
 from rad_core.trajectory import limit_violation
-from rad_core.sim.mocap import RegistrationConfig, RigidBodyPose, body_map_for, register_scene
+from rad_core.mocap_input import BodyMap, MocapFrames, MocapTracker, wait_for_bodies
+from rad_core.sim.mocap import RegistrationConfig, register_scene
 from rad_msgs.action import ExecuteAssembly
-from rad_msgs.msg import RigidBodies, Scene as SceneMsg
+from rad_msgs.msg import Scene as SceneMsg
 from rad_msgs.srv import Allocate, PlanAction, PlanAssembly, Sequence
 from rad_ros.conversions import (allocation_from_response, placement_to_msg, scene_from_msg, scene_from_request,
                                  scene_msg_is_empty)
 from rad_ros.node_main import run_node
 from rad_ros.plan_msgs import fill_plan_response, plan_json
 from rad_ros.sequencer_msgs import action_to_msg, ranking_from_response, sequence_request
-from rad_ros.motion import motion_from_msgs, pose_from_msg
+from rad_ros.mocap_input import MocapInput, calibration_tf
+from rad_ros.motion import motion_from_msgs
 from rad_ros.plant import ActionPlant
 from rad_ros.qos import LATCHED
 
@@ -80,16 +98,32 @@ class AssemblyNode(Node):
                             ('robot', 'panda'), ('joint_prefix', ''), ('arm_controller', 'joint_trajectory_controller'),
                             ('gripper_action', 'franka_gripper/gripper_action'), ('gripper_result_is_width', False),
                             ('path_tolerance', 0.05), ('goal_tolerance', 0.01), ('goal_time_tolerance', 1.0),
-                            ('require_joint_states', True)):
+                            ('require_joint_states', True), ('mocap_input', 'rad'), ('mocap_topic', 'rigid_bodies'),
+                            ('pose_topic', 'mocap/{body}/pose'), ('mocap_frame', ''), ('body_map_file', ''),
+                            ('table_z', 0.0), ('lost_timeout_s', 2.0)):
             self.declare_parameter(name, value)
+        # Lists typed by what the user writes ([0, 0, 1] is an integer array): checked below instead.
+        anything = ParameterDescriptor(dynamic_typing=True)
+        for name, value in (('mocap_to_base_translation', [0.0, 0.0, 0.0]),
+                            ('mocap_to_base_quaternion', [0.0, 0.0, 0.0, 1.0]), ('ignore_bodies', [])):
+            self.declare_parameter(name, value, anything)
         self.model = robot_model(str(self.param('robot')), str(self.param('joint_prefix')))
         self.lock = threading.Lock()
         self.joints: tuple[float, JointState] | None = None
-        self.bodies = None
         self.task: Scene | None = None
         path = self.get_parameter('task_file').value
         if path:
             self.task = Scene.load(path)
+        self.frames = MocapFrames.from_params(self.param('frame_id'), self.param('mocap_frame'),
+                                              self.param('mocap_to_base_translation'),
+                                              self.param('mocap_to_base_quaternion'))
+        ignore = self.param('ignore_bodies') or []
+        if isinstance(ignore, str) or not all(isinstance(n, str) for n in ignore):
+            raise RadError(f'ignore_bodies must be a list of body names, got {ignore!r}')
+        self.body_map = BodyMap.from_params(str(self.param('body_map_file')), ignore)
+        self.registration = RegistrationConfig(table_z=_number(self.param('table_z'), 'table_z'))
+        self.tracker = MocapTracker(self.frames, _number(self.param('lost_timeout_s'), 'lost_timeout_s'),
+                                    fresh_s=_number(self.param('stale_after_s'), 'stale_after_s'))
         # Requests block while they wait for other services and for the robot, so
         # what they wait on (service responses, joint states, motion capture) is
         # handled by a node of its own with its own thread: however many requests
@@ -99,7 +133,10 @@ class AssemblyNode(Node):
         self.plan_client = self.io.create_client(PlanAction, 'plan_action')
         self.sequence_client = self.io.create_client(Sequence, 'sequence')
         self.io.create_subscription(JointState, 'joint_states', self.joint_states_callback, 10)
-        self.io.create_subscription(RigidBodies, 'rigid_bodies', self.rigid_bodies_callback, qos_profile_sensor_data)
+        self.mocap = MocapInput(self.io, self.tracker, str(self.param('mocap_input')), str(self.param('mocap_topic')),
+                                str(self.param('pose_topic')))
+        if self.task is not None:
+            self.watch_bodies(self.task)
         self.io.create_subscription(SceneMsg, 'scene', self.scene_callback, LATCHED)
         self.io_executor = SingleThreadedExecutor(context=self.context)
         self.io_executor.add_node(self.io)
@@ -107,6 +144,9 @@ class AssemblyNode(Node):
         self.io_thread.start()
         group = ReentrantCallbackGroup()
         self.plan_pub = self.create_publisher(String, 'plan_json', LATCHED)
+        if self.frames.calibrated:
+            self.tf_static_pub = self.create_publisher(TFMessage, '/tf_static', LATCHED)
+            self.tf_static_pub.publish(calibration_tf(self.frames, self.get_clock().now().to_msg()))
         self.create_service(PlanAssembly, 'plan_assembly', self.plan_assembly_callback, callback_group=group)
         self.action_server = ActionServer(self, ExecuteAssembly, 'execute_assembly', self.execute_callback,
                                           goal_callback=lambda goal: GoalResponse.ACCEPT,
@@ -127,16 +167,20 @@ class AssemblyNode(Node):
         with self.lock:
             self.joints = (time.monotonic(), msg)
 
-    def rigid_bodies_callback(self, msg) -> None:
-        with self.lock:
-            self.bodies = (time.monotonic(), msg)
-
     def scene_callback(self, msg: SceneMsg) -> None:
         if not self.param('task_file'):
             try:
                 self.task = scene_from_msg(msg)
+                self.watch_bodies(self.task)
             except RadError as e:
                 self.get_logger().warning(f'ignoring an invalid scene on /scene: {e}')
+
+    def watch_bodies(self, task: Scene):
+        """The task's bodies by name (pose_stamped subscribes to each one's topic); RadError when the
+        body map does not fit the task."""
+        resolved = self.body_map.resolve({b.id: b.type for b in task.blocks})
+        self.mocap.watch(resolved.by_body)
+        return resolved
 
     def fresh(self, entry, what: str):
         stale = float(self.param('stale_after_s'))
@@ -170,11 +214,11 @@ class AssemblyNode(Node):
         if self.task is None:
             raise RadError('no scene in the request and no task known: set the task_file parameter '
                            'or publish the task on /scene')
-        with self.lock:
-            msg = self.fresh(self.bodies, 'motion capture on /rigid_bodies')
-        bodies = [RigidBodyPose(b.rigid_body_name, *pose_from_msg(b.pose), b.tracking_valid)
-                  for b in msg.rigidbodies]
-        return register_scene(bodies, self.task, RegistrationConfig(body_map=body_map_for(self.task)))
+        task = self.task
+        resolved = self.watch_bodies(task)
+        bodies = wait_for_bodies(self.tracker, resolved, warn=self.get_logger().warning)
+        return register_scene(bodies, task, dataclasses.replace(self.registration,
+                                                                body_map=resolved.registration_map))
 
     def scene_of(self, msg: SceneMsg, text: str) -> tuple[Scene, bool]:
         """The scene a request carries, or the registered one (and True) when it has none."""
@@ -344,6 +388,12 @@ class AssemblyNode(Node):
         else:
             (goal_handle.succeed if result.success else goal_handle.abort)()
         return result
+
+
+def _number(value, name: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise RadError(f'{name} must be a finite number, got {value!r}')
+    return float(value)
 
 
 def main(args=None):
