@@ -155,6 +155,36 @@ def test_a_block_pushed_aside_mid_take_apart_is_replanned_from_what_is_seen(plan
         assert run.drift[plant.pushed] == pytest.approx(0.03, abs=0.003)   # drift: what the push left
 
 
+def test_a_block_missing_from_a_frame_is_looked_for_again_and_one_never_seen_is_lost(planner):
+    """Nothing to take apart (the heap itself): no motion; the end's registration decides what is lost."""
+    with World(HEAP) as world:
+        twin = Twin(world)
+        plant = Plant(twin)
+        frames = []
+
+        def register(drop=lambda n: n == 0):
+            scene = twin.current_scene()
+            frames.append(scene)
+            return without_block(scene, 'b2') if drop(len(frames) - 1) else scene
+        run = take_apart(twin.current_scene(), HEAP, local_place_planner(planner), **plant.kw(register=register))
+        assert run.success and run.steps == [] and run.lost == [] and len(frames) == 2, run.reason
+        assert set(run.drift) == {b.id for b in HEAP.blocks} and run.drift_stats()['max_mm'] < 0.5
+        frames.clear()
+        run = take_apart(twin.current_scene(), HEAP, local_place_planner(planner),
+                         **plant.kw(register=lambda: register(drop=lambda n: True)))
+        assert not run.success and run.lost == ['b2'] and run.reason == 'blocks lost: b2'
+        assert len(frames) == 1 + TableConfig().recount and 'b2' not in run.drift
+        assert run.document({})['take_apart']['lost'] == ['b2']
+
+
+def without_block(scene, block_id):
+    """The scene without one block (motion capture did not report its body)."""
+    from rad_core.scene import Scene
+    doc = scene.to_dict()
+    doc['blocks'] = [b for b in doc['blocks'] if b['id'] != block_id]
+    return Scene.from_dict(doc)
+
+
 def test_a_plan_that_cannot_be_made_says_why(built):
     scene, order = built
 

@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable
 
 import numpy as np
@@ -61,6 +61,15 @@ class TableConfig:
     """GAMP tries at most this many spots per block (its heap spot first)."""
     max_blocks: int = 4
     """... and at most this many removable blocks before a plan gives up."""
+    position_tol: float = 0.01
+    """A block put down within this (m) of its spot counts as where the plan put it (the execute loop's
+    tolerance is raised to it). Table spots are not cells: registration snaps nothing there, so a few mm
+    of placement error would otherwise cost a re-plan, while the other blocks keep `gap` of room and
+    every new plan starts from what is seen anyway. Blocks in the target regions snap to cells, so
+    there a deviation is a unit or nothing."""
+    recount: int = 3
+    """A heap block not seen at the end is looked for in this many more motion-capture frames (a
+    body dropped from a frame or two is not lost)."""
 
     def validate(self) -> None:
         values = (self.reach, self.base_clearance, self.region_margin, self.gap, self.spot_step,
@@ -74,6 +83,9 @@ class TableConfig:
                            f'{self.gap}, {self.region_margin})')
         if self.x_range[0] >= self.x_range[1] or self.y_range[0] >= self.y_range[1]:
             raise RadError(f'table config: empty x_range {self.x_range} or y_range {self.y_range}')
+        if not (math.isfinite(self.position_tol) and 0 < self.position_tol < 0.05) or self.recount < 0:
+            raise RadError(f'table config: position_tol must be in (0, 0.05) m and recount >= 0, got '
+                           f'{self.position_tol}, {self.recount}')
         if self.max_spots < 1 or self.max_blocks < 1:
             raise RadError(f'table config: max_spots and max_blocks must be >= 1, got {self.max_spots}, '
                            f'{self.max_blocks}')
@@ -336,16 +348,30 @@ def take_apart(scene: Scene, heap: Scene, plan_place: PlacePlanner, move_arm, mo
                time_limit_s: float = 60.0, joints: Callable[[], 'np.ndarray | None'] | None = None,
                cancelled: Callable[[], bool] = lambda: False, report: Report | None = None,
                settle: Callable[[float], None] = time.sleep) -> TakeApartResult:
-    """Take the structure of `scene` (registered) apart onto the table of `heap` on a plant; never
-    raises RadError (it becomes the reason). The plant callables and phases are execute_assembly's."""
+    """Take the structure of `scene` (registered) apart onto the table of `heap` on a plant. Only a
+    bad `table` config raises RadError; anything else that goes wrong becomes the result's reason.
+    The plant callables and the phases reported are execute_assembly's."""
     table.validate()
 
     def plan(current: Scene, start) -> AssemblyPlan:
         return plan_take_apart(current, heap, plan_place, start, build_order, table, time_limit_s)
 
+    config = replace(config, position_tol=max(config.position_tol, table.position_tol))
     run = execute_assembly(scene, plan, move_arm, move_gripper, register, config, joints=joints,
                            cancelled=cancelled, report=report, settle=settle)
     result = TakeApartResult(run, heap)
-    if run.final_scene is not None:
-        result.lost, result.drift = drift_from_heap(run.final_scene, heap)
+    if run.final_scene is None:
+        return result
+    result.lost, result.drift = drift_from_heap(run.final_scene, heap)
+    for _ in range(table.recount if result.lost else 0):
+        settle(0.05)
+        try:
+            seen = register()
+        except RadError:
+            continue
+        lost, drift = drift_from_heap(seen, heap)
+        if len(lost) < len(result.lost):
+            run.final_scene, result.lost, result.drift = seen, lost, drift
+        if not lost:
+            break
     return result
