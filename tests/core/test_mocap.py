@@ -9,7 +9,7 @@ from rad_core.errors import RadError
 from rad_core.generator import GeneratorConfig, generate_scene
 from rad_core.grid import Grid, blocks_on_grid
 from rad_core.scene import Block, Scene
-from rad_core.sim.mocap import (RegistrationConfig, RigidBodyPose, body_map_for, register_scene,
+from rad_core.sim.mocap import (RegistrationConfig, RigidBodyPose, body_map_for, register_scene, register_world,
                                 scene_to_bodies, yaw_quaternion)
 
 from scenes import U, scene
@@ -252,3 +252,74 @@ def test_config_is_checked():
                 {'table_z': math.inf}):
         with pytest.raises(RadError):
             RegistrationConfig(**bad)
+
+
+# ---- register_world: what a scene cannot express is set aside, not fatal ------------------------------
+
+def test_register_world_sets_a_block_on_its_side_aside_and_registers_the_rest():
+    s = scene()
+    on_side = (math.sin(math.pi / 4), 0.0, 0.0, math.cos(math.pi / 4))    # 90 deg about x
+    bodies = _with(s, 0, quaternion=on_side)
+    assert 'tilted' in _err(s, bodies)                                   # register_scene still refuses
+    reg = register_world(bodies, s, config_for(s))
+    assert [b.id for b in reg.scene.blocks] == ['c1', 'i0']
+    assert set(reg.set_aside) == {'c0'} and 'tilted 90.0 deg' in reg.set_aside['c0']
+    assert reg.in_regions == frozenset() and reg.blocked == {} and reg.plannable() is reg.scene
+
+
+def test_register_world_blocks_the_cells_a_block_pushed_off_its_grid_occupies():
+    s = scene()
+    t = s.targets[0]
+    # c0 placed on cell (0, 0, 0), then pushed 20 mm along +x: half way into cell (1, 0, 0).
+    bodies = _with(s, 0, position=(t.origin[0] + 0.02, t.origin[1], U / 2))
+    reg = register_world(bodies, s, config_for(s))
+    assert set(reg.set_aside) == {'c0'} and '20.0 mm off its grid' in reg.set_aside['c0']
+    assert reg.in_regions == {'c0'} and reg.blocked == {'front': ((0, 0, 0), (1, 0, 0))}
+    plannable = reg.plannable()
+    assert set(plannable.targets[0].filled) == {(2, 0, 0), (0, 0, 1)}
+    assert reg.scene.targets == s.targets                   # coverage is still measured against the real targets
+
+
+def test_register_world_leaves_a_cell_a_registered_block_sits_on_to_it():
+    s = scene()
+    t = s.targets[0]
+    bodies = _with(s, 1, position=tuple(t.cell_center((1, 0, 0), U)))        # c1 placed on cell (1, 0, 0)
+    bodies[0] = RigidBodyPose('c0', (t.origin[0] + 0.018, t.origin[1], U / 2), (0, 0, 0, 1))   # c0 pushed at it
+    reg = register_world(bodies, s, config_for(s))
+    assert set(reg.set_aside) == {'c0'} and reg.blocked == {'front': ((0, 0, 0),)}
+
+
+def test_register_world_sets_aside_one_of_two_overlapping_blocks_and_names_the_other():
+    s = scene()
+    reg = register_world(_with(s, 1, position=(0.4 + 0.01, -0.2, U / 2)), s, config_for(s))
+    assert set(reg.set_aside) == {'c1'} and "(rigid body 'c0')" in reg.set_aside['c1']
+    assert [b.id for b in reg.scene.blocks] == ['c0', 'i0']
+
+
+def test_register_world_still_refuses_set_up_errors():
+    s = scene()
+    for bodies, what in ((_with(s, 0, name='wand'), 'unknown'), (_with(s, 1, quaternion=(0, 0, 0, 2)), 'unit length'),
+                         (_with(s, 0, tracking_valid=False), 'not tracked')):
+        with pytest.raises(RadError, match=what):
+            register_world(bodies, s, config_for(s))
+
+
+def test_plannable_refuses_when_every_target_cell_is_blocked():
+    doc_ = scene().to_dict()
+    doc_['targets'] = [{'name': 'one', 'origin': [0.45, 0.1, U / 2], 'size': [1, 1, 1], 'filled': [[0, 0, 0]]}]
+    s = Scene.from_dict(doc_)
+    reg = register_world(_with(s, 0, position=(0.45 + 0.015, 0.1, U / 2)), s, config_for(s))
+    with pytest.raises(RadError, match='every target cell is occupied'):
+        reg.plannable()
+
+
+def test_tolerances_follow_the_tracker_noise():
+    base = RegistrationConfig()
+    assert RegistrationConfig.for_noise(0.001, 0.5, U) == base              # 1 mm, 0.5 deg: the defaults hold
+    wide = RegistrationConfig.for_noise(0.004, 4.0, U, tilt_tol_deg=12.0)
+    assert wide.position_tol == pytest.approx(0.4) and wide.yaw_tol_deg == pytest.approx(20.0)
+    assert wide.tilt_tol_deg == 12.0
+    with pytest.raises(RadError, match='too large to register'):
+        RegistrationConfig.for_noise(0.005, 0.5, U)
+    with pytest.raises(RadError, match='finite'):
+        RegistrationConfig.for_noise(math.nan, 0.5, U)

@@ -13,14 +13,27 @@ Endpoints (relative names, so namespaces and remaps work); <arm_controller> and
        topic interface, no feedback; checked the same way, a refusal only logged)
   pub  joint_states                    sensor_msgs/JointState (the model's arm and finger joints),
                                        publish_rate_hz
-  pub  <mocap_prefix>/<body>/pose      geometry_msgs/PoseStamped per block (sensor-data QoS)
-  pub  rigid_bodies                    rad_msgs/RigidBodies, all bodies + frame number
+  pub  <mocap_prefix>/<body>/pose      geometry_msgs/PoseStamped per block (sensor-data QoS); a
+                                       dropped body is not published
+  pub  rigid_bodies                    rad_msgs/RigidBodies, all bodies + frame number; a dropped
+                                       body has tracking_valid false and its last reported pose
   pub  scene                           rad_msgs/Scene, latched: the scene last loaded
   pub  ~/events                        std_msgs/String: accepted / rejected (with the reason) / done
   srv  load_scene                      rad_msgs/LoadScene
   srv  reset                           std_srvs/Trigger: back to the scene last loaded
   srv  get_scene_state                 rad_msgs/GetSceneState: the scene as it is now
   srv  set_block_pose                  rad_msgs/SetBlockPose: move one block (a disturbance)
+
+Motion capture is published as a motion-capture system would: in `mocap_frame`
+(stamped so; '' = frame_id, poses already in the robot base frame), the twin's
+base-frame poses taken through the inverse of the calibration p_base = R(q) p_mocap + t
+(`mocap_to_base_translation`, `mocap_to_base_quaternion` [x, y, z, w]).
+
+The faults of a real cell (`rad_core.sim.faults`): `faults` is 'none', 'realistic'
+or a JSON/YAML file of FaultConfig fields, `faults_seed` their seed (a file's own
+seed wins). A dropped frame is a tick with no motion-capture publication (joint
+states still go out); every injected slip, miss, nudge and placement error is
+also published on ~/events ({'event': 'fault', ...}).
 
 Physics runs all the time at real_time_factor x wall time, in the timer callback,
 so service calls and trajectories interleave with it on one thread; the action
@@ -30,10 +43,14 @@ goals are coroutines on that thread that wait for the twin to finish them.
 from __future__ import annotations
 
 import json
+import math
 import time
+
+import numpy as np
 
 from geometry_msgs.msg import PoseStamped
 from control_msgs.action import FollowJointTrajectory, GripperCommand
+from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.node import Node
 from rclpy.task import Future
@@ -46,7 +63,10 @@ from trajectory_msgs.msg import JointTrajectory
 from rad_core.errors import RadError
 from rad_core.motion import GripperResult
 from rad_core.scene import Scene
+from rad_core.sim.faults import FaultConfig
+from rad_core.sim.mocap import RigidBodyPose
 from rad_core.sim.twin import Tolerances, Twin, TwinConfig
+from rad_core.transforms import matrix_from_quaternion
 from rad_core.trajectory import TrajectoryRejected
 from rad_core.sim.workspace import Workspace
 from rad_core.sim.world import World
@@ -70,7 +90,20 @@ class TwinNode(Node):
         self.declare_parameter('joint_prefix', '')
         self.declare_parameter('arm_controller', 'joint_trajectory_controller')
         self.declare_parameter('gripper_action', 'franka_gripper/gripper_action')
+        self.declare_parameter('faults', 'none')
+        self.declare_parameter('faults_seed', 0)
+        self.declare_parameter('mocap_frame', '')
+        any_type = ParameterDescriptor(dynamic_typing=True)     # [0, 0, 1] as well as [0.0, 0.0, 1.0]
+        self.declare_parameter('mocap_to_base_translation', [0.0, 0.0, 0.0], any_type)
+        self.declare_parameter('mocap_to_base_quaternion', [0.0, 0.0, 0.0, 1.0], any_type)
         self.frame_id = self.get_parameter('frame_id').value
+        seed = self.get_parameter('faults_seed').value
+        if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+            raise RadError(f'faults_seed must be a non-negative integer, got {seed!r}')
+        faults = FaultConfig.parse(str(self.get_parameter('faults').value), seed)
+        self.mocap_frame = str(self.get_parameter('mocap_frame').value) or self.frame_id
+        self.to_mocap = mocap_from_base(self.get_parameter('mocap_to_base_translation').value,
+                                        self.get_parameter('mocap_to_base_quaternion').value)
         self.rtf = float(self.get_parameter('real_time_factor').value)
         rate = float(self.get_parameter('publish_rate_hz').value)
         if not (rate > 0 and self.rtf > 0):
@@ -79,7 +112,9 @@ class TwinNode(Node):
         self.workspace = Workspace()
         self.world = World()
         self.twin = Twin(self.world, TwinConfig(robot=str(self.get_parameter('robot').value),
-                                                joint_prefix=str(self.get_parameter('joint_prefix').value)))
+                                                joint_prefix=str(self.get_parameter('joint_prefix').value),
+                                                faults=faults))
+        self.faults_published = 0
         self.arm_done: Future | None = None       # completed by the timer when the running trajectory ends
         self.wakers: list[Future] = []             # action coroutines waiting for the next tick
         self.gripper_done: Future | None = None
@@ -111,6 +146,7 @@ class TwinNode(Node):
             self.load(Scene.load(path))
         self.last_tick = time.monotonic()
         self.create_timer(1.0 / rate, self.tick_callback)
+        self.get_logger().info(f'{faults.describe()}; motion capture in frame {self.mocap_frame!r}')
         self.get_logger().info('twin ready' + (f' with {path}' if path else ' (no scene loaded)'))
 
     # ---- world ------------------------------------------------------------
@@ -158,15 +194,21 @@ class TwinNode(Node):
                          velocity=[float(v) for v in velocities])
         msg.header.stamp = stamp
         self.joint_pub.publish(msg)
+        faults = self.twin.fault_events
+        for event in faults[self.faults_published:]:
+            self.event('fault', **event)
+        self.faults_published = len(faults)
         if self.scene is None:
             return
-        bodies = self.twin.bodies()
         self.frame_number += 1
-        self.bodies_pub.publish(rigid_bodies_msg(bodies, self.frame_number, stamp, self.frame_id))
+        if self.twin.drop_frame():
+            return
+        bodies = [self.to_mocap(b) for b in self.twin.bodies()]
+        self.bodies_pub.publish(rigid_bodies_msg(bodies, self.frame_number, stamp, self.mocap_frame))
         for body in bodies:
             pub = self.pose_pubs.get(body.name)
-            if pub is not None:
-                pub.publish(pose_stamped(body, stamp, self.frame_id))
+            if pub is not None and body.tracking_valid:
+                pub.publish(pose_stamped(body, stamp, self.mocap_frame))
 
     # ---- callbacks ----------------------------------------------------------
     def trajectory_callback(self, msg: JointTrajectory) -> None:
@@ -297,6 +339,44 @@ class TwinNode(Node):
         self.world.set_block_pose(request.block_id, position, quaternion)
         response.success = True
         return response
+
+
+def mocap_from_base(translation, quaternion):
+    """The map of a base-frame body to what motion capture reports in its own frame, given the calibration
+    p_base = R(q) p_mocap + t; RadError naming the parameter when it is malformed."""
+    t = np.asarray(list(translation), dtype=float) if _numbers(translation) else None
+    q = np.asarray(list(quaternion), dtype=float) if _numbers(quaternion) else None
+    if t is None or t.shape != (3,) or not np.all(np.isfinite(t)):
+        raise RadError(f'mocap_to_base_translation must be 3 finite numbers (m), got {list(translation)!r}')
+    if q is None or q.shape != (4,) or not np.all(np.isfinite(q)) or abs(np.linalg.norm(q) - 1.0) > 1e-3:
+        raise RadError(f'mocap_to_base_quaternion must be a unit quaternion [x, y, z, w], got {list(quaternion)!r}')
+    q = q / np.linalg.norm(q)
+    if np.allclose(t, 0.0) and np.allclose(q, [0, 0, 0, 1]):
+        return lambda body: body
+    r = matrix_from_quaternion(q)
+    q_inv = np.array([-q[0], -q[1], -q[2], q[3]])
+
+    def to_mocap(body: RigidBodyPose) -> RigidBodyPose:
+        p = r.T @ (np.asarray(body.position) - t)
+        return RigidBodyPose(body.name, tuple(float(v) for v in p),
+                             tuple(float(v) for v in _quat_mul(q_inv, np.asarray(body.quaternion))),
+                             body.tracking_valid)
+    return to_mocap
+
+
+def _numbers(values) -> bool:
+    try:
+        return all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in values)
+    except TypeError:
+        return False
+
+
+def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Hamilton product a * b of [x, y, z, w] quaternions."""
+    ax, ay, az, aw = a
+    bx, by, bz, bw = b
+    return np.array([aw * bx + ax * bw + ay * bz - az * by, aw * by - ax * bz + ay * bw + az * bx,
+                     aw * bz + ax * by - ay * bx + az * bw, aw * bw - ax * bx - ay * by - az * bz])
 
 
 def _tolerance(tolerances) -> float:

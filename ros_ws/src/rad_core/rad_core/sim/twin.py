@@ -43,8 +43,8 @@ for the twin's life, and in the running trajectory's report with the grasp event
 - motion capture: `bodies` adds Gaussian noise to each reported position (per
   axis) and yaw, and drops bodies (tracking_valid false, the last reported pose,
   as a tracker does); `current_scene` / `registration` register what motion
-  capture reports, holding a dropped body at its last pose (a body missing for a
-  frame is "not seen", not "removed"). Dropped frames are the node's business
+  capture reports, waiting a few frames for a dropped body and else holding it at
+  its last pose (a body missing for a frame is "not seen", not "removed"). Dropped frames are the node's business
   (`drop_frame` says whether to skip one);
 - placement error: a released block is shifted in x/y by the error once the
   fingers are clear of it, no farther than its neighbours allow (blocks do not
@@ -332,10 +332,18 @@ class Twin:
         return RegistrationConfig.for_noise(f.mocap_position_noise, f.mocap_yaw_noise_deg, template.unit,
                                             body_map={bid: (bid, types[bid]) for bid in self.world.blocks})
 
-    def _seen(self) -> list[RigidBodyPose]:
-        """What registration gets: a body motion capture dropped is held at its last pose (not seen for a
-        frame is not gone)."""
-        return [b if b.tracking_valid else replace(b, tracking_valid=True) for b in self.bodies()]
+    def _seen(self, frames: int = 10) -> list[RigidBodyPose]:
+        """What registration gets: each body's latest tracked pose over up to `frames` motion-capture frames
+        (stopping at the first frame by which every body was tracked), as a registration that waits out a
+        dropped body does; a body dropped in all of them is held at its last reported pose (not seen for a
+        moment is not gone)."""
+        latest: dict[str, RigidBodyPose] = {}
+        for _ in range(frames):
+            now = self.bodies()
+            latest.update({b.name: b for b in now if b.tracking_valid})
+            if len(latest) == len(now):
+                break
+        return [latest.get(b.name, replace(b, tracking_valid=True)) for b in now]
 
     def current_scene(self, template: Scene | None = None, config: RegistrationConfig | None = None) -> Scene:
         """The blocks where motion capture sees them now, snapped as registration snaps them.
@@ -738,18 +746,25 @@ class Twin:
                 self._fault('nudge', block=other, by=block_id, distance=round(moved * f.nudge_distance, 6))
 
     def _shift(self, block_id: str, dxy: np.ndarray) -> float:
-        """Move a block by dxy (m) in x/y, or the largest part of it (1, 3/4, 1/2, 1/4) that does not push it
-        deeper into anything; returns that fraction (0: it stays)."""
+        """Move a block by dxy (m) in x/y, or as far along it as it goes without pushing into anything
+        (to within 1/64 of it: a block shifted at a neighbour ends against it); returns the fraction moved."""
         w = self.world
         pos, q = w.block_pose(block_id)
         body = w.blocks[block_id]
         before = self._penetration(body)
-        for frac in (1.0, 0.75, 0.5, 0.25):
+
+        def fits(frac: float) -> bool:
             w.set_block_pose(block_id, [pos[0] + frac * dxy[0], pos[1] + frac * dxy[1], pos[2]], q)
-            if self._penetration(body) >= before - 2e-4:
-                return frac
-        w.set_block_pose(block_id, pos, q)
-        return 0.0
+            return self._penetration(body) >= before - 2e-4
+
+        if fits(1.0):
+            return 1.0
+        lo, hi = 0.0, 1.0
+        for _ in range(6):
+            mid = (lo + hi) / 2
+            lo, hi = (mid, hi) if fits(mid) else (lo, mid)
+        fits(lo)
+        return lo
 
     def _penetration(self, body: int) -> float:
         """The deepest contact (m, <= 0) of a body with anything now."""
@@ -766,7 +781,14 @@ class Twin:
         touched = sorted({f'{links.get(c[3], c[3])} touches {names.get(c[2], f"body {c[2]}")}'
                           for c in p.getContactPoints(bodyA=w.robot, physicsClientId=w.client)
                           if c[2] != w.robot and c[8] < 1e-3})
-        held = f'; holding block {self.attached[0]}' if self.attached is not None else ''
+        held = ''
+        if self.attached is not None:
+            # What the held block touches pushes the hand too (the attachment is rigid).
+            body = w.blocks.get(self.attached[0])
+            hits = sorted({names.get(c[2], f'body {c[2]}') for c in
+                           (p.getContactPoints(bodyA=body, physicsClientId=w.client) if body is not None else [])
+                           if c[2] not in (w.robot, body) and c[8] < 1e-3})
+            held = f'; holding block {self.attached[0]}' + (f', which touches {", ".join(hits)}' if hits else '')
         return (f' ({", ".join(touched)}{held})' if touched else f' (no contact{held})')
 
     def _constraint_ids(self) -> set[int]:
