@@ -35,3 +35,18 @@ def test_rad_demo_refuses_a_bad_scene_file(tmp_path):
     r = subprocess.run([shutil.which('rad'), 'demo', '--scene', str(bad), '--out', str(tmp_path / 'o')],
                        capture_output=True, text=True, timeout=120)
     assert r.returncode == 2 and "demo: error: missing field 'block_types'" in r.stderr
+
+
+def test_demo_refuses_bad_faults_and_cycles_before_starting_the_graph(tmp_path):
+    """--faults and --cycles are checked first: a one-line reason, exit code 2, no node started."""
+    from ros_harness import INSTALL_DIR
+    exe = INSTALL_DIR / 'rad_planner' / 'lib' / 'rad_planner' / 'demo'
+    bad = tmp_path / 'faults.json'
+    bad.write_text('{"slipp": 0.1}')
+    for args, expected in ((['--faults', str(tmp_path / 'none.json')], 'is neither none, realistic nor a file'),
+                           (['--faults', str(bad)], 'unknown fault setting(s) slipp'),
+                           (['--cycles', '0'], '--cycles must be at least 1')):
+        r = subprocess.run([str(exe), '--out', str(tmp_path / 'o'), *args], capture_output=True, text=True,
+                           timeout=60)
+        assert r.returncode == 2 and expected in r.stderr, r.stderr
+        assert not (tmp_path / 'o' / 'logs').exists()
