@@ -193,7 +193,7 @@ def test_a_plan_that_cannot_be_made_says_why(built):
         return MotionPlan(False, 'grasp', 'grasp: all 2 grasps blocked')
     plan = plan_take_apart(scene, HEAP, nothing_feasible, build_order=order)
     assert not plan.success and plan.steps == []
-    assert plan.reason.startswith(f'no block can be taken off next ({len(order)} left)')
+    assert plan.reason.startswith(f'no block can be taken off next ({len(order)} left')
     assert 'grasp: all 2 grasps blocked' in plan.reason
     with pytest.raises(RadError, match='max_spots'):
         plan_take_apart(scene, HEAP, nothing_feasible, config=TableConfig(max_spots=0))

@@ -59,7 +59,7 @@ class TableConfig:
     """Pitch of the candidate spots."""
     max_spots: int = 4
     """GAMP tries at most this many spots per block (its heap spot first)."""
-    max_blocks: int = 4
+    max_blocks: int = 6
     """... and at most this many removable blocks before a plan gives up."""
     position_tol: float = 0.01
     """A block put down within this (m) of its spot counts as where the plan put it (the execute loop's
@@ -234,23 +234,25 @@ def plan_take_apart(scene: Scene, heap: Scene, plan_place: PlacePlanner, start=N
         if not order:
             reason = f'{len(pending)} blocks left, each with another resting on it'
             break
-        found, failures = None, []
+        found, failures = None, {}
         for bid in order[:config.max_blocks]:
-            for pos, yaw in return_poses(current, bid, heap, config):
+            failures[bid] = 'no free spot on the table'
+            for n, (pos, yaw) in enumerate(return_poses(current, bid, heap, config)):
                 ts = time.perf_counter()
                 motion = plan_place(current, bid, [float(v) for v in pos], int(yaw), q)
                 plan.timings['motion'] += time.perf_counter() - ts
                 if motion.success:
                     found = (bid, pos, yaw, motion)
                     break
-                failures.append(f'{bid} to ({pos[0]:.3f}, {pos[1]:.3f}) m: {motion.reason}')
+                if n == 0:
+                    failures[bid] = f'to ({pos[0]:.3f}, {pos[1]:.3f}) m: {motion.reason}'
+                if motion.failure == 'grasp':
+                    break      # it cannot be picked where it lies: no other spot changes that
             if found is not None:
                 break
-            if not failures or not failures[-1].startswith(bid):
-                failures.append(f'{bid}: no free spot on the table')
         if found is None:
-            shown = '; '.join(failures[:3]) + (f'; and {len(failures) - 3} more' if len(failures) > 3 else '')
-            reason = f'no block can be taken off next ({len(pending)} left): {shown}'
+            shown = '; '.join(f'{bid} {why}' for bid, why in failures.items())
+            reason = f'no block can be taken off next ({len(pending)} left; first spot tried each): {shown}'
             break
         bid, pos, yaw, motion = found
         block = current.block(bid)
