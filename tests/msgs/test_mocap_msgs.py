@@ -120,3 +120,28 @@ def test_type_hashes_match_upstream_jazzy(package, interface):
         hashes = {h['type_name']: h['hash_string'] for h in json.load(f)['type_hashes']}
     expected = UPSTREAM_HASHES[(package, interface)]
     assert {name: hashes.get(name) for name in expected} == expected
+
+
+# ---- rad_ros.mocap_input's conversions (message types only) --------------------------------
+
+def test_driver_messages_convert_to_rigid_bodies_and_the_calibration_to_tf_static():
+    from geometry_msgs.msg import PoseStamped
+    from rad_core.errors import RadError
+    from rad_core.mocap_input import FrameTransform, MocapFrames
+    from rad_ros.mocap_input import bodies_from_mocap4r2, body_from_pose_stamped, body_topic, calibration_tf
+    from rad_ros.motion import pose_msg
+    msg = RigidBodies(frame_number=7)
+    msg.rigidbodies = [RigidBody(rigid_body_name='Block_3', pose=pose_msg((1.0, 2.0, 3.0), (0.0, 0.0, 0.6, 0.8)))]
+    (body,) = bodies_from_mocap4r2(msg)
+    assert (body.name, body.position, body.quaternion, body.tracking_valid) == \
+        ('Block_3', [1.0, 2.0, 3.0], [0.0, 0.0, 0.6, 0.8], True)
+    pose = PoseStamped(pose=pose_msg((0.5, 0.0, 0.1), (0.0, 0.0, 0.0, 1.0)))
+    assert body_from_pose_stamped('b1', pose).position == [0.5, 0.0, 0.1]
+    assert body_topic('/natnet_ros/{body}/pose', 'Block_3') == '/natnet_ros/Block_3/pose'
+    with pytest.raises(RadError, match="must contain '{body}'"):
+        body_topic('/natnet_ros/pose', 'Block_3')
+    frames = MocapFrames('base', 'optitrack', FrameTransform((0.1, 0.2, 0.3), (0.0, 0.0, 0.6, 0.8)))
+    (t,) = calibration_tf(frames, pose.header.stamp).transforms
+    assert (t.header.frame_id, t.child_frame_id) == ('base', 'optitrack')
+    assert [t.transform.translation.x, t.transform.translation.y, t.transform.translation.z] == [0.1, 0.2, 0.3]
+    assert [t.transform.rotation.z, t.transform.rotation.w] == pytest.approx([0.6, 0.8])

@@ -171,9 +171,13 @@ class AssemblyNode(Node):
         if not self.param('task_file'):
             try:
                 self.task = scene_from_msg(msg)
-                self.watch_bodies(self.task)
             except RadError as e:
                 self.get_logger().warning(f'ignoring an invalid scene on /scene: {e}')
+                return
+            try:
+                self.watch_bodies(self.task)
+            except RadError as e:   # said again by every request that registers against this task
+                self.get_logger().warning(f'the body map does not fit the task on /scene: {e}')
 
     def watch_bodies(self, task: Scene):
         """The task's bodies by name (pose_stamped subscribes to each one's topic); RadError when the
