@@ -12,7 +12,7 @@ export RAD_TEST_HARNESS=1  # lets tests tell they run under this script
 start=$SECONDS
 status=0
 # Every test gets a time limit, so a hung node fails its test instead of the run.
-python -m pytest tests --timeout="${RAD_TEST_TIMEOUT:-300}" "$@" || status=$?
+python -m pytest tests --timeout="${RAD_TEST_TIMEOUT:-300}" --durations=30 "$@" || status=$?
 elapsed=$((SECONDS - start))
 
 case $status in

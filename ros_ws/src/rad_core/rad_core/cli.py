@@ -5,7 +5,7 @@
     rad scene render scene.json -o scene.png [--allocation allocation.json] [--robot]
     rad scene stats --grid G --sides S --scenes N
     rad allocate scene.json [--time-limit S] [--seed N] [--workers W] [--solver cp-sat|highs]
-    rad demo [--scene FILE] [--out DIR] [--rtf X]
+    rad demo [--scene FILE] [--out DIR] [--rtf X] [--faults none|realistic|FILE] [--cycles N]
     rad limits RESULT.json [--robot panda|fr3] [--joint-prefix P]
     rad calibrate PAIRS.csv [--out FILE] [--max-rms M] [--mocap-frame NAME]
     rad eval --agent AGENT [--checkpoint FILE] --grid G [--robot] --scenes N --seed S --json FILE
@@ -120,6 +120,10 @@ def cmd_demo(args) -> int:
     argv = [str(exe), '--out', args.out, '--rtf', str(args.rtf), '--time-limit', str(args.time_limit)]
     if args.scene:
         argv += ['--scene', args.scene]
+    if args.faults != 'none':
+        argv += ['--faults', args.faults, '--faults-seed', str(args.faults_seed)]
+    if args.cycles != 1:
+        argv += ['--cycles', str(args.cycles)]
     os.execv(str(exe), argv)
     return 1
 
@@ -399,6 +403,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--out', default='out/demo', help='output folder')
     p.add_argument('--rtf', type=float, default=5.0, help='twin speed, simulated s per wall s')
     p.add_argument('--time-limit', type=float, default=120.0, help='planning time limit, s')
+    p.add_argument('--faults', default='none', metavar='none|realistic|FILE',
+                   help="the twin's faults of a real cell: none, realistic, or a JSON/YAML file of FaultConfig fields")
+    p.add_argument('--faults-seed', type=int, default=0, help='seed of the faults')
+    p.add_argument('--cycles', type=int, default=1, metavar='N',
+                   help='build, take apart and build again N times, with no reset (1: build once)')
     p.set_defaults(func=cmd_demo)
 
     p = sub.add_parser('limits', help="check a result's or plan's arm trajectories against a Franka's limits")
