@@ -193,3 +193,13 @@ def test_a_plan_that_cannot_be_made_is_the_reason_and_nothing_moves(twin):
 def test_config_is_checked(twin):
     with pytest.raises(RadError, match='position_tol'):
         Run(twin, None)(config=ExecuteConfig(position_tol=0.0))
+
+
+def test_the_deviation_tolerance_follows_the_tracker_noise():
+    assert ExecuteConfig().deviation_tol == 0.005
+    # 1 mm per axis: two measurements differ by sqrt(2) mm per axis; a deviation needs 6 sigma of that.
+    assert ExecuteConfig(mocap_noise=0.001).deviation_tol == pytest.approx(0.0085, abs=1e-4)
+    assert ExecuteConfig(position_tol=0.01, mocap_noise=0.001).deviation_tol == 0.01
+    for bad in (-0.001, float('nan')):
+        with pytest.raises(RadError, match='mocap_noise'):
+            ExecuteConfig(mocap_noise=bad).validate()

@@ -610,3 +610,14 @@ def test_a_twin_at_rest_reports_the_scene_it_was_loaded_with(seed):
         twin.load_scene(scene)
         twin.settle(2.0)
         assert twin.current_scene(scene).to_dict() == scene.to_dict()
+
+
+def test_a_path_abort_names_what_the_held_block_touches(twin):
+    """The attachment is rigid: a carried block pressed into the table stops the arm, and the report says so."""
+    pick_and_place(twin, stop_after_lift=True)
+    assert twin.attached is not None and twin.attached[0] == 'c0'
+    q = twin.world.joint_positions()[:7]
+    below = ik(twin.world, PICK + [0, 0, -0.03], CLOSE_ALONG_X, q)      # 3 cm into the table
+    report = twin.execute(move(q, below, speed=0.2), tolerances=Tolerances(path=0.02))
+    assert report.error_code == PATH_TOLERANCE_VIOLATED
+    assert report.error_string.endswith('holding block c0, which touches the table)'), report.error_string

@@ -388,3 +388,51 @@ def test_latched_scene_topic_and_reset(twin, ros_node):
     reset = wait_for_service(ros_node, Trigger, 'reset', timeout=10.0)
     assert call_service(ros_node, reset, Trigger.Request(), timeout=10.0).success
     assert Scene.loads(twin.state().scene_json).to_dict() == twin.scene.to_dict()
+
+
+def test_faults_and_a_mocap_frame_shape_what_motion_capture_publishes(node_process, ros_node, tmp_path):
+    """Motion capture as a tracker in its own frame publishes it: poses through the inverse calibration, stamped
+    with mocap_frame; dropped frames leave gaps in the frame numbers; dropped bodies are untracked, at their
+    last pose, and missing from their PoseStamped topic."""
+    from geometry_msgs.msg import PoseStamped
+    from rad_msgs.msg import RigidBodies
+    from rad_ros.motion import pose_from_msg
+    from rclpy.qos import qos_profile_sensor_data
+    from rad_core.transforms import matrix_from_quaternion, yaw_quaternion
+
+    scene = generate_scene(GeneratorConfig(grid=3), 5)
+    (tmp_path / 'scene.json').write_text(scene.dumps())
+    (tmp_path / 'faults.yaml').write_text('drop_frame: 0.3\ndrop_body: 0.3\n')
+    t, q = [0.1, -0.2, 0.74], list(yaw_quaternion(90))
+    proc = node_process('rad_sim', 'twin_node', *ros_args({
+        'scene_file': str(tmp_path / 'scene.json'), 'faults': str(tmp_path / 'faults.yaml'), 'faults_seed': 3,
+        'mocap_frame': 'optitrack', 'mocap_to_base_translation': t, 'mocap_to_base_quaternion': q}))
+    frames, poses = [], []
+    ros_node.create_subscription(RigidBodies, 'rigid_bodies', frames.append, qos_profile_sensor_data)
+    block = scene.blocks[0].id
+    ros_node.create_subscription(PoseStamped, f'mocap/{block}/pose', poses.append, qos_profile_sensor_data)
+    assert spin_until(ros_node, lambda: len(frames) >= 60, timeout=30.0), proc.output_tail()
+    proc.wait_for_output(r'faults \(seed 3\): drop_body=0.3, drop_frame=0.3', timeout=5.0)
+    numbers = [f.frame_number for f in frames]
+    assert numbers == sorted(numbers) and numbers[-1] - numbers[0] + 1 > len(numbers)     # gaps: dropped frames
+    assert {f.header.frame_id for f in frames} == {'optitrack'} and {p.header.frame_id for p in poses} == {'optitrack'}
+    r = matrix_from_quaternion(q)
+    want = {b.id: np.asarray(b.position) for b in scene.blocks}
+    tracked = untracked = 0
+    for f in frames:
+        for b in f.rigidbodies:
+            p_mocap, _ = pose_from_msg(b.pose)
+            np.testing.assert_allclose(r @ np.asarray(p_mocap) + t, want[b.rigid_body_name], atol=2e-4)
+            tracked += b.tracking_valid
+            untracked += not b.tracking_valid
+    assert tracked and untracked                   # a dropped body: at its last pose, tracking_valid false
+    assert 0 < len(poses) < len(frames)            # and not published on its own topic
+
+
+@pytest.mark.parametrize('params, reason', [({'faults': 'sometimes'}, 'none, realistic or a JSON/YAML file'),
+                                            ({'mocap_to_base_quaternion': [0.0, 0.0, 0.0, 2.0]},
+                                             'mocap_to_base_quaternion must be a unit quaternion')])
+def test_bad_fault_and_frame_parameters_stop_the_twin_with_the_reason(node_process, params, reason):
+    proc = node_process('rad_sim', 'twin_node', *ros_args(params))
+    assert proc.wait(timeout=20.0) == 1
+    assert 'cannot start' in proc.stderr() and reason in proc.stderr()
