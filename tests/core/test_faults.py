@@ -198,6 +198,7 @@ def test_a_slipped_block_falls_and_is_picked_again(motion):
     assert result.success and result.coverage == 1.0 and result.lost_blocks == {}
     doc = result.document({})['execution']
     assert doc['replans'] == 1 and doc['recovered_faults'] == 1 and doc['lost_blocks'] == {}
+    assert doc['planned_coverage'] == 1.0
 
 
 def test_a_missed_grasp_opens_backs_out_and_replans(motion):
@@ -248,6 +249,37 @@ def test_a_block_pushed_off_its_cell_is_lost_and_its_cells_are_left_out_of_the_p
     assert blocked and all(not blocked.get(t.name, set()) & set(t.filled) for t in cell.plans[1].targets)
     # ... and nothing is counted as built that is not registered on its cells.
     assert result.final_scene.targets == SCENE.targets and result.coverage < 1.0
+    assert not result.success and f'lost blocks: {nudge["block"]}' in result.reason
+    assert result.planned_coverage == 1.0
     assert nudge['block'] not in {b.id for b in result.final_scene.blocks}
     assert result.document({})['execution']['lost_blocks'] == result.lost_blocks
 
+
+
+@pytest.mark.parametrize('victim, built', [('b3', True), ('b1', False)])
+def test_a_block_knocked_on_its_side_is_lost_and_the_run_succeeds_only_if_it_builds_what_was_planned(motion, victim,
+                                                                                                      built):
+    """After the first step a table block is tipped onto its side (by hand: a fault on demand). It cannot be in a
+    scene: registration sets it aside, the loop replans without it. The other cube can stand in for b3; nothing
+    can for the I2_up b1, so that run ends short of the first plan's coverage and says why."""
+    cell = Cell(motion, FaultConfig())
+    move_arm, moves = cell.move_arm, []
+
+    def move_and_tip(trajectory):
+        move_arm(trajectory)
+        moves.append(trajectory)
+        if len(moves) == 3:
+            pos, _ = cell.world.block_pose(victim)
+            cell.world.set_block_pose(victim, pos, [math.sqrt(0.5), 0, 0, math.sqrt(0.5)])   # 90 deg about x
+            cell.twin.settle(0.5)
+    cell.move_arm = move_and_tip
+    result = cell.run()
+    assert set(result.lost_blocks) == {victim} and 'tilted 90.0 deg' in result.lost_blocks[victim]
+    assert result.faults[0]['problem'].startswith(f'block {victim} cannot be registered') and result.replans == 1
+    assert victim not in {b.id for b in cell.plans[1].blocks} and result.blocked_cells == {}
+    assert result.planned_coverage == 1.0 and result.success == built and (result.coverage == 1.0) == built
+    if built:
+        assert result.reason.startswith(f'built without 1 lost block(s): {victim}')
+    else:
+        assert result.reason.startswith(f'coverage {result.coverage:.3f} is below the 1.000 the first plan')
+        assert f'lost blocks: {victim}' in result.reason

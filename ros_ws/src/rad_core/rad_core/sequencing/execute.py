@@ -40,9 +40,11 @@ The faults of a real cell (`rad_core.sim.faults`) all end up as one of these:
   loss. Known limit: GAMP does not see a set-aside block as an obstacle to the arm's
   paths (one lying on the table far from the structure rarely is one).
 Nothing is counted as built that registration does not see on its cells: the
-coverage is measured from the last registration. The result counts replans,
-every fault the loop met (`faults`, with whether a new plan recovered from it)
-and the lost blocks.
+coverage is measured from the last registration, and a run whose last plan
+finished but whose coverage is below what the first plan set out to build (lost
+blocks, cells left out) is not a success; its reason says what was lost. The
+result counts replans, every fault the loop met (`faults`, with whether a new
+plan recovered from it) and the lost blocks.
 """
 
 from __future__ import annotations
@@ -113,6 +115,8 @@ class ExecutionResult:
     """Blocks the last registration could not express (block id -> why): not planned for, not counted."""
     blocked_cells: dict[str, list] = field(default_factory=dict)
     """Region name -> target cells the lost blocks occupy (left out of the plans)."""
+    planned_coverage: float | None = None
+    """The coverage the first plan set out to build (its steps applied to the scene)."""
 
     @property
     def coverage(self) -> float:
@@ -126,6 +130,7 @@ class ExecutionResult:
         """The run's recovery figures, as the rad-result/1 document's `execution` holds them."""
         return {'replans': self.replans, 'faults': [dict(f) for f in self.faults],
                 'recovered_faults': self.recovered_faults, 'lost_blocks': dict(self.lost_blocks),
+                'planned_coverage': self.planned_coverage,
                 'blocked_cells': {k: [list(c) for c in v] for k, v in self.blocked_cells.items()}}
 
     def document(self, timings: dict) -> dict:
@@ -176,6 +181,10 @@ def execute_assembly(scene: Scene, plan: Plan, move_arm: MoveArm, move_gripper: 
                 result.faults[-1]['recovered'] = True     # a new plan from the measured world
             if result.allocation is None:
                 result.allocation = assembly.allocation
+                promised = current
+                for step in assembly.steps:
+                    promised = moved(promised, step.block, step.position, step.yaw)
+                result.planned_coverage = measured_coverage(promised)
             result.reallocations += [e.to_dict() for e in assembly.reallocations]
             problem = None
             for step in assembly.steps:
@@ -216,8 +225,14 @@ def execute_assembly(scene: Scene, plan: Plan, move_arm: MoveArm, move_gripper: 
         measure()
     except RadError:
         pass   # the plant is gone, or a block is where no plan can go: keep what was measured last
-    if result.success and result.lost_blocks and not result.reason:
-        result.reason = f'built without {len(result.lost_blocks)} lost block(s): ' + '; '.join(
-            f'{b} ({why})' for b, why in sorted(result.lost_blocks.items()))
+    lost = '; '.join(f'{b} ({why})' for b, why in sorted(result.lost_blocks.items()))
+    if result.success and result.planned_coverage is not None and result.coverage < result.planned_coverage - 1e-9:
+        result.success = False
+        result.reason = (f'coverage {result.coverage:.3f} is below the {result.planned_coverage:.3f} the first plan '
+                         f'set out to build' + (f'; lost blocks: {lost}' if lost else ''))
+    elif result.success and lost and not result.reason:
+        result.reason = f'built without {len(result.lost_blocks)} lost block(s): {lost}'
+    elif not result.success and lost:
+        result.reason = f'{result.reason}; lost blocks: {lost}'
     report(len(result.steps), len(result.steps), '', 'done', result.reason)
     return result
