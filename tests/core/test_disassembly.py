@@ -15,7 +15,7 @@ from rad_core.sequencing import HeurPolicy
 from rad_core.sequencing.disassembly import (TableConfig, local_place_planner, plan_take_apart, removal_order,
                                              resting_on, return_poses, take_apart, to_take_apart)
 from rad_core.sequencing.execute import ExecuteConfig, execute_assembly
-from rad_core.sequencing.plan import local_motion_planner, moved, plan_assembly
+from rad_core.sequencing.plan import MotionPlan, local_motion_planner, moved, plan_assembly
 from rad_core.sequencing.result import measured_coverage
 from rad_core.sim.twin import Twin
 from rad_core.sim.world import World
@@ -94,6 +94,24 @@ def test_a_block_goes_back_to_its_heap_pose_or_else_to_a_free_spot_off_the_targe
         assert np.all(np.hypot(pts[:, 0], pts[:, 1]) <= config.reach)
         assert pts[:, 2].min() == pytest.approx(HEAP.unit / 2)
         assert bid not in to_take_apart(trial)
+
+
+def test_a_block_that_can_go_straight_home_goes_before_one_that_cannot(planner, built):
+    scene, order = built
+    real = local_place_planner(planner)
+    top = order[-1]
+    home = HEAP.block(top)
+
+    def place(current, block_id, position, yaw, start):
+        if block_id == top and np.allclose(position, home.position):
+            return MotionPlan(False, 'placement', 'placement: the hand hits a neighbour there')
+        return real(current, block_id, position, yaw, start)
+    plan = plan_take_apart(scene, HEAP, place, build_order=order)
+    assert plan.success, plan.reason
+    steps = [(s.block, np.allclose(s.position, HEAP.block(s.block).position)) for s in plan.steps]
+    assert steps[0] == (order[-2], True) and (top, False) in steps
+    assert all(at_home for b, at_home in steps if b != top)
+    assert to_take_apart(plan.final_scene) == []
 
 
 def test_builds_takes_apart_and_builds_again_with_nothing_touched(planner, built):
@@ -189,7 +207,6 @@ def test_a_plan_that_cannot_be_made_says_why(built):
     scene, order = built
 
     def nothing_feasible(current, block_id, position, yaw, start):
-        from rad_core.sequencing.plan import MotionPlan
         return MotionPlan(False, 'grasp', 'grasp: all 2 grasps blocked')
     plan = plan_take_apart(scene, HEAP, nothing_feasible, build_order=order)
     assert not plan.success and plan.steps == []

@@ -7,9 +7,10 @@ scene, one block at a time on a planning copy, like `sequencing.plan.plan_assemb
 - which block next: only a block with nothing resting on it (`resting_on`), the
   reverse of the build order where it is known, else the highest first;
 - where it goes: its pose in the heap it came from (the start scene) when that spot
-  is free, else the nearest free table spot (`TableConfig`): within the arm's reach,
-  away from the robot's base and the target regions, a finger's room from every
-  other block and from the heap spots the others will go back to;
+  is free (a block that can go straight back comes before one that cannot), else the
+  nearest free table spot (`TableConfig`): within the arm's reach, away from the
+  robot's base and the target regions, a finger's room from every other block and
+  from the heap spots the others will go back to;
 - how: GAMP picks the block where it lies and places its anchor at that pose (a
   `PlacePlanner`: `local_place_planner` in-process, /plan_action with a place pose
   over ROS); the first block and spot GAMP finds feasible is taken.
@@ -177,7 +178,7 @@ def return_poses(scene: Scene, block_id: str, heap: Scene, config: TableConfig =
     """Where a block may go back to, best first (anchor position, yaw): its heap pose when free,
     then the free table spots nearest to it (at most config.max_spots in all)."""
     current = {b.id: b for b in scene.blocks}
-    in_heap = {b.id for b in heap.blocks}
+    in_heap = {b.id for b in heap.blocks if b.id in current and b.type == current[b.id].type}
     home = heap.block(block_id) if block_id in in_heap else current[block_id]
     others = [scene.unit_positions(b) for b in scene.blocks if b.id != block_id]
     out = []
@@ -234,22 +235,8 @@ def plan_take_apart(scene: Scene, heap: Scene, plan_place: PlacePlanner, start=N
         if not order:
             reason = f'{len(pending)} blocks left, each with another resting on it'
             break
-        found, failures = None, {}
-        for bid in order[:config.max_blocks]:
-            failures[bid] = 'no free spot on the table'
-            for n, (pos, yaw) in enumerate(return_poses(current, bid, heap, config)):
-                ts = time.perf_counter()
-                motion = plan_place(current, bid, [float(v) for v in pos], int(yaw), q)
-                plan.timings['motion'] += time.perf_counter() - ts
-                if motion.success:
-                    found = (bid, pos, yaw, motion)
-                    break
-                if n == 0:
-                    failures[bid] = f'to ({pos[0]:.3f}, {pos[1]:.3f}) m: {motion.reason}'
-                if motion.failure == 'grasp':
-                    break      # it cannot be picked where it lies: no other spot changes that
-            if found is not None:
-                break
+        found, failures = _next_block(current, order[:config.max_blocks], heap, plan_place, q, config,
+                                      plan.timings)
         if found is None:
             shown = '; '.join(f'{bid} {why}' for bid, why in failures.items())
             reason = f'no block can be taken off next ({len(pending)} left; first spot tried each): {shown}'
@@ -265,6 +252,47 @@ def plan_take_apart(scene: Scene, heap: Scene, plan_place: PlacePlanner, start=N
     plan.predicted_coverage = measured_coverage(current)
     plan.timings['total'] = time.perf_counter() - t0
     return plan
+
+
+def _next_block(current: Scene, order: list[str], heap: Scene, plan_place: PlacePlanner, q, config: TableConfig,
+                timings: dict) -> tuple[tuple | None, dict[str, str]]:
+    """The first (block, position, yaw, motion) GAMP finds feasible, and each block's first failure.
+
+    First pass: a block that can go straight back to its heap pose; second: any free spot.
+    """
+    failures: dict[str, str] = {}
+    for home_only in (True, False):
+        for bid in order:
+            if failures.get(bid, '').startswith('cannot be picked'):
+                continue
+            poses = return_poses(current, bid, heap, config)
+            home_first = bool(poses) and _is_home(heap, bid, poses[0])
+            if home_only:
+                poses = poses[:1] if home_first else []
+            elif home_first and bid in failures:
+                poses = poses[1:]     # its heap pose was tried in the first pass
+            failures.setdefault(bid, 'no free spot on the table')
+            for pos, yaw in poses:
+                ts = time.perf_counter()
+                motion = plan_place(current, bid, [float(v) for v in pos], int(yaw), q)
+                timings['motion'] += time.perf_counter() - ts
+                if motion.success:
+                    return (bid, pos, yaw, motion), failures
+                if motion.failure == 'grasp':
+                    # It cannot be picked where it lies: no other spot changes that.
+                    failures[bid] = f'cannot be picked: {motion.reason}'
+                    break
+                if failures[bid] == 'no free spot on the table':
+                    failures[bid] = f'to ({pos[0]:.3f}, {pos[1]:.3f}) m: {motion.reason}'
+    return None, failures
+
+
+def _is_home(heap: Scene, block_id: str, pose) -> bool:
+    ids = {b.id for b in heap.blocks}
+    if block_id not in ids:
+        return False
+    home = heap.block(block_id)
+    return int(pose[1]) == int(home.yaw) and bool(np.allclose(pose[0], home.position))
 
 
 def local_place_planner(planner) -> PlacePlanner:
