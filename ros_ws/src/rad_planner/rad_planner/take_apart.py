@@ -9,7 +9,8 @@
                    (bounded by the node's max_replans); cancelling it stops the arm
 
 The server lives on the assembly node (`serve_take_apart(node)`), whose plant, joint
-states, registration and parameters (settle_s, position_tol, max_replans, time_limit_s)
+states, registration (`registered_world` where the node has it: fallen blocks set aside)
+and parameters (settle_s, position_tol, max_replans, time_limit_s, the tracker's noise)
 it shares with /execute_assembly.
 """
 
@@ -28,6 +29,7 @@ from rad_core.sequencing.disassembly import TableConfig, take_apart
 from rad_core.sequencing.execute import ExecuteConfig
 from rad_core.sequencing.plan import MotionPlan
 from rad_core.sim import panda
+from rad_core.sim.mocap import Registration
 from rad_core.trajectory import limit_violation
 from rad_core.transforms import yaw_quaternion
 from rad_msgs.action import TakeApart
@@ -88,13 +90,18 @@ def serve_take_apart(node) -> ActionServer:
         try:
             limit = node.time_limit(goal.time_limit_s)
             heap = heap_of(node, goal)
-            scene = node.registered_scene()
+            # Lenient registration where the node has it: a fallen block is set aside (and reported
+            # lost), not a reason to leave the rest of the structure standing.
+            register = getattr(node, 'registered_world', node.registered_scene)
+            got = register()
+            scene = got.scene if isinstance(got, Registration) else got
             if not {b.id for b in heap.blocks} & {b.id for b in scene.blocks}:
                 raise RadError('the heap scene has none of the blocks motion capture sees')
             config = ExecuteConfig(float(node.param('settle_s')), float(node.param('position_tol')),
-                                   int(node.param('max_replans')), True)
+                                   int(node.param('max_replans')), True,
+                                   mocap_noise=float(getattr(node, 'noise', (0.0,))[0]))
             plant = node.plant(cancelled)
-            run = take_apart(scene, heap, plan_place, plant.move_arm, plant.move_gripper, node.registered_scene,
+            run = take_apart(scene, heap, plan_place, plant.move_arm, plant.move_gripper, register,
                              config, TableConfig(), build_order=list(goal.build_order), time_limit_s=limit,
                              joints=lambda: node.start_joints([]), cancelled=cancelled, report=report)
         except Exception as e:  # noqa: BLE001 - an action must answer, never die

@@ -36,7 +36,8 @@ from rad_core.errors import RadError
 from rad_core.scene import Scene
 from rad_core.sequencing.execute import ExecuteConfig, ExecutionResult, Report, execute_assembly
 from rad_core.sequencing.plan import AssemblyPlan, MotionPlan, PlanStep, moved
-from rad_core.sequencing.result import measured_coverage, result_document
+from rad_core.sequencing.result import measured_coverage
+from rad_core.sim.mocap import Registration
 
 # (scene state, block id, anchor position, yaw in degrees, start joints or None) -> the motion
 PlacePlanner = Callable[[Scene, str, list, int, 'np.ndarray | None'], MotionPlan]
@@ -356,7 +357,7 @@ class TakeApartResult:
 
     def document(self, timings: dict) -> dict:
         """A rad-result/1 document of the run (no allocation), with the take-apart's own figures."""
-        doc = result_document(self.run.scene, None, self.run.steps, self.run.final_scene, timings)
+        doc = self.run.document(timings)
         doc['take_apart'] = {'success': self.success, 'reason': self.reason, 'replans': self.run.replans,
                              'failures': self.failures, 'lost': list(self.lost),
                              'drift_m': dict(self.drift), 'drift': self.drift_stats(),
@@ -396,12 +397,15 @@ def take_apart(scene: Scene, heap: Scene, plan_place: PlacePlanner, move_arm, mo
     for _ in range(table.recount if result.lost else 0):
         settle(0.05)
         try:
-            seen = register()
+            got = register()
         except RadError:
             continue
+        seen = got.scene if isinstance(got, Registration) else got
         lost, drift = drift_from_heap(seen, heap)
         if len(lost) < len(result.lost):
             run.final_scene, result.lost, result.drift = seen, lost, drift
         if not lost:
             break
+    # A block registration set aside (fallen on its side, off its cell) is not back on the heap either.
+    result.lost = sorted(set(result.lost) | set(run.lost_blocks))
     return result
