@@ -158,8 +158,9 @@ def test_execute_builds_the_scene_and_reports_each_step(graph):
     doc_ = json.loads(result.result_json)
     assert doc_['format'] == 'rad-result/1' and doc_['coverage'] == 1.0
     assert set(doc_) == {'format', 'scene', 'allocation', 'steps', 'final_blocks', 'coverage', 'timings',
-                         'reallocations'}
+                         'reallocations', 'execution'}
     assert doc_['reallocations'] == []      # the demo scene builds without a stall
+    assert doc_['execution']['faults'] == [] and doc_['execution']['lost_blocks'] == {}   # a twin without faults
     step = doc_['steps'][0]
     assert {'block', 'type', 'target', 'yaw', 'cells', 'trajectories', 'gripper'} <= set(step)
     # The arm trajectories exactly as sent (7 arm joints, accelerations for quintic interpolation) and

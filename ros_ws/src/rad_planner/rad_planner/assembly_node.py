@@ -20,7 +20,11 @@ request with a reason naming it.
                          (<gripper_action>), re-register after each step, replan on deviation
                          or a failed grasp (the loop is rad_core.sequencing.execute; this node
                          supplies the plant: rad_ros.plant.ActionPlant); cancelling it cancels
-                         the running goal and the arm stops
+                         the running goal and the arm stops. After a fault, blocks no scene can
+                         express (fallen over, pushed off their cells) are set aside as lost and
+                         the plan is repaired from the rest (rad_core.sim.mocap.register_world)
+  act  take_apart        rad_msgs/TakeApart: the structure back onto the table, each motion verified
+                         (rad_planner.take_apart, rad_core.sequencing.disassembly)
   pub  plan_json         std_msgs/String (latched): the latest plan, for the visualizer
   pub  /tf_static        tf2_msgs/TFMessage (latched): the calibration frame_id -> mocap_frame, when
                          motion capture reports in a frame of its own
@@ -36,6 +40,9 @@ pivot's offset from the anchor unit's centre in the block frame); ignore_bodies 
 skip; any other body is skipped and reported once. A block whose body is momentarily not seen
 (tracking_valid false, missing from a frame) is waited for, up to lost_timeout_s; one lost for
 longer fails the request naming it. table_z is the table top's height in frame_id.
+mocap_noise (m) and mocap_yaw_noise_deg (deg), the tracker's noise as a standard deviation,
+widen the registration tolerances and the deviation check to 5 and 6 sigma, so that noise
+alone is not taken for a fault.
 
 The robot's state comes from joint_states by name (the model's arm and finger joints,
 parameters robot and joint_prefix): a missing joint or a stamp older than stale_after_s
@@ -72,7 +79,7 @@ from rad_core.robot_model import robot_model
 from rad_core.sim import panda
 from rad_core.trajectory import limit_violation
 from rad_core.mocap_input import BodyMap, MocapFrames, MocapTracker, wait_for_bodies
-from rad_core.sim.mocap import RegistrationConfig, register_scene
+from rad_core.sim.mocap import Registration, RegistrationConfig, register_scene, register_world
 from rad_msgs.action import ExecuteAssembly
 from rad_msgs.msg import Scene as SceneMsg
 from rad_msgs.srv import Allocate, PlanAction, PlanAssembly, Sequence
@@ -85,6 +92,7 @@ from rad_ros.mocap_input import MocapInput, calibration_tf
 from rad_ros.motion import motion_from_msgs
 from rad_ros.plant import ActionPlant
 from rad_ros.qos import LATCHED
+from rad_planner.take_apart import serve_take_apart
 
 
 class AssemblyNode(Node):
@@ -100,7 +108,8 @@ class AssemblyNode(Node):
                             ('path_tolerance', 0.05), ('goal_tolerance', 0.01), ('goal_time_tolerance', 1.0),
                             ('require_joint_states', True), ('mocap_input', 'rad'), ('mocap_topic', 'rigid_bodies'),
                             ('pose_topic', 'mocap/{body}/pose'), ('mocap_frame', ''), ('body_map_file', ''),
-                            ('table_z', 0.0), ('lost_timeout_s', 2.0)):
+                            ('table_z', 0.0), ('lost_timeout_s', 2.0), ('mocap_noise', 0.0),
+                            ('mocap_yaw_noise_deg', 0.0)):
             self.declare_parameter(name, value)
         # Lists typed by what the user writes ([0, 0, 1] is an integer array): checked below instead.
         anything = ParameterDescriptor(dynamic_typing=True)
@@ -122,6 +131,12 @@ class AssemblyNode(Node):
             raise RadError(f'ignore_bodies must be a list of body names, got {ignore!r}')
         self.body_map = BodyMap.from_params(str(self.param('body_map_file')), ignore)
         self.registration = RegistrationConfig(table_z=_number(self.param('table_z'), 'table_z'))
+        # The tracker's noise (std dev): registration tolerances and the deviation check widen with it.
+        self.noise = (_number(self.param('mocap_noise'), 'mocap_noise'),
+                      _number(self.param('mocap_yaw_noise_deg'), 'mocap_yaw_noise_deg'))
+        if min(self.noise) < 0:
+            raise RadError(f'mocap_noise and mocap_yaw_noise_deg must be >= 0, got {self.noise}')
+        RegistrationConfig.for_noise(*self.noise, 0.05)   # refuses noise no 5 cm block lattice can take
         self.tracker = MocapTracker(self.frames, _number(self.param('lost_timeout_s'), 'lost_timeout_s'),
                                     fresh_s=_number(self.param('stale_after_s'), 'stale_after_s'))
         # Requests block while they wait for other services and for the robot, so
@@ -152,6 +167,7 @@ class AssemblyNode(Node):
                                           goal_callback=lambda goal: GoalResponse.ACCEPT,
                                           cancel_callback=lambda goal: CancelResponse.ACCEPT,
                                           callback_group=group)
+        self.take_apart_server = serve_take_apart(self)
         self.get_logger().info('assembly planner ready')
 
     def destroy_node(self):
@@ -215,14 +231,24 @@ class AssemblyNode(Node):
         return np.array([by_name[n] for n in names])
 
     def registered_scene(self) -> Scene:
+        """The task's blocks where motion capture sees them; RadError for a block no scene can express."""
+        return register_scene(*self._bodies_and_config())
+
+    def registered_world(self) -> Registration:
+        """As `registered_scene`, but blocks no scene can express (fallen over, pushed off their cells) are
+        set aside with the reason (`register_world`): what execution re-plans from after a fault."""
+        return register_world(*self._bodies_and_config())
+
+    def _bodies_and_config(self):
         if self.task is None:
             raise RadError('no scene in the request and no task known: set the task_file parameter '
                            'or publish the task on /scene')
         task = self.task
         resolved = self.watch_bodies(task)
         bodies = wait_for_bodies(self.tracker, resolved, warn=self.get_logger().warning)
-        return register_scene(bodies, task, dataclasses.replace(self.registration,
-                                                                body_map=resolved.registration_map))
+        config = RegistrationConfig.for_noise(*self.noise, task.unit, **{
+            **dataclasses.asdict(self.registration), 'body_map': resolved.registration_map})
+        return bodies, task, config
 
     def scene_of(self, msg: SceneMsg, text: str) -> tuple[Scene, bool]:
         """The scene a request carries, or the registered one (and True) when it has none."""
@@ -366,11 +392,11 @@ class AssemblyNode(Node):
             limit = self.time_limit(goal.time_limit_s)
             scene, _ = self.scene_of(goal.scene, goal.scene_json)
             config = ExecuteConfig(float(self.param('settle_s')), float(self.param('position_tol')),
-                                   int(self.param('max_replans')), bool(goal.replan))
+                                   int(self.param('max_replans')), bool(goal.replan), mocap_noise=self.noise[0])
             plant = self.plant(lambda: goal_handle.is_cancel_requested)
             run = execute_assembly(scene, lambda current, start: self.plan(current, limit, start),
                                    plant.move_arm, plant.move_gripper,
-                                   self.registered_scene, config, joints=lambda: self.start_joints([]),
+                                   self.registered_world, config, joints=lambda: self.start_joints([]),
                                    cancelled=lambda: goal_handle.is_cancel_requested, report=report)
         except RadError as e:
             result.success, result.reason = False, str(e)

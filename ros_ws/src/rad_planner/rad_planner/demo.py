@@ -114,9 +114,14 @@ def run(scene: Scene, out: Path, rtf: float, time_limit: float, faults: str = 'n
     scene_path = out / 'scene.json'
     scene_path.write_text(scene.dumps() + '\n')
     twin = {'scene_file': str(scene_path.resolve()), 'real_time_factor': str(rtf)}
-    if faults != 'none':
-        twin.update({'faults': faults, 'faults_seed': str(int(faults_seed))})
     overrides = {'twin': twin, 'viz': {'recording_path': str((out / 'recording.rrd').resolve())}}
+    if faults != 'none':
+        from rad_core.sim.faults import FaultConfig
+        twin.update({'faults': faults, 'faults_seed': str(int(faults_seed))})
+        # The assembly node is told the tracker's noise, as a user would configure it for their cell.
+        config = FaultConfig.parse(faults, int(faults_seed))
+        overrides['assembly'] = {'mocap_noise': str(config.mocap_position_noise),
+                                 'mocap_yaw_noise_deg': str(config.mocap_yaw_noise_deg)}
     t0 = time.perf_counter()
     graph = start_graph(default_params(), overrides, log_dir=out / 'logs')
     rclpy.init()

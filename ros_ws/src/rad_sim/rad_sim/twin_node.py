@@ -65,7 +65,7 @@ from rad_core.motion import GripperResult
 from rad_core.scene import Scene
 from rad_core.sim.faults import FaultConfig
 from rad_core.sim.mocap import RigidBodyPose
-from rad_core.sim.twin import Tolerances, Twin, TwinConfig
+from rad_core.sim.twin import BLOCK_PLAY, Tolerances, Twin, TwinConfig, twin_world_config
 from rad_core.transforms import matrix_from_quaternion
 from rad_core.trajectory import TrajectoryRejected
 from rad_core.sim.workspace import Workspace
@@ -92,6 +92,7 @@ class TwinNode(Node):
         self.declare_parameter('gripper_action', 'franka_gripper/gripper_action')
         self.declare_parameter('faults', 'none')
         self.declare_parameter('faults_seed', 0)
+        self.declare_parameter('block_play', BLOCK_PLAY)   # per side face, fraction of a unit (0.5 mm at 5 cm)
         self.declare_parameter('mocap_frame', '')
         any_type = ParameterDescriptor(dynamic_typing=True)     # [0, 0, 1] as well as [0.0, 0.0, 1.0]
         self.declare_parameter('mocap_to_base_translation', [0.0, 0.0, 0.0], any_type)
@@ -110,7 +111,7 @@ class TwinNode(Node):
             raise RadError('publish_rate_hz and real_time_factor must be positive')
 
         self.workspace = Workspace()
-        self.world = World()
+        self.world = World(config=twin_world_config(play=float(self.get_parameter('block_play').value)))
         self.twin = Twin(self.world, TwinConfig(robot=str(self.get_parameter('robot').value),
                                                 joint_prefix=str(self.get_parameter('joint_prefix').value),
                                                 faults=faults))
