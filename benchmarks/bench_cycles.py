@@ -34,7 +34,7 @@ def scene_of(spec):
 
 
 def run_cycles(name, scene, planner, cycles: int, faults: str, seed: int) -> list[dict]:
-    from rad_core.errors import RadError
+    from rad_core.trajectory import TrajectoryAborted
     from rad_core.sequencing.disassembly import local_place_planner, take_apart
     from rad_core.sequencing.execute import ExecuteConfig, execute_assembly
     from rad_core.sim.faults import FaultConfig
@@ -48,8 +48,9 @@ def run_cycles(name, scene, planner, cycles: int, faults: str, seed: int) -> lis
 
         def move_arm(trajectory):
             report = twin.execute(trajectory, tolerances=Tolerances(path=0.05, goal=0.01, goal_time=1.0))
-            if report.error_code:
-                raise RadError(f'trajectory aborted (error code {report.error_code}): {report.error_string}')
+            if report.error_code:      # as rad_ros.plant.ActionPlant: a started trajectory stopped
+                raise TrajectoryAborted(report.error_code, f'trajectory aborted (error code {report.error_code}): '
+                                                           f'{report.error_string}')
 
         kw = dict(move_arm=move_arm, move_gripper=twin.execute_gripper, register=twin.registration,
                   config=ExecuteConfig(settle_s=0.5, max_replans=10, mocap_noise=noise),

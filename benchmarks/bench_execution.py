@@ -116,7 +116,7 @@ def run_teleport(name, scene, planner) -> dict:
 
 
 def run_simulated(name, scene, planner, faults: str, seed: int, max_replans: int) -> dict:
-    from rad_core.errors import RadError
+    from rad_core.trajectory import TrajectoryAborted
     from rad_core.sequencing.execute import ExecuteConfig, execute_assembly
     from rad_core.sim.twin import Tolerances, Twin, TwinConfig, twin_world_config
     from rad_core.sim.world import World
@@ -134,8 +134,9 @@ def run_simulated(name, scene, planner, faults: str, seed: int, max_replans: int
         def move_arm(trajectory):
             # The tolerances the assembly node sends with every goal (graph.yaml): contact aborts the run.
             report = twin.execute(trajectory, tolerances=Tolerances(path=0.05, goal=0.01, goal_time=1.0))
-            if report.error_code:
-                raise RadError(f'trajectory aborted (error code {report.error_code}): {report.error_string}')
+            if report.error_code:      # as rad_ros.plant.ActionPlant: a started trajectory stopped
+                raise TrajectoryAborted(report.error_code, f'trajectory aborted (error code {report.error_code}): '
+                                                           f'{report.error_string}')
 
         result = execute_assembly(scene, planner, move_arm, twin.execute_gripper, twin.registration,
                                   ExecuteConfig(settle_s=0.5, max_replans=max_replans),

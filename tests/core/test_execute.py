@@ -16,7 +16,9 @@ from rad_core.generator import GeneratorConfig, generate_scene
 from rad_core.sequencing import HeurPolicy
 from rad_core.sequencing.execute import ExecuteConfig, execute_assembly
 from rad_core.sequencing.plan import local_motion_planner, plan_assembly
-from rad_core.sim.twin import Twin
+from rad_core.sim.panda import HOME
+from rad_core.sim.twin import Tolerances, Twin
+from rad_core.trajectory import PATH_TOLERANCE_VIOLATED, TrajectoryAborted
 from rad_core.sim.world import World
 
 SCENE = generate_scene(GeneratorConfig(grid=3), 1)
@@ -171,6 +173,50 @@ def test_a_grasp_on_nothing_fails_the_step_and_the_loop_replans(twin, motion):
     assert run.grips[run.grips.index(next(g for g in run.grips if g.action == 'grasp')) + 1].action == 'open'
     assert result.success, result.reason
     assert result.coverage == 1.0
+
+
+def test_a_trajectory_aborted_mid_carry_opens_the_hand_backs_out_and_replans(twin, motion):
+    """The controller stops the carry halfway (as it does when the arm is held back: here a path
+    tolerance tighter than the tracking): the hand opens where the arm stopped, the arm backs out along
+    the path it came to where the step began, and the loop re-registers and replans."""
+    run = Run(twin, motion)
+
+    def move_arm(trajectory):
+        run.sent.append(trajectory)
+        if len(run.sent) == 2:                   # the first step's carry: stopped 0.6 s in
+            twin.start(trajectory, Tolerances())
+            twin.advance(0.6)
+            twin.cancel()
+            raise TrajectoryAborted(PATH_TOLERANCE_VIOLATED, 'path tolerance violated (forced)')
+        report = twin.execute(trajectory)
+        if report.error_code:
+            raise RadError(report.error_string)
+    result = run(move_arm=move_arm, joints=lambda: twin.world.joint_positions())
+    first = result.steps[0]
+    assert 'trajectory aborted' in first['failure'] and 'backed out' in first['failure'], first
+    # The hand opened (dropping the block) right after the abort, then one back-out trajectory ran
+    # from where the arm stopped to where the step began.
+    back_out = run.sent[2]
+    assert run.grips[run.grips.index(next(g for g in run.grips if g.action == 'grasp')) + 1].action == 'open'
+    assert np.allclose(back_out.points[-1].positions, HOME[:7], atol=1e-6)
+    assert result.replans >= 1 and result.faults[0]['recovered']
+    # Every block is accounted for: on its cell, elsewhere on the table, or lost with the reason.
+    dropped = run.plans[0][2].steps[0].block
+    assert dropped in {b.id for b in result.final_scene.blocks} or dropped in result.lost_blocks
+    assert result.coverage > 0
+
+
+def test_back_out_path_follows_the_rest_points_in_reverse():
+    from rad_core.sequencing.execute import back_out_path
+    from rad_core.trajectory import Trajectory, TrajectoryPoint
+    names = tuple(f'panda_joint{k}' for k in range(1, 8))
+    a, b, c, d = (np.full(7, v) for v in (0.0, 0.1, 0.2, 0.3))
+
+    def traj(*qs):
+        return Trajectory(names, [TrajectoryPoint(list(q), [0.0] * 7, float(i)) for i, q in enumerate(qs)])
+    stopped = np.full(7, 0.25)                    # on the second trajectory's segment c -> d
+    path = back_out_path([traj(a, b), traj(b, c, d)], stopped, a)
+    assert [round(float(q[0]), 3) for q in path] == [0.25, 0.2, 0.1, 0.0]
 
 
 def test_cancel_stops_before_the_next_step(twin, motion):

@@ -51,6 +51,15 @@ class TrajectoryRejected(RadError):
         self.code = code
 
 
+class TrajectoryAborted(RadError):
+    """A plant stopped a trajectory it had started (PATH_TOLERANCE_VIOLATED: something held the arm
+    back; GOAL_TOLERANCE_VIOLATED): the arm holds where it is. `code` is the error code."""
+
+    def __init__(self, code: int, message: str):
+        super().__init__(message)
+        self.code = code
+
+
 @dataclass
 class TrajectoryPoint:
     positions: list[float]

@@ -28,7 +28,7 @@ from rclpy.action import ActionClient as _ActionClient
 from rad_core.errors import RadError
 from rad_core.motion import GripperCommand as GripperStep, GripperResult
 from rad_core.robot_model import RobotModel
-from rad_core.trajectory import Trajectory
+from rad_core.trajectory import GOAL_TOLERANCE_VIOLATED, PATH_TOLERANCE_VIOLATED, Trajectory, TrajectoryAborted
 from rad_ros.motion import s_to_duration, trajectory_to_msg
 
 class ActionClient(_ActionClient):
@@ -95,8 +95,11 @@ class ActionPlant:
         result = self._run(self.arm, self.arm_name, goal, wait, 'the arm controller')
         code = int(result.error_code)
         if code != FollowJointTrajectory.Result.SUCCESSFUL:
-            raise RadError(f'the arm controller ({self.arm_name}) failed the trajectory: '
-                           f'{ERROR_NAMES.get(code, "error")} ({code}): {result.error_string or "no reason given"}')
+            why = (f'the arm controller ({self.arm_name}) failed the trajectory: '
+                   f'{ERROR_NAMES.get(code, "error")} ({code}): {result.error_string or "no reason given"}')
+            if code in (PATH_TOLERANCE_VIOLATED, GOAL_TOLERANCE_VIOLATED):
+                raise TrajectoryAborted(code, why)     # it moved and stopped: the arm is somewhere on the path
+            raise RadError(why)
 
     def move_gripper(self, command: GripperStep) -> GripperResult:
         goal = GripperCommand.Goal()

@@ -58,7 +58,10 @@ import numpy as np
 
 from rad_core.allocation.result import AllocationResult
 from rad_core.errors import RadError
+from rad_core.gamp.trajectory import retime
 from rad_core.motion import GripperCommand, GripperResult, Motion, run_motion
+from rad_core.robot_model import PANDA, envelope
+from rad_core.trajectory import Trajectory, TrajectoryAborted
 from rad_core.scene import Scene
 from rad_core.sequencing.plan import AssemblyPlan, moved
 from rad_core.sim.mocap import Registration
@@ -81,6 +84,11 @@ class ExecuteConfig:
     mocap_noise: float = 0.0
     """Std dev (m) per axis of motion capture's positions: a block counts as off only when it is
     off by more than 6 sigma of the difference of two measurements as well as position_tol."""
+    recover_aborts: bool = True
+    """A trajectory the controller aborted after it started (the arm held back by contact): open the
+    hand, back out along the path it came, re-register and replan (False: the abort ends the run)."""
+    back_out_speed: float = 0.3
+    """Fraction of the Franka limits (velocity, acceleration, jerk) the back-out moves at."""
 
     @property
     def deviation_tol(self) -> float:
@@ -94,6 +102,8 @@ class ExecuteConfig:
             raise RadError(f'position_tol must be positive, got {self.position_tol}')
         if not (self.mocap_noise >= 0 and np.isfinite(self.mocap_noise)):
             raise RadError(f'mocap_noise must be finite and >= 0, got {self.mocap_noise}')
+        if not (0 < self.back_out_speed <= 1):
+            raise RadError(f'back_out_speed must be in (0, 1], got {self.back_out_speed}')
         if self.max_replans < 0:
             raise RadError(f'max_replans must be >= 0, got {self.max_replans}')
 
@@ -193,8 +203,9 @@ def execute_assembly(scene: Scene, plan: Plan, move_arm: MoveArm, move_gripper: 
                 report(len(result.steps), len(assembly.steps), step.block, 'executing', '')
                 motion = Motion.from_dict(step.motion)
                 step_start = HOME if last_q is None else last_q
-                failed = run_motion(motion, move_arm, move_gripper, start=step_start[:7])
-                # A failed grasp has opened the hand and backed the arm out to where the step began.
+                failed = _run_step(motion, move_arm, move_gripper, step_start, joints, config)
+                # A failed grasp, or a trajectory the controller aborted (something held the arm back), has
+                # opened the hand and backed the arm out to where the step began.
                 last_q = motion.final_joints() if not failed else np.concatenate(
                     [step_start[:7], [motion.opening] * 2])
                 settle(config.settle_s)
@@ -236,3 +247,68 @@ def execute_assembly(scene: Scene, plan: Plan, move_arm: MoveArm, move_gripper: 
         result.reason = f'{result.reason}; lost blocks: {lost}'
     report(len(result.steps), len(result.steps), '', 'done', result.reason)
     return result
+
+
+def _run_step(motion: Motion, move_arm: MoveArm, move_gripper: MoveGripper, step_start: np.ndarray,
+              joints, config: ExecuteConfig) -> str:
+    """run_motion, and when the controller aborts a trajectory it had started (the arm or the held
+    block met something: PATH_TOLERANCE_VIOLATED), recover like a real cell's operator would script
+    it: open the hand where the arm stopped (a held block drops the little way to whatever is below),
+    back the arm out along the path it came (the checked straight joint segments between the
+    motion's rest points, reversed) to where the step began, and let the loop re-register and
+    replan. Needs `joints` (where the arm stopped); without it, or with config.recover_aborts false,
+    the abort ends the run as before. A refused trajectory (TrajectoryRejected) never moved: it
+    ends the run (a plan the controller refuses is a bug to see, not a fault of the world)."""
+    sent: list = []
+
+    def tracked(trajectory):
+        sent.append(trajectory)
+        move_arm(trajectory)
+
+    try:
+        return run_motion(motion, tracked, move_gripper, start=step_start[:7])
+    except TrajectoryAborted as e:
+        if joints is None or not config.recover_aborts:
+            raise
+        aborted = e
+    q_now = joints()
+    if q_now is None:
+        raise aborted
+    try:
+        move_gripper(GripperCommand('open', motion.opening, 0.0, 0))
+        path = back_out_path(sent, np.asarray(q_now, dtype=float)[:7], np.asarray(step_start, dtype=float)[:7])
+        if len(path) > 1:
+            names = Trajectory.from_dict(sent[-1]).joint_names if isinstance(sent[-1], dict) else sent[-1].joint_names
+            move_arm(retime(path, envelope(PANDA), config.back_out_speed, joint_names=names))
+    except RadError as e:
+        raise RadError(f'{aborted}; backing out failed: {e}') from None
+    return f'trajectory aborted: {aborted}; the hand opened and the arm backed out'
+
+
+def back_out_path(sent: list, q_now: np.ndarray, step_start: np.ndarray) -> list[np.ndarray]:
+    """Arm waypoints from where an aborted trajectory left the arm (q_now) back to where the step
+    began: the rest points (zero velocity: the planner's waypoints, joined by straight joint segments)
+    of the trajectories sent so far, in reverse, entering the last one's path on the segment q_now is
+    nearest to."""
+    trajs = [t if isinstance(t, Trajectory) else Trajectory.from_dict(t) for t in sent]
+    rests: list[np.ndarray] = [np.asarray(step_start, dtype=float)]
+    for k, traj in enumerate(trajs):
+        pts = [np.asarray(p.positions, dtype=float) for p in traj.points
+               if not p.velocities or max(abs(v) for v in p.velocities) < 1e-9]
+        if k == len(trajs) - 1:
+            # Keep the rest points up to the segment the arm stopped on.
+            chain = [rests[-1]] + pts
+            j = min(range(len(chain) - 1), key=lambda i: _to_segment(q_now, chain[i], chain[i + 1]))
+            pts = pts[:j]
+        rests += pts
+    path = [np.asarray(q_now, dtype=float)]
+    for q in reversed(rests):
+        if np.abs(q - path[-1]).max() > 1e-6:
+            path.append(q)
+    return path
+
+
+def _to_segment(q: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
+    d = b - a
+    t = 0.0 if not d.any() else float(np.clip(np.dot(q - a, d) / np.dot(d, d), 0.0, 1.0))
+    return float(np.linalg.norm(q - (a + t * d)))

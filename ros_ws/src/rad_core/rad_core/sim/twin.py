@@ -77,7 +77,8 @@ from rad_core.sim.mocap import Registration, RegistrationConfig, RigidBodyPose, 
 from rad_core.sim.world import World, WorldConfig
 from rad_core.transforms import yaw_quaternion
 from rad_core.trajectory import (GOAL_TOLERANCE_VIOLATED, INVALID_GOAL, PATH_TOLERANCE_VIOLATED, SUCCESSFUL,
-                                 Spline, Trajectory, TrajectoryRejected, limit_violation, parse_trajectory)
+                                 Spline, Trajectory, TrajectoryAborted, TrajectoryRejected, limit_violation,
+                                 parse_trajectory)
 
 
 BLOCK_PLAY = 0.01
@@ -482,7 +483,8 @@ class Twin:
         def move_arm(trajectory):
             report = self.execute(trajectory, callback, real_time_factor=real_time_factor)
             if report.error_code != SUCCESSFUL:
-                raise RadError(f'trajectory aborted (error code {report.error_code}): {report.error_string}')
+                raise TrajectoryAborted(report.error_code, f'trajectory aborted (error code {report.error_code}): '
+                                                           f'{report.error_string}')
 
         start = self.world.joint_positions()[:7]
         try:
