@@ -252,21 +252,27 @@ def execute_assembly(scene: Scene, plan: Plan, move_arm: MoveArm, move_gripper: 
 def _run_step(motion: Motion, move_arm: MoveArm, move_gripper: MoveGripper, step_start: np.ndarray,
               joints, config: ExecuteConfig) -> str:
     """run_motion, and when the controller aborts a trajectory it had started (the arm or the held
-    block met something: PATH_TOLERANCE_VIOLATED), recover like a real cell's operator would script
-    it: open the hand where the arm stopped (a held block drops the little way to whatever is below),
-    back the arm out along the path it came (the checked straight joint segments between the
-    motion's rest points, reversed) to where the step began, and let the loop re-register and
-    replan. Needs `joints` (where the arm stopped); without it, or with config.recover_aborts false,
-    the abort ends the run as before. A refused trajectory (TrajectoryRejected) never moved: it
-    ends the run (a plan the controller refuses is a bug to see, not a fault of the world)."""
+    block met something: PATH_TOLERANCE_VIOLATED), recover as a cell's operator would script it: back
+    the arm out along the path it came (the checked straight joint segments between the motion's
+    rest points, reversed) to where the step began. A block in the hand is carried back to where it
+    was picked and put down there (its spot is free: it came from there), then the arm goes on
+    backing out with the hand open; the loop then re-registers and replans. Needs `joints` (where
+    the arm stopped); without it, or with config.recover_aborts false, the abort ends the run. A
+    refused trajectory (TrajectoryRejected) never moved: it ends the run (a plan the controller
+    refuses is a bug to see, not a fault of the world)."""
     sent: list = []
+    grips: list[GripperCommand] = []
 
-    def tracked(trajectory):
+    def tracked_arm(trajectory):
         sent.append(trajectory)
         move_arm(trajectory)
 
+    def tracked_gripper(command):
+        grips.append(command)
+        return move_gripper(command)
+
     try:
-        return run_motion(motion, tracked, move_gripper, start=step_start[:7])
+        return run_motion(motion, tracked_arm, tracked_gripper, start=step_start[:7])
     except TrajectoryAborted as e:
         if joints is None or not config.recover_aborts:
             raise
@@ -274,15 +280,31 @@ def _run_step(motion: Motion, move_arm: MoveArm, move_gripper: MoveGripper, step
     q_now = joints()
     if q_now is None:
         raise aborted
+    held = next((g for g in reversed(grips) if g.action in ('grasp', 'release')), None)
+    held = held if held is not None and held.action == 'grasp' else None
     try:
-        move_gripper(GripperCommand('open', motion.opening, 0.0, 0))
         path = back_out_path(sent, np.asarray(q_now, dtype=float)[:7], np.asarray(step_start, dtype=float)[:7])
-        if len(path) > 1:
-            names = Trajectory.from_dict(sent[-1]).joint_names if isinstance(sent[-1], dict) else sent[-1].joint_names
-            move_arm(retime(path, envelope(PANDA), config.back_out_speed, joint_names=names))
+        first = sent[0] if isinstance(sent[0], Trajectory) else Trajectory.from_dict(sent[0])
+        names = first.joint_names
+        if held is None:
+            move_gripper(GripperCommand('open', motion.opening, 0.0, 0))
+            legs = [path]
+        else:
+            # Where the hand closed on the block: the end of the trajectory before the grasp.
+            before = sent[held.before - 1] if held.before > 0 else None
+            picked = np.asarray((before if isinstance(before, Trajectory) else Trajectory.from_dict(before))
+                                .points[-1].positions if before is not None else step_start[:7], dtype=float)
+            cut = next((i for i, q in enumerate(path) if np.abs(q - picked).max() < 1e-6), len(path) - 1)
+            legs = [path[:cut + 1], path[cut:]]
+        for k, leg in enumerate(legs):
+            if len(leg) > 1:
+                move_arm(retime(leg, envelope(PANDA), config.back_out_speed, joint_names=names))
+            if k == 0 and held is not None:
+                move_gripper(GripperCommand('release', motion.opening, 0.0, held.before))
     except RadError as e:
         raise RadError(f'{aborted}; backing out failed: {e}') from None
-    return f'trajectory aborted: {aborted}; the hand opened and the arm backed out'
+    where = ', put the block back where it was picked' if held is not None else ''
+    return f'trajectory aborted: {aborted}; the arm backed out{where} and the hand opened'
 
 
 def back_out_path(sent: list, q_now: np.ndarray, step_start: np.ndarray) -> list[np.ndarray]:
