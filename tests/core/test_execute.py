@@ -208,6 +208,29 @@ def test_a_trajectory_aborted_mid_carry_puts_the_block_back_backs_out_and_replan
     assert result.success and result.coverage == 1.0, result.reason
 
 
+def test_a_block_wedged_on_the_way_back_is_let_go_and_the_arm_backs_out_empty(twin, motion):
+    run = Run(twin, motion)
+
+    def move_arm(trajectory):
+        run.sent.append(trajectory)
+        if len(run.sent) in (2, 3):              # the carry, and then the way back with the block
+            twin.start(trajectory, Tolerances())
+            twin.advance(0.6 if len(run.sent) == 2 else 0.2)
+            twin.cancel()
+            raise TrajectoryAborted(PATH_TOLERANCE_VIOLATED, 'path tolerance violated (forced)')
+        report = twin.execute(trajectory)
+        if report.error_code:
+            raise RadError(report.error_string)
+    result = run(move_arm=move_arm, joints=lambda: twin.world.joint_positions())
+    assert 'let go of the wedged block' in result.steps[0]['failure'], result.steps[0]
+    actions = [g.action for g in run.grips]
+    assert actions[actions.index('grasp') + 1] == 'open'                   # let go where it stuck
+    assert np.allclose(run.sent[3].points[-1].positions, HOME[:7], atol=1e-6)   # then back out empty
+    assert result.replans >= 1 and result.faults[0]['recovered']
+    dropped = result.steps[0]['block']
+    assert dropped in {b.id for b in result.final_scene.blocks} or dropped in result.lost_blocks
+
+
 def test_back_out_path_follows_the_rest_points_in_reverse():
     from rad_core.sequencing.execute import back_out_path
     from rad_core.trajectory import Trajectory, TrajectoryPoint

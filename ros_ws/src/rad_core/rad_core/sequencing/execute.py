@@ -296,14 +296,29 @@ def _run_step(motion: Motion, move_arm: MoveArm, move_gripper: MoveGripper, step
                                 .points[-1].positions if before is not None else step_start[:7], dtype=float)
             cut = next((i for i, q in enumerate(path) if np.abs(q - picked).max() < 1e-6), len(path) - 1)
             legs = [path[:cut + 1], path[cut:]]
+        let_go = False
         for k, leg in enumerate(legs):
             if len(leg) > 1:
-                move_arm(retime(leg, envelope(PANDA), config.back_out_speed, joint_names=names))
+                try:
+                    move_arm(retime(leg, envelope(PANDA), config.back_out_speed, joint_names=names))
+                except TrajectoryAborted:
+                    if k > 0 or held is None:
+                        raise
+                    # The held block is wedged and does not come back out with the hand: let go of it
+                    # where it is and back out empty from where the arm stopped.
+                    move_gripper(GripperCommand('open', motion.opening, 0.0, held.before))
+                    let_go = True
+                    q_here = np.asarray(joints(), dtype=float)[:7]
+                    rest = back_out_path(sent, q_here, np.asarray(step_start, dtype=float)[:7])
+                    if len(rest) > 1:
+                        move_arm(retime(rest, envelope(PANDA), config.back_out_speed, joint_names=names))
+                    break
             if k == 0 and held is not None:
                 move_gripper(GripperCommand('release', motion.opening, 0.0, held.before))
     except RadError as e:
         raise RadError(f'{aborted}; backing out failed: {e}') from None
-    where = ', put the block back where it was picked' if held is not None else ''
+    where = '' if held is None else (', let go of the wedged block' if let_go
+                                     else ', put the block back where it was picked')
     return f'trajectory aborted: {aborted}; the arm backed out{where} and the hand opened'
 
 
