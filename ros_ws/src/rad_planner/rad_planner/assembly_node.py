@@ -295,9 +295,18 @@ class AssemblyNode(Node):
         return self.allocate(scene, exclude, time_limit_s, support='stable')
 
     def plan_motion(self, scene: Scene, action, start) -> MotionPlan:
-        request = PlanAction.Request(scene_json=scene.dumps(),
-                                     start_positions=[] if start is None else [float(v) for v in start])
+        request = self.plan_action_request(scene, start)
         request.action = action_to_msg(action)
+        return self.ask_plan_action(request, start)
+
+    @staticmethod
+    def plan_action_request(scene: Scene, start) -> PlanAction.Request:
+        return PlanAction.Request(scene_json=scene.dumps(),
+                                  start_positions=[] if start is None else [float(v) for v in start])
+
+    def ask_plan_action(self, request: PlanAction.Request, start) -> MotionPlan:
+        """/plan_action's answer as a MotionPlan; RadError for a request it calls invalid or for a trajectory
+        the robot would refuse (checked against the model's limits from `start`)."""
         response = self.call(self.plan_client, request)
         if response.failure in ('invalid_request', 'error'):
             raise RadError(f'plan_action: {response.reason}')

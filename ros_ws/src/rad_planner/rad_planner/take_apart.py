@@ -19,7 +19,6 @@ from __future__ import annotations
 import json
 import time
 
-import numpy as np
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
 
@@ -28,36 +27,19 @@ from rad_core.scene import Scene
 from rad_core.sequencing.disassembly import TableConfig, take_apart
 from rad_core.sequencing.execute import ExecuteConfig
 from rad_core.sequencing.plan import MotionPlan
-from rad_core.sim import panda
 from rad_core.sim.mocap import Registration
-from rad_core.trajectory import limit_violation
 from rad_core.transforms import yaw_quaternion
 from rad_msgs.action import TakeApart
-from rad_msgs.srv import PlanAction
-from rad_ros.motion import motion_from_msgs, pose_msg
+from rad_ros.motion import pose_msg
 
 
-def place_planner(node, client):
+def place_planner(node):
     """A disassembly.PlacePlanner over /plan_action (a place pose instead of a cell)."""
     def plan_place(scene: Scene, block_id: str, position, yaw: int, start) -> MotionPlan:
-        request = PlanAction.Request(scene_json=scene.dumps(),
-                                     start_positions=[] if start is None else [float(v) for v in start])
+        request = node.plan_action_request(scene, start)
         request.action.block_id = block_id
         request.place_at_pose, request.place_pose = True, pose_msg(position, yaw_quaternion(yaw))
-        response = node.call(client, request)
-        if response.failure in ('invalid_request', 'error'):
-            raise RadError(f'plan_action: {response.reason}')
-        if not response.success:
-            return MotionPlan(False, response.failure, response.reason)
-        motion = motion_from_msgs(response.trajectories, response.gripper)
-        q = panda.HOME if start is None else np.asarray(start, dtype=float)
-        for k, traj in enumerate(motion['trajectories']):
-            why = limit_violation(traj, q, node.model)
-            if why:
-                raise RadError(f'plan_action answered a trajectory the {node.model.name} would refuse '
-                               f'(trajectory {k}): {why}')
-            q = np.asarray(traj['points'][-1]['positions'])
-        return MotionPlan(True, '', '', (response.grasp.unit, response.grasp.yaw_deg), motion)
+        return node.ask_plan_action(request, start)
     return plan_place
 
 
@@ -72,8 +54,7 @@ def heap_of(node, goal) -> Scene:
 
 def serve_take_apart(node) -> ActionServer:
     """Mount /take_apart on an assembly node (rad_planner.assembly_node.AssemblyNode)."""
-    client = node.io.create_client(PlanAction, 'plan_action')
-    plan_place = place_planner(node, client)
+    plan_place = place_planner(node)
 
     def execute_callback(goal_handle):
         goal = goal_handle.request
