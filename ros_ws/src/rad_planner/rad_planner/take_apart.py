@@ -27,7 +27,6 @@ from rad_core.scene import Scene
 from rad_core.sequencing.disassembly import TableConfig, take_apart
 from rad_core.sequencing.execute import ExecuteConfig
 from rad_core.sequencing.plan import MotionPlan
-from rad_core.sim.mocap import Registration
 from rad_core.transforms import yaw_quaternion
 from rad_msgs.action import TakeApart
 from rad_ros.motion import pose_msg
@@ -71,16 +70,15 @@ def serve_take_apart(node) -> ActionServer:
         try:
             limit = node.time_limit(goal.time_limit_s)
             heap = heap_of(node, goal)
-            # Lenient registration where the node has it: a fallen block is set aside (and reported
-            # lost), not a reason to leave the rest of the structure standing.
-            register = getattr(node, 'registered_world', node.registered_scene)
-            got = register()
-            scene = got.scene if isinstance(got, Registration) else got
+            # Lenient registration: a fallen block is set aside (and reported lost), not a reason to
+            # leave the rest of the structure standing.
+            register = node.registered_world
+            scene = register().scene
             if not {b.id for b in heap.blocks} & {b.id for b in scene.blocks}:
                 raise RadError('the heap scene has none of the blocks motion capture sees')
             config = ExecuteConfig(float(node.param('settle_s')), float(node.param('position_tol')),
                                    int(node.param('max_replans')), True,
-                                   mocap_noise=float(getattr(node, 'noise', (0.0,))[0]))
+                                   mocap_noise=node.noise[0])
             plant = node.plant(cancelled)
             run = take_apart(scene, heap, plan_place, plant.move_arm, plant.move_gripper, register,
                              config, TableConfig(), build_order=list(goal.build_order), time_limit_s=limit,
