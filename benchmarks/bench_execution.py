@@ -140,7 +140,8 @@ def run_simulated(name, scene, planner, faults: str, seed: int, max_replans: int
 
         result = execute_assembly(scene, planner, move_arm, twin.execute_gripper, twin.registration,
                                   ExecuteConfig(settle_s=0.5, max_replans=max_replans),
-                                  joints=lambda: twin.world.joint_positions(), settle=twin.settle)
+                                  joints=lambda: twin.world.joint_positions(), settle=twin.settle,
+                                  plan_motion=planner.motion)
         sim_s = twin.time - sim0
         injected = Counter(e.get('fault', e.get('action', '?')) for e in twin.fault_events)
     steps = result.steps

@@ -283,3 +283,61 @@ def test_a_block_knocked_on_its_side_is_lost_and_the_run_succeeds_only_if_it_bui
     else:
         assert result.reason.startswith(f'coverage {result.coverage:.3f} is below the 1.000 the first plan')
         assert f'lost blocks: {victim}' in result.reason
+
+
+ROW = Scene.from_dict({
+    'format': 'rad-scene/1', 'unit': U, 'block_types': {'cube': [[0, 0, 0]]},
+    'blocks': [{'id': 'p', 'type': 'cube', 'position': [0.4, -0.2, U / 2], 'yaw': 0},
+               {'id': 'q', 'type': 'cube', 'position': [0.5, -0.2, U / 2], 'yaw': 0}],
+    'targets': [{'name': 'row', 'origin': [0.45, 0.1, U / 2], 'size': [2, 1, 1], 'filled': [[0, 0, 0], [1, 0, 0]]}]})
+
+
+@pytest.mark.parametrize('refresh', [True, False])
+def test_a_block_left_2mm_into_its_neighbours_cell_is_built_against_not_onto(motion, refresh):
+    """The first block is left 2 mm into the other cell (a placement error, forced). Registration snaps
+    it onto its cell and keeps the offset; with plan_motion the second block's motion is planned again
+    against it and set down flush beside it. Without, the plan's motion lowers the block onto its edge
+    (in a free row it shoves the first back; in a structure it jams and the controller aborts)."""
+    from rad_core.sim.twin import Tolerances, twin_world_config
+    from rad_core.trajectory import TrajectoryAborted
+    world = World(ROW, twin_world_config())
+    twin = Twin(world)
+    shoved = {}
+
+    def move_arm(trajectory):
+        report = twin.execute(trajectory, tolerances=Tolerances(path=0.05, goal=0.01, goal_time=1.0))
+        if report.error_code:
+            raise TrajectoryAborted(report.error_code, f'aborted: {report.error_string}')
+
+    def move_gripper(command):
+        result = twin.execute_gripper(command)
+        if command.action == 'release' and not shoved:
+            for bid in ('p', 'q'):
+                pos, quat = world.block_pose(bid)
+                if abs(pos[1] - 0.1) < 0.01:
+                    toward = 1.0 if pos[0] < 0.475 else -1.0       # into the other cell
+                    world.set_block_pose(bid, [pos[0] + toward * 0.002, pos[1], pos[2]], quat)
+                    shoved[bid] = toward
+        return result
+
+    def plan(scene, start):
+        return plan_assembly(scene, solve, motion, HeurPolicy(), seed=1, start=start)
+
+    result = execute_assembly(ROW, plan, move_arm, move_gripper, twin.registration, ExecuteConfig(settle_s=0.3),
+                              joints=world.joint_positions, settle=twin.settle,
+                              plan_motion=motion if refresh else None)
+    (first, toward), = shoved.items()
+    second = 'q' if first == 'p' else 'p'
+    assert result.success and result.coverage == 1.0, result.reason
+    x = world.block_pose(second)[0][0]
+    nominal = 0.5 if first == 'p' else 0.45
+    if refresh:
+        assert result.replans == 0 and result.faults == []
+        assert result.final_scene.measured_offsets[first][0] == pytest.approx(toward * 0.002, abs=2e-4)
+        # Set down flush against the first block: 2 mm over, less the twin's play between them.
+        assert toward * (x - nominal) > 0.0008
+    else:
+        # Lowered at its cell onto the first block's edge: here (a free row) it shoves the first block back.
+        assert toward * (x - nominal) < 0.0008
+        assert abs(result.final_scene.measured_offsets.get(first, (0, 0))[0]) < 0.0018
+    world.close()

@@ -225,3 +225,72 @@ def test_bad_requests_raise(generated):
         plan_action(world, scene.blocks[0].id, [0.5, np.nan, 0.05], 0)
     with pytest.raises(RadError):
         plan_action(world, scene.blocks[0].id, [0.5, 0, 0.05], 0, start=np.zeros(4))
+
+
+# ---- seats against neighbours seen off their cells ------------------------------------------------------
+
+def _row(offsets, placed=('a', 'c'), size=(3, 2, 1)):
+    """A 3x2 region at x 0.45..0.55, y 0..0.05; 'a' on cell (0,0), 'c' on (2,0), 'd' on (2,1) when placed,
+    else on the table; 'b' (to place, on cell (1,0)) on the table."""
+    cells = {'a': (0.45, 0.0), 'c': (0.55, 0.0), 'd': (0.55, 0.05)}
+    table = {'a': (0.3, -0.3), 'b': (0.4, -0.3), 'c': (0.5, -0.3), 'd': (0.6, -0.3)}
+    blocks = [{'id': k, 'type': 'cube', 'yaw': 0,
+               'position': [*(cells[k] if k in placed else table[k]), U / 2]} for k in 'abcd']
+    return Scene.from_dict({
+        'format': 'rad-scene/1', 'unit': U, 'block_types': {'cube': [[0, 0, 0]]}, 'blocks': blocks,
+        'targets': [{'name': 't', 'origin': [0.45, 0.0, U / 2], 'size': list(size),
+                     'filled': [[i, j, 0] for i in range(3) for j in range(2)]}],
+        'measured_offsets': {k: v for k, v in offsets.items() if k in placed}})
+
+
+@pytest.mark.parametrize('offsets, placed, want', [
+    ({}, ('a', 'c'), (0, 0)),                                          # nothing off: the cell's pose
+    ({'a': [0.002, 0.0005]}, ('a',), (0.002, 0)),                       # a landed 2 mm into b's cell
+    ({'a': [-0.002, 0.0]}, ('a', 'c'), (0, 0)),                         # off, but away from b
+    ({'a': [0.002, 0.0], 'c': [0.0, 0.0]}, ('a', 'c'), (0.001, 0)),     # squeezed: the middle
+    ({'a': [0.001, 0.0], 'c': [0.003, 0.0]}, ('a', 'c'), (0.001, 0)),   # a row drifting: follow it, no further
+    ({'d': [-0.001, -0.0015]}, ('d',), (-0.001, 0)),                    # a corner: cleared along the cheaper axis
+    ({'a': [0.04 * 0.5 - 1e-3, 0.0]}, ('a',), (0.0125, 0)),             # at most a quarter unit
+])
+def test_seat_shift_clears_neighbours_seen_off_their_cells(offsets, placed, want):
+    from rad_core.gamp.action import seat_shift
+    s = _row(offsets, placed)
+    shift = seat_shift(s, 'b', np.array([0.5, 0.0, U / 2]), 0)
+    assert shift == pytest.approx([*want, 0.0], abs=1e-6)
+
+
+def test_a_block_is_placed_clear_of_a_neighbour_seen_off_its_cell():
+    from rad_core.gamp.action import MotionPlanner, SceneAction
+    planner = MotionPlanner()
+    try:
+        action = SceneAction('b', 0, 't', (1, 0, 0), 0)
+        shifted = _row({'a': [0.002, 0.0]}, ('a',))
+        result, position, _ = planner(shifted, action)
+        assert result.success, result.reason
+        assert position.tolist() == pytest.approx([0.5, 0.0, U / 2])        # the plan's pose is the cell's
+        # Replayed in the world: the block is released 2 mm over, flush with its neighbour, not into it.
+        planner.world.load_scene(shifted)
+        placed, _ = _replay(planner.world, result, 'b')
+        assert placed[0] == pytest.approx(0.502, abs=3e-4)
+        assert planner.world.block_pose('a')[0][0] == pytest.approx(0.452)
+    finally:
+        planner.close()
+
+
+def test_a_block_set_aside_where_the_placement_goes_is_an_obstacle_to_the_plan():
+    from rad_core.gamp.action import MotionPlanner, SceneAction
+    d = _row({}, ()).to_dict()
+    # A block on its side over cell (1, 0): no block of the scene, but there.
+    d['blocks'] = [b for b in d['blocks'] if b['id'] != 'd']
+    d['obstacles'] = [{'id': 'd', 'type': 'cube', 'position': [0.5, 0.0, U / 2],
+                       'quaternion': [math.sin(math.pi / 4), 0, 0, math.cos(math.pi / 4)]}]
+    planner = MotionPlanner()
+    try:
+        result, _, _ = planner(Scene.from_dict(d), SceneAction('b', 0, 't', (1, 0, 0), 0))
+        assert not result.success and result.failure == 'placement'
+        assert 'block d (set aside)' in result.reason
+        assert list(planner.world.obstacles) == ['d']
+        result, _, _ = planner(_row({}, ()), SceneAction('b', 0, 't', (1, 0, 0), 0))
+        assert result.success and planner.world.obstacles == {}          # gone with the next scene
+    finally:
+        planner.close()

@@ -1,6 +1,7 @@
 """Motion-capture registration: round trips, noise, and every way a pose can be wrong."""
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -315,7 +316,8 @@ def test_plannable_refuses_when_every_target_cell_is_blocked():
 
 def test_tolerances_follow_the_tracker_noise():
     base = RegistrationConfig()
-    assert RegistrationConfig.for_noise(0.001, 0.5, U) == base              # 1 mm, 0.5 deg: the defaults hold
+    # 1 mm, 0.5 deg: the tolerances hold; only offsets under 3 sigma are taken for noise.
+    assert RegistrationConfig.for_noise(0.001, 0.5, U) == replace(base, offset_floor=0.003)
     wide = RegistrationConfig.for_noise(0.004, 4.0, U, tilt_tol_deg=12.0)
     assert wide.position_tol == pytest.approx(0.4) and wide.yaw_tol_deg == pytest.approx(20.0)
     assert wide.tilt_tol_deg == 12.0
@@ -323,3 +325,41 @@ def test_tolerances_follow_the_tracker_noise():
         RegistrationConfig.for_noise(0.005, 0.5, U)
     with pytest.raises(RadError, match='finite'):
         RegistrationConfig.for_noise(math.nan, 0.5, U)
+
+
+def test_a_block_snapped_onto_its_cell_keeps_how_far_off_it_was_seen():
+    s = with_placed(generate_scene(GeneratorConfig(grid=4), 3))
+    on_grid = [s.blocks[i].id for i in blocks_on_grid(s, Grid(s))]
+    bodies = scene_to_bodies(s)
+    far, near = on_grid[0], on_grid[-1]
+    shifted = [RigidBodyPose(b.name, (b.position[0] + (0.002 if b.name == far else 0.0001 if b.name == near else 0),
+                                      b.position[1] - (0.0015 if b.name == far else 0), b.position[2]), b.quaternion)
+               for b in bodies]
+    got = register_world(shifted, s, config_for(s)).scene
+    assert_same_scene(got, s)                   # still on its cells: the grid, the MDP and coverage see it built
+    assert got.measured_offsets == {far: pytest.approx((0.002, -0.0015))}    # 0.1 mm is under the floor
+    assert got.offset(far) == pytest.approx([0.002, -0.0015, 0.0])
+    # The offsets travel with the scene's document (to the gamp node) and are checked there.
+    assert Scene.loads(got.dumps()).measured_offsets == got.measured_offsets
+    # Table blocks keep their measured x/y and need none.
+    table = [b.id for b in s.blocks if b.id not in on_grid]
+    assert not set(table) & set(got.measured_offsets)
+
+
+def test_the_offset_floor_follows_the_tracker_noise():
+    assert RegistrationConfig().offset_floor == pytest.approx(3e-4)
+    assert RegistrationConfig.for_noise(0.001, 0.5, 0.05).offset_floor == pytest.approx(0.003)
+    assert RegistrationConfig.for_noise(0.00005, 0.5, 0.05).offset_floor == pytest.approx(3e-4)
+    with pytest.raises(RadError, match='offset_floor'):
+        RegistrationConfig(offset_floor=-1.0)
+
+
+def test_a_set_aside_block_is_an_obstacle_of_the_scene_where_it_lies():
+    s = scene()
+    turned = _rpy_quat(math.pi / 2, 0, 0)
+    reg = register_world(_with(s, 2, quaternion=turned, position=(0.6, -0.2, 0.026)), s, config_for(s))
+    assert set(reg.set_aside) == {'i0'} and [b.id for b in reg.scene.blocks] == ['c0', 'c1']
+    (o,) = reg.scene.obstacles
+    assert (o.id, o.type) == ('i0', 'I2') and o.position == pytest.approx((0.6, -0.2, 0.026))
+    assert o.quaternion == pytest.approx(turned)
+    assert reg.plannable().obstacles == reg.scene.obstacles

@@ -1,3 +1,4 @@
+import copy
 import json
 import math
 
@@ -119,3 +120,47 @@ def test_type_counts_and_positions_are_numpy_friendly():
     s = scene()
     assert s.type_counts() == {'cube': 2, 'I2': 1, 'L3_up': 0}
     assert isinstance(s.unit_positions(s.blocks[0]), np.ndarray)
+
+
+def test_measured_offsets_round_trip_and_are_checked():
+    d = doc()
+    d['measured_offsets'] = {'c1': [0.002, -0.001]}
+    s = Scene.from_dict(d)
+    assert s.measured_offsets == {'c1': (0.002, -0.001)} and s.offset('c0').tolist() == [0, 0, 0]
+    assert Scene.loads(s.dumps()).measured_offsets == s.measured_offsets
+    assert 'measured_offsets' not in scene().to_dict()        # scenes without them keep their documents
+    assert s == scene()                                         # the same scene: only the planning world differs
+    for bad, field, problem in [({'x9': [0, 0]}, 'measured_offsets.x9', 'unknown block id'),
+                                ({'c1': [0.03, 0]}, 'measured_offsets.c1', 'half a unit'),
+                                ({'c1': [0.001]}, 'measured_offsets.c1', r'expected \[dx, dy\]'),
+                                ([1, 2], 'measured_offsets', 'expected an object')]:
+        d['measured_offsets'] = bad
+        with pytest.raises(SceneError, match=problem) as e:
+            Scene.from_dict(d)
+        assert e.value.field == field
+
+
+def test_moving_a_block_drops_its_measured_offset_only():
+    from rad_core.sequencing.plan import moved
+    d = doc()
+    d['measured_offsets'] = {'c0': [0.002, 0.0], 'c1': [0.0, 0.001]}
+    s = moved(Scene.from_dict(d), 'c1', (0.5, -0.3, U / 2), 0)
+    assert s.measured_offsets == {'c0': (0.002, 0.0)}
+
+
+def test_obstacles_round_trip_and_are_checked():
+    d = doc()
+    d['obstacles'] = [{'id': 'x0', 'type': 'cube', 'position': [0.3, 0.3, 0.025], 'quaternion': [0, 0, 0.5, 0.8660254]}]
+    s = Scene.from_dict(d)
+    assert s.obstacles[0].id == 'x0' and s.obstacles[0].quaternion == pytest.approx((0, 0, 0.5, 0.8660254))
+    assert Scene.loads(s.dumps()).obstacles == s.obstacles and s == scene()
+    for change, field, problem in [({'id': 'c0'}, 'obstacles[0].id', 'also a block'),
+                                   ({'type': 'dodecahedron'}, 'obstacles[0].type', 'unknown block type'),
+                                   ({'type': ['cube']}, 'obstacles[0].type', 'unknown block type'),
+                                   ({'quaternion': [0, 0, 0, 2]}, 'obstacles[0].quaternion', 'not unit length'),
+                                   ({'position': [0.3, 0.3]}, 'obstacles[0].position', 'expected')]:
+        bad = copy.deepcopy(d)
+        bad['obstacles'][0].update(change)
+        with pytest.raises(SceneError, match=problem) as e:
+            Scene.from_dict(bad)
+        assert e.value.field == field

@@ -15,6 +15,19 @@ is their 1 cm gap). A block stays one solid: faces between units of the same
 block do not move (the predecessor's filler slabs), and top and bottom faces do
 not move either, so heights and stacking are unchanged. `unit_boxes` in
 rad_core.blocks turns this into boxes for physics, rendering and Rerun.
+
+A scene registered from motion capture may also say what the lattice cannot
+(optional ``measured_offsets``): block id -> [dx, dy] (m), how far from the pose
+the scene gives it motion capture saw a block that registration snapped onto its
+target cell (a real placement is a few millimetres off). Only the motion planning
+world uses them: it puts those blocks where they were seen, so the next block is
+placed and its fingers planned against the real neighbours
+(`rad_core.gamp.action.seat_shift`); the grid, the allocation, the MDP and coverage
+use the cells. Likewise ``obstacles``: blocks registration had to set aside (fallen
+on a side, turned off the 90-degree yaws), each with its type and measured pose
+(position, quaternion x y z w). They are no blocks of the scene (nothing plans to
+pick or count them), but the motion planning world holds them where they lie, so
+no arm motion is planned through them.
 """
 
 from __future__ import annotations
@@ -64,6 +77,20 @@ class Block:
 
 
 @dataclass(frozen=True)
+class Obstacle:
+    """A block that is there but no block of the scene: its measured pose, for motion planning only."""
+
+    id: str
+    type: str
+    position: tuple[float, float, float]
+    quaternion: tuple[float, float, float, float]
+
+    def to_dict(self) -> dict:
+        return {'id': self.id, 'type': self.type, 'position': list(self.position),
+                'quaternion': list(self.quaternion)}
+
+
+@dataclass(frozen=True)
 class TargetRegion:
     name: str
     origin: tuple[float, float, float]
@@ -98,6 +125,10 @@ class Scene:
     targets: tuple[TargetRegion, ...]
     clearance: float = 0.0
     """Gap left between neighbouring blocks, a fraction of the unit (module docstring); 0 = flush."""
+    measured_offsets: Mapping[str, tuple[float, float]] = field(default_factory=dict, compare=False)
+    """Block id -> (dx, dy) m: where motion capture saw a block snapped onto its cell (module docstring)."""
+    obstacles: tuple[Obstacle, ...] = field(default=(), compare=False)
+    """Blocks set aside by registration, where they lie (module docstring)."""
     _by_id: dict = field(default=None, repr=False, compare=False)
 
     def __post_init__(self):
@@ -120,6 +151,11 @@ class Scene:
         """World centres of the block's unit cubes, shape (n, 3)."""
         offsets = self.block_types[block.type].rotated(block.yaw)
         return np.asarray(block.position) + self.unit * offsets
+
+    def offset(self, block_id: str) -> np.ndarray:
+        """The block's measured x/y offset from its scene pose as a 3-vector (m; zeros when none)."""
+        dx, dy = self.measured_offsets.get(block_id, (0.0, 0.0))
+        return np.array([dx, dy, 0.0])
 
     def with_clearance(self, clearance: float) -> 'Scene':
         """This scene with another clearance, validated as a document would be."""
@@ -146,6 +182,10 @@ class Scene:
             'blocks': [b.to_dict() for b in self.blocks],
             'targets': [t.to_dict() for t in self.targets],
         })
+        if self.measured_offsets:
+            doc['measured_offsets'] = {k: list(v) for k, v in self.measured_offsets.items()}
+        if self.obstacles:
+            doc['obstacles'] = [o.to_dict() for o in self.obstacles]
         return doc
 
     def dumps(self) -> str:
@@ -290,7 +330,7 @@ def _parse_target(doc: Any, i: int) -> TargetRegion:
 
 def _parse_scene(doc: Any) -> Scene:
     _expect(isinstance(doc, dict), '', 'a scene must be a JSON object')
-    _check_keys(doc, '', {'format', 'unit', 'block_types', 'blocks', 'targets'}, {'clearance'})
+    _check_keys(doc, '', {'format', 'unit', 'block_types', 'blocks', 'targets'}, {'clearance', 'measured_offsets', 'obstacles'})
     _expect(doc['format'] == FORMAT, 'format', f'expected {FORMAT!r}, got {_show(doc["format"])}')
     unit = _number(doc['unit'], 'unit')
     _expect(UNIT_RANGE[0] <= unit <= UNIT_RANGE[1], 'unit', f'{unit} m is outside {UNIT_RANGE[0]}..{UNIT_RANGE[1]} m')
@@ -316,9 +356,49 @@ def _parse_scene(doc: Any) -> Scene:
     total = sum(t.num_cells for t in targets)
     _expect(total <= MAX_GRID_CELLS, 'targets', f'{total} grid cells exceed the limit of {MAX_GRID_CELLS}')
 
-    scene = Scene(unit, types, blocks, targets, clearance)
+    offsets = _parse_offsets(doc.get('measured_offsets', {}), seen, unit)
+    obstacles = _parse_obstacles(doc.get('obstacles', []), seen, types)
+    scene = Scene(unit, types, blocks, targets, clearance, offsets, obstacles)
     _check_geometry(scene)
     return scene
+
+
+def _parse_obstacles(doc: Any, ids: Mapping[str, int], types) -> tuple[Obstacle, ...]:
+    _expect(isinstance(doc, list), 'obstacles', 'expected a list of {id, type, position, quaternion}')
+    _expect(len(doc) <= MAX_BLOCKS, 'obstacles', f'{len(doc)} obstacles exceed the limit of {MAX_BLOCKS}')
+    out, names = [], set()
+    for i, o in enumerate(doc):
+        where = f'obstacles[{i}]'
+        _expect(isinstance(o, dict), where, 'expected an object')
+        _check_keys(o, where, {'id', 'type', 'position', 'quaternion'}, set())
+        oid = o['id']
+        _expect(isinstance(oid, str) and oid, f'{where}.id', f'expected a non-empty string, got {_show(oid)}')
+        _expect(oid not in ids and oid not in names, f'{where}.id', f'{oid!r} is also a block or another obstacle')
+        names.add(oid)
+        _expect(isinstance(o['type'], str) and o['type'] in types, f'{where}.type', f'unknown block type {_show(o["type"])}')
+        pos, quat = o['position'], o['quaternion']
+        _expect(isinstance(pos, list) and len(pos) == 3, f'{where}.position', 'expected [x, y, z] (m)')
+        _expect(isinstance(quat, list) and len(quat) == 4, f'{where}.quaternion', 'expected [x, y, z, w]')
+        position = tuple(_number(v, f'{where}.position') for v in pos)
+        q = np.array([_number(v, f'{where}.quaternion') for v in quat])
+        norm = float(np.linalg.norm(q))
+        _expect(abs(norm - 1.0) < 1e-3, f'{where}.quaternion', f'not unit length (norm {norm:.4f})')
+        out.append(Obstacle(oid, o['type'], position, tuple(float(v) for v in q / norm)))
+    return tuple(out)
+
+
+def _parse_offsets(doc: Any, ids: Mapping[str, int], unit: float) -> dict[str, tuple[float, float]]:
+    _expect(isinstance(doc, dict), 'measured_offsets', 'expected an object: block id -> [dx, dy] (m)')
+    out = {}
+    for block_id, v in doc.items():
+        where = f'measured_offsets.{block_id}'
+        _expect(block_id in ids, where, f'unknown block id {block_id!r}')
+        _expect(isinstance(v, (list, tuple)) and len(v) == 2, where, f'expected [dx, dy] (m), got {_show(v)}')
+        xy = tuple(_number(x, where) for x in v)
+        _expect(all(abs(x) < unit / 2 for x in xy), where,
+                f'{list(xy)} m is half a unit ({unit / 2} m) or more off: that is another cell, not an offset')
+        out[block_id] = xy
+    return out
 
 
 def _check_geometry(scene: Scene) -> None:

@@ -406,7 +406,8 @@ class AssemblyNode(Node):
             run = execute_assembly(scene, lambda current, start: self.plan(current, limit, start),
                                    plant.move_arm, plant.move_gripper,
                                    self.registered_world, config, joints=lambda: self.start_joints([]),
-                                   cancelled=lambda: goal_handle.is_cancel_requested, report=report)
+                                   cancelled=lambda: goal_handle.is_cancel_requested, report=report,
+                                   plan_motion=self.plan_motion)
         except RadError as e:
             result.success, result.reason = False, str(e)
             report(0, 0, '', 'done', result.reason)

@@ -63,8 +63,58 @@ def target_pose(scene: Scene, action: SceneAction) -> tuple[np.ndarray, int]:
                           action.rotation)
 
 
+def seat_shift(scene: Scene, block_id: str, position, yaw: int, limit: float = 0.25) -> np.ndarray:
+    """How far (m, x/y) to move a block from its cell's pose so that it clears the neighbours motion
+    capture saw off their cells (`Scene.measured_offsets`), as little as that takes.
+
+    A real placement leaves a block a few millimetres off; snapped to its cell, it still counts as
+    built, but a neighbour lowered flush beside it at the exact cell would land on its edge. Each side
+    neighbour (same layer, one cell over in x or y) bounds the shift along that axis: no further
+    towards it than its own offset. Within the bounds the smallest shift is taken (0 when nothing
+    intrudes), so offsets do not pile up along a row; squeezed from both sides, the middle (the
+    collision checks then say whether the play absorbs it). A corner neighbour that still overlaps is
+    cleared along the axis that costs less. At most `limit` unit in each axis."""
+    u = scene.unit
+    block = scene.block(block_id)
+    ours = np.asarray(position, dtype=float) + u * scene.block_types[block.type].rotated(yaw)
+    lo, hi = np.full(2, -np.inf), np.full(2, np.inf)
+    corners = []
+    for other in scene.blocks:
+        if other.id == block_id:
+            continue
+        theirs = scene.unit_positions(other)
+        d = (theirs[None, :, :] - ours[:, None, :]) / u           # (our units, their units, 3)
+        near = (np.abs(d[..., 2]) < 0.5) & (np.abs(d[..., :2]).max(axis=-1) < 1.25)
+        if not near.any():
+            continue
+        o = scene.offset(other.id)[:2]
+        for dx, dy in d[near][:, :2]:
+            sx = int(round(dx))
+            sy = int(round(dy))
+            if sx and sy:
+                corners.append((sx, sy, o))
+            elif sx or sy:
+                a, side = (0, sx) if sx else (1, sy)
+                if side > 0:
+                    hi[a] = min(hi[a], o[a])
+                else:
+                    lo[a] = max(lo[a], o[a])
+    shift = np.array([min(max(0.0, lo[a]), hi[a]) if lo[a] <= hi[a] else (lo[a] + hi[a]) / 2 for a in range(2)])
+    for sx, sy, o in corners:
+        side = np.array([sx, sy])
+        if np.all(side * (shift - o) > 1e-9):       # into their corner along both axes
+            cost = np.abs(o - shift)
+            for a in np.argsort(cost):
+                if lo[a] <= o[a] <= hi[a]:
+                    shift[a] = o[a]
+                    break
+    shift = np.clip(shift, -limit * u, limit * u)
+    return np.array([round(float(shift[0]), 6), round(float(shift[1]), 6), 0.0])
+
+
 class MotionPlanner:
-    """GAMP over a planning world of its own; each call loads the given scene state."""
+    """GAMP over a planning world of its own; each call loads the given scene state. A block goes to
+    its cell's pose, moved by `seat_shift` clear of neighbours seen off their cells."""
 
     def __init__(self, config: GampConfig = GampConfig()):
         self.config = config
@@ -77,4 +127,5 @@ class MotionPlanner:
         position, yaw = target_pose(scene, action)
         start = start_joints([] if start is None else start)
         self.world.load_scene(scene)
-        return plan_action(self.world, action.block_id, position, yaw, start=start, config=self.config), position, yaw
+        seat = position + seat_shift(scene, action.block_id, position, yaw) if scene.measured_offsets else position
+        return plan_action(self.world, action.block_id, seat, yaw, start=start, config=self.config), position, yaw

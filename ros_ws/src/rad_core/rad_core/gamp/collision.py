@@ -104,8 +104,10 @@ def make_collision_fn(world: World, exclude: Iterable[str] = (), attached: Attac
     if attached is not None:
         exclude.add(attached.block_id)
     names = {body: f'block {bid}' for bid, body in world.blocks.items()}
+    names.update({body: f'block {bid} (set aside)' for bid, body in world.obstacles.items()})
     names[world.table] = 'the table'
-    obstacles = {body for bid, body in world.blocks.items() if bid not in exclude} | {world.table}
+    obstacles = ({body for bid, body in world.blocks.items() if bid not in exclude} | {world.table}
+                 | set(world.obstacles.values()))
     link_name = {v: _LINK_LABEL.get(k, k.replace('panda_', '')) for k, v in world.link_index.items()}
     link_name[-1] = 'base'
     links = robot_links(world)

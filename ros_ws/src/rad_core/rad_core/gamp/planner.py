@@ -282,7 +282,7 @@ def _tops(world: World, exclude: str) -> float:
     """Highest point of any block but one (m; 0 for the bare table)."""
     p = world.pybullet
     tops = [p.getAABB(body, -1, physicsClientId=world.client)[1][2]
-            for bid, body in world.blocks.items() if bid != exclude]
+            for bid, body in [*world.blocks.items(), *world.obstacles.items()] if bid != exclude]
     return max(tops, default=0.0)
 
 

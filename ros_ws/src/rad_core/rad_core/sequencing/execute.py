@@ -22,9 +22,15 @@ the one that deviated, so the rad-result/1 document says what the robot did.
 The faults of a real cell (`rad_core.sim.faults`) all end up as one of these:
 - a block left a few millimetres off (placement error, a nudge, motion-capture
   noise) that registration still snaps to its cell, or that stays within the
-  deviation tolerance on the table: nothing to do, the next registration carries
-  the measured pose into any later plan. The tolerance follows the tracker's
-  noise (`ExecuteConfig.mocap_noise`), so noise alone does not look like a fault;
+  deviation tolerance on the table: it counts as where the plan put it. The
+  registration keeps how far off its cell it was seen (`Scene.measured_offsets`),
+  and with `plan_motion` each later step's motion is planned again from the world
+  as measured just before it runs: the motion planning world puts those blocks
+  where they were seen, and the next block is set down clear of them
+  (`rad_core.gamp.action.seat_shift`), not onto the edge of a neighbour that
+  landed 2 mm into its cell. A step that cannot be planned again so is a
+  deviation (below). The tolerance follows the tracker's noise
+  (`ExecuteConfig.mocap_noise`), so noise alone does not look like a fault;
 - a block farther off, or fallen (a slip): a deviation; the plan is repaired by
   replanning from what is seen, where a block lying flat on the table is just a
   block to pick again;
@@ -51,19 +57,20 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable
 
 import numpy as np
 
 from rad_core.allocation.result import AllocationResult
 from rad_core.errors import RadError
+from rad_core.gamp.action import SceneAction
 from rad_core.gamp.trajectory import retime
 from rad_core.motion import GripperCommand, GripperResult, Motion, run_motion
 from rad_core.robot_model import PANDA, envelope
 from rad_core.trajectory import Trajectory, TrajectoryAborted
 from rad_core.scene import Scene
-from rad_core.sequencing.plan import AssemblyPlan, moved
+from rad_core.sequencing.plan import AssemblyPlan, PlanMotion, moved
 from rad_core.sim.mocap import Registration
 from rad_core.sim.panda import HOME
 from rad_core.sequencing.result import deviation, measured_coverage, result_document
@@ -159,12 +166,15 @@ Report = Callable[[int, int, str, str, str], None]   # (steps done, steps planne
 def execute_assembly(scene: Scene, plan: Plan, move_arm: MoveArm, move_gripper: MoveGripper, register: Register,
                      config: ExecuteConfig = ExecuteConfig(), joints: Callable[[], 'np.ndarray | None'] | None = None,
                      cancelled: Callable[[], bool] = lambda: False, report: Report | None = None,
-                     settle: Callable[[float], None] = time.sleep) -> ExecutionResult:
+                     settle: Callable[[float], None] = time.sleep,
+                     plan_motion: PlanMotion | None = None) -> ExecutionResult:
     """Build `scene` on the plant; never raises RadError (it becomes the result's reason).
 
     joints: the robot's joints now (arm and fingers), for each plan's start (None: home); without
     it, every plan starts where the last executed motion ended (home at first).
     settle(seconds): let the plant come to rest (a real plant: wait; a twin: step it).
+    plan_motion: the planner's motion planner (scene, action, start joints), to plan a step's motion
+    again from the measured world when registration saw blocks off their cells (None: never).
     Phases reported: planning, executing, verifying, replanning, done.
     """
     config.validate()
@@ -197,12 +207,24 @@ def execute_assembly(scene: Scene, plan: Plan, move_arm: MoveArm, move_gripper: 
                 result.planned_coverage = measured_coverage(promised)
             result.reallocations += [e.to_dict() for e in assembly.reallocations]
             problem = None
-            for step in assembly.steps:
+            for k, step in enumerate(assembly.steps):
                 if cancelled():
                     raise RadError('cancelled')
                 report(len(result.steps), len(assembly.steps), step.block, 'executing', '')
-                motion = Motion.from_dict(step.motion)
                 step_start = HOME if last_q is None else last_q
+                if plan_motion is not None and k > 0 and current.measured_offsets:
+                    # Blocks were seen off their cells since the plan was made: plan this motion again
+                    # against them (the first step's was planned from the world as measured).
+                    fresh = plan_motion(current, SceneAction(step.block, step.unit, step.target, tuple(step.cell),
+                                                             step.rotation), step_start)
+                    if not fresh.success:
+                        problem = (f'block {step.block}: planned again against the blocks where motion capture '
+                                   f'sees them, it cannot be placed ({fresh.reason})')
+                        result.faults.append({'step': len(result.steps), 'block': step.block, 'problem': problem,
+                                              'recovered': False})
+                        break
+                    step = replace(step, motion=fresh.motion, grasp=tuple(fresh.grasp))
+                motion = Motion.from_dict(step.motion)
                 failed = _run_step(motion, move_arm, move_gripper, step_start, joints, config)
                 # A failed grasp, or a trajectory the controller aborted (something held the arm back), has
                 # opened the hand and backed the arm out to where the step began.

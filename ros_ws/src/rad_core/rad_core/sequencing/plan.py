@@ -124,10 +124,12 @@ Rank = Callable[[Scene, list, 'np.ndarray | None'], Any]
 
 
 def moved(scene: Scene, block_id: str, position, yaw: int) -> Scene:
-    """The scene with one block at a new pose (validated like any scene)."""
+    """The scene with one block at a new pose (validated like any scene); its measured offset, if it
+    had one, is gone (it is where it was put now, as far as anyone knows)."""
     blocks = tuple(Block(b.id, b.type, tuple(round(float(v), 6) for v in position), int(yaw) % 360)
                    if b.id == block_id else b for b in scene.blocks)
-    return Scene.from_dict(replace(scene, blocks=blocks).to_dict())
+    offsets = {k: v for k, v in scene.measured_offsets.items() if k != block_id}
+    return Scene.from_dict(replace(scene, blocks=blocks, measured_offsets=offsets).to_dict())
 
 
 def plan_assembly(scene: Scene, allocate: Allocate, plan_motion: PlanMotion, sequencer: Policy | Rank,

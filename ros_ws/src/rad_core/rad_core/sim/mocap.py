@@ -33,7 +33,8 @@ its side, or one pushed off its cell, is a fact of the world to plan around, not
 a reason to stop. `register_world` registers the same way but sets such blocks
 aside with the reason (tilted, turned, off the height lattice, off its grid in a
 region, sticking into a region, overlapping another) and returns the scene of the
-rest as a `Registration`. A set-aside block is still there, physically: one
+rest as a `Registration`; the scene lists them as ``obstacles`` at their measured
+poses, so motion planning steers clear of them. A set-aside block is still there, physically: one
 lying over a target region occupies cells a plan would fill. The registration
 records those cells (`Registration.blocked`: every target cell a set-aside
 block's units overlap by more than `BLOCKED_OVERLAP` in each axis, at its
@@ -108,6 +109,10 @@ class RegistrationConfig:
     yaw_tol_deg: float = 15.0
     table_z: float = 0.0
     resolution: float = 1e-4
+    offset_floor: float = 3e-4
+    """A block snapped onto a target cell from farther than this (m, in x or y) keeps the offset as a
+    measured offset of the scene. 0.3 mm: above the creep of resting bodies and a tracker's
+    resolution, below any offset that can make two flush neighbours touch."""
 
     def __post_init__(self):
         if not (math.isfinite(self.position_tol) and 0 < self.position_tol < 0.5):
@@ -120,6 +125,8 @@ class RegistrationConfig:
             raise RadError(f'table_z must be finite, got {self.table_z!r}')
         if not (math.isfinite(self.resolution) and 0 <= self.resolution <= 0.01):
             raise RadError(f'resolution must be in 0..0.01 m, got {self.resolution!r}')
+        if not (math.isfinite(self.offset_floor) and self.offset_floor >= 0):
+            raise RadError(f'offset_floor must be finite and >= 0, got {self.offset_floor!r}')
         blocks = {}
         for body, entry in self.body_map.items():
             if not (isinstance(entry, (tuple, list)) and len(entry) == 2):
@@ -132,7 +139,8 @@ class RegistrationConfig:
     @classmethod
     def for_noise(cls, position_noise: float, yaw_noise_deg: float, unit: float, **kw) -> RegistrationConfig:
         """The tolerances `kw` gives (or the defaults), widened where a tracker's noise (std dev: m per
-        axis, deg) would otherwise push a correct pose past them: at least 5 sigma.
+        axis, deg) would otherwise push a correct pose past them: at least 5 sigma; measured offsets
+        are kept from 3 sigma up.
         Raises RadError when the noise is too large to snap to a lattice of this unit at all."""
         if not (math.isfinite(position_noise) and position_noise >= 0 and math.isfinite(yaw_noise_deg)
                 and yaw_noise_deg >= 0 and math.isfinite(unit) and unit > 0):
@@ -141,11 +149,13 @@ class RegistrationConfig:
         base = cls(**kw)
         position_tol = max(base.position_tol, 5 * position_noise / unit)
         yaw_tol = max(base.yaw_tol_deg, 5 * yaw_noise_deg)
+        # A measured offset smaller than 3 sigma is as likely noise as a block off its cell.
+        offset_floor = max(base.offset_floor, 3 * position_noise)
         if position_tol >= 0.45 or yaw_tol >= 40:
             raise RadError(f'motion-capture noise of {position_noise * 1000:.1f} mm and {yaw_noise_deg:g} deg is '
                            f'too large to register {unit * 1000:.0f} mm blocks reliably (5 sigma must stay under '
                            f'0.45 unit and 40 deg)')
-        return replace(base, position_tol=position_tol, yaw_tol_deg=yaw_tol)
+        return replace(base, position_tol=position_tol, yaw_tol_deg=yaw_tol, offset_floor=offset_floor)
 
 
 def body_map_for(scene: Scene, names: dict[str, str] | None = None) -> dict[str, tuple[str, str]]:
@@ -224,6 +234,7 @@ def _register(bodies: list[RigidBodyPose], template: Scene, config: Registration
               lenient: bool) -> Registration:
     seen_bodies: set[str] = set()
     blocks, names = [], []
+    offsets: dict[str, list[float]] = {}
     set_aside: dict[str, str] = {}
     in_regions: set[str] = set()
     for body in bodies:
@@ -242,7 +253,7 @@ def _register(bodies: list[RigidBodyPose], template: Scene, config: Registration
             raise RadError(f'rigid body {name!r} (block {block_id!r}) is not tracked (tracking_valid is '
                            f'false): its pose is unknown')
         try:
-            position, yaw = _snap(body, template, template.block_types[block_type], config)
+            position, yaw, offset = _snap(body, template, template.block_types[block_type], config)
         except _Unexpressible as e:
             if not lenient:
                 raise
@@ -252,10 +263,15 @@ def _register(bodies: list[RigidBodyPose], template: Scene, config: Registration
             continue
         blocks.append({'id': block_id, 'type': block_type, 'position': position, 'yaw': yaw})
         names.append(name)
+        if offset is not None and max(abs(v) for v in offset) >= config.offset_floor:
+            offsets[block_id] = offset
     by_block = {entry[0]: body for body in bodies for entry in [config.body_map.get(body.name)] if entry}
     doc = template.to_dict()
     while True:
         doc['blocks'] = blocks
+        kept = {b['id'] for b in blocks}
+        doc['measured_offsets'] = {k: v for k, v in offsets.items() if k in kept}
+        doc['obstacles'] = [_obstacle(b, by_block[b], config) for b in sorted(set_aside)]
         try:
             scene = Scene.from_dict(doc)
         except SceneError as e:
@@ -273,6 +289,14 @@ def _register(bodies: list[RigidBodyPose], template: Scene, config: Registration
         blocked = _blocked_cells([by_block[b] for b in set_aside], [config.body_map[by_block[b].name][1]
                                                                     for b in set_aside], scene)
         return Registration(scene, set_aside, frozenset(in_regions), blocked)
+
+
+def _obstacle(block_id: str, body: RigidBodyPose, config: RegistrationConfig) -> dict:
+    """A set-aside block as the scene's obstacle: where it lies, for motion planning."""
+    quat = np.asarray(body.quaternion, dtype=float)
+    x, y, z = (float(v) for v in body.position)
+    return {'id': block_id, 'type': config.body_map[body.name][1], 'position': [x, y, z - config.table_z],
+            'quaternion': (quat / np.linalg.norm(quat)).tolist()}
 
 
 def _blocked_cells(bodies: list[RigidBodyPose], types: list[str], scene: Scene) -> dict[str, tuple]:
@@ -323,7 +347,10 @@ def _over_regions(body: RigidBodyPose, template: Scene, block_type) -> bool:
     return False
 
 
-def _snap(body: RigidBodyPose, template: Scene, block_type, config: RegistrationConfig) -> tuple[list[float], int]:
+def _snap(body: RigidBodyPose, template: Scene, block_type,
+          config: RegistrationConfig) -> tuple[list[float], int, list[float] | None]:
+    """The block's anchor position and yaw as a scene can express them, and, for a block snapped onto
+    a target region's grid, its measured x/y offset from there (m; None elsewhere)."""
     name, u = body.name, template.unit
     pos = np.asarray(body.position, dtype=float).reshape(-1)
     quat = np.asarray(body.quaternion, dtype=float).reshape(-1)
@@ -365,9 +392,11 @@ def _snap(body: RigidBodyPose, template: Scene, block_type, config: Registration
             raise _Unexpressible(f'rigid body {name!r} is in target region {region.name!r} but '
                            f'{off.max() * u * 1000:.1f} mm off its grid '
                            f'(limit {tol * u * 1000:.1f} mm)')
+        measured = out[:2]
         for a in range(2):
             out[a] = round(float(origin[a] + u * np.round(idx[a])), _DECIMALS)
-    return out, snapped_yaw
+        return out, snapped_yaw, [round(measured[a] - out[a], _DECIMALS) for a in range(2)]
+    return out, snapped_yaw, None
 
 
 def grid_tolerance(config: RegistrationConfig, scene: Scene) -> float:

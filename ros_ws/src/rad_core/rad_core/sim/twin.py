@@ -92,6 +92,12 @@ at the twin's own tracking error (its joints lag the command by one 4 ms physics
 held-out cube3, 0.26 coverage with 0.1 mm and 0.81 (as teleporting) with 0.5 mm."""
 
 
+AVERAGE_FRAMES = 10
+"""Motion-capture frames a registration averages body positions over when the tracker is noisy
+(`Twin.registration`): the blocks are at rest, so 10 frames (a tenth of a second at 100 Hz) cut the
+noise of a measured offset by sqrt(10)."""
+
+
 def twin_world_config(base: WorldConfig = WorldConfig(), play: float = BLOCK_PLAY) -> WorldConfig:
     """The world a twin simulates: `base` with `play` per side face (see BLOCK_PLAY)."""
     return replace(base, physics=replace(base.physics, side_gap=play))
@@ -346,21 +352,43 @@ class Twin:
         """Registration of every block by its id, with tolerances that follow the motion-capture noise."""
         types = {b.id: b.type for b in self.world.scene.blocks}
         f = self.config.faults
-        return RegistrationConfig.for_noise(f.mocap_position_noise, f.mocap_yaw_noise_deg, template.unit,
+        return RegistrationConfig.for_noise(f.mocap_position_noise / math.sqrt(self._frames()), f.mocap_yaw_noise_deg,
+                                            template.unit,
                                             body_map={bid: (bid, types[bid]) for bid in self.world.blocks})
+
+    def _frames(self) -> int:
+        """How many motion-capture frames a registration averages positions over: AVERAGE_FRAMES with
+        position noise (blocks at rest: the mean of n frames has 1/sqrt(n) of the noise), else 1."""
+        return AVERAGE_FRAMES if self.config.faults.mocap_position_noise > 0 else 1
 
     def _seen(self, frames: int = 10) -> list[RigidBodyPose]:
         """What registration gets: each body's latest tracked pose over up to `frames` motion-capture frames
         (stopping at the first frame by which every body was tracked), as a registration that waits out a
         dropped body does; a body dropped in all of them is held at its last reported pose (not seen for a
-        moment is not gone)."""
+        moment is not gone). With position noise, at least `_frames()` frames, and each body's position
+        is the mean of its tracked ones (the blocks are at rest)."""
         latest: dict[str, RigidBodyPose] = {}
-        for _ in range(frames):
+        sums: dict[str, list] = {}
+        average = self._frames()
+        for k in range(max(frames, average)):
             now = self.bodies()
             latest.update({b.name: b for b in now if b.tracking_valid})
-            if len(latest) == len(now):
+            for b in now:
+                if b.tracking_valid:
+                    total = sums.setdefault(b.name, [np.zeros(3), 0])
+                    total[0] += b.position
+                    total[1] += 1
+            if len(latest) == len(now) and k + 1 >= average:
                 break
-        return [latest.get(b.name, replace(b, tracking_valid=True)) for b in now]
+        out = []
+        for b in now:
+            seen = latest.get(b.name)
+            if seen is None:
+                out.append(replace(b, tracking_valid=True))
+                continue
+            total, n = sums[b.name]
+            out.append(replace(seen, position=tuple(float(v) for v in total / n)) if n > 1 else seen)
+        return out
 
     def current_scene(self, template: Scene | None = None, config: RegistrationConfig | None = None) -> Scene:
         """The blocks where motion capture sees them now, snapped as registration snaps them.

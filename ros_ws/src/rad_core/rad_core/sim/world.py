@@ -79,6 +79,7 @@ class World:
         self._p, self.client = p, cid
         self.scene: Scene | None = None
         self.blocks: dict[str, int] = {}
+        self.obstacles: dict[str, int] = {}     # the scene's obstacles (set-aside blocks), fixed bodies
         self._shapes: dict[tuple, tuple[BlockShape, list[float]]] = {}   # -> shape, RGBA
         self._inertial: dict[int, tuple[list, list]] = {}   # body -> inertial frame in body frame
         self.table = -1
@@ -176,24 +177,35 @@ class World:
         return shape
 
     def load_scene(self, scene: Scene) -> None:
-        """(Re)create every block body at its scene pose and send the robot HOME.
+        """(Re)create every block body at its scene pose (plus its measured offset, if the scene has
+        one) and send the robot HOME.
 
         Block bodies of the previous scene are removed; constraints on them go with them.
         """
         p, cid = self._p, self.client
-        for body in self.blocks.values():
+        for body in [*self.blocks.values(), *self.obstacles.values()]:
             p.removeBody(body, physicsClientId=cid)
         self.blocks.clear()
+        self.obstacles.clear()
         self._inertial.clear()
         self._fit_table(scene)
         for block in scene.blocks:
             offsets = np.asarray(scene.block_types[block.type].offsets, dtype=float)
             shape, rgba = self._shape(block.type, offsets, scene.unit, scene.clearance)
-            body = add_block_body(p, cid, shape, list(block.position), yaw_quaternion(block.yaw),
-                                  self.config.physics)
+            # Where motion capture saw it, when a registration says so (`Scene.measured_offsets`).
+            body = add_block_body(p, cid, shape, list(np.asarray(block.position) + scene.offset(block.id)),
+                                  yaw_quaternion(block.yaw), self.config.physics)
             p.changeVisualShape(body, -1, rgbaColor=rgba, physicsClientId=cid)
             self._inertial[body] = (shape.com.tolist(), shape.axes)
             self.blocks[block.id] = body
+        for o in scene.obstacles:
+            # A block set aside by registration, where it lies: fixed (mass 0), there to be steered around.
+            offsets = np.asarray(scene.block_types[o.type].offsets, dtype=float)
+            shape, _ = self._shape(o.type, offsets, scene.unit, scene.clearance)
+            body = add_block_body(p, cid, shape, list(o.position), list(o.quaternion), self.config.physics)
+            p.changeDynamics(body, -1, mass=0.0, physicsClientId=cid)
+            p.changeVisualShape(body, -1, rgbaColor=[0.5, 0.5, 0.5, 1.0], physicsClientId=cid)
+            self.obstacles[o.id] = body
         self.scene = scene
         self.set_block_velocities_zero()
         self.set_joint_positions(panda.HOME)
