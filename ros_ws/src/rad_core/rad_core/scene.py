@@ -330,7 +330,8 @@ def _parse_target(doc: Any, i: int) -> TargetRegion:
 
 def _parse_scene(doc: Any) -> Scene:
     _expect(isinstance(doc, dict), '', 'a scene must be a JSON object')
-    _check_keys(doc, '', {'format', 'unit', 'block_types', 'blocks', 'targets'}, {'clearance', 'measured_offsets', 'obstacles'})
+    _check_keys(doc, '', {'format', 'unit', 'block_types', 'blocks', 'targets'},
+                {'clearance', 'measured_offsets', 'obstacles'})
     _expect(doc['format'] == FORMAT, 'format', f'expected {FORMAT!r}, got {_show(doc["format"])}')
     unit = _number(doc['unit'], 'unit')
     _expect(UNIT_RANGE[0] <= unit <= UNIT_RANGE[1], 'unit', f'{unit} m is outside {UNIT_RANGE[0]}..{UNIT_RANGE[1]} m')
@@ -375,7 +376,8 @@ def _parse_obstacles(doc: Any, ids: Mapping[str, int], types) -> tuple[Obstacle,
         _expect(isinstance(oid, str) and oid, f'{where}.id', f'expected a non-empty string, got {_show(oid)}')
         _expect(oid not in ids and oid not in names, f'{where}.id', f'{oid!r} is also a block or another obstacle')
         names.add(oid)
-        _expect(isinstance(o['type'], str) and o['type'] in types, f'{where}.type', f'unknown block type {_show(o["type"])}')
+        _expect(isinstance(o['type'], str) and o['type'] in types, f'{where}.type',
+                f'unknown block type {_show(o["type"])}')
         pos, quat = o['position'], o['quaternion']
         _expect(isinstance(pos, list) and len(pos) == 3, f'{where}.position', 'expected [x, y, z] (m)')
         _expect(isinstance(quat, list) and len(quat) == 4, f'{where}.quaternion', 'expected [x, y, z, w]')
