@@ -212,9 +212,11 @@ def execute_assembly(scene: Scene, plan: Plan, move_arm: MoveArm, move_gripper: 
                     raise RadError('cancelled')
                 report(len(result.steps), len(assembly.steps), step.block, 'executing', '')
                 step_start = HOME if last_q is None else last_q
-                if plan_motion is not None and k > 0 and current.measured_offsets:
-                    # Blocks were seen off their cells since the plan was made: plan this motion again
-                    # against them (the first step's was planned from the world as measured).
+                if plan_motion is not None and k > 0 and (current.measured_offsets
+                                                          or not _starts_at(step.motion, step_start)):
+                    # Blocks were seen off their cells since the plan was made, or the step before was
+                    # planned again and left the arm elsewhere: plan this motion again from the world as
+                    # measured (the first step's was planned from it).
                     fresh = plan_motion(current, SceneAction(step.block, step.unit, step.target, tuple(step.cell),
                                                              step.rotation), step_start)
                     if not fresh.success:
@@ -269,6 +271,17 @@ def execute_assembly(scene: Scene, plan: Plan, move_arm: MoveArm, move_gripper: 
         result.reason = f'{result.reason}; lost blocks: {lost}'
     report(len(result.steps), len(result.steps), '', 'done', result.reason)
     return result
+
+
+def _starts_at(motion: dict | None, q: np.ndarray) -> bool:
+    """Whether a motion's first arm trajectory starts where the arm is (q)."""
+    trajectories = (motion or {}).get('trajectories') or []
+    if not trajectories:
+        return True
+    first = trajectories[0]
+    first = first if isinstance(first, Trajectory) else Trajectory.from_dict(first)
+    start = np.asarray(first.points[0].positions, dtype=float)
+    return bool(np.abs(start - np.asarray(q, dtype=float)[:7]).max() < 1e-6)
 
 
 def _run_step(motion: Motion, move_arm: MoveArm, move_gripper: MoveGripper, step_start: np.ndarray,
