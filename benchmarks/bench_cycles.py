@@ -58,7 +58,7 @@ def run_cycles(name, scene, planner, cycles: int, faults: str, seed: int) -> lis
         for cycle in range(1, cycles + 1):
             t0 = time.perf_counter()
             start = twin.registration().scene
-            build = execute_assembly(start, planner, **kw)
+            build = execute_assembly(start, planner, plan_motion=planner.motion, **kw)
             order = [s['block'] for s in build.steps]
             apart = take_apart(twin.registration().scene, scene, place, build_order=order, **kw)
             stats = apart.drift_stats()

@@ -112,3 +112,24 @@ def test_a_ranking_outside_the_allocation_is_never_taken_and_a_failing_sequencer
         raise RadError('service sequence is not available')
     with pytest.raises(RadError, match='service sequence is not available'):
         plan_assembly(scene, solve, motion, down)
+
+
+class _Highest:
+    """A policy that wants the highest cells first: it ranks blocks that would rest on nothing first."""
+    name = 'highest'
+
+    def scores(self, env, actions, rng):
+        heights = [float(env.grid.centres[env.resulting_cells(a)[0]][:, 2].min()) for a in actions]
+        return np.array(heights + [-1.0])
+
+
+def test_a_block_that_would_rest_on_nothing_is_never_planned(motion):
+    scene = generate_scene(GeneratorConfig(grid=4), 0)
+    plan = plan_assembly(scene, solve, motion, _Highest(), seed=1)
+    assert plan.steps
+    env = AssemblyEnv(scene, EnvConfig(stability='none'))
+    regions = [t.name for t in scene.targets]
+    for step in plan.steps:
+        cells = np.array([env.grid.index(regions.index(step.target), c) for c in step.cells])
+        assert support.any_support(env.grid, env.state.occupancy, cells), step.to_dict()
+        env.state.occupancy[cells] = 0

@@ -31,6 +31,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from rad_core import support
 from rad_core.allocation.result import AllocationResult
 from rad_core.gamp.action import SceneAction
 from rad_core.mdp import Action, AssemblyEnv, EnvConfig
@@ -192,6 +193,13 @@ def plan_assembly(scene: Scene, allocate: Allocate, plan_motion: PlanMotion, seq
         ranked = rank(env, allowed, rng)
         if isinstance(ranked, str):
             return stop(ranked)
+        # The plan's own MDP judges no stability (the sequencer and the search do, for the actions they
+        # checked); an action further down a ranking can still put a block on nothing, to drop when
+        # the hand opens. Never plan one.
+        resting = [a for a in ranked if a.is_terminate or _rests_on_something(env, a)]
+        if ranked and not resting:
+            return stop(f'each of the {len(ranked)} ranked actions would put a block on nothing')
+        ranked = resting
         found = _first_feasible(env, world['scene'], ranked, planned_motion, world['q'], timings)
         if isinstance(found, str):
             return stop(found)
@@ -249,6 +257,12 @@ def mdp_actions(env: AssemblyEnv, ranked: list[SceneAction], allowed) -> list:
         if action in allowed:
             out.append(action)
     return out
+
+
+def _rests_on_something(env: AssemblyEnv, action: Action) -> bool:
+    """Whether some unit of the block would rest on the table or a placed block."""
+    cells, _ = env.resulting_cells(action)
+    return cells is None or support.any_support(env.grid, env.state.occupancy, cells)   # off-grid: judged later
 
 
 def _first_feasible(env: AssemblyEnv, scene: Scene, ranked, plan_motion: PlanMotion, q, timings):
