@@ -294,3 +294,21 @@ def test_a_block_set_aside_where_the_placement_goes_is_an_obstacle_to_the_plan()
         assert result.success and planner.world.obstacles == {}          # gone with the next scene
     finally:
         planner.close()
+
+
+def test_a_set_aside_block_the_hand_touches_is_no_obstacle_to_leaving():
+    from rad_core.gamp.action import drop_obstacles_on_the_hand
+    world = World()
+    try:
+        world.set_joint_positions(panda.HOME)
+        p = world.pybullet
+        tip = p.getLinkState(world.robot, world.link_index['panda_leftfinger'], physicsClientId=world.client)[0]
+        d = _row({}, ()).to_dict()
+        d['obstacles'] = [
+            {'id': 'stuck', 'type': 'cube', 'position': list(tip), 'quaternion': [0, 0, 0, 1]},
+            {'id': 'fallen', 'type': 'cube', 'position': [0.3, 0.4, U / 2], 'quaternion': [0.7071068, 0, 0, 0.7071068]}]
+        world.load_scene(Scene.from_dict(d))
+        assert drop_obstacles_on_the_hand(world, panda.HOME) == ['stuck']
+        assert list(world.obstacles) == ['fallen']
+    finally:
+        world.close()

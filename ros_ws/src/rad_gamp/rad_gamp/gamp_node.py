@@ -25,7 +25,7 @@ import numpy as np
 from rclpy.node import Node
 
 from rad_core.errors import RadError
-from rad_core.gamp.action import MotionPlanner, SceneAction, start_joints
+from rad_core.gamp.action import MotionPlanner, SceneAction
 from rad_core.gamp.planner import GampConfig, plan_action
 from rad_core.gamp.trajectory import TimingConfig
 from rad_core.motion import run_motion
@@ -70,8 +70,7 @@ class GampNode(Node):
             if units[:, 2].min() < scene.unit / 4:
                 raise RadError(f'place_pose of block {a.block_id!r} puts it into the table (lowest unit centre '
                                f'z = {units[:, 2].min():.3f} m, on the table it is {scene.unit / 2:.3f} m)')
-            start = start_joints(request.start_positions)
-            self.planner.world.load_scene(scene)
+            start = self.planner.load(scene, request.start_positions)
             return plan_action(self.planner.world, a.block_id, position, yaw, start=start,
                                config=self.planner.config)
         action = SceneAction(a.block_id, a.unit, a.target, (a.cell.i, a.cell.j, a.cell.k), a.rotation)

@@ -112,6 +112,19 @@ def seat_shift(scene: Scene, block_id: str, position, yaw: int, limit: float = 0
     return np.array([round(float(shift[0]), 6), round(float(shift[1]), 6), 0.0])
 
 
+def drop_obstacles_on_the_hand(world: World, q: np.ndarray) -> list[str]:
+    """Remove from the planning world the obstacles (set-aside blocks) the robot touches at q: a block
+    wedged on the fingers or leaning on the arm moves with them and falls when they move away, so
+    it is no obstacle to leaving; the next registration shows where it went. Returns their ids."""
+    p, cid = world.pybullet, world.client
+    world.set_joint_positions(q)
+    gone = [oid for oid, body in world.obstacles.items()
+            if p.getClosestPoints(world.robot, body, 0.002, physicsClientId=cid)]
+    for oid in gone:
+        p.removeBody(world.obstacles.pop(oid), physicsClientId=cid)
+    return gone
+
+
 class MotionPlanner:
     """GAMP over a planning world of its own; each call loads the given scene state. A block goes to
     its cell's pose, moved by `seat_shift` clear of neighbours seen off their cells."""
@@ -123,9 +136,18 @@ class MotionPlanner:
     def close(self) -> None:
         self.world.close()
 
-    def __call__(self, scene: Scene, action: SceneAction, start=None) -> tuple[GampResult, np.ndarray, int]:
-        position, yaw = target_pose(scene, action)
+    def load(self, scene: Scene, start=None) -> np.ndarray | None:
+        """Load the scene state into the planning world for a motion from `start` (joint values, empty
+        or None: home); returns the start as 9 joints (None: home). Obstacles the robot touches there
+        are left out (`drop_obstacles_on_the_hand`)."""
         start = start_joints([] if start is None else start)
         self.world.load_scene(scene)
+        if scene.obstacles:
+            drop_obstacles_on_the_hand(self.world, panda.HOME if start is None else start)
+        return start
+
+    def __call__(self, scene: Scene, action: SceneAction, start=None) -> tuple[GampResult, np.ndarray, int]:
+        position, yaw = target_pose(scene, action)
+        start = self.load(scene, start)
         seat = position + seat_shift(scene, action.block_id, position, yaw) if scene.measured_offsets else position
         return plan_action(self.world, action.block_id, seat, yaw, start=start, config=self.config), position, yaw

@@ -298,12 +298,10 @@ def _is_home(heap: Scene, block_id: str, pose) -> bool:
 
 def local_place_planner(planner) -> PlacePlanner:
     """Adapt an in-process `gamp.action.MotionPlanner` (its world and config) to PlacePlanner."""
-    from rad_core.gamp.action import start_joints
     from rad_core.gamp.planner import plan_action
 
     def plan_place(scene: Scene, block_id: str, position, yaw: int, start) -> MotionPlan:
-        q = start_joints([] if start is None else start)
-        planner.world.load_scene(scene)
+        q = planner.load(scene, start)
         result = plan_action(planner.world, block_id, position, float(yaw), start=q, config=planner.config)
         if not result.success:
             return MotionPlan(False, result.failure, result.reason)
