@@ -31,7 +31,6 @@ from typing import Any, Callable
 
 import numpy as np
 
-from rad_core import support
 from rad_core.allocation.result import AllocationResult
 from rad_core.gamp.action import SceneAction
 from rad_core.mdp import Action, AssemblyEnv, EnvConfig
@@ -148,7 +147,10 @@ def plan_assembly(scene: Scene, allocate: Allocate, plan_motion: PlanMotion, seq
     if not allocation.has_solution:
         plan.reason = f'allocation failed: {allocation.status}'
         return _done(plan, t0)
-    env = AssemblyEnv(scene, EnvConfig(stability='none'))
+    # The plan's MDP judges stability as the learned agents' does (physics, after a prune of blocks
+    # resting on nothing): the sequencer and its search judge the actions they checked, but a ranking
+    # goes on below them, and an action taken from there must not put a block where it tips or falls.
+    env = AssemblyEnv(scene, EnvConfig(stability='physics'))
     allowed_actions = AllocationActions(env, allocation.placements)   # its guide changes on re-allocation
     world = {'scene': scene, 'q': start}   # the planning copy: scene and arm joints
 
@@ -193,13 +195,6 @@ def plan_assembly(scene: Scene, allocate: Allocate, plan_motion: PlanMotion, seq
         ranked = rank(env, allowed, rng)
         if isinstance(ranked, str):
             return stop(ranked)
-        # The plan's own MDP judges no stability (the sequencer and the search do, for the actions they
-        # checked); an action further down a ranking can still put a block on nothing, to drop when
-        # the hand opens. Never plan one.
-        resting = [a for a in ranked if a.is_terminate or _rests_on_something(env, a)]
-        if ranked and not resting:
-            return stop(f'each of the {len(ranked)} ranked actions would put a block on nothing')
-        ranked = resting
         found = _first_feasible(env, world['scene'], ranked, planned_motion, world['q'], timings)
         if isinstance(found, str):
             return stop(found)
@@ -259,15 +254,12 @@ def mdp_actions(env: AssemblyEnv, ranked: list[SceneAction], allowed) -> list:
     return out
 
 
-def _rests_on_something(env: AssemblyEnv, action: Action) -> bool:
-    """Whether some unit of the block would rest on the table or a placed block."""
-    cells, _ = env.resulting_cells(action)
-    return cells is None or support.any_support(env.grid, env.state.occupancy, cells)   # off-grid: judged later
-
-
 def _first_feasible(env: AssemblyEnv, scene: Scene, ranked, plan_motion: PlanMotion, q, timings):
     """(action, PlanStep) of the best-ranked action GAMP can execute, or why none."""
     def check(action) -> MotionPlan:
+        outcome, why, _, _ = env.evaluate(action)      # stability first: no motion for a block that falls
+        if outcome is not None:
+            return MotionPlan(False, 'stability', why)
         ts = time.perf_counter()
         motion = plan_motion(scene, scene_action(env, action), q)
         timings['motion'] += time.perf_counter() - ts
