@@ -341,3 +341,33 @@ def test_a_block_left_2mm_into_its_neighbours_cell_is_built_against_not_onto(mot
         assert toward * (x - nominal) < 0.0008
         assert abs(result.final_scene.measured_offsets.get(first, (0, 0))[0]) < 0.0018
     world.close()
+
+
+def test_a_block_found_turned_on_the_table_is_picked_where_it_lies_and_built_straight(motion):
+    """A block that slipped lands anyhow: flat on the table, 30 degrees off the lattice. Registration
+    keeps it (at the nearest yaw, the turn as its measured offset) and GAMP grasps it as it lies."""
+    from rad_core.sim.twin import Tolerances, twin_world_config
+    from rad_core.trajectory import TrajectoryAborted
+    from rad_core.transforms import yaw_quaternion
+    world = World(ROW, twin_world_config())
+    twin = Twin(world)
+    world.set_block_pose('q', [0.5, -0.2, U / 2], yaw_quaternion(30.0))
+    twin.settle(0.2)
+    seen = twin.registration()
+    assert seen.set_aside == {} and seen.scene.turn('q') == pytest.approx(30.0, abs=0.5)
+
+    def move_arm(trajectory):
+        report = twin.execute(trajectory, tolerances=Tolerances(path=0.05, goal=0.01, goal_time=1.0))
+        if report.error_code:
+            raise TrajectoryAborted(report.error_code, f'aborted: {report.error_string}')
+
+    def plan(scene, start):
+        return plan_assembly(scene, solve, motion, HeurPolicy(), seed=1, start=start)
+
+    result = execute_assembly(seen.scene, plan, move_arm, twin.execute_gripper, twin.registration,
+                              ExecuteConfig(settle_s=0.3), joints=world.joint_positions, settle=twin.settle,
+                              plan_motion=motion)
+    assert result.success and result.coverage == 1.0 and result.lost_blocks == {}, result.reason
+    yaw = yaw_of_quaternion(world.block_pose('q')[1]) % 90
+    assert min(yaw, 90 - yaw) < 2.0 and 'q' not in result.final_scene.measured_offsets
+    world.close()

@@ -363,3 +363,21 @@ def test_a_set_aside_block_is_an_obstacle_of_the_scene_where_it_lies():
     assert (o.id, o.type) == ('i0', 'I2') and o.position == pytest.approx((0.6, -0.2, 0.026))
     assert o.quaternion == pytest.approx(turned)
     assert reg.plannable().obstacles == reg.scene.obstacles
+
+
+def test_a_block_turned_on_the_table_is_registered_straight_with_its_turn_kept():
+    s = scene()
+    bodies = _with(s, 2, quaternion=yaw_quaternion(90 + 32))          # i0, lying flat on the table
+    with pytest.raises(RadError, match='32.0 deg from a multiple of 90'):
+        register_scene(bodies, s, config_for(s))                     # strict: no scene has that yaw
+    reg = register_world(bodies, s, config_for(s))
+    assert reg.set_aside == {} and reg.scene.block('i0').yaw == 90
+    assert reg.scene.turn('i0') == pytest.approx(32.0) and reg.scene.offset('i0').tolist() == [0, 0, 0]
+    # In a target region, or turned and lifted off the table, it still cannot be expressed.
+    placed = with_placed(generate_scene(GeneratorConfig(grid=4), 3))
+    bid = next(placed.blocks[i].id for i in blocks_on_grid(placed, Grid(placed)))
+    k = [b.id for b in placed.blocks].index(bid)
+    turned = scene_to_bodies(placed)
+    b = turned[k]
+    turned[k] = RigidBodyPose(b.name, b.position, tuple(yaw_quaternion(placed.blocks[k].yaw + 30)))
+    assert bid in register_world(turned, placed, config_for(placed)).set_aside

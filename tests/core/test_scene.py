@@ -132,7 +132,7 @@ def test_measured_offsets_round_trip_and_are_checked():
     assert s == scene()                                         # the same scene: only the planning world differs
     for bad, field, problem in [({'x9': [0, 0]}, 'measured_offsets.x9', 'unknown block id'),
                                 ({'c1': [0.03, 0]}, 'measured_offsets.c1', 'half a unit'),
-                                ({'c1': [0.001]}, 'measured_offsets.c1', r'expected \[dx, dy\]'),
+                                ({'c1': [0.001]}, 'measured_offsets.c1', r'expected \[dx, dy\] \(m\) or'),
                                 ([1, 2], 'measured_offsets', 'expected an object')]:
         d['measured_offsets'] = bad
         with pytest.raises(SceneError, match=problem) as e:
@@ -164,3 +164,13 @@ def test_obstacles_round_trip_and_are_checked():
         with pytest.raises(SceneError, match=problem) as e:
             Scene.from_dict(bad)
         assert e.value.field == field
+
+
+def test_a_measured_turn_is_an_offset_of_at_most_45_degrees():
+    d = doc()
+    d['measured_offsets'] = {'c1': [0.0, 0.0, -30.0]}
+    s = Scene.from_dict(d)
+    assert s.turn('c1') == -30.0 and s.turn('c0') == 0.0 and s.offset('c1').tolist() == [0, 0, 0]
+    d['measured_offsets'] = {'c1': [0.0, 0.0, 50.0]}
+    with pytest.raises(SceneError, match='more than 45'):
+        Scene.from_dict(d)

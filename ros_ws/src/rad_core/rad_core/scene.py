@@ -19,7 +19,9 @@ rad_core.blocks turns this into boxes for physics, rendering and Rerun.
 A scene registered from motion capture may also say what the lattice cannot
 (optional ``measured_offsets``): block id -> [dx, dy] (m), how far from the pose
 the scene gives it motion capture saw a block that registration snapped onto its
-target cell (a real placement is a few millimetres off). Only the motion planning
+target cell (a real placement is a few millimetres off), or, as [0, 0, turn], how
+far (deg) a block lying on the table is turned from the yaw the scene gives it (a
+block that slipped lands anyhow). Only the motion planning
 world uses them: it puts those blocks where they were seen, so the next block is
 placed and its fingers planned against the real neighbours
 (`rad_core.gamp.action.seat_shift`); the grid, the allocation, the MDP and coverage
@@ -125,8 +127,9 @@ class Scene:
     targets: tuple[TargetRegion, ...]
     clearance: float = 0.0
     """Gap left between neighbouring blocks, a fraction of the unit (module docstring); 0 = flush."""
-    measured_offsets: Mapping[str, tuple[float, float]] = field(default_factory=dict, compare=False)
-    """Block id -> (dx, dy) m: where motion capture saw a block snapped onto its cell (module docstring)."""
+    measured_offsets: Mapping[str, tuple[float, ...]] = field(default_factory=dict, compare=False)
+    """Block id -> (dx, dy) m: where motion capture saw a block snapped onto its cell; (0, 0, turn deg)
+    for one lying on the table turned off the 90-degree yaws (module docstring)."""
     obstacles: tuple[Obstacle, ...] = field(default=(), compare=False)
     """Blocks set aside by registration, where they lie (module docstring)."""
     _by_id: dict = field(default=None, repr=False, compare=False)
@@ -154,8 +157,13 @@ class Scene:
 
     def offset(self, block_id: str) -> np.ndarray:
         """The block's measured x/y offset from its scene pose as a 3-vector (m; zeros when none)."""
-        dx, dy = self.measured_offsets.get(block_id, (0.0, 0.0))
+        dx, dy = self.measured_offsets.get(block_id, (0.0, 0.0))[:2]
         return np.array([dx, dy, 0.0])
+
+    def turn(self, block_id: str) -> float:
+        """How far (deg) the block is measured turned from its scene yaw (0 when not)."""
+        values = self.measured_offsets.get(block_id, ())
+        return float(values[2]) if len(values) > 2 else 0.0
 
     def with_clearance(self, clearance: float) -> 'Scene':
         """This scene with another clearance, validated as a document would be."""
@@ -395,11 +403,15 @@ def _parse_offsets(doc: Any, ids: Mapping[str, int], unit: float) -> dict[str, t
     for block_id, v in doc.items():
         where = f'measured_offsets.{block_id}'
         _expect(block_id in ids, where, f'unknown block id {block_id!r}')
-        _expect(isinstance(v, (list, tuple)) and len(v) == 2, where, f'expected [dx, dy] (m), got {_show(v)}')
-        xy = tuple(_number(x, where) for x in v)
-        _expect(all(abs(x) < unit / 2 for x in xy), where,
-                f'{list(xy)} m is half a unit ({unit / 2} m) or more off: that is another cell, not an offset')
-        out[block_id] = xy
+        _expect(isinstance(v, (list, tuple)) and len(v) in (2, 3), where,
+                f'expected [dx, dy] (m) or [dx, dy, turn] (m, m, deg), got {_show(v)}')
+        values = tuple(_number(x, where) for x in v)
+        _expect(all(abs(x) < unit / 2 for x in values[:2]), where,
+                f'{list(values[:2])} m is half a unit ({unit / 2} m) or more off: that is another cell, not an offset')
+        if len(values) == 3:
+            _expect(abs(values[2]) <= 45, where, f'a turn of {values[2]} deg is more than 45: that is another yaw, '
+                                                 f'not an offset')
+        out[block_id] = values
     return out
 
 

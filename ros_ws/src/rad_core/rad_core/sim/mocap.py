@@ -33,7 +33,10 @@ its side, or one pushed off its cell, is a fact of the world to plan around, not
 a reason to stop. `register_world` registers the same way but sets such blocks
 aside with the reason (tilted, turned, off the height lattice, off its grid in a
 region, sticking into a region, overlapping another) and returns the scene of the
-rest as a `Registration`; the scene lists them as ``obstacles`` at their measured
+rest as a `Registration`. A block lying flat on the table but turned off the
+90-degree yaws is not set aside there: it is registered at the nearest one with the
+turn kept as its measured offset, so it can be picked where it lies and put down
+straight. The scene lists the set-aside blocks as ``obstacles`` at their measured
 poses, so motion planning steers clear of them. A set-aside block is still there, physically: one
 lying over a target region occupies cells a plan would fill. The registration
 records those cells (`Registration.blocked`: every target cell a set-aside
@@ -253,7 +256,7 @@ def _register(bodies: list[RigidBodyPose], template: Scene, config: Registration
             raise RadError(f'rigid body {name!r} (block {block_id!r}) is not tracked (tracking_valid is '
                            f'false): its pose is unknown')
         try:
-            position, yaw, offset = _snap(body, template, template.block_types[block_type], config)
+            position, yaw, offset = _snap(body, template, template.block_types[block_type], config, lenient)
         except _Unexpressible as e:
             if not lenient:
                 raise
@@ -263,7 +266,7 @@ def _register(bodies: list[RigidBodyPose], template: Scene, config: Registration
             continue
         blocks.append({'id': block_id, 'type': block_type, 'position': position, 'yaw': yaw})
         names.append(name)
-        if offset is not None and max(abs(v) for v in offset) >= config.offset_floor:
+        if offset is not None and (len(offset) == 3 or max(abs(v) for v in offset) >= config.offset_floor):
             offsets[block_id] = offset
     by_block = {entry[0]: body for body in bodies for entry in [config.body_map.get(body.name)] if entry}
     doc = template.to_dict()
@@ -347,10 +350,11 @@ def _over_regions(body: RigidBodyPose, template: Scene, block_type) -> bool:
     return False
 
 
-def _snap(body: RigidBodyPose, template: Scene, block_type,
-          config: RegistrationConfig) -> tuple[list[float], int, list[float] | None]:
-    """The block's anchor position and yaw as a scene can express them, and, for a block snapped onto
-    a target region's grid, its measured x/y offset from there (m; None elsewhere)."""
+def _snap(body: RigidBodyPose, template: Scene, block_type, config: RegistrationConfig,
+          lenient: bool = False) -> tuple[list[float], int, list[float] | None]:
+    """The block's anchor position and yaw as a scene can express them, and its measured offset from
+    there: x/y (m) for a block snapped onto a target region's grid; [0, 0, turn (deg)] for one lying
+    on the table turned off the lattice (lenient only; strict registration refuses it); else None."""
     name, u = body.name, template.unit
     pos = np.asarray(body.position, dtype=float).reshape(-1)
     quat = np.asarray(body.quaternion, dtype=float).reshape(-1)
@@ -369,9 +373,14 @@ def _snap(body: RigidBodyPose, template: Scene, block_type,
                        f'{config.tilt_tol_deg:g}): a block must lie flat, not on its side or an edge')
     yaw = math.degrees(math.atan2(r[1, 0], r[0, 0]))
     snapped_yaw = round(yaw / 90.0) * 90
-    if abs(yaw - snapped_yaw) > config.yaw_tol_deg:
-        raise _Unexpressible(f'rigid body {name!r}: yaw {yaw:.1f} deg is {abs(yaw - snapped_yaw):.1f} deg from a '
-                       f'multiple of 90 (limit {config.yaw_tol_deg:g})')
+    turned = yaw - snapped_yaw
+    if abs(turned) > config.yaw_tol_deg:
+        turn_error = (f'rigid body {name!r}: yaw {yaw:.1f} deg is {abs(turned):.1f} deg from a multiple of 90 '
+                      f'(limit {config.yaw_tol_deg:g})')
+        if not lenient:
+            raise _Unexpressible(turn_error)
+    else:
+        turn_error = ''
     snapped_yaw %= 360
 
     height = (pos[2] - config.table_z - u / 2) / u
@@ -383,6 +392,13 @@ def _snap(body: RigidBodyPose, template: Scene, block_type,
            round(u / 2 + level * u, _DECIMALS)]
 
     region = _region_of(template, snapped_yaw, block_type, np.array(out))
+    if turn_error:
+        # Lying flat on the table, turned off the lattice (a block that slipped or fell): registered at
+        # the nearest yaw a scene has, the turn kept as its measured offset, so it can be picked up
+        # where it really lies and put down straight. Anywhere else it cannot be expressed.
+        if region is not None or level != 0 or _over_regions(body, template, block_type):
+            raise _Unexpressible(turn_error)
+        return out, snapped_yaw, [0.0, 0.0, round(turned, 3)]
     if region is not None:
         origin = np.asarray(region.origin)
         idx = (np.array(out[:2]) - origin[:2]) / u

@@ -194,7 +194,7 @@ class World:
             shape, rgba = self._shape(block.type, offsets, scene.unit, scene.clearance)
             # Where motion capture saw it, when a registration says so (`Scene.measured_offsets`).
             body = add_block_body(p, cid, shape, list(np.asarray(block.position) + scene.offset(block.id)),
-                                  yaw_quaternion(block.yaw), self.config.physics)
+                                  yaw_quaternion(block.yaw + scene.turn(block.id)), self.config.physics)
             p.changeVisualShape(body, -1, rgbaColor=rgba, physicsClientId=cid)
             self._inertial[body] = (shape.com.tolist(), shape.axes)
             self.blocks[block.id] = body
