@@ -417,7 +417,11 @@ def test_cancelling_execution_cancels_the_arm_goal_and_the_arm_stops(node_proces
     def arm_moving():
         return 'executing' in phases and joints and max(abs(v) for v in joints[-1].velocity[:7]) > 0.05
 
-    assert spin_until(ros_node, arm_moving, timeout=120.0), ('the arm never moved', phases)
+    if not spin_until(ros_node, arm_moving, timeout=120.0):
+        got = handle.get_result_async()
+        rclpy.spin_until_future_complete(ros_node, got, timeout_sec=10.0)
+        why = got.result().result.reason if got.result() is not None else 'no result'
+        raise AssertionError(f'the arm never moved: phases {phases}, result: {why}')
     moving_at = np.asarray(joints[-1].position[:7])
     t_cancel = time.monotonic()
     cancel = handle.cancel_goal_async()
