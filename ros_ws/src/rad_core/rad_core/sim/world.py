@@ -189,23 +189,22 @@ class World:
         self.obstacles.clear()
         self._inertial.clear()
         self._fit_table(scene)
-        for block in scene.blocks:
-            offsets = np.asarray(scene.block_types[block.type].offsets, dtype=float)
-            shape, rgba = self._shape(block.type, offsets, scene.unit, scene.clearance)
-            # Where motion capture saw it, when a registration says so (`Scene.measured_offsets`).
-            body = add_block_body(p, cid, shape, list(np.asarray(block.position) + scene.offset(block.id)),
-                                  yaw_quaternion(block.yaw + scene.turn(block.id)), self.config.physics)
-            p.changeVisualShape(body, -1, rgbaColor=rgba, physicsClientId=cid)
+        def add(type_name: str, position, quaternion, rgba=None) -> int:
+            offsets = np.asarray(scene.block_types[type_name].offsets, dtype=float)
+            shape, colour = self._shape(type_name, offsets, scene.unit, scene.clearance)
+            body = add_block_body(p, cid, shape, list(position), list(quaternion), self.config.physics)
+            p.changeVisualShape(body, -1, rgbaColor=rgba or colour, physicsClientId=cid)
             self._inertial[body] = (shape.com.tolist(), shape.axes)
-            self.blocks[block.id] = body
+            return body
+
+        for block in scene.blocks:
+            # Where motion capture saw it, when a registration says so (`Scene.measured_offsets`).
+            self.blocks[block.id] = add(block.type, np.asarray(block.position) + scene.offset(block.id),
+                                        yaw_quaternion(block.yaw + scene.turn(block.id)))
         for o in scene.obstacles:
             # A block set aside by registration, where it lies: fixed (mass 0), there to be steered around.
-            offsets = np.asarray(scene.block_types[o.type].offsets, dtype=float)
-            shape, _ = self._shape(o.type, offsets, scene.unit, scene.clearance)
-            body = add_block_body(p, cid, shape, list(o.position), list(o.quaternion), self.config.physics)
+            body = self.obstacles[o.id] = add(o.type, o.position, o.quaternion, [0.5, 0.5, 0.5, 1.0])
             p.changeDynamics(body, -1, mass=0.0, physicsClientId=cid)
-            p.changeVisualShape(body, -1, rgbaColor=[0.5, 0.5, 0.5, 1.0], physicsClientId=cid)
-            self.obstacles[o.id] = body
         self.scene = scene
         self.set_block_velocities_zero()
         self.set_joint_positions(panda.HOME)
