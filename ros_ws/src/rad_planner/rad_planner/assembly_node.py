@@ -63,7 +63,7 @@ from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
 import rclpy
-from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
+from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor, SingleThreadedExecutor
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
@@ -155,7 +155,8 @@ class AssemblyNode(Node):
         self.io.create_subscription(SceneMsg, 'scene', self.scene_callback, LATCHED)
         self.io_executor = SingleThreadedExecutor(context=self.context)
         self.io_executor.add_node(self.io)
-        self.io_thread = threading.Thread(target=self.io_executor.spin, daemon=True)
+        self.io_stop = threading.Event()
+        self.io_thread = threading.Thread(target=self.spin_io, daemon=True)
         self.io_thread.start()
         group = ReentrantCallbackGroup()
         self.plan_pub = self.create_publisher(String, 'plan_json', LATCHED)
@@ -170,8 +171,20 @@ class AssemblyNode(Node):
         self.take_apart_server = serve_take_apart(self)
         self.get_logger().info('assembly planner ready')
 
+    def spin_io(self):
+        # spin_once in a loop rather than spin: this rclpy's Executor.shutdown destroys the wait's
+        # guard condition without waiting for spin to return, so the thread is stopped and joined
+        # first, and only then is its executor shut down.
+        try:
+            while not self.io_stop.is_set() and self.context.ok():
+                self.io_executor.spin_once(timeout_sec=0.1)
+        except ExternalShutdownException:
+            pass
+
     def destroy_node(self):
-        self.io_executor.shutdown(timeout_sec=2.0)
+        self.io_stop.set()
+        self.io_thread.join(timeout=2.0)
+        self.io_executor.shutdown(timeout_sec=0)
         self.io.destroy_node()
         super().destroy_node()
 
