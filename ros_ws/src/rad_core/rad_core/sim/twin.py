@@ -644,6 +644,9 @@ class Twin:
         commanded = abs(grip.target - grip.drive) < 1e-9
         arrived = commanded and np.abs(fingers - grip.drive).max() < 2e-4
         stalled = grip.still >= 0.05 and (commanded or grip.closing)
+        if stalled and not grip.closing and self._wedged():
+            grip.still = 0.0
+            return
         timeout = grip.t > abs(grip.drive - fingers.mean()) / self.config.gripper_speed + 2.0
         if arrived or stalled or timeout:
             self._finish_grip(stop=False)
@@ -678,7 +681,8 @@ class Twin:
             block_id, width = self._released
             if block_id not in w.blocks:
                 self._released = None
-            elif float(fingers.min()) > width + 0.003:     # the fingers are clear of the block's sides
+            elif float(fingers.min()) > width + 0.003 and w.blocks[block_id] not in self._ghosts:
+                # the fingers are clear of the block's sides (and collide with it again)
                 self._released = None
                 self._after_release(block_id)
         closing = target < panda.FINGER_OPEN - cfg.close_margin and target < float(fingers.mean()) - cfg.close_margin
@@ -692,6 +696,23 @@ class Twin:
             self._fault('miss', block=common[0])
         elif common:
             self._attach(common[0], float(fingers.mean()))
+
+    def _wedged(self) -> bool:
+        """Opening fingers stopped by the block they just let go: let them pass through it (until
+        clear, `_unghost`). In PyBullet the squeezed pads' penetration recovery can twist a block as
+        they open, and a twisted block wedges between them and comes up with the hand; a parallel
+        gripper's coupled fingers open symmetrically off a block standing on its support."""
+        if self._released is None:
+            return False
+        block_id = self._released[0]
+        body = self.world.blocks.get(block_id)
+        if body is None or body in self._ghosts:
+            return False
+        if not all(block_id in self._touching(link) for link in self.world.finger_links):
+            return False
+        self._ghost(block_id)
+        self._events.append({'t': round(self._run_time(), 6), 'action': 'unwedge', 'block': block_id})
+        return True
 
     def _touching(self, link: int) -> set[str]:
         p, w = self._p, self.world
@@ -761,9 +782,13 @@ class Twin:
             if w.blocks.get(block_id) != body:
                 del self._ghosts[body]
                 continue
-            near = [p.getClosestPoints(w.robot, body, 0.002, linkIndexA=link, physicsClientId=w.client)
-                    for link in w.finger_links]
-            if not any(near):
+            # Bounding boxes, not closest points: those honour the collision filter and find nothing.
+            lo, hi = (np.asarray(v) for v in p.getAABB(body, physicsClientId=w.client))
+            near = False
+            for link in w.finger_links:
+                flo, fhi = (np.asarray(v) for v in p.getAABB(w.robot, link, physicsClientId=w.client))
+                near |= bool(np.all(flo < hi + 0.002) and np.all(lo - 0.002 < fhi))
+            if not near:
                 for link in w.finger_links:
                     p.setCollisionFilterPair(w.robot, body, link, -1, 1, physicsClientId=w.client)
                 del self._ghosts[body]
