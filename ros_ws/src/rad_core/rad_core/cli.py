@@ -24,13 +24,17 @@ import json
 import sys
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from rad_core import jsonfmt
 from rad_core.errors import RadError
-from rad_core.scene import Scene
+
+if TYPE_CHECKING:
+    from rad_core.scene import Scene
 
 
 def _read_scene(path: str) -> Scene:
+    from rad_core.scene import Scene   # numpy: not needed to parse arguments or print help
     if path == '-':
         return Scene.loads(sys.stdin.read())
     return Scene.load(path)
@@ -358,7 +362,10 @@ def _add_solver_args(p: argparse.ArgumentParser) -> None:
     p.add_argument('--workers', type=int, default=1, help='CP-SAT workers (1 = deterministic)')
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(command: str | None = 'train') -> argparse.ArgumentParser:
+    """The whole parser, built without importing torch, OR-Tools, PyBullet or Dask: each command imports
+    what it uses when it runs. Only `rad train`'s --<config field> flags need a heavy import (TrainConfig
+    lives with the trainer, which imports torch), so they are added only when `command` is 'train'."""
     parser = argparse.ArgumentParser(prog='rad', description='rad: robot assembly discovery tools')
     parser.add_argument('--debug', action='store_true', help='show tracebacks of internal errors')
     sub = parser.add_subparsers(dest='command', required=True)
@@ -425,8 +432,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="the motion-capture frame's name, written as mocap_frame (default: mocap)")
     p.set_defaults(func=cmd_calibrate)
     p = sub.add_parser('eval', help="the paper's metrics (R, d, e, f, f_g, f_p, coverage) of a sequencer over scenes")
-    from rad_core.evaluation import AGENTS
-    p.add_argument('--agent', choices=list(AGENTS), default='heur')
+    # A name, not argparse choices: the registry imports the solvers and networks, and building the parser
+    # must stay quick for every command; get_agent refuses an unknown name with the list of valid ones.
+    p.add_argument('--agent', default='heur', metavar='AGENT',
+                   help='the sequencer to evaluate (default: heur); an unknown name lists the valid ones')
     p.add_argument('--verify', action='store_true',
                    help='take the best-ranked action the planning copy finds feasible (GAMP with the robot, '
                         'the stability check without): no failures by construction')
@@ -491,13 +500,20 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--scheduler', metavar='ADDR',
                    help='with --actors or --seeds: use the workers of an existing Dask scheduler, '
                         'e.g. tcp://127.0.0.1:8786')
-    _add_train_args(p)
+    if command == 'train':
+        _add_train_args(p)
     p.set_defaults(func=cmd_train)
     return parser
 
 
+def _command(argv: list[str]) -> str | None:
+    """The subcommand argv names: its first word that is not an option (the top level has only --debug)."""
+    return next((a for a in argv if not a.startswith('-')), None)
+
+
 def main(argv=None) -> int:
-    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    parser = build_parser(_command(argv))
     args = parser.parse_args(argv)
     try:
         return args.func(args)
