@@ -7,6 +7,16 @@ import subprocess
 from rad_core.scene import Scene
 
 
+def chunk_kinds(png: bytes) -> list[bytes]:
+    """The kinds of a PNG file's chunks, in order."""
+    assert png[:8] == b'\x89PNG\r\n\x1a\n'
+    kinds, pos = [], 8
+    while pos < len(png):
+        kinds.append(png[pos + 4:pos + 8])
+        pos += 12 + int.from_bytes(png[pos:pos + 4], 'big')
+    return kinds
+
+
 def test_rad_demo_builds_the_default_scene_and_writes_every_output(tmp_path):
     exe = shutil.which('rad')
     assert exe, 'rad is not on PATH (source scripts/env.sh)'
@@ -14,9 +24,11 @@ def test_rad_demo_builds_the_default_scene_and_writes_every_output(tmp_path):
     r = subprocess.run([exe, 'demo', '--out', str(out), '--rtf', '8'], capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
     assert 'demo: built: 4 steps' in r.stdout and 'coverage 1.00' in r.stdout
-    for name in ('scene.json', 'result.json', 'final.png', 'recording.rrd'):
+    for name in ('scene.json', 'result.json', 'before.png', 'after.png', 'build.png', 'recording.rrd'):
         assert (out / name).stat().st_size > 0, name
     result = json.loads((out / 'result.json').read_text())
+    # The build's animation: the start, then one frame per step.
+    assert chunk_kinds((out / 'build.png').read_bytes()).count(b'fcTL') == len(result['steps']) + 1
     assert result['format'] == 'rad-result/1' and result['coverage'] == 1.0
     scene = Scene.from_dict(result['scene'])
     assert scene.to_dict() == Scene.load(out / 'scene.json').to_dict()

@@ -3,8 +3,13 @@
     demo [--scene FILE] [--out DIR] [--rtf X] [--time-limit S]
          [--faults none|realistic|FILE] [--faults-seed N] [--cycles N]
 
-Writes DIR/scene.json, DIR/result.json (rad-result/1), DIR/final.png and, when
-the Rerun visualizer is installed, DIR/recording.rrd; node logs in DIR/logs/.
+Writes DIR/scene.json, DIR/result.json (rad-result/1), pictures of the build and, when
+the Rerun visualizer is installed, DIR/recording.rrd; node logs in DIR/logs/. The pictures
+(rad_core.render.save_build_pictures) show the structure close up from two sides, target
+cells no block fills as translucent pink cubes and blocks on cells outside the target tinted
+red: DIR/before.png (the target and the heap at the start), DIR/after.png (what was built, as
+motion capture saw it at the end) and DIR/build.png, an animated PNG of the structure after
+each step (blocks at their planned poses).
 Without --scene it builds the default scene: two-sided, g = 4, generator seed 8.
 
 --faults gives the twin the faults of a real cell (rad_core.sim.faults: 'realistic'
@@ -179,9 +184,10 @@ def run(scene: Scene, out: Path, rtf: float, time_limit: float, faults: str = 'n
     final = None
     if doc.get('final_blocks'):
         final = Scene.from_dict(dict(scene.to_dict(), blocks=doc['final_blocks']))
-        from rad_core.render import save_scene_png
-        from rad_core.sim.panda import HOME
-        save_scene_png(final, out / 'final.png', robot=HOME)
+    # The last build's own start: with --cycles, the heap as motion capture saw it after a take-apart.
+    start = Scene.from_dict(doc['scene']) if doc.get('scene') else scene
+    from rad_core.render import save_build_pictures
+    save_build_pictures(start, final, doc.get('steps', []), out)
     return {'result': result, 'doc': doc, 'exit_codes': codes, 'final': final, 'cycles': rows}
 
 
@@ -215,8 +221,8 @@ def main(argv=None) -> int:
         print(f'demo: error: {e}', file=sys.stderr)
         return 2
     result, doc = run_['result'], run_['doc']
-    files = ', '.join(str(args.out / f) for f in ('scene.json', 'result.json', 'final.png', 'recording.rrd')
-                      if (args.out / f).exists())
+    files = ', '.join(str(args.out / f) for f in ('scene.json', 'result.json', 'before.png', 'after.png',
+                                                  'build.png', 'recording.rrd') if (args.out / f).exists())
     print(f'demo: {"built" if result.success else "stopped"}: {result.steps_executed} steps, '
           f'{result.replans} replans, coverage {result.coverage:.2f}'
           + (f' ({result.reason})' if result.reason else ''))
