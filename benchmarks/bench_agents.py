@@ -24,7 +24,9 @@ import argparse
 import time
 
 from rad_core import jsonfmt
-from rad_core.evaluation import ProgressBar, evaluate, generated_scenes
+from rad_core.evaluation import evaluate
+from rad_core.progress import ProgressBar
+from rad_core.scene_sources import generated_scenes
 
 # Table II of the paper (two-sided, robot in the loop); absent: not reported. The
 # table has no d or f; for HEUR they follow from it (the text's "40 % ... upon an

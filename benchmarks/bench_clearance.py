@@ -15,7 +15,8 @@ from __future__ import annotations
 import argparse
 import time
 
-from rad_core.evaluation import evaluate, generated_scenes
+from rad_core.evaluation import evaluate
+from rad_core.scene_sources import generated_scenes
 
 AGENTS = ('heur', 'heur-verified')
 

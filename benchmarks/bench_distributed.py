@@ -36,7 +36,8 @@ import argparse
 import time
 
 from rad_core.distributed import AgentArgs, dask_client, evaluate_distributed
-from rad_core.evaluation import evaluate, generated_scenes, uses_robot
+from rad_core.evaluation import evaluate, uses_robot
+from rad_core.scene_sources import generated_scenes
 
 
 def main() -> int:

@@ -92,7 +92,7 @@ def attempted_and_placed(steps, final_scene) -> tuple[int, int]:
 
 
 def run_teleport(name, scene, planner) -> dict:
-    from rad_core.sequencing.result import measured_coverage
+    from rad_core.coverage import measured_coverage
     from rad_core.sim.twin import Twin, twin_world_config
     from rad_core.sim.world import World
     from rad_core.transforms import yaw_quaternion

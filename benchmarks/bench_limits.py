@@ -68,7 +68,7 @@ DEFAULT_SHAPES = 'arch,tower,stairs,tee,window'
 def _coverage(twin) -> tuple[float, list[str]]:
     """measured_coverage of the twin's registered scene; bodies registration refuses are left out."""
     from rad_core.errors import RadError
-    from rad_core.sequencing.result import measured_coverage
+    from rad_core.coverage import measured_coverage
     from rad_core.sim.mocap import RegistrationConfig, register_scene
     try:
         return measured_coverage(twin.current_scene()), []

@@ -36,7 +36,8 @@ import numpy as np
 
 from rad_core import jsonfmt
 from rad_core.allocation import AllocationParams, solve
-from rad_core.evaluation import ProgressBar, evaluate, get_agent
+from rad_core.evaluation import evaluate, get_agent
+from rad_core.progress import ProgressBar
 
 from bench_table2 import fmt, scenes   # the same generated scenes as Table II, the same number format
 
@@ -97,8 +98,8 @@ def paper_fill(grid, n: int, clearance: float, cache: Path) -> list[float]:
     path = cache / f'paper-fill-{cell_name(grid, n, clearance)}.json'
     if path.exists():
         return json.loads(path.read_text())
-    from rad_core.shapes import target_coverage
-    out = [target_coverage(scene, solve(scene, AllocationParams()).placements)
+    from rad_core.coverage import placements_coverage
+    out = [placements_coverage(scene, solve(scene, AllocationParams()).placements)
            for _, scene in cell_scenes(grid, n, clearance)]
     cache.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(out))

@@ -37,7 +37,9 @@ import numpy as np
 
 from rad_core import jsonfmt
 from rad_core.allocation import AllocationParams, solve
-from rad_core.evaluation import ProgressBar, evaluate, generated_scenes, get_agent
+from rad_core.evaluation import evaluate, get_agent
+from rad_core.progress import ProgressBar
+from rad_core.scene_sources import generated_scenes
 from rad_core.mdp import AssemblyEnv, EnvConfig
 from rad_core.physics import PhysicsStability
 from rad_core.sequencing.actions import AllocationActions

@@ -24,7 +24,8 @@ import time
 from pathlib import Path
 
 from rad_core import jsonfmt
-from rad_core.evaluation import ProgressBar, evaluate, get_agent
+from rad_core.evaluation import evaluate, get_agent
+from rad_core.progress import ProgressBar
 
 ROOT = Path(__file__).resolve().parents[1]
 PAPER = {   # Table II of the paper (two-sided, robot in the loop); absent keys are not reported

@@ -220,7 +220,8 @@ def cmd_settle(args) -> None:
 
 def cmd_eval(args) -> None:
     import json
-    from rad_core.evaluation import evaluate, generated_scenes, get_agent
+    from rad_core.evaluation import evaluate, get_agent
+    from rad_core.scene_sources import generated_scenes
     out = {}
     runs = [('trained with the robot', args.model, False), ('start (no robot)', args.baseline, False)]
     if args.verify:

@@ -24,6 +24,7 @@ try:
 except ImportError:   # run without scripts/env.sh: the core is pure Python
     sys.path.insert(0, str(ROOT / 'ros_ws' / 'src' / 'rad_core'))
 
+from rad_core.coverage import placements_coverage  # noqa: E402
 from rad_core import shapes  # noqa: E402
 from rad_core.allocation import AllocationParams, solve, validate_allocation  # noqa: E402
 
@@ -56,7 +57,7 @@ def summary(name, scene, params):
     spec = shapes.SPECS[name]
     return {'name': name, 'split': split, 'family': spec.family, 'custom': spec.custom,
             'cells': scene.num_target_cells, 'blocks': len(scene.blocks), 'status': result.status,
-            'objective': result.objective, 'coverage': shapes.target_coverage(scene, result.placements),
+            'objective': result.objective, 'coverage': placements_coverage(scene, result.placements),
             'heur_order': heur, 'stable_order': stable, 'problems': problems}
 
 

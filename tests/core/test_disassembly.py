@@ -16,7 +16,7 @@ from rad_core.sequencing.disassembly import (TableConfig, local_place_planner, p
                                              resting_on, return_poses, take_apart, to_take_apart)
 from rad_core.sequencing.execute import ExecuteConfig, execute_assembly
 from rad_core.sequencing.plan import MotionPlan, local_motion_planner, moved, plan_assembly
-from rad_core.sequencing.result import measured_coverage
+from rad_core.coverage import measured_coverage
 from rad_core.sim.twin import Twin
 from rad_core.sim.world import World
 

@@ -19,7 +19,8 @@ import pytest
 
 from rad_core.distributed import AgentArgs, dask_client, evaluate_distributed
 from rad_core.errors import RadError
-from rad_core.evaluation import evaluate, generated_scenes
+from rad_core.evaluation import evaluate
+from rad_core.scene_sources import generated_scenes
 
 SCENES = list(generated_scenes(3, 2, 6, 0))
 SEED = 5
@@ -139,7 +140,7 @@ def test_cli_workers_and_scheduler_give_the_serial_json(client, tmp_path):
         r = rad('eval', '--agent', 'heur-norobot', '--grid', '3', '--scenes', '3', '--seed', '0',
                 '--json', str(out), *flags)
         assert r.returncode == 0, r.stderr
-        assert 'heur-norobot on 3 scenes' in r.stdout and 'Dask' in r.stdout
+        assert 'heur on 3 scenes' in r.stdout and 'Dask' in r.stdout
         assert json.loads(out.read_text()) == expected
 
 
@@ -179,7 +180,7 @@ def test_bad_arguments_fail_before_any_cluster_starts():
             evaluate_distributed(AgentArgs('heur-norobot'), SCENES, False, 0, workers=workers)
     with pytest.raises(RadError, match='no scenes'):
         evaluate_distributed(AgentArgs('heur-norobot'), [], False, 0, workers=1)
-    with pytest.raises(RadError, match='unknown agent'):
+    with pytest.raises(RadError, match="unknown scorer 'nobody'"):
         evaluate_distributed(AgentArgs('nobody'), SCENES, False, 0, workers=1)
     with pytest.raises(RadError, match='--dashboard'):
         with dask_client(scheduler='tcp://127.0.0.1:1', dashboard=True):

@@ -196,7 +196,8 @@ def test_config_errors_are_clear():
 
 @pytest.mark.parametrize('name', ['milp-dqn', 'dqn', 'dqn-rel', 'milp-dqn-mixed'])
 def test_shipped_agents_load_by_name_and_evaluate_with_the_same_keys(name):
-    from rad_core.evaluation import KEYS, evaluate, generated_scenes
+    from rad_core.evaluation import KEYS, evaluate
+    from rad_core.scene_sources import generated_scenes
     assert ckpt.resolve(name).is_file(), f'{name}: no shipped weights in {ckpt.WEIGHTS_DIR}'
     q = QPolicy.load(name)
     assert q.name in name and q.source.endswith(f'{name}.pt')
@@ -207,7 +208,8 @@ def test_shipped_agents_load_by_name_and_evaluate_with_the_same_keys(name):
 def test_verify_never_fails_and_never_builds_less():
     """--verify: the best-ranked action the stability check accepts; a failing action
     is skipped instead of ending the episode."""
-    from rad_core.evaluation import evaluate, generated_scenes, get_agent
+    from rad_core.evaluation import evaluate, get_agent
+    from rad_core.scene_sources import generated_scenes
     scenes = list(generated_scenes(4, 2, 12, 0))
     plain = evaluate('milp-dqn', scenes, robot=False, seed=0)
     checked = evaluate(get_agent('milp-dqn', verify=True), scenes, robot=False, seed=0)
@@ -219,7 +221,8 @@ def test_verify_never_fails_and_never_builds_less():
 
 
 def test_a_model_of_another_action_space_is_refused():
-    from rad_core.evaluation import evaluate, generated_scenes
+    from rad_core.evaluation import evaluate
+    from rad_core.scene_sources import generated_scenes
     with pytest.raises(Exception, match="trained on the 'milp' action space"):
         evaluate('dqn', generated_scenes(3, 2, 1, 0), robot=False, seed=0, policy=QPolicy.load('milp-dqn'))
 

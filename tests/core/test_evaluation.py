@@ -7,7 +7,8 @@ import sys
 
 import pytest
 
-from rad_core.evaluation import KEYS, evaluate, generated_scenes, summarize
+from rad_core.evaluation import KEYS, evaluate, summarize
+from rad_core.scene_sources import generated_scenes
 from rad_core.generator import GeneratorConfig, generate_scene
 from rad_core.mdp import Outcome
 from rad_core.scene import Scene

@@ -10,12 +10,13 @@ import pytest
 from rad_core.allocation import AllocationParams, solve
 from rad_core.allocation.cpsat import pose_key, rests_now
 from rad_core.errors import RadError
-from rad_core.evaluation import Check, evaluate, get_agent
+from rad_core.evaluation import evaluate, get_agent
+from rad_core.sequencing.deciders import Check
 from rad_core.generator import GeneratorConfig, generate_scene
 from rad_core.mdp import AssemblyEnv, EnvConfig
 from rad_core.sequencing.actions import AllocationActions
 from rad_core.sequencing.episode import run_episode
-from rad_core.evaluation import policy_decider
+from rad_core.sequencing.deciders import policy_decider
 from rad_core.sequencing.policy import HeurPolicy
 from rad_core.sequencing.reallocation import (ReallocationConfig, Reallocator, placed_scene,
                                               with_reallocation)
@@ -194,10 +195,10 @@ def test_no_time_left_skips_the_solve_with_a_reason():
 
 def test_rad_eval_reallocate_agent_names_and_refuses_other_action_spaces():
     agent = get_agent('heur-verified', reallocate=True)
-    assert agent.reallocate and agent.name == 'heur-verified+realloc'
+    assert agent.reallocate and agent.name == 'heur+verify+realloc' and agent.robot is True
     assert get_agent('milp-dqn-mixed-lookahead', verify=True, reallocate=True).name == \
-        'milp-dqn-mixed-lookahead+verify+realloc'
-    with pytest.raises(RadError, match='--reallocate applies'):
+        'milp-dqn-mixed+lookahead:5+verify+realloc'
+    with pytest.raises(RadError, match='realloc applies'):
         get_agent('dqn', reallocate=True)
 
 

@@ -5,7 +5,8 @@ import pytest
 from rad_core.allocation import AllocationParams, solve
 from rad_core.allocation.placements import Placement
 from rad_core.errors import RadError
-from rad_core.evaluation import evaluate, generated_scenes, get_agent
+from rad_core.evaluation import evaluate, get_agent
+from rad_core.scene_sources import generated_scenes
 from rad_core.generator import GeneratorConfig, generate_scene
 from rad_core.learning.checkpoint import CheckpointError
 from rad_core.sequencing.sequencer import POLICIES, Sequencer, SequencerConfig
@@ -92,7 +93,7 @@ def test_bad_configs_and_checkpoints_name_the_problem(tmp_path):
 
 def test_search_agents_with_verification_never_fail_and_are_reproducible():
     agent = get_agent('milp-dqn-halving', verify=True, budget=3)
-    assert agent.name == 'milp-dqn-halving@3+verify' and agent.search == 'halving' and agent.budget == 3
+    assert agent.name == 'milp-dqn+halving:3+verify' and agent.search == 'halving' and agent.budget == 3
     runs = [evaluate(agent, generated_scenes(3, 2, 2, 10), robot=True, seed=0) for _ in range(2)]
     assert runs[0]['f'] == 0.0
     assert [r['return'] for r in runs[0]['scenes']] == [r['return'] for r in runs[1]['scenes']]
@@ -100,7 +101,7 @@ def test_search_agents_with_verification_never_fail_and_are_reproducible():
 
 
 def test_budget_only_for_search_agents():
-    with pytest.raises(RadError, match='--budget applies to the search agents'):
+    with pytest.raises(RadError, match='--budget applies to agents with a simulation search'):
         get_agent('milp-dqn', budget=3)
     with pytest.raises(RadError, match='>= 1'):
         get_agent('milp-dqn-mcts', budget=0)

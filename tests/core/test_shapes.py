@@ -9,6 +9,7 @@ import pytest
 
 from rad_core import shapes
 from rad_core.allocation import solve, validate_allocation
+from rad_core.coverage import placements_coverage
 from rad_core.errors import RadError
 from rad_core.scene import Scene
 
@@ -117,7 +118,7 @@ def test_allocation_fills_the_target(name):
     result = solve(scene)
     assert result.has_solution
     assert validate_allocation(scene, result) == []
-    assert shapes.target_coverage(scene, result.placements) >= 0.9
+    assert placements_coverage(scene, result.placements) >= 0.9
 
 
 def test_seed_moves_the_blocks_only():

@@ -6,7 +6,7 @@ import pytest
 from rad_core import support
 from rad_core.allocation import AllocationParams, solve
 from rad_core.allocation.validate import validate_allocation
-from rad_core.evaluation import coverage_opt
+from rad_core.coverage import optimum_coverage
 from rad_core.generator import GeneratorConfig, generate_scene
 from rad_core.mdp import AssemblyEnv, EnvConfig
 from rad_core.physics import PhysicsStability
@@ -87,7 +87,7 @@ def test_stable_allocations_are_valid_and_buildable_where_the_papers_are_not(phy
             space = AllocationActions(env, result.placements)
             ceiling = coverage_ceiling(env, space)
             assert ceiling is not None
-            gaps.append(coverage_opt(env, space.guide) - ceiling)
+            gaps.append(optimum_coverage(env, space.guide) - ceiling)
     # What the allocation proposes and what any order can build: far closer with 'stable'.
     assert np.mean(gaps_stable) < 0.5 * np.mean(gaps_paper)
     assert np.mean(gaps_paper) > 0.03

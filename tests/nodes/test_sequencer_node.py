@@ -31,7 +31,7 @@ def test_serves_a_ranking_and_a_bad_request_gets_a_reason_then_the_next_is_serve
     good = sequence_request(DEMO_SCENE, placements, max_actions=3)
     r = ask(good)
     assert r.success, r.reason
-    assert r.policy.startswith('milp-dqn-lookahead') and not r.terminate
+    assert r.policy.startswith('milp-dqn-mixed+lookahead:5') and not r.terminate   # the default agent
     ranking = ranking_from_response(r)
     assert 1 <= len(ranking.actions) <= 3 and len(ranking.values) == len(ranking.actions)
     assert {a.block_id for a in ranking.actions} <= {b.id for b in DEMO_SCENE.blocks}

@@ -192,7 +192,9 @@ def cmd_calibrate(args) -> int:
 
 
 def cmd_eval(args) -> int:
-    from rad_core.evaluation import ProgressBar, evaluate, generated_scenes, get_agent, scene_dir, uses_robot
+    from rad_core.evaluation import evaluate, get_agent, uses_robot
+    from rad_core.progress import ProgressBar
+    from rad_core.scene_sources import generated_scenes, scene_dir
     distributed = args.workers is not None or args.scheduler is not None
     if args.workers is not None and args.workers < 1:
         raise RadError(f'--workers must be at least 1, got {args.workers}')
@@ -239,7 +241,7 @@ def cmd_eval(args) -> int:
 
 
 def cmd_dataset_build(args) -> int:
-    from rad_core.evaluation import ProgressBar
+    from rad_core.progress import ProgressBar
     from rad_core.learning.dataset import build
     shapes = []
     if args.shapes:
@@ -267,7 +269,7 @@ def cmd_dataset_build(args) -> int:
 
 def cmd_train(args) -> int:
     from dataclasses import fields
-    from rad_core.evaluation import ProgressBar
+    from rad_core.progress import ProgressBar
     from rad_core.learning.dqn import TrainConfig, train
     given = {f.name: getattr(args, f.name) for f in fields(TrainConfig) if getattr(args, f.name) is not None}
     if args.resume:
@@ -435,7 +437,9 @@ def build_parser(command: str | None = 'train') -> argparse.ArgumentParser:
     # A name, not argparse choices: the registry imports the solvers and networks, and building the parser
     # must stay quick for every command; get_agent refuses an unknown name with the list of valid ones.
     p.add_argument('--agent', default='heur', metavar='AGENT',
-                   help='the sequencer to evaluate (default: heur); an unknown name lists the valid ones')
+                   help='the agent to evaluate (default: heur): a preset (default, greedy, paper, heur, heur-verified, '
+                        'exact) or scorer+parts, e.g. milp-dqn-mixed+mcts:10+verify+realloc+support:stable '
+                        '(rad_core.agents); results record its canonical text')
     p.add_argument('--verify', action='store_true',
                    help='take the best-ranked action the planning copy finds feasible (GAMP with the robot, '
                         'the stability check without): no failures by construction')

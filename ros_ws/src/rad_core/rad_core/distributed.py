@@ -256,7 +256,7 @@ def evaluate_distributed(agent_args: AgentArgs, scenes: Iterable[tuple[str, Scen
     else:
         with dask_client(workers, scheduler, dashboard) as own:
             rows = _run(own, agent_args, scenes, robot, seed, progress, execution, alloc_doc, realloc_doc, retries)
-    return summarize(rows)
+    return summarize(rows, agent.name)
 
 
 def _run(client, agent_args, scenes, robot, seed, progress, execution, alloc_doc, realloc_doc, retries) -> list:

@@ -1,77 +1,59 @@
-"""The paper's evaluation (Sec. V, Tables I and II) for any sequencer.
+"""The paper's evaluation (Sec. V, Tables I and II) for any agent: episodes and their metrics.
 
-An agent is a `Policy` (it scores the allocation's allowed actions) plus two
-choices that decide which row of Table II it reproduces:
-
-- where it acts: with the robot in the loop (`RobotAssemblyEnv`: GAMP decides
-  grasp and placement, the twin executes, physics judges) or without it
-  (`AssemblyEnv` with physical stability, the paper's "HEUR wo robot" oracle);
-- how the ranking becomes an action: the best-ranked one blindly (the paper's
-  HEUR, which therefore fails with f_g / f_p), or the best one GAMP finds
-  feasible from the current state (what /plan_assembly does: `heur-verified`).
+An agent is an `agents.AgentSpec` (scorer, search, verification, re-allocation,
+allocation support; `rad_core.agents` has its text form and presets). Here it runs
+episodes, with the robot in the loop (`RobotAssemblyEnv`: GAMP decides grasp and
+placement, the twin executes, physics judges) or without it (`AssemblyEnv` with
+physical stability, the paper's "HEUR wo robot" oracle). Unverified, it takes the
+best-ranked action blindly (the paper's agents, which therefore fail with f_g / f_p);
+verified, the best one found feasible from the current state (what /plan_assembly does).
 
 Nothing ranked (above terminating) means the termination action, as in the
 paper. Every episode starts from the scene with a fresh CP-SAT allocation
 (deterministic: one worker, fixed seed), and episode i gets the random
 generator default_rng(seed + i), so a run is reproducible from (agent, scenes,
-robot, seed).
-
-The learned sequencers (milp-dqn, dqn, dqn-rel) are agents whose policy is a
-trained Q-network (`rad_core.learning`), each choosing among its own action
-space; they load their shipped weights by name or any checkpoint file.
+robot, seed). Every row and result records the agent's canonical text (`agent`).
 """
 
 from __future__ import annotations
 
-import sys
-import time
-from collections.abc import Callable, Iterable, Iterator
-from dataclasses import dataclass
-from pathlib import Path
-from typing import NamedTuple, TextIO
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, replace
 
 import numpy as np
 
+from rad_core.agents import SIMULATION_SEARCHES, AgentSpec, label, parse_with_robot
 from rad_core.allocation import AllocationParams, solve
 from rad_core.allocation.guide import AllocationGuide
+from rad_core.coverage import optimum_coverage
 from rad_core.errors import RadError
 from rad_core.mdp import AssemblyEnv, EnvConfig, Outcome
 from rad_core.scene import Scene
-from rad_core.sequencing.actions import ActionSpace, action_space
-from rad_core.sequencing.episode import Decide, Decision, run_episode, stop
-from rad_core.sequencing.policy import HeurPolicy, Policy, first_feasible, ranked_actions
+from rad_core.sequencing.actions import action_space
+from rad_core.sequencing.deciders import (exact_decider, policy_decider, search_decider, simulated_check,
+                                          stability_check)
+from rad_core.sequencing.episode import run_episode
+from rad_core.sequencing.policy import Policy
 
-KEYS = ('R', 'R_std', 'd', 'e', 'f', 'f_g', 'f_p', 'coverage', 'coverage_rel', 'n', 'scenes')
+KEYS = ('agent', 'R', 'R_std', 'd', 'e', 'f', 'f_g', 'f_p', 'coverage', 'coverage_rel', 'n', 'scenes')
 FAIL_GRASP = (Outcome.INVALID_GRASP,)
 FAIL_PLACE = (Outcome.INVALID_PLACEMENT, Outcome.INVALID_DISTURBED)
 
 
 @dataclass(frozen=True)
 class Agent:
-    """A sequencer under evaluation.
+    """An `AgentSpec` ready to run episodes: its policy factory and what its parts imply here.
 
-    make_policy: builds the policy (once per run; policies keep no per-episode
-        state, each episode gets its own seeded generator).
-    robot: None follows `evaluate`'s robot flag; False never uses the robot
-        (the oracle), True always does (GAMP checks need the robot's world),
-        whatever the flag says.
-    verified: take the best-ranked action the planning copy finds feasible (with
-        the robot: GAMP; without: the physics stability check), not the best one.
-    actions: the action space it chooses among (`sequencing.actions`): 'milp'
-        (the allocation's actions), 'all' (the DQN baseline), 'rel' (DQN-REL).
-    support: the allocation it expects (`AllocationParams.support`): 'none'
-        (the paper's MILP) or 'stable'; `evaluate`'s allocation argument overrides.
-    search: '' (act on the policy's ranking) or a test-time search of
-        `sequencing.search` ('mcts', 'halving', 'lookahead') on the acting env itself (snapshot,
-        simulate, restore), with `budget` simulations per decision and exploration
-        `epsilon` (None: the search's default, 0.05 for mcts as the paper, 0 for halving).
-    reallocate: when the episode would stop with allocated poses open, check them (with
-        the robot: a simulated step; without: stability), exclude those that fail as
-        no-goods and re-solve the allocation over the free cells (each event in the row).
+    name: the spec's canonical text (`agents.label`). robot: None follows `evaluate`'s robot
+    flag; True / False whatever it says (legacy names fixed it; the branch and bound needs the
+    robot). search: '' or a search of `sequencing.search`, or 'exact' / 'dfs' for the branch and
+    bound without / with the network's order of children. actions and support: the scorer's
+    action space and the allocation it runs with (a model file records both).
     """
 
     name: str
     make_policy: Callable[[], Policy]
+    spec: AgentSpec | None = None
     robot: bool | None = None
     verified: bool = False
     actions: str = 'milp'
@@ -80,182 +62,64 @@ class Agent:
     budget: int = 5
     epsilon: float | None = None
     reallocate: bool = False
-    """Re-solve the allocation when sequencing stalls (`sequencing.reallocation`)."""
     time_limit_s: float = 60.0
     """Search time per scene of the branch and bound (search='exact' or 'dfs')."""
 
 
-def _learned(name: str, actions: str, checkpoint=None, support: str = 'none', network: str | None = None,
-             **kw) -> Agent:
+def agent_from_spec(spec: AgentSpec, robot: bool | None = None) -> Agent:
+    """The runnable agent of a spec (loads a network to read what its file records)."""
+    policy = spec.make_policy() if spec.learned else None
+    actions = getattr(policy, 'actions', 'milp')
+    support = spec.resolved_support(policy)
+    search, budget, limit = spec.search, 5, 60.0
+    if spec.search == 'bnb':
+        search, limit = ('dfs' if spec.learned else 'exact'), float(spec.budget)
+        if robot is False:
+            raise RadError(f'{label(spec)}: the branch and bound searches with GAMP and physics: it needs the robot')
+        robot = True
+    elif spec.search:
+        budget = int(spec.budget)
+    if spec.realloc and actions != 'milp':
+        raise RadError(f'realloc applies to agents choosing among the allocation\'s actions, not {label(spec)!r} '
+                       f'({actions!r})')
+
     def make_policy():
-        from rad_core.learning.policy import QPolicy
-        return QPolicy.load(checkpoint if checkpoint is not None else (network or name))
-    return Agent(name, make_policy, actions=actions, support=support, **kw)
+        return policy if policy is not None else spec.make_policy()
+    return Agent(label(spec), make_policy, spec, robot=robot, verified=spec.verify, actions=actions,
+                 support=support, search=search, budget=budget, reallocate=spec.realloc, time_limit_s=limit)
 
 
-AGENTS = {
-    'heur': Agent('heur', HeurPolicy),
-    'heur-verified': Agent('heur-verified', HeurPolicy, robot=True, verified=True),
-    'heur-norobot': Agent('heur-norobot', HeurPolicy, robot=False),
-    'milp-dqn': _learned('milp-dqn', 'milp'),
-    'dqn': _learned('dqn', 'all'),
-    'dqn-rel': _learned('dqn-rel', 'rel'),
-    'milp-dqn-mixed': _learned('milp-dqn-mixed', 'milp', support='stable'),
-    # The paper's MILP-DQN-MCTS (budget 5) and rad's sequential halving at the same budget.
-    'milp-dqn-mcts': _learned('milp-dqn-mcts', 'milp', network='milp-dqn', search='mcts'),
-    'milp-dqn-halving': _learned('milp-dqn-halving', 'milp', network='milp-dqn', search='halving'),
-    'milp-dqn-mixed-mcts': _learned('milp-dqn-mixed-mcts', 'milp', support='stable', network='milp-dqn-mixed',
-                                    search='mcts'),
-    'milp-dqn-mixed-halving': _learned('milp-dqn-mixed-halving', 'milp', support='stable',
-                                       network='milp-dqn-mixed', search='halving'),
-    'milp-dqn-lookahead': _learned('milp-dqn-lookahead', 'milp', network='milp-dqn', search='lookahead'),
-    # milp-dqn-mixed fine-tuned with the robot in the loop (docs/results/robot_training.md).
-    'milp-dqn-robot': _learned('milp-dqn-robot', 'milp', support='stable'),
-    'milp-dqn-robot-lookahead': _learned('milp-dqn-robot-lookahead', 'milp', support='stable',
-                                         network='milp-dqn-robot', search='lookahead'),
-    # The robot-feasible ceiling: branch and bound over orders and re-allocations (`sequencing.exact`).
-    'exact': Agent('exact', HeurPolicy, robot=True, verified=True, support='stable', search='exact',
-                   reallocate=True),
-    # The same branch and bound as a time-bounded test-time search, children in the network's order.
-    'milp-dqn-mixed-dfs': _learned('milp-dqn-mixed-dfs', 'milp', support='stable', network='milp-dqn-mixed',
-                                   search='dfs', robot=True, verified=True, time_limit_s=10.0),
-    'milp-dqn-mixed-lookahead': _learned('milp-dqn-mixed-lookahead', 'milp', support='stable',
-                                         network='milp-dqn-mixed', search='lookahead'),
-}
-LEARNED = tuple(name for name, a in AGENTS.items() if a.name.startswith(('milp-dqn', 'dqn')))
-
-
-def get_agent(agent: str | Agent, checkpoint: str | None = None, verify: bool = False,
+def get_agent(agent: str | AgentSpec | Agent, checkpoint: str | None = None, verify: bool = False,
               budget: int | None = None, reallocate: bool = False) -> Agent:
-    """An agent by name; learned agents load `checkpoint` instead of their shipped
-    weights; verify makes it take the best-ranked action the planning copy finds
-    feasible (`Agent.verified`); budget sets a search agent's simulations per decision;
-    reallocate makes it re-solve the allocation when it stalls (`Agent.reallocate`)."""
-    from dataclasses import replace
+    """An agent by its text (`agents.parse`: a preset, scorer+parts, or a legacy name), spec or
+    itself. The keyword arguments are the command line's older switches, applied on top:
+    checkpoint replaces a learned agent's network by a model file; verify, budget and
+    reallocate set those parts."""
     if isinstance(agent, Agent):
         return agent
-    if reallocate:
-        base = get_agent(agent, checkpoint, verify, budget)
-        if base.actions != 'milp':
-            raise RadError(f'--reallocate applies to agents choosing among the allocation\'s actions, '
-                           f'not {base.name!r} ({base.actions!r})')
-        return replace(base, name=f'{base.name}+realloc', reallocate=True)
-    if verify:
-        base = get_agent(agent, checkpoint, budget=budget)
-        return replace(base, name=f'{base.name}+verify', verified=True)
-    if agent not in AGENTS:
-        raise RadError(f'unknown agent {agent!r}; one of {", ".join(AGENTS)}')
-    found = AGENTS[agent]
+    spec, robot = (agent, None) if isinstance(agent, AgentSpec) else parse_with_robot(agent)
+    if checkpoint is not None:
+        if not spec.learned:
+            raise RadError(f'--checkpoint applies to learned agents (a network scorer), not {label(spec)!r}')
+        spec = replace(spec, scorer=str(checkpoint))
     if budget is not None:
-        if found.search not in ('mcts', 'halving', 'lookahead'):
-            raise RadError(f'--budget applies to the search agents with a simulation budget (*-mcts, *-halving, '
-                           f'*-lookahead), not {agent!r}')
+        if spec.search not in SIMULATION_SEARCHES:
+            raise RadError(f'--budget applies to agents with a simulation search ({", ".join(SIMULATION_SEARCHES)}), '
+                           f'not {label(spec)!r}')
         if budget < 1:
             raise RadError(f'--budget must be >= 1, got {budget}')
-        found = replace(found, name=f'{agent}@{budget}', budget=budget)
-    if checkpoint is not None:
-        if agent not in LEARNED:
-            raise RadError(f'--checkpoint applies to the learned agents ({", ".join(LEARNED)}), not {agent!r}')
-        found = replace(found, make_policy=_learned(agent, found.actions, checkpoint).make_policy)
-    return found
+        spec = replace(spec, budget=budget)
+    if verify:
+        spec = replace(spec, verify=True)
+    if reallocate:
+        spec = replace(spec, realloc=True)
+    return agent_from_spec(spec, robot)
 
 
-def uses_robot(agent: str | Agent, robot: bool) -> bool:
+def uses_robot(agent: str | AgentSpec | Agent, robot: bool) -> bool:
     """Whether the agent's episodes run with the robot, given the caller's flag."""
     agent = get_agent(agent)
     return robot if agent.robot is None else agent.robot
-
-
-def coverage_opt(env: AssemblyEnv, guide: AllocationGuide) -> float:
-    """Target coverage the allocation optimum achieves: target cells already
-    filled or covered by an allocated pose, over all target cells."""
-    filled = env.state.occupancy >= 0
-    for cells in guide.pose_cells:
-        filled[cells] = True
-    total = int(env.grid.is_target.sum())
-    return float((filled & env.grid.is_target).sum()) / total if total else 1.0
-
-
-class Check(NamedTuple):
-    success: bool
-    reason: str = ''
-    plan: object = None     # the motion plan the check found, when it planned one
-
-
-def stability_check(env: AssemblyEnv):
-    """A verify() for no-robot agents: would the action be valid now (geometry and
-    physics, on the env's own cached stability check)? Acting is left to the env."""
-    def check(action) -> Check:
-        outcome, reason, _, _ = env.evaluate(action)
-        return Check(outcome is None, reason)
-    return check
-
-
-def policy_decider(policy: Policy, actions: ActionSpace, verify=None) -> Decide:
-    """decide() for the episode loop: the best-ranked action, or with verify
-    (a GAMP check, `RobotAssemblyEnv.plan`) the best one it finds feasible,
-    carrying its motion plan; nothing ranked (or feasible) means terminate."""
-    def decide(env: AssemblyEnv, rng: np.random.Generator) -> Decision:
-        ranked = ranked_actions(policy, env, actions(env), rng)
-        if verify is None:
-            return Decision(ranked[0]) if ranked else stop()
-        action, plan, _ = first_feasible(env, ranked, verify)
-        return Decision(action, plan) if action is not None else stop()
-    return decide
-
-
-def search_decider(policy: Policy, actions: ActionSpace, stepper, agent: Agent, verify=None) -> Decide:
-    """decide() that searches before every decision (`Agent.search`) on `stepper`, the env
-    that acts (RobotAssemblyEnv with the robot, the AssemblyEnv without); the search
-    leaves it as it was. Unverified: the search's move. Verified: the best of the
-    search's ranking that is known to work: a searched child whose simulated step
-    succeeded needs no further check (it was a real step of the planning copy, GAMP
-    and physics included; its motion plan is reused), an unsearched one is checked by
-    simulating it (`simulated_check`); failed children are never taken."""
-    from rad_core.sequencing.search import SEARCHES, EnvModel
-    search = SEARCHES[agent.search]
-    kwargs = {} if agent.epsilon is None else {'epsilon': agent.epsilon}
-    check = simulated_check(stepper) if verify is not None else None
-
-    def decide(env: AssemblyEnv, rng: np.random.Generator) -> Decision:
-        if not actions(env):
-            return stop()
-        model = EnvModel(stepper, policy, actions)
-        result = search(model, rng, budget=agent.budget, **kwargs)
-        plans = {a: plan for (steps, a), plan in model.plans.items() if steps == env.state.steps}
-        if verify is None:
-            if result.action.is_terminate:
-                return stop()
-            return Decision(result.action, plans.get(result.action))
-        worked = {c.action for c in result.children if not c.invalid}
-
-        def known_or_simulated(action) -> Check:
-            return Check(True, '', plans.get(action)) if action in worked else check(action)
-        action, ok, _ = first_feasible(env, [a for a, _ in result.proposals()], known_or_simulated)
-        return Decision(action, ok.plan) if action is not None else stop()
-    return decide
-
-
-def policy_order(policy: Policy, rng: np.random.Generator):
-    """order(env, actions) for a search: all actions, best score first (ties keep their order)."""
-    def order(env: AssemblyEnv, actions: list) -> list:
-        scores = np.asarray(policy.scores(env, actions, rng), dtype=float)[:-1]
-        return [actions[i] for i in np.argsort(-scores, kind='stable')]
-    return order
-
-
-def simulated_check(stepper):
-    """A check that steps the action in a snapshot of the planning copy and goes back:
-    success when the step is valid (with the robot: GAMP, execution and physics)."""
-    def check(action) -> Check:
-        snap = stepper.snapshot()
-        try:
-            result = stepper.step(action)
-            plan = getattr(stepper, 'last_plan', None)
-        finally:
-            stepper.restore(snap)
-        return Check(not result.outcome.is_invalid, result.reason, plan)
-    return check
 
 
 def scene_episode(agent: str | Agent, scene: Scene, robot: bool, seed: int, execution: str = 'teleport',
@@ -284,16 +148,19 @@ def scene_episode(agent: str | Agent, scene: Scene, robot: bool, seed: int, exec
         env = AssemblyEnv(scene, EnvConfig(stability='physics'), stability=stability)
     try:
         guide = AllocationGuide(scene, placements, env.grid)
-        opt = coverage_opt(env, guide)
+        opt = optimum_coverage(env, guide)
         space = action_space(agent.actions, env, placements)
         verify = None
         if agent.verified:
             verify = renv.plan if with_robot else stability_check(env)
         if agent.search in ('exact', 'dfs'):
-            decide, exact = exact_decider(renv, space, agent, policy if agent.search == 'dfs' else None,
-                                          reallocation)
+            if renv is None:
+                raise RadError('the branch and bound needs the robot (it searches with GAMP and physics)')
+            decide, exact = exact_decider(renv, space, agent.time_limit_s, agent.reallocate,
+                                          policy if agent.search == 'dfs' else None, reallocation)
         elif agent.search:
-            decide = search_decider(policy, space, renv if with_robot else env, agent, verify)
+            decide = search_decider(policy, space, renv if with_robot else env, agent.search, agent.budget,
+                                    agent.epsilon, verify)
         else:
             decide = policy_decider(policy, space, verify)
         reallocator = None
@@ -322,46 +189,8 @@ def scene_episode(agent: str | Agent, scene: Scene, robot: bool, seed: int, exec
     return row
 
 
-def exact_decider(renv, space, agent: Agent, policy: Policy | None = None, reallocation=None):
-    """decide() that plays the best line of the branch and bound (`sequencing.exact.exact_search`,
-    with re-allocation at dead ends when the agent re-allocates), searched on the first call within
-    `agent.time_limit_s`; and the dict that then holds its result. policy: the children's order
-    (best score first; None: the search's default, most target cells then lowest first)."""
-    from rad_core.sequencing.actions import AllocationActions
-    from rad_core.sequencing.exact import exact_search
-    from rad_core.sequencing.reallocation import ReallocationConfig, Reallocator
-    if renv is None:
-        raise RadError('the exact planner needs the robot (it searches with GAMP and physics)')
-    config = reallocation or ReallocationConfig()
-    env, holder = renv.env, {}
-
-    def on_dead_end(_renv, current):
-        # A copy of the line's space (its parent keeps its own), with the no-goods found on the line.
-        sub = AllocationActions(env, current.guide.placements)
-        reallocator = Reallocator(sub, simulated_check(renv), config)
-        reallocator.no_goods = dict(getattr(current, 'no_goods', {}))
-        event = reallocator.stalled(env, 'exact search: dead end')
-        sub.no_goods = reallocator.no_goods
-        return sub if event.changed else None
-
-    def bound_of(_renv) -> float:   # re-allocating: what any allocation of the free cells could cover
-        from rad_core.allocation.cpsat import coverage_bound
-        from rad_core.sequencing.reallocation import placed_scene
-        return coverage_bound(placed_scene(env))
-
-    def decide(env_: AssemblyEnv, rng: np.random.Generator) -> Decision:
-        if 'line' not in holder:
-            holder['result'] = exact_search(renv, space, agent.time_limit_s,
-                                            order=None if policy is None else policy_order(policy, rng),
-                                            on_dead_end=on_dead_end if agent.reallocate else None,
-                                            bound_of=bound_of if agent.reallocate else None)
-            holder['line'] = list(holder['result'].actions)
-        return Decision(holder['line'].pop(0)) if holder['line'] else stop()
-    return decide, holder
-
-
-def summarize(rows: list[dict]) -> dict:
-    """The paper's numbers over episode rows (see `evaluate`)."""
+def summarize(rows: list[dict], agent: str = '') -> dict:
+    """The paper's numbers over episode rows (see `evaluate`); agent: its canonical text."""
     n = len(rows)
     if n == 0:
         raise RadError('no scenes to evaluate')
@@ -373,6 +202,7 @@ def summarize(rows: list[dict]) -> dict:
 
     rel = [r['coverage'] / r['coverage_opt'] if r['coverage_opt'] > 0 else 1.0 for r in rows]
     return {
+        'agent': agent,
         'R': float(returns.mean()), 'R_std': float(returns.std()),
         'd': frac(lambda o: o == Outcome.COMPLETED),
         'e': frac(lambda o: o == Outcome.TERMINATED),
@@ -392,8 +222,8 @@ def evaluate(agent: str | Agent, scenes: Iterable[tuple[str, Scene]], robot: boo
              reallocation=None) -> dict:
     """Run the agent once on every (name, scene); scene i seeds the policy with seed + i.
 
-    Returns exactly KEYS: R, R_std (mean and std of the discounted return), d, e, f
-    (fractions that ended completed / terminated / on an invalid action; the rest
+    Returns exactly KEYS: agent (its canonical text, `agents.label`), R, R_std (mean and std
+    of the discounted return), d, e, f (fractions that ended completed / terminated / on an invalid action; the rest
     ran out of blocks), f_g, f_p (grasp / placement failures with the robot; a
     motion that moved another block counts as f_p), coverage (target-cell
     coverage, the paper's a-bar), coverage_rel (coverage over the allocation
@@ -425,56 +255,6 @@ def evaluate(agent: str | Agent, scenes: Iterable[tuple[str, Scene]], robot: boo
     finally:
         if stability is not None:
             stability.close()
-    return summarize(rows)
+    return summarize(rows, agent.name)
 
 
-# ---- where scenes come from, and progress ---------------------------------------
-def generated_scenes(grid: int, sides: int, n: int, seed: int) -> Iterator[tuple[str, Scene]]:
-    """n generator scenes with seeds seed .. seed + n - 1, made as they are needed."""
-    from rad_core.generator import GeneratorConfig, generate_scene
-    config = GeneratorConfig(grid=grid, sides=sides)
-    config.validate()
-    for s in range(seed, seed + n):
-        yield f'g{grid}-sides{sides}-seed{s}', generate_scene(config, s)
-
-
-def scene_dir(path: str | Path) -> list[tuple[str, Scene]]:
-    """Every *.json in a folder, sorted by name, all read before any episode runs,
-    so a bad file stops the run at once with its name."""
-    folder = Path(path)
-    if not folder.is_dir():
-        raise RadError(f'scene folder {str(folder)!r} does not exist or is not a folder')
-    files = sorted(folder.glob('*.json'))
-    if not files:
-        raise RadError(f'scene folder {str(folder)!r} holds no *.json files')
-    scenes = []
-    for f in files:
-        try:
-            scenes.append((f.stem, Scene.load(f)))
-        except RadError as e:
-            raise RadError(f'bad scene file {str(f)!r}: {e}') from None
-    return scenes
-
-
-class ProgressBar:
-    """A one-line bar on a terminal (nothing when the stream is not one), so a
-    long run shows it is alive without filling logs; no tqdm dependency."""
-
-    def __init__(self, total: int, label: str = '', stream: TextIO | None = None, width: int = 30):
-        self.total, self.label, self.width, self.done = max(total, 1), label, width, 0
-        self.stream = stream if stream is not None else sys.stderr
-        self.enabled = hasattr(self.stream, 'isatty') and self.stream.isatty()
-        self.t0 = time.perf_counter()
-
-    def __call__(self, row: dict | None = None) -> None:
-        self.done += 1
-        if not self.enabled:
-            return
-        filled = self.width * self.done // self.total
-        elapsed = time.perf_counter() - self.t0
-        eta = elapsed / self.done * (self.total - self.done)
-        self.stream.write(f'\r{self.label} [{"#" * filled}{"." * (self.width - filled)}] '
-                          f'{self.done}/{self.total} {elapsed:.0f}s, ~{eta:.0f}s left ')
-        if self.done >= self.total:
-            self.stream.write('\n')
-        self.stream.flush()

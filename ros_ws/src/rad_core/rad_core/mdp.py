@@ -169,8 +169,8 @@ class AssemblyEnv:
 
     def coverage(self) -> float:
         """Fraction of target cells filled (the paper's a-bar)."""
-        total = int(self.grid.is_target.sum())
-        return 1.0 - self.remaining_target_cells() / total if total else 1.0
+        from rad_core.coverage import state_coverage
+        return state_coverage(self)
 
     def num_actions(self) -> int:
         return len(self.unplaced_units()) * len(self.free_cells()) * 4 + 1

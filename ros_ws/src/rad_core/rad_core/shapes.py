@@ -553,14 +553,3 @@ SPLITS: dict[str, list[str]] = {
     'holdout': ['corbel_arch', 'aqueduct', 'tee', 'window', 'spire_cup', 'overhangs', 'cube3', 'pillars',
                 'log_cabin'],
 }
-
-
-def target_coverage(scene: Scene, placements) -> float:
-    """Fraction of the scene's target cells that the placements fill.
-
-    The allocation's objective nets off non-target cells, so it can hide a
-    target cell left empty behind one filled; this counts only the targets.
-    """
-    targets = {(t.name, c) for t in scene.targets for c in t.filled}
-    filled = {(p.target, tuple(c)) for p in placements for c in p.cells}
-    return len(targets & filled) / len(targets)

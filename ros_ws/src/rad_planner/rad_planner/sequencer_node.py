@@ -7,10 +7,13 @@ takes the first action GAMP finds feasible, so the policy never commands anythin
 
   srv  sequence  rad_msgs/Sequence
 
-Parameters: policy (milp-dqn-lookahead, the default; milp-dqn-halving, milp-dqn-mcts, milp-dqn, heur), checkpoint
-('' = the shipped network), budget (search simulations per decision), search_time_s
-(milp-dqn-dfs: the branch and bound's time per search), seed.
-A bad policy or checkpoint: the node does not start (one line on stderr, exit 1).
+Parameters: agent (an agent's text, `rad_core.agents`: a preset such as `default`, or
+scorer+search:budget...; the sequencer uses its scorer, search and budget), seed; and, on
+top of it, checkpoint (a model file replacing the agent's network, '' = none), budget
+(search simulations per decision, 0 = the agent's), search_time_s (bnb seconds per search,
+0 = the agent's). policy: one of the older names (milp-dqn-lookahead, milp-dqn-halving,
+milp-dqn-mcts, milp-dqn-dfs, milp-dqn, heur) instead of agent ('' = use agent).
+A bad agent, policy or checkpoint: the node does not start (one line on stderr, exit 1).
 """
 
 from __future__ import annotations
@@ -20,7 +23,7 @@ import time
 from rclpy.node import Node
 
 from rad_core.errors import RadError
-from rad_core.sequencing.sequencer import DEFAULT_POLICY, Sequencer, SequencerConfig
+from rad_core.sequencing.sequencer import DEFAULT_AGENT, Sequencer, SequencerConfig
 from rad_msgs.srv import Sequence
 from rad_ros.node_main import main_for
 from rad_ros.sequencer_msgs import fill_sequence_response, sequence_inputs
@@ -29,18 +32,19 @@ from rad_ros.sequencer_msgs import fill_sequence_response, sequence_inputs
 class SequencerNode(Node):
     def __init__(self):
         super().__init__('sequencer')
-        for name, value in (('policy', DEFAULT_POLICY), ('checkpoint', ''), ('budget', 5), ('seed', 0),
-                            ('search_time_s', 10.0)):
+        for name, value in (('agent', DEFAULT_AGENT), ('policy', ''), ('checkpoint', ''), ('budget', 0), ('seed', 0),
+                            ('search_time_s', 0.0)):
             self.declare_parameter(name, value)
-        config = SequencerConfig(policy=str(self.param('policy')), checkpoint=str(self.param('checkpoint')),
-                                 budget=int(self.param('budget')), seed=int(self.param('seed')),
-                                 search_time_s=float(self.param('search_time_s')))
+        budget, search_time = int(self.param('budget')), float(self.param('search_time_s'))
+        config = SequencerConfig(agent=str(self.param('agent')), policy=str(self.param('policy')),
+                                 checkpoint=str(self.param('checkpoint')), budget=budget or None,
+                                 seed=int(self.param('seed')), search_time_s=search_time or None)
         t0 = time.perf_counter()
         self.sequencer = Sequencer(config)   # RadError (a bad checkpoint names its file): the node does not start
-        self.policy = config.policy if config.policy == 'heur' else f'{config.policy} ({self.sequencer.source})'
+        agent = self.sequencer.agent
+        self.policy = agent if not self.sequencer.spec.learned else f'{agent} ({self.sequencer.source})'
         self.create_service(Sequence, 'sequence', self.sequence_callback)
-        self.get_logger().info(f'sequencer ready: {self.policy}, budget {config.budget}, '
-                               f'loaded in {time.perf_counter() - t0:.1f} s')
+        self.get_logger().info(f'sequencer ready: {self.policy}, loaded in {time.perf_counter() - t0:.1f} s')
 
     def param(self, name):
         return self.get_parameter(name).value

@@ -345,7 +345,10 @@ class Trainer:
         self._writer.flush()
 
     def model_doc(self) -> dict:
+        # What the network was trained for travels with it: its action space and the allocation
+        # (support rule) of its training data, which an agent naming it then runs with.
         return {'format': ckpt.MODEL_FORMAT, 'method': self.cfg.method, 'actions': self.actions,
+                'support': self.dataset.header.get('allocation', {}).get('support', 'none'),
                 'net': self.cfg.net.to_dict(), 'weights': self.q.state_dict(),
                 'train': {'config': asdict(self.cfg), 'position': dict(self.pos),
                           'best_eval_return': self.best_eval}}

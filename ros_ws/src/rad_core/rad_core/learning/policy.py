@@ -21,9 +21,10 @@ from rad_core.mdp import Action, AssemblyEnv
 
 class QPolicy:
     def __init__(self, net: QNetwork, name: str = 'q', actions: str = 'milp', source: str = '',
-                 device: str | torch.device = 'cpu'):
+                 device: str | torch.device = 'cpu', support: str = 'none'):
         self.net = net.to(device).eval()
         self.name, self.actions, self.source, self.device = name, actions, source, torch.device(device)
+        self.support = support   # the allocation's support rule in the training data ('none' or 'stable')
         self._observer: tuple | None = None   # (scene, Observer) of the last scene asked about
 
     @classmethod
@@ -43,7 +44,10 @@ class QPolicy:
         except (TypeError, ValueError, AssertionError) as e:
             raise ckpt.CheckpointError(f'checkpoint {str(path)!r}: bad network sizes {doc["net"]!r} ({e})') from None
         ckpt.load_weights(net, doc['weights'], path)
-        return cls(net, str(doc['method']), str(doc['actions']), str(path), device)
+        support = str(doc.get('support', 'none'))   # model files before it was recorded: the paper's MILP
+        if support not in ('none', 'stable'):
+            raise ckpt.CheckpointError(f'checkpoint {str(path)!r}: unknown allocation support {support!r}')
+        return cls(net, str(doc['method']), str(doc['actions']), str(path), device, support)
 
     def observer(self, env: AssemblyEnv) -> Observer:
         if self._observer is None or self._observer[0] is not env.scene:

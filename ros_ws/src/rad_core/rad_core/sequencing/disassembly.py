@@ -36,7 +36,7 @@ from rad_core.errors import RadError
 from rad_core.scene import Scene
 from rad_core.sequencing.execute import ExecuteConfig, ExecutionResult, Report, execute_assembly
 from rad_core.sequencing.plan import AssemblyPlan, MotionPlan, PlanStep, moved
-from rad_core.sequencing.result import measured_coverage
+from rad_core.coverage import measured_coverage
 from rad_core.sim.mocap import Registration
 
 # (scene state, block id, anchor position, yaw in degrees, start joints or None) -> the motion

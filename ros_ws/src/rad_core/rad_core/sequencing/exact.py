@@ -13,7 +13,7 @@ final pose of each block still on the table.
   orders of the same placements are searched once.
 - A state is pruned when its coverage plus the target cells of the allocation's
   poses still open cannot beat the best coverage found; the root's value of that
-  (`coverage_opt`) is the bound, and reaching it ends the search at once.
+  (`coverage.optimum_coverage`) is the bound, and reaching it ends the search at once.
 - `on_dead_end` lets the caller re-allocate where no move succeeds although
   allocated poses remain (or the allocation is used up with target cells free);
   the search goes on from that state with the new action space for that subtree
@@ -35,7 +35,7 @@ from dataclasses import dataclass, field
 from typing import Callable
 
 from rad_core.errors import RadError
-from rad_core.evaluation import coverage_opt
+from rad_core.coverage import optimum_coverage
 from rad_core.mdp import Action, AssemblyEnv
 from rad_core.sequencing.actions import AllocationActions
 
@@ -119,7 +119,7 @@ def exact_search(renv, space: AllocationActions, time_limit_s: float = 60.0, max
     start_time = time.monotonic()
     deadline = start_time + time_limit_s
     root = renv.snapshot()
-    bound = coverage_opt(env, space.guide) if bound_of is None else bound_of(renv)
+    bound = optimum_coverage(env, space.guide) if bound_of is None else bound_of(renv)
     best, best_line = env.coverage(), []
     seen: set[frozenset] = set()
 
@@ -189,7 +189,7 @@ def exact_search(renv, space: AllocationActions, time_limit_s: float = 60.0, max
         if bound_of is not None and bound_of(renv) <= best + _EPS:
             return                                             # nothing from here beats the best
         tried = set()
-        while bound_of is not None or coverage_opt(env, space.guide) > best + _EPS:
+        while bound_of is not None or optimum_coverage(env, space.guide) > best + _EPS:
             tried.add(open_poses(space))
             if expand(space, line) or on_dead_end is None:
                 return

@@ -73,7 +73,8 @@ from rad_core.scene import Scene
 from rad_core.sequencing.plan import AssemblyPlan, PlanMotion, moved
 from rad_core.sim.mocap import Registration
 from rad_core.sim.panda import HOME
-from rad_core.sequencing.result import deviation, measured_coverage, result_document
+from rad_core.sequencing.result import deviation, result_document
+from rad_core.coverage import measured_coverage
 
 
 @dataclass(frozen=True)

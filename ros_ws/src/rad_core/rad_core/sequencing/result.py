@@ -5,20 +5,10 @@ from __future__ import annotations
 import numpy as np
 
 from rad_core.allocation.result import AllocationResult
-from rad_core.grid import Grid, blocks_on_grid
+from rad_core.coverage import measured_coverage
 from rad_core.scene import Scene
 
 FORMAT = 'rad-result/1'
-
-
-def measured_coverage(scene: Scene) -> float:
-    """Fraction of target cells that blocks of this (registered) scene fill."""
-    grid = Grid(scene)
-    filled = np.zeros(grid.num_cells, dtype=bool)
-    for cells in blocks_on_grid(scene, grid).values():
-        filled[cells] = True
-    total = int(grid.is_target.sum())
-    return float((filled & grid.is_target).sum() / total) if total else 1.0
 
 
 def deviation(expected: Scene, measured: Scene, tol: float, set_aside: dict[str, str] | None = None) -> str | None:

@@ -8,75 +8,97 @@ real and come back. It answers a *ranking*: the caller (plan_assembly) still tak
 the first action that GAMP finds feasible from its own planning copy, so whatever
 the policy, nothing is commanded that fails there.
 
-Policies:
-- milp-dqn-mcts: the paper's MILP-DQN-MCTS (search.mcts, budget 5, epsilon 0.05).
-- milp-dqn-halving: rad's sequential halving with deepening lines (search.halving).
-- milp-dqn-lookahead: verified greedy with a look-ahead veto (search.lookahead).
-- milp-dqn-dfs: the branch and bound of `sequencing.exact` for `search_time_s`, children
-  in the network's order, over whole lines from the state; the best line is kept, so
-  later requests along it answer at once (a state off the line searches again).
-- milp-dqn: the network's Q-values alone (no search).
-- heur: the paper's heuristic (uniform among fully supported allocated actions).
+The agent (`rad_core.agents`, text form): the sequencer uses its scorer (a network or
+HEUR), its search and the search's budget. `default` is what the node runs: the mixed
+network with the look-ahead search. Verification, re-allocation and the allocation's
+support are the caller's (/plan_assembly always takes the first action GAMP finds
+feasible). With the branch and bound (`bnb`), the best line from the state is kept, so
+later requests along it answer at once (a state off the line searches again).
+
+The node's older `policy` names still work: milp-dqn-mcts (the paper's MCTS),
+milp-dqn-halving, milp-dqn-lookahead, milp-dqn-dfs (bnb), milp-dqn (no search) with
+the shipped mixed network or `checkpoint`, and heur.
 """
 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from rad_core.agents import SIMULATION_SEARCHES, AgentSpec, label, parse
 from rad_core.allocation.guide import AllocationGuide
 from rad_core.errors import RadError
 from rad_core.gamp.action import SceneAction, start_joints
 from rad_core.mdp import AssemblyEnv, EnvConfig
 from rad_core.scene import Scene
 from rad_core.sequencing.actions import AllocationActions, scene_action
-from rad_core.sequencing.policy import HeurPolicy, ranked_indices
+from rad_core.sequencing.policy import ranked_indices
 from rad_core.sequencing.search import SEARCHES, EnvModel
 
+# The sequencer node's older policy names (a search over the shipped mixed network, or HEUR).
 POLICIES = ('milp-dqn-mcts', 'milp-dqn-halving', 'milp-dqn-lookahead', 'milp-dqn-dfs', 'milp-dqn', 'heur')
-SEARCH_OF = {'milp-dqn-mcts': 'mcts', 'milp-dqn-halving': 'halving', 'milp-dqn-lookahead': 'lookahead'}
-# What the sequencer node runs unless told otherwise (docs/results/table2.md: the searches
-# tie on average; lookahead is never worse than the verified greedy policy within its budget).
-DEFAULT_POLICY = 'milp-dqn-lookahead'
-# The shipped network the learned policies load when no checkpoint is given.
+_POLICY_SEARCH = {'milp-dqn-mcts': 'mcts', 'milp-dqn-halving': 'halving', 'milp-dqn-lookahead': 'lookahead',
+                  'milp-dqn-dfs': 'bnb', 'milp-dqn': ''}
+DEFAULT_AGENT = 'default'
+# The shipped network the older policy names load when no checkpoint is given.
 DEFAULT_NETWORK = 'milp-dqn-mixed'
 
 
 @dataclass(frozen=True)
 class SequencerConfig:
-    """policy: one of POLICIES. checkpoint: a model file, or '' for the shipped
-    network (DEFAULT_NETWORK). budget: search simulations (real planning-twin steps)
-    per decision. epsilon: the search's exploration (None: the paper's 0.05 for mcts,
-    0 for halving). seed: seeds the policy's and the search's generator, together
-    with the state's step count, so one request always gets the same answer."""
+    """agent: an agent's text (`rad_core.agents`); the sequencer uses its scorer, search and
+    budget. policy: one of the older POLICIES instead (then agent is ignored). checkpoint:
+    a model file replacing the scorer's network; budget: the search's simulations per
+    decision; search_time_s: the branch and bound's seconds per search (None: the agent's).
+    epsilon: the search's exploration (None: the paper's 0.05 for mcts, 0 otherwise).
+    seed: seeds the policy's and the search's generator, together with the state's step
+    count, so one request always gets the same answer."""
 
-    policy: str = DEFAULT_POLICY
+    agent: str = DEFAULT_AGENT
+    policy: str = ''
     checkpoint: str = ''
-    budget: int = 5
+    budget: int | None = None
     seed: int = 0
     epsilon: float | None = None
-    search_time_s: float = 10.0
-    """milp-dqn-dfs: the branch and bound's time per search (a state not on a known line)."""
+    search_time_s: float | None = None
+
+    def spec(self) -> AgentSpec:
+        """The agent this configuration runs (RadError naming what does not fit)."""
+        if self.policy:
+            if self.policy not in POLICIES:
+                raise RadError(f'policy must be one of {", ".join(POLICIES)}, got {self.policy!r}')
+            if self.policy == 'heur':
+                if self.checkpoint:
+                    raise RadError('checkpoint applies to the learned policies, not heur')
+                spec = AgentSpec('heur')
+            else:
+                search = _POLICY_SEARCH[self.policy]
+                spec = AgentSpec(self.checkpoint or DEFAULT_NETWORK, search, verify=search == 'bnb')
+        else:
+            spec = parse(self.agent)
+            if self.checkpoint:
+                if not spec.learned:
+                    raise RadError(f'checkpoint applies to learned agents, not {label(spec)!r}')
+                spec = replace(spec, scorer=self.checkpoint)
+        if self.budget is not None:
+            if not isinstance(self.budget, int) or isinstance(self.budget, bool) or self.budget < 1:
+                raise RadError(f'budget must be a positive integer, got {self.budget!r}')
+            if spec.search in SIMULATION_SEARCHES:
+                spec = replace(spec, budget=self.budget)
+        if self.search_time_s is not None:
+            if not (isinstance(self.search_time_s, (int, float)) and 0 < self.search_time_s < 3600):
+                raise RadError(f'search_time_s must be a positive number of seconds under 3600, '
+                               f'got {self.search_time_s!r}')
+            if spec.search == 'bnb':
+                spec = replace(spec, budget=float(self.search_time_s))
+        return spec
 
     def validate(self) -> None:
-        if self.policy not in POLICIES:
-            raise RadError(f'policy must be one of {", ".join(POLICIES)}, got {self.policy!r}')
-        if not isinstance(self.budget, int) or self.budget < 1:
-            raise RadError(f'budget must be a positive integer, got {self.budget!r}')
-        if not (isinstance(self.search_time_s, (int, float)) and 0 < self.search_time_s < 3600):
-            raise RadError(f'search_time_s must be a positive number of seconds under 3600, got {self.search_time_s!r}')
+        self.spec()
         if self.epsilon is not None and not 0.0 <= self.epsilon <= 1.0:
             raise RadError(f'epsilon must be in [0, 1], got {self.epsilon!r}')
-        if self.policy == 'heur' and self.checkpoint:
-            raise RadError('checkpoint applies to the learned policies, not heur')
-
-    @property
-    def search_epsilon(self) -> float:
-        if self.epsilon is not None:
-            return self.epsilon
-        return 0.05 if self.policy == 'milp-dqn-mcts' else 0.0
 
 
 @dataclass
@@ -96,24 +118,29 @@ class Sequencer:
     def __init__(self, config: SequencerConfig = SequencerConfig()):
         config.validate()
         self.config = config
+        self.spec = config.spec()
+        self.agent = label(self.spec)
         self._renv = None   # the planning twin, made on the first search
-        # milp-dqn-dfs: state -> (the rest of its best line, the coverage the line reaches)
+        # bnb: state -> (the rest of its best line, the coverage the line reaches)
         self._lines: dict[tuple, tuple[list[SceneAction], float]] = {}
-        if config.policy == 'heur':
-            self.policy = HeurPolicy()
-        else:
-            from rad_core.learning.policy import QPolicy
-            self.policy = QPolicy.load(config.checkpoint or DEFAULT_NETWORK)
+        self.policy = self.spec.make_policy()
+        if self.spec.learned:
             if self.policy.actions != 'milp':
                 raise RadError(f'{self.policy.source} was trained on the {self.policy.actions!r} action space; '
                                f'the sequencer chooses among the allocation\'s actions (a milp-dqn network)')
 
     @property
     def source(self) -> str:
-        return getattr(self.policy, 'source', self.config.policy)
+        return getattr(self.policy, 'source', self.agent)
+
+    @property
+    def search_epsilon(self) -> float:
+        if self.config.epsilon is not None:
+            return self.config.epsilon
+        return 0.05 if self.spec.search == 'mcts' else 0.0
 
     def forget(self) -> None:
-        """Drop the best lines milp-dqn-dfs keeps (e.g. between benchmark runs of one scene)."""
+        """Drop the best lines the branch and bound keeps (e.g. between benchmark runs of one scene)."""
         self._lines.clear()
 
     def close(self) -> None:
@@ -142,9 +169,9 @@ class Sequencer:
             ranking.terminate = True
             ranking.reason = ('every allocated pose is built' if left == 0
                               else f'{left} allocated poses left, no unplaced block of their types')
-        elif self.config.policy == 'milp-dqn-dfs':
+        elif self.spec.search == 'bnb':
             self._dfs(scene, env, space, q0, rng, ranking, left)
-        elif self.config.policy in SEARCH_OF:
+        elif self.spec.search:
             self._search(scene, space, q0, rng, ranking, left)
         else:
             ts = time.perf_counter()
@@ -155,7 +182,7 @@ class Sequencer:
             ranking.timings['policy'] = time.perf_counter() - ts
             if not ranked:
                 ranking.terminate = True
-                why = getattr(self.policy, 'why_none', f'{self.config.policy} values stopping more')
+                why = getattr(self.policy, 'why_none', f'{self.agent} values stopping more')
                 ranking.reason = f'{left} allocated poses left, none of them can be built next ({why})'
         if max_actions:
             ranking.actions, ranking.values = ranking.actions[:max_actions], ranking.values[:max_actions]
@@ -168,8 +195,7 @@ class Sequencer:
         ranking.timings['twin'] = time.perf_counter() - ts
         ts = time.perf_counter()
         model = EnvModel(renv, self.policy, space)   # the space is stateless: it serves the twin's env too
-        result = SEARCHES[SEARCH_OF[self.config.policy]](model, rng, budget=self.config.budget,
-                                                       epsilon=self.config.search_epsilon)
+        result = SEARCHES[self.spec.search](model, rng, budget=self.spec.budget, epsilon=self.search_epsilon)
         ranking.timings['search'] = time.perf_counter() - ts
         ranking.search = result.to_dict()
         for action, value in result.proposals():
@@ -186,14 +212,14 @@ class Sequencer:
              left: int) -> None:
         """The first action of the best line from here (searched, or known from an earlier
         search along it), then the other allowed actions by Q as the caller's fallbacks."""
-        from rad_core.evaluation import policy_order
+        from rad_core.sequencing.deciders import policy_order
         from rad_core.sequencing.exact import exact_search
         key = _line_key(env, space.guide.placements)
         known = self._lines.get(key)
         if known is None:
             ts = time.perf_counter()
             renv = self._twin_at(scene, q0)
-            found = exact_search(renv, space, self.config.search_time_s, order=policy_order(self.policy, rng))
+            found = exact_search(renv, space, self.spec.budget, order=policy_order(self.policy, rng))
             ranking.timings['search'] = time.perf_counter() - ts
             ranking.search = {'coverage': found.coverage, 'complete': found.complete, 'bound': found.bound,
                               'states': found.states, 'reason': found.reason}

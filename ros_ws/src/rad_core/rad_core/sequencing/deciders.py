@@ -1,0 +1,142 @@
+"""How a ranking becomes a decision of the episode loop (`sequencing.episode`): the best-ranked
+action, the best one a check finds feasible, a test-time search's move, or the branch and bound's
+line. The checks: GAMP with the robot (`RobotAssemblyEnv.plan`), the physics stability check
+without it, or a simulated step of the planning copy.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from rad_core.errors import RadError
+from rad_core.mdp import AssemblyEnv
+from rad_core.sequencing.actions import ActionSpace
+from rad_core.sequencing.episode import Decide, Decision, stop
+from rad_core.sequencing.policy import Policy, first_feasible, ranked_actions
+
+
+class Check(NamedTuple):
+    success: bool
+    reason: str = ''
+    plan: object = None     # the motion plan the check found, when it planned one
+
+
+def stability_check(env: AssemblyEnv):
+    """A verify() for no-robot agents: would the action be valid now (geometry and
+    physics, on the env's own cached stability check)? Acting is left to the env."""
+    def check(action) -> Check:
+        outcome, reason, _, _ = env.evaluate(action)
+        return Check(outcome is None, reason)
+    return check
+
+
+def policy_decider(policy: Policy, actions: ActionSpace, verify=None) -> Decide:
+    """decide() for the episode loop: the best-ranked action, or with verify
+    (a GAMP check, `RobotAssemblyEnv.plan`) the best one it finds feasible,
+    carrying its motion plan; nothing ranked (or feasible) means terminate."""
+    def decide(env: AssemblyEnv, rng: np.random.Generator) -> Decision:
+        ranked = ranked_actions(policy, env, actions(env), rng)
+        if verify is None:
+            return Decision(ranked[0]) if ranked else stop()
+        action, plan, _ = first_feasible(env, ranked, verify)
+        return Decision(action, plan) if action is not None else stop()
+    return decide
+
+
+def search_decider(policy: Policy, actions: ActionSpace, stepper, search_name: str, budget: int,
+                   epsilon: float | None = None, verify=None) -> Decide:
+    """decide() that searches before every decision (`sequencing.search.SEARCHES[search_name]`, with
+    `budget` simulations and exploration `epsilon`, None: the search's default) on `stepper`, the env
+    that acts (RobotAssemblyEnv with the robot, the AssemblyEnv without); the search
+    leaves it as it was. Unverified: the search's move. Verified: the best of the
+    search's ranking that is known to work: a searched child whose simulated step
+    succeeded needs no further check (it was a real step of the planning copy, GAMP
+    and physics included; its motion plan is reused), an unsearched one is checked by
+    simulating it (`simulated_check`); failed children are never taken."""
+    from rad_core.sequencing.search import SEARCHES, EnvModel
+    search = SEARCHES[search_name]
+    kwargs = {} if epsilon is None else {'epsilon': epsilon}
+    check = simulated_check(stepper) if verify is not None else None
+
+    def decide(env: AssemblyEnv, rng: np.random.Generator) -> Decision:
+        if not actions(env):
+            return stop()
+        model = EnvModel(stepper, policy, actions)
+        result = search(model, rng, budget=budget, **kwargs)
+        plans = {a: plan for (steps, a), plan in model.plans.items() if steps == env.state.steps}
+        if verify is None:
+            if result.action.is_terminate:
+                return stop()
+            return Decision(result.action, plans.get(result.action))
+        worked = {c.action for c in result.children if not c.invalid}
+
+        def known_or_simulated(action) -> Check:
+            return Check(True, '', plans.get(action)) if action in worked else check(action)
+        action, ok, _ = first_feasible(env, [a for a, _ in result.proposals()], known_or_simulated)
+        return Decision(action, ok.plan) if action is not None else stop()
+    return decide
+
+
+def policy_order(policy: Policy, rng: np.random.Generator):
+    """order(env, actions) for a search: all actions, best score first (ties keep their order)."""
+    def order(env: AssemblyEnv, actions: list) -> list:
+        scores = np.asarray(policy.scores(env, actions, rng), dtype=float)[:-1]
+        return [actions[i] for i in np.argsort(-scores, kind='stable')]
+    return order
+
+
+def simulated_check(stepper):
+    """A check that steps the action in a snapshot of the planning copy and goes back:
+    success when the step is valid (with the robot: GAMP, execution and physics)."""
+    def check(action) -> Check:
+        snap = stepper.snapshot()
+        try:
+            result = stepper.step(action)
+            plan = getattr(stepper, 'last_plan', None)
+        finally:
+            stepper.restore(snap)
+        return Check(not result.outcome.is_invalid, result.reason, plan)
+    return check
+
+
+def exact_decider(renv, space, time_limit_s: float, reallocate: bool = False, policy: Policy | None = None,
+                  reallocation=None):
+    """decide() that plays the best line of the branch and bound (`sequencing.exact.exact_search`,
+    with re-allocation at dead ends when `reallocate`), searched on the first call within
+    `time_limit_s`; and the dict that then holds its result. policy: the children's order
+    (best score first; None: the search's default, most target cells then lowest first)."""
+    from rad_core.sequencing.actions import AllocationActions
+    from rad_core.sequencing.exact import exact_search
+    from rad_core.sequencing.reallocation import ReallocationConfig, Reallocator
+    if renv is None:
+        raise RadError('the exact planner needs the robot (it searches with GAMP and physics)')
+    config = reallocation or ReallocationConfig()
+    env, holder = renv.env, {}
+
+    def on_dead_end(_renv, current):
+        # A copy of the line's space (its parent keeps its own), with the no-goods found on the line.
+        sub = AllocationActions(env, current.guide.placements)
+        reallocator = Reallocator(sub, simulated_check(renv), config)
+        reallocator.no_goods = dict(getattr(current, 'no_goods', {}))
+        event = reallocator.stalled(env, 'exact search: dead end')
+        sub.no_goods = reallocator.no_goods
+        return sub if event.changed else None
+
+    def bound_of(_renv) -> float:   # re-allocating: what any allocation of the free cells could cover
+        from rad_core.allocation.cpsat import coverage_bound
+        from rad_core.sequencing.reallocation import placed_scene
+        return coverage_bound(placed_scene(env))
+
+    def decide(env_: AssemblyEnv, rng: np.random.Generator) -> Decision:
+        if 'line' not in holder:
+            holder['result'] = exact_search(renv, space, time_limit_s,
+                                            order=None if policy is None else policy_order(policy, rng),
+                                            on_dead_end=on_dead_end if reallocate else None,
+                                            bound_of=bound_of if reallocate else None)
+            holder['line'] = list(holder['result'].actions)
+        return Decision(holder['line'].pop(0)) if holder['line'] else stop()
+    return decide, holder
+
+
