@@ -6,7 +6,7 @@ Each cycle builds the target with the execute / verify / replan loop /execute_as
 takes it apart onto the table with the loop /take_apart runs (rad_core.sequencing.disassembly),
 in-process on one `Twin` built as the twin node builds it (the whole arm motion simulated, the
 node's path and goal tolerances); the next cycle builds from what motion capture sees. Plans:
-CP-SAT (stable allocation, re-allocation), the shipped default policy, in-process GAMP.
+the agent as the node graph runs it (`sequencing.agent_plan.AgentPlanner`, `default`).
 Per cycle: build coverage, steps, replans, take-apart success, blocks lost, drift from the
 heap (mm, mean and max), wall time. Results: OUT.md and OUT.json.
 """
@@ -21,7 +21,6 @@ from pathlib import Path
 
 import numpy as np
 
-from bench_execution import Planner
 
 SCENES = (('default g4 seed 8', ('generated', 4, 8)), ('g5 seed 503', ('generated', 5, 503)),
           ('pillars (held out)', ('shape', 'pillars')))
@@ -83,10 +82,11 @@ def main() -> None:
     p.add_argument('--cycles', type=int, default=10)
     p.add_argument('--faults', default='none')
     p.add_argument('--seed', type=int, default=0)
-    p.add_argument('--policy', default='milp-dqn-lookahead')
+    p.add_argument('--agent', default='default', help='the agent (rad_core.agents), as the node graph runs it')
     p.add_argument('--out', type=Path, default=Path('docs/results/cycles'))
     args = p.parse_args()
-    planner = Planner(args.policy)
+    from rad_core.sequencing.agent_plan import AgentPlanner
+    planner = AgentPlanner(args.agent)
     rows = []
     for name, spec in SCENES:
         rows += run_cycles(name, scene_of(spec), planner, args.cycles, args.faults, args.seed)
@@ -104,7 +104,7 @@ def main() -> None:
     args.out.with_suffix('.json').write_text(json.dumps({'command': command, 'faults': args.faults,
                                                          'summary': summary, 'rows': rows}, indent=1) + '\n')
     lines = ['# Build, take apart, build again', '',
-             f'Made by `{command}` ({time.strftime("%Y-%m-%d")}; policy {args.policy}; faults {args.faults}; '
+             f'Made by `{command}` ({time.strftime("%Y-%m-%d")}; agent {planner.agent}; faults {args.faults}; '
              'in-process loops of /execute_assembly and /take_apart on one twin, no reset).', '',
              '| scene | cycle | coverage | steps (build + take apart) | replans | take-apart | lost | '
              'drift mean / max mm | wall s |', '|---|---|---|---|---|---|---|---|---|']

@@ -1,14 +1,14 @@
 """Execution with the whole arm motion simulated, against teleporting execution, fault-free and under faults.
 
     python benchmarks/bench_execution.py [--grids 4 5] [--scenes 5] [--shapes holdout]
-        [--faults none mocap placement slip miss nudge drops realistic] [--policy milp-dqn-lookahead]
+        [--faults none mocap placement slip miss nudge drops realistic] [--agent default]
         [--runs out/bench_execution/runs.jsonl] [--out docs/results/execution]
 
 What /execute_assembly runs, in-process: the execute / verify / replan loop
 (`rad_core.sequencing.execute.execute_assembly`, the function the assembly node calls),
-plans from `plan_assembly` with CP-SAT (stable allocation, re-allocation on), the
-shipped sequencer policy and in-process GAMP, the plant a real `Twin` as the twin node builds
-it (`twin_world_config`: blocks with 0.5 mm of play per side; PyBullet: the
+plans from the agent as the node graph runs it (`sequencing.agent_plan.AgentPlanner`: CP-SAT,
+the sequencer, in-process GAMP; `default`: stable allocation, re-allocation on), the plant a
+real `Twin` as the twin node builds it (`twin_world_config`: blocks with 0.5 mm of play per side; PyBullet: the
 arm follows every trajectory under the path and goal tolerances the assembly node sends,
 so contact aborts the run as it would on a real controller; the hand grasps by contact)
 with the faults of `rad_core.sim.faults` (seeded per scene). DDS adds transport only (bench_plan_assembly
@@ -57,30 +57,6 @@ def scenes(grids, count, seed, shapes):
     for split in shapes:
         out += [(f'{name}', shape_scene(name)) for name in SPLITS[split]]
     return out
-
-
-class Planner:
-    """plan(scene, start) as the assembly node plans: stable allocation, re-allocation, the sequencer policy."""
-
-    def __init__(self, policy: str):
-        from rad_core.gamp.action import MotionPlanner
-        from rad_core.sequencing.plan import local_motion_planner
-        from rad_core.sequencing.sequencer import Sequencer, SequencerConfig
-        self.gamp = MotionPlanner()
-        self.motion = local_motion_planner(self.gamp)
-        self.sequencer = Sequencer(SequencerConfig(policy=policy))
-
-    def allocate(self, scene, exclude=(), time_limit_s=None, support='stable'):
-        from rad_core.allocation.cpsat import AllocationParams, solve
-        limit = 10.0 if time_limit_s is None else max(1e-3, min(10.0, float(time_limit_s)))
-        return solve(scene, AllocationParams(time_limit_s=limit, support=support), exclude)
-
-    def __call__(self, scene, start):
-        from rad_core.sequencing.plan import plan_assembly
-        from rad_core.sequencing.reallocation import ReallocationConfig
-        return plan_assembly(scene, self.allocate, self.motion, self.sequencer.rank, seed=0, start=start,
-                             time_limit_s=120.0, reallocate=lambda s, ex, t: self.allocate(s, ex, t),
-                             reallocation=ReallocationConfig())
 
 
 def attempted_and_placed(steps, final_scene) -> tuple[int, int]:
@@ -182,9 +158,9 @@ def summarise(rows: list[dict]) -> dict:
     return out
 
 
-def write_markdown(path: Path, summary: dict, args, command: str) -> None:
+def write_markdown(path: Path, summary: dict, args, command: str, agent: str) -> None:
     lines = ['# Execution: the whole arm motion simulated, against teleporting, and under faults', '',
-             f'Made by `{command}` ({time.strftime("%Y-%m-%d")}; policy {args.policy}; '
+             f'Made by `{command}` ({time.strftime("%Y-%m-%d")}; agent {agent}; '
              'the in-process execute / verify / replan loop of /execute_assembly, a real PyBullet twin).', '',
              '| run | runs | coverage | delta vs reference | steps | replans | raw step success '
              '| recovered step success | failed runs | faults injected | wall s |',
@@ -207,7 +183,7 @@ def main() -> None:
     p.add_argument('--seed', type=int, default=500, help='first generator seed (training uses >= 1e6)')
     p.add_argument('--shapes', nargs='*', default=['holdout'], choices=['train', 'holdout'])
     p.add_argument('--faults', nargs='*', default=list(FAULT_LEVELS), choices=list(FAULT_LEVELS))
-    p.add_argument('--policy', default='milp-dqn-lookahead')
+    p.add_argument('--agent', default='default', help='the agent (rad_core.agents), as the node graph runs it')
     p.add_argument('--max-replans', type=int, default=10)
     p.add_argument('--runs', type=Path, default=Path('out/bench_execution/runs.jsonl'))
     p.add_argument('--out', type=Path, default=Path('docs/results/execution'))
@@ -218,7 +194,8 @@ def main() -> None:
         for line in args.runs.read_text().splitlines():
             r = json.loads(line)
             done[(r['scene'], r['mode'], r['faults'])] = r
-    planner = Planner(args.policy)
+    from rad_core.sequencing.agent_plan import AgentPlanner
+    planner = AgentPlanner(args.agent)
     todo = scenes(args.grids, args.scenes, args.seed, args.shapes)
     for i, (name, scene) in enumerate(todo):
         jobs = [('teleport', 'none')] + [('simulate', f) for f in args.faults]
@@ -244,9 +221,9 @@ def main() -> None:
               + f', recovered step success {s["recovered_step_success"]:.3f}, failed runs {s["failed_runs"]}')
     args.out.parent.mkdir(parents=True, exist_ok=True)
     command = 'python benchmarks/' + ' '.join([Path(sys.argv[0]).name, *sys.argv[1:]])
-    args.out.with_suffix('.json').write_text(json.dumps({'command': command, 'policy': args.policy,
+    args.out.with_suffix('.json').write_text(json.dumps({'command': command, 'agent': planner.agent,
                                                          'summary': summary, 'runs': rows}, indent=1) + '\n')
-    write_markdown(args.out.with_suffix('.md'), summary, args, command)
+    write_markdown(args.out.with_suffix('.md'), summary, args, command, planner.agent)
 
 
 if __name__ == '__main__':

@@ -39,7 +39,7 @@ from rad_core.allocation import AllocationParams, solve
 from rad_core.evaluation import evaluate, get_agent
 from rad_core.progress import ProgressBar
 
-from bench_table2 import fmt, scenes   # the same generated scenes as Table II, the same number format
+from common import fmt, scenes   # the same generated scenes as Table II, the same number format
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_AGENTS = ('heur-verified', 'heur-verified+stable', 'heur-verified+realloc', 'milp-dqn-mcts+verify',

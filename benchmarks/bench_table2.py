@@ -27,6 +27,8 @@ from rad_core import jsonfmt
 from rad_core.evaluation import evaluate, get_agent
 from rad_core.progress import ProgressBar
 
+from common import fmt, scenes
+
 ROOT = Path(__file__).resolve().parents[1]
 PAPER = {   # Table II of the paper (two-sided, robot in the loop); absent keys are not reported
     (4, 'heur'): {'R': 0.57, 'e': 0.36, 'f_g': 0.24, 'f_p': 0.16, 'coverage': 0.62},
@@ -42,14 +44,6 @@ DEFAULT_AGENTS = ('heur', 'heur-verified', 'milp-dqn', 'milp-dqn+verify', 'milp-
                   'milp-dqn-robot+verify', 'milp-dqn-robot-lookahead+verify')
 COLS = ('R', 'd', 'e', 'f', 'f_g', 'f_p', 'coverage', 'coverage_rel')
 HEADS = {'coverage': 'a-bar', 'coverage_rel': 'a_rel'}
-
-
-def scenes(grid: int, n: int, clearance: float):
-    from rad_core.generator import GeneratorConfig, generate_scene
-    kw = {'clearance': clearance} if clearance else {}
-    config = GeneratorConfig(grid=grid, sides=2, **kw)
-    for s in range(n):
-        yield f'g{grid}-c{clearance:g}-seed{s}', generate_scene(config, s)
 
 
 def agent_of(label: str):
@@ -69,10 +63,6 @@ def run(label: str, grid: int, n: int, clearance: float, cache: Path, force: boo
     cache.mkdir(parents=True, exist_ok=True)
     path.write_text(jsonfmt.dumps(result))
     return result
-
-
-def fmt(v) -> str:
-    return '' if v is None else f'{v:.2f}'
 
 
 def main() -> int:

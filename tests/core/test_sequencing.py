@@ -133,3 +133,26 @@ def test_a_block_that_would_rest_on_nothing_is_never_planned(motion):
         cells = np.array([env.grid.index(regions.index(step.target), c) for c in step.cells])
         assert support.any_support(env.grid, env.state.occupancy, cells), step.to_dict()
         env.state.occupancy[cells] = 0
+
+
+def test_an_unverified_plan_stops_where_its_best_ranked_action_fails_and_a_verified_one_goes_on(motion):
+    """The paper's agents take the best-ranked action blindly; /plan_assembly's default checks with GAMP."""
+    from rad_core.agents import parse
+    from rad_core.sequencing.agent_plan import plan_for_agent
+    scene = generate_scene(GeneratorConfig(grid=3), 1)
+    first = plan_assembly(scene, solve, motion, HeurPolicy(), seed=1).steps[0].block
+    asked = []
+
+    def glued_first(scene_now, action, start):
+        asked.append(action.block_id)
+        if action.block_id == first:     # GAMP refuses what it would do on a real cell; here on demand
+            return MotionPlan(False, 'grasp', f'grasp: {action.block_id} is glued down')
+        return motion(scene_now, action, start)
+
+    def allocate(s, support):
+        return solve(s)
+    blind = plan_for_agent(parse('heur'), scene, allocate, glued_first, HeurPolicy(), seed=1)
+    assert not blind.success and blind.steps == [] and asked == [first]
+    assert blind.reason.startswith('no feasible next action (1 tried)') and 'glued down' in blind.reason
+    checked = plan_for_agent(parse('heur+verify'), scene, allocate, glued_first, HeurPolicy(), seed=1)
+    assert checked.steps and first not in [s.block for s in checked.steps]   # it built around the glued block

@@ -14,7 +14,7 @@ arm (the block is put in place and physics only settles the structure), the
 predecessor's shortcut, for training; 'simulate' runs the whole trajectory.
 
 For training (`rad_core.learning.dqn` with the robot), two more (measured in
-scripts/bench_robot_training.py and docs/results/robot_training.md):
+benchmarks/bench_robot_training.py and docs/results/robot_training.md):
 - ``markov=True``: after each successful step the world is put where the MDP
   state says (placed blocks on their grid poses, as always; the other blocks back
   at their start poses, the arm at HOME), so what the next step sees is a function
@@ -120,7 +120,7 @@ class StepCache:
     of the scene and the placed blocks (poses and arm; GAMP seeds its IK from a
     fixed seed), so GAMP's answer and the teleport-and-settle verdict are too (up to
     Bullet's contact cache, whose history the cache ignores: measured to change no
-    verdict, scripts/bench_robot_training.py). Plain data: a training checkpoint
+    verdict, benchmarks/bench_robot_training.py). Plain data: a training checkpoint
     stores it, so a resumed run replays exactly what the uninterrupted one would.
     """
 

@@ -5,10 +5,12 @@ request has none, registered from motion capture against the task (`task_file`
 parameter, else the latched `scene` topic); the robot from
 `joint_states`; allocation from `/allocate`; the order from the sequencer node
 (`/sequence`, asked at every step for a ranking of the next actions); motions from
-`/plan_action` (the first ranked action GAMP finds feasible is taken). When nothing
-can be built next while allocated poses remain, it re-allocates through `/allocate`
-(no-goods excluded, parameters `reallocate`, `max_reallocations`; the first
-allocation's mode is `allocation_support`, 'stable' by default). So the twin
+`/plan_action`. How is the `agent` parameter's (`rad_core.agents`, `default` like the
+sequencer node's; `rad_core.sequencing.agent_plan.plan_for_agent`, what `rad eval` and the
+benchmarks run in process): the first allocation with its support rule; verified, the
+first ranked action GAMP finds feasible is taken (unverified: the first ranked only); when
+nothing can be built next while allocated poses remain and it re-allocates, it re-solves
+through `/allocate` (no-goods excluded, at most `max_reallocations`). So the twin
 can be replaced by a real cell, and the policy by another, without touching this node.
 A sequencer that is down or does not answer within `sequencer_timeout_s` fails the
 request with a reason naming it.
@@ -69,11 +71,12 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 from tf2_msgs.msg import TFMessage
 
+from rad_core.agents import parse
 from rad_core.errors import RadError
 from rad_core.scene import Scene
 from rad_core.sequencing.execute import ExecuteConfig, execute_assembly
-from rad_core.sequencing.plan import MotionPlan, plan_assembly
-from rad_core.sequencing.reallocation import ReallocationConfig
+from rad_core.sequencing.agent_plan import plan_for_agent
+from rad_core.sequencing.plan import MotionPlan
 from rad_core.sequencing.sequencer import Ranking
 from rad_core.robot_model import robot_model
 from rad_core.sim import panda
@@ -102,7 +105,7 @@ class AssemblyNode(Node):
                             ('task_file', ''), ('service_timeout_s', 60.0), ('stale_after_s', 2.0),
                             ('settle_s', 0.5), ('position_tol', 0.005), ('max_replans', 3),
                             ('step_timeout_factor', 3.0), ('frame_id', 'world'), ('sequencer_timeout_s', 20.0),
-                            ('allocation_support', 'stable'), ('reallocate', True), ('max_reallocations', 10),
+                            ('agent', 'default'), ('max_reallocations', 10),
                             ('robot', 'panda'), ('joint_prefix', ''), ('arm_controller', 'joint_trajectory_controller'),
                             ('gripper_action', 'franka_gripper/gripper_action'), ('gripper_result_is_width', False),
                             ('path_tolerance', 0.05), ('goal_tolerance', 0.01), ('goal_time_tolerance', 1.0),
@@ -117,6 +120,12 @@ class AssemblyNode(Node):
                             ('mocap_to_base_quaternion', [0.0, 0.0, 0.0, 1.0]), ('ignore_bodies', [])):
             self.declare_parameter(name, value, anything)
         self.model = robot_model(str(self.param('robot')), str(self.param('joint_prefix')))
+        # The agent's parts this node runs (verification, re-allocation, the allocation's support);
+        # a learned scorer without an explicit support reads it from its model file here, once.
+        self.agent = parse(str(self.param('agent')))
+        self.support = self.agent.resolved_support()
+        if int(self.param('max_reallocations')) < 0:
+            raise RadError(f'max_reallocations must be >= 0, got {self.param("max_reallocations")}')
         self.lock = threading.Lock()
         self.joints: tuple[float, JointState] | None = None
         self.task: Scene | None = None
@@ -296,7 +305,7 @@ class AssemblyNode(Node):
         limit = float(self.param('allocation_time_limit_s')) if time_limit_s is None \
             else min(float(time_limit_s), float(self.param('allocation_time_limit_s')))
         request = Allocate.Request(scene_json=scene.dumps(), time_limit_s=max(limit, 1e-3),
-                                   support=support or str(self.param('allocation_support')))
+                                   support=support or self.support)
         request.exclude = [placement_to_msg(p) for p in exclude]
         response = self.call(self.allocate_client, request)
         if response.status == 'INVALID_REQUEST':
@@ -336,14 +345,9 @@ class AssemblyNode(Node):
         return MotionPlan(True, '', '', (response.grasp.unit, response.grasp.yaw_deg), motion)
 
     def plan(self, scene: Scene, time_limit: float, start):
-        reallocation = None
-        if self.param('reallocate'):
-            reallocation = ReallocationConfig(max_reallocations=int(self.param('max_reallocations')))
-            reallocation.validate()
-        plan = plan_assembly(scene, self.allocate, self.plan_motion, self.rank, seed=int(self.param('seed')),
-                             start=start, time_limit_s=time_limit,
-                             reallocate=self.reallocate if reallocation is not None else None,
-                             reallocation=reallocation)
+        plan = plan_for_agent(self.agent, scene, self.allocate, self.plan_motion, self.rank, self.reallocate,
+                              support=self.support, seed=int(self.param('seed')), start=start,
+                              time_limit_s=time_limit, max_reallocations=int(self.param('max_reallocations')))
         self.plan_pub.publish(String(data=json.dumps(plan_json(plan))))
         return plan
 

@@ -135,11 +135,13 @@ def moved(scene: Scene, block_id: str, position, yaw: int) -> Scene:
 
 def plan_assembly(scene: Scene, allocate: Allocate, plan_motion: PlanMotion, sequencer: Policy | Rank,
                   seed: int = 0, start=None, time_limit_s: float = 60.0, reallocate=None,
-                  reallocation=None) -> AssemblyPlan:
+                  reallocation=None, verify: bool = True) -> AssemblyPlan:
     """sequencer: a Policy (in-process scores of the MDP state) or a Rank callable.
     A Rank callable's RadError (say, the sequencer node is down) propagates.
     reallocate: (scene state, no-goods, time limit) -> AllocationResult, to re-allocate on
-    stall (None: never); reallocation: its `ReallocationConfig` (default: the defaults)."""
+    stall (None: never); reallocation: its `ReallocationConfig` (default: the defaults).
+    verify: take the best-ranked action GAMP finds feasible (the default); False: the
+    best-ranked one only, and the plan stops where it cannot be done (the paper's agents)."""
     t0 = time.perf_counter()
     timings = {'allocation': 0.0, 'sequencing': 0.0, 'motion': 0.0}
     allocation = allocate(scene)
@@ -196,7 +198,8 @@ def plan_assembly(scene: Scene, allocate: Allocate, plan_motion: PlanMotion, seq
         ranked = rank(env, allowed, rng)
         if isinstance(ranked, str):
             return stop(ranked)
-        found = _first_feasible(env, world['scene'], ranked, planned_motion, world['q'], timings)
+        found = _first_feasible(env, world['scene'], ranked if verify else ranked[:1], planned_motion, world['q'],
+                                timings)
         if isinstance(found, str):
             return stop(found)
         action, step = found

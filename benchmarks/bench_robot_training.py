@@ -1,8 +1,8 @@
 """Where a robot-in-the-loop training step's time goes, and how fast it runs.
 
-    python scripts/bench_robot_training.py profile [--steps 50] [--grid 4]
-    python scripts/bench_robot_training.py bench   [--steps 150] [--grid 4]
-    python scripts/bench_robot_training.py settle  [--scenes 40] [--grid 4]
+    python benchmarks/bench_robot_training.py profile [--steps 50] [--grid 4]
+    python benchmarks/bench_robot_training.py bench   [--steps 150] [--grid 4]
+    python benchmarks/bench_robot_training.py settle  [--scenes 40] [--grid 4]
 
 profile: cProfile over `--steps` training-like steps (epsilon-greedy on the
 shipped no-robot network, epsilon 0.3, stable allocations of g = 4 scenes, the
@@ -15,7 +15,7 @@ every configuration gives the same outcomes as the baseline on the same actions.
 settle: for how many simulated seconds of settling the judgement of a placement
 stays what 0.5 s (the default) says, over many exploratory placements.
 
-    python scripts/bench_robot_training.py eval --model runs/milp-dqn-robot/model.pt [--grids 4,5]
+    python benchmarks/bench_robot_training.py eval --model runs/milp-dqn-robot/model.pt [--grids 4,5]
 
 eval: `rad_core.evaluation.evaluate` with the robot (its default execution and
 settling, a fresh world per scene, no markov, no cache: the evaluation's own

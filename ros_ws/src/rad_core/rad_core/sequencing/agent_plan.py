@@ -1,0 +1,68 @@
+"""What /plan_assembly does for an agent (`rad_core.agents`), whoever supplies the parts.
+
+`plan_for_agent` wires an agent's parts into `plan_assembly`: the first allocation with
+its support rule, re-allocation when it re-allocates, verification with GAMP when it
+verifies; the scorer and the search are the `rank` callable's (the sequencer's). The
+assembly node passes DDS clients for allocate / plan_motion / rank; `AgentPlanner` holds
+the same parts in process (CP-SAT, GAMP, a `Sequencer`) for benchmarks and evaluation,
+so a figure measured with it is a statement about what the node graph does.
+"""
+
+from __future__ import annotations
+
+from rad_core.agents import AgentSpec, label, parse
+from rad_core.scene import Scene
+from rad_core.sequencing.plan import AssemblyPlan, plan_assembly
+
+
+def plan_for_agent(spec: AgentSpec, scene: Scene, allocate, plan_motion, rank, reallocate=None, *,
+                   support: str | None = None, seed: int = 0, start=None, time_limit_s: float = 60.0,
+                   max_reallocations: int = 10) -> AssemblyPlan:
+    """allocate(scene, support=S) and reallocate(scene, no-goods, time limit) -> AllocationResult;
+    plan_motion and rank as `plan_assembly` takes them. support: the allocation support when
+    the caller has resolved it (default: `spec.resolved_support()`, which reads a model file)."""
+    from rad_core.sequencing.reallocation import ReallocationConfig
+    support = support or spec.resolved_support()
+    reallocation = None
+    if spec.realloc:
+        reallocation = ReallocationConfig(max_reallocations=max_reallocations)
+        reallocation.validate()
+    return plan_assembly(scene, lambda s: allocate(s, support=support), plan_motion, rank, seed=seed, start=start,
+                         time_limit_s=time_limit_s, reallocate=reallocate if spec.realloc else None,
+                         reallocation=reallocation, verify=spec.verify)
+
+
+class AgentPlanner:
+    """`plan_for_agent` with in-process parts: CP-SAT (10 s, one worker), GAMP and the agent's
+    sequencer. planner(scene, start) -> AssemblyPlan; `motion` and `gamp` for execution."""
+
+    def __init__(self, agent: str | AgentSpec = 'default', allocation_time_limit_s: float = 10.0,
+                 time_limit_s: float = 120.0):
+        from rad_core.gamp.action import MotionPlanner
+        from rad_core.sequencing.plan import local_motion_planner
+        from rad_core.sequencing.sequencer import Sequencer, SequencerConfig
+        self.spec = parse(agent) if isinstance(agent, str) else agent
+        self.agent = label(self.spec)
+        self.sequencer = Sequencer(SequencerConfig(agent=self.agent))
+        self.support = self.spec.resolved_support(self.sequencer.policy)
+        self.allocation_time_limit_s, self.time_limit_s = allocation_time_limit_s, time_limit_s
+        self.gamp = MotionPlanner()
+        self.motion = local_motion_planner(self.gamp)
+
+    def allocate(self, scene: Scene, exclude=(), time_limit_s: float | None = None, support: str | None = None):
+        from rad_core.allocation.cpsat import AllocationParams, solve
+        limit = self.allocation_time_limit_s if time_limit_s is None \
+            else max(1e-3, min(self.allocation_time_limit_s, float(time_limit_s)))
+        return solve(scene, AllocationParams(time_limit_s=limit, support=support or self.support), exclude)
+
+    def reallocate(self, scene: Scene, exclude, time_limit_s: float | None = None):
+        """As the assembly node re-allocates: always the stable allocation."""
+        return self.allocate(scene, exclude, time_limit_s, support='stable')
+
+    def __call__(self, scene: Scene, start=None) -> AssemblyPlan:
+        return plan_for_agent(self.spec, scene, self.allocate, self.motion, self.sequencer.rank, self.reallocate,
+                              support=self.support, start=start, time_limit_s=self.time_limit_s)
+
+    def close(self) -> None:
+        self.sequencer.close()
+        self.gamp.close()
