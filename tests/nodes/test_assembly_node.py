@@ -97,6 +97,24 @@ def test_plans_from_json_and_from_motion_capture(graph):
         assert Scene.loads(r.scene_json).to_dict()['targets'] == DEMO_SCENE.to_dict()['targets']
 
 
+def test_the_node_graph_and_the_in_process_planner_take_the_same_actions(graph):
+    """/plan_assembly over DDS and `AgentPlanner` in process run one path (`plan_for_agent`): the
+    graph here runs the sequencer with the mixed network and no search, the assembly node with its
+    default agent, which together are the `greedy` preset."""
+    from rad_core.sequencing.agent_plan import AgentPlanner
+    planner = AgentPlanner('greedy')
+    try:
+        for scene in (DEMO_SCENE, generate_scene(GeneratorConfig(grid=4), 3)):
+            r = graph.plan(scene_json=scene.dumps())
+            local = planner(scene)
+            assert r.success == local.success, (r.reason, local.reason)
+            assert [(s.block_id, s.target, sorted((c.i, c.j, c.k) for c in s.cells)) for s in r.steps] == \
+                [(s.block, s.target, sorted(tuple(c) for c in s.cells)) for s in local.steps]
+            assert r.predicted_coverage == pytest.approx(local.predicted_coverage)
+    finally:
+        planner.close()
+
+
 def test_a_pose_the_robot_cannot_build_is_reallocated(graph):
     # Real GAMP: the I2 that the only full allocation needs lies out of the arm's reach.
     blocks = [{'id': 'c0', 'type': 'cube', 'position': [0.4, -0.25, U / 2], 'yaw': 0},
