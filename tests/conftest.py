@@ -5,6 +5,10 @@ without it (an IDE, a bare `.venv/bin/python -m pytest`), this file loads env.sh
 settings into os.environ at import time, before any test module can import rclpy,
 and then re-executes pytest once so that the dynamic loader also sees the workspace
 libraries (generated interfaces import only if LD_LIBRARY_PATH held them at start).
+
+It also sorts the tests into tiers (markers registered in pytest.ini): `dds` for
+everything under DDS_DIRS, `slow` for the heavy tests named in SLOW. `make test-fast`
+runs `-m "not slow and not dds"`; `make test` runs every tier.
 """
 
 from __future__ import annotations
@@ -12,6 +16,7 @@ from __future__ import annotations
 import os
 import sys
 import uuid
+from pathlib import Path
 
 import pytest
 import ros_harness as harness
@@ -51,6 +56,127 @@ def pytest_configure(config):
         sys.stdout.flush()
         sys.stderr.flush()
         os.execve(sys.executable, sys.orig_argv, dict(os.environ))
+
+
+# Tests that start nodes, talk over DDS or run the whole graph.
+DDS_DIRS = ('tests/nodes', 'tests/ros', 'tests/e2e')
+
+# The heavy tests of the pure-core and message tiers, each with why it is slow and what
+# it took (seconds, on the 2 shared cores under a background benchmark). An entry is a
+# file or file::function (every parameter case). tests/test_tiers.py checks each exists.
+SLOW = (
+    ('tests/core/test_dqn.py::test_a_short_training_beats_a_random_policy_on_its_training_scenes',
+     'trains a network (18 s)'),
+    ('tests/core/test_dqn.py::test_a_killed_run_resumes_and_ends_as_if_never_stopped',
+     'trains twice in subprocesses (17 s)'),
+    ('tests/core/test_dqn.py::test_robot_training_runs_checkpoints_and_resumes_as_if_never_stopped',
+     'trains with the robot in the loop (16 s)'),
+    ('tests/core/test_dqn.py::test_sigint_checkpoints_and_exits_130', 'trains in a subprocess (5 s)'),
+    ('tests/core/test_dqn.py::test_two_runs_with_one_seed_give_identical_weights_and_another_seed_does_not',
+     'trains three times (4 s)'),
+    ('tests/core/test_dqn.py::test_an_existing_run_is_not_overwritten_and_resume_keeps_its_config',
+     '`rad train` subprocesses (4 s)'),
+    ('tests/core/test_dqn.py::test_bad_checkpoints_name_the_file_and_the_problem',
+     '`rad eval` subprocesses that import torch (3 s)'),
+    ('tests/core/test_dqn.py::test_init_starts_from_the_model_file_and_a_mismatch_is_refused',
+     'trains, then builds four trainers (4 s)'),
+    ('tests/core/test_dqn.py::test_verify_never_fails_and_never_builds_less',
+     'evaluates a network on 12 scenes twice (5 s)'),
+    ('tests/core/test_distributed_train.py::test_cli_actors_starts_its_own_loopback_cluster_and_trains',
+     'a Dask cluster and training in subprocesses (16 s)'),
+    ('tests/core/test_distributed_train.py::test_bad_flag_combinations_are_one_line_errors',
+     '8 `rad train` subprocesses that import torch (15 s)'),
+    ('tests/core/test_distributed_train.py::test_two_actors_feed_the_learner_which_checkpoints_and_resumes',
+     'a Dask cluster training twice (8 s)'),
+    ('tests/core/test_distributed_train.py::test_seeds_give_each_seed_the_standalone_run',
+     'a Dask cluster and standalone runs (8 s)'),
+    ('tests/core/test_distributed_train.py::test_actors_refresh_their_weights_from_the_learner',
+     'a Dask cluster (2 s)'),
+    ('tests/core/test_distributed.py::test_two_workers_give_exactly_the_serial_rows_and_metrics',
+     'Dask clusters (7 s)'),
+    ('tests/core/test_distributed.py::test_cli_bad_workers_and_an_unreachable_scheduler_are_one_line_errors',
+     '`rad eval` subprocesses waiting on Dask (6 s)'),
+    ('tests/core/test_distributed.py::test_cli_workers_and_scheduler_give_the_serial_json',
+     'a Dask cluster behind the CLI (3 s)'),
+    ('tests/core/test_distributed.py::test_a_worker_killed_mid_run_loses_no_scene_and_counts_none_twice',
+     'a Dask cluster (2 s)'),
+    ('tests/core/test_distributed.py::test_every_socket_of_the_cluster_is_on_loopback_while_it_runs',
+     'a Dask cluster (2 s)'),
+    ('tests/core/test_execute.py::test_builds_the_scene_step_by_step_and_documents_it',
+     'simulated robot execution (5 s)'),
+    ('tests/core/test_execute.py::test_a_grasp_on_nothing_fails_the_step_and_the_loop_replans',
+     'simulated robot execution (5 s)'),
+    ('tests/core/test_execute.py::test_a_trajectory_aborted_mid_carry_puts_the_block_back_backs_out_and_replans',
+     'simulated robot execution (5 s)'),
+    ('tests/core/test_execute.py::test_a_block_wedged_on_the_way_back_is_let_go_and_the_arm_backs_out_empty',
+     'simulated robot execution (4 s)'),
+    ('tests/core/test_execute.py::test_a_block_moved_mid_run_replans_from_the_measured_world',
+     'simulated robot execution (3 s)'),
+    ('tests/core/test_execute.py::test_cancel_stops_before_the_next_step', 'simulated robot execution (2 s)'),
+    ('tests/core/test_faults.py::test_a_block_knocked_on_its_side_is_lost_and_the_run_succeeds_only_if_it_builds_what_was_planned',
+     'simulated robot execution (4 s)'),
+    ('tests/core/test_faults.py::test_a_slipped_block_falls_and_is_picked_again', 'simulated robot execution (4 s)'),
+    ('tests/core/test_faults.py::test_a_neighbour_nudged_a_few_millimetres_is_absorbed',
+     'simulated robot execution (2 s)'),
+    ('tests/core/test_faults.py::test_a_missed_grasp_opens_backs_out_and_replans', 'simulated robot execution (3 s)'),
+    ('tests/core/test_faults.py::test_a_block_left_2mm_into_its_neighbours_cell_is_built_against_not_onto',
+     'simulated robot execution (2 s)'),
+    ('tests/core/test_faults.py::test_placement_errors_noise_and_dropped_bodies_at_realistic_levels_are_absorbed',
+     'simulated robot execution (2 s)'),
+    ('tests/core/test_faults.py::test_a_block_found_turned_on_the_table_is_picked_where_it_lies_and_built_straight',
+     'simulated robot execution (2 s)'),
+    ('tests/core/test_faults.py::test_a_block_pushed_off_its_cell_is_lost_and_its_cells_are_left_out_of_the_plan',
+     'simulated robot execution (2 s)'),
+    ('tests/core/test_faults.py::test_a_miss_every_time_ends_with_the_reason_after_max_replans',
+     'simulated robot execution (2 s)'),
+    ('tests/core/test_disassembly.py::test_builds_takes_apart_and_builds_again_with_nothing_touched',
+     'simulated robot execution, three times (5 s)'),
+    ('tests/core/test_disassembly.py::test_a_block_pushed_aside_mid_take_apart_is_replanned_from_what_is_seen',
+     'simulated robot execution (2 s)'),
+    ('tests/core/test_evaluation.py::test_heur_fails_with_the_robot_where_heur_verified_does_not',
+     'episodes with the robot (4 s)'),
+    ('tests/core/test_evaluation.py::test_heur_verified_always_has_the_robot', 'episodes with the robot (2 s)'),
+    ('tests/core/test_evaluation.py::test_same_seed_same_numbers_and_the_seed_matters',
+     'three evaluations (2 s)'),
+    ('tests/core/test_evaluation.py::test_cli_writes_the_json', '`rad eval` subprocess (3 s)'),
+    ('tests/core/test_evaluation.py::test_cli_scene_dir_reads_every_file_and_names_a_bad_one',
+     '`rad eval` subprocesses (3 s)'),
+    ('tests/core/test_evaluation.py::test_execution_mode_reaches_the_robot_env', 'episodes with the robot (2 s)'),
+    ('tests/core/test_sequencer.py::test_every_policy_ranks_allocated_actions_and_answers_the_same_twice',
+     'every policy, searches included (4 s)'),
+    ('tests/core/test_sequencer.py::test_search_agents_with_verification_never_fail_and_are_reproducible',
+     'searches with the robot (3 s)'),
+    ('tests/core/test_robot_env.py::test_guided_episode_builds_what_the_mdp_books',
+     'whole episodes with the robot (4 s)'),
+    ('tests/core/test_robot_env.py::test_the_step_cache_replays_the_verdicts_of_a_fresh_env',
+     'episodes with the robot, twice (2 s)'),
+    ('tests/core/test_trajectory_limits.py::test_planned_scenes_stay_within_both_robots_limits_at_1khz',
+     'plans whole scenes with GAMP (2 s)'),
+    ('tests/core/test_allocation.py::test_time_limit_is_honoured_and_bound_reported',
+     'waits out solver time limits (3 s)'),
+    ('tests/core/test_generator.py::test_calibrated_to_the_papers_target_sizes', 'generates hundreds of scenes (2 s)'),
+    ('tests/core/test_cli_startup.py::test_train_help_still_lists_the_config_flags',
+     '`rad train --help` subprocesses that import torch (7 s)'),
+)
+
+
+def tiers_of(path: str | Path, name: str = '') -> set[str]:
+    """The tier markers of the test `name` (function, maybe with [params]) in file `path`."""
+    path = Path(path)
+    rel = (path.relative_to(harness.REPO_ROOT) if path.is_relative_to(harness.REPO_ROOT) else path).as_posix()
+    tiers = set()
+    if any(rel.startswith(d + '/') for d in DDS_DIRS):
+        tiers.add('dds')
+    function = name.split('[')[0]
+    if any(entry in (rel, f'{rel}::{function}') for entry, _ in SLOW):
+        tiers.add('slow')
+    return tiers
+
+
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        for tier in sorted(tiers_of(item.path, item.name)):
+            item.add_marker(tier)
 
 
 def pytest_report_header(config):
