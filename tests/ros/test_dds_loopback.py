@@ -127,7 +127,11 @@ def netns_available() -> bool:
 @pytest.mark.skipif(not netns_available(),
                     reason='needs unshare --net and ip (root): no private network namespace')
 def test_checks_fail_without_the_settings(process):
-    project = dict(os.environ)
+    # A domain whose RTPS ports (7400 + 250 * domain ...) lie below Linux's ephemeral ports (32768 up):
+    # the session's domain (100-199) shares its range with them, and an ephemeral socket a library
+    # opened on 0.0.0.0 once landed in it and read as a DDS receive socket off loopback.
+    domain = str(random.randrange(1, 97))
+    project = dict(os.environ, ROS_DOMAIN_ID=domain, RAD_ROS_DOMAIN_ID=domain)
     no_profile = {k: v for k, v in project.items() if 'DEFAULT_PROFILES_FILE' not in k}
     plain = dict(no_profile, ROS_AUTOMATIC_DISCOVERY_RANGE='SUBNET',
                  ROS_DOMAIN_ID=str(random.randrange(100, 200)))
