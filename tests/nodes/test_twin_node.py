@@ -44,7 +44,8 @@ def twin(node_process, ros_node, tmp_path):
     seen = {'joints': [], 'bodies': [], 'events': []}
     ros_node.create_subscription(JointState, 'joint_states', seen['joints'].append, 10)
     ros_node.create_subscription(RigidBodies, 'rigid_bodies', seen['bodies'].append, qos_profile_sensor_data)
-    ros_node.create_subscription(String, 'twin/events', lambda m: seen['events'].append(json.loads(m.data)), 10)
+    events = ros_node.create_subscription(String, 'twin/events', lambda m: seen['events'].append(json.loads(m.data)),
+                                          10)
     pub = ros_node.create_publisher(JointTrajectory, TRAJ_TOPIC, 10)
     state_client = wait_for_service(ros_node, GetSceneState, 'get_scene_state', timeout=30.0)
     load_client = wait_for_service(ros_node, LoadScene, 'load_scene', timeout=10.0)
@@ -52,6 +53,10 @@ def twin(node_process, ros_node, tmp_path):
     gripper = ActionClient(ros_node, GripperCommand, GRIPPER_ACTION)
     assert arm.wait_for_server(timeout_sec=10.0) and gripper.wait_for_server(timeout_sec=10.0)
     spin_until(ros_node, lambda: seen['joints'] and seen['bodies'], timeout=15.0)
+    # Topics are not latched: a trajectory published, or an event sent, before the endpoints have
+    # matched is lost (seen once in CI: nothing arrived in 20 s).
+    assert spin_until(ros_node, lambda: pub.get_subscription_count() > 0 and events.get_publisher_count() > 0,
+                      timeout=15.0)
 
     class Twin:
         pass
