@@ -39,9 +39,6 @@ SIMULATION_SEARCHES = ('mcts', 'halving', 'lookahead')
 SUPPORTS = ('none', 'stable')
 DEFAULT_BUDGET = {'mcts': 5, 'halving': 5, 'lookahead': 5, 'bnb': 10.0}
 NETWORKS = ('milp-dqn', 'milp-dqn-mixed', 'milp-dqn-robot', 'dqn', 'dqn-rel')
-# The action space each shipped network chooses among (a model file records its own).
-NETWORK_ACTIONS = {'milp-dqn': 'milp', 'milp-dqn-mixed': 'milp', 'milp-dqn-robot': 'milp', 'dqn': 'all',
-                   'dqn-rel': 'rel'}
 
 
 @dataclass(frozen=True)
@@ -91,19 +88,6 @@ class AgentSpec:
     @property
     def learned(self) -> bool:
         return self.scorer != 'heur'
-
-    @property
-    def is_file(self) -> bool:
-        return '/' in self.scorer or self.scorer.endswith('.pt')
-
-    def actions(self) -> str:
-        """The action space the agent chooses among: 'milp' (the allocation's), 'all' (DQN), 'rel' (DQN-REL).
-        A model file's is read from the file (which loads torch)."""
-        if not self.learned:
-            return 'milp'
-        if self.scorer in NETWORK_ACTIONS:
-            return NETWORK_ACTIONS[self.scorer]
-        return self.make_policy().actions
 
     def make_policy(self):
         """The scorer as a `Policy` (a network is loaded here; a bad file is a RadError naming it)."""
@@ -236,19 +220,3 @@ def _apply(spec: AgentSpec, parts: list[str], whole: str) -> AgentSpec:
             raise RadError(f'unknown part {part!r} in agent {whole!r}: a search ({", ".join(SEARCHES)}, '
                            f'with :budget), verify, realloc or support:none|stable')
     return AgentSpec(**fields)
-
-
-def describe(spec: AgentSpec) -> str:
-    """One line for people: what the agent does."""
-    scorer = 'the paper\'s heuristic' if not spec.learned else f'network {spec.scorer}'
-    bits = [f'ranks with {scorer}']
-    if spec.search == 'bnb':
-        bits.append(f'plays the best line a branch and bound finds in {spec.budget:g} s')
-    elif spec.search:
-        bits.append(f'searches ({spec.search}, {spec.budget} simulations per decision)')
-    bits.append('takes the best action found feasible' if spec.verify else 'takes the best-ranked action')
-    if spec.realloc:
-        bits.append('re-allocates when stuck')
-    support = spec.support or "the scorer's"
-    bits.append(f'allocation support {support}')
-    return ', '.join(bits)
