@@ -16,7 +16,7 @@ python -m pytest tests --timeout="${RAD_TEST_TIMEOUT:-300}" --durations=30 "$@" 
 elapsed=$((SECONDS - start))
 
 case $status in
-    0) echo "test.sh: all tests passed (${elapsed} s)" ;;
+    0) echo "test.sh: passed${*:+ (pytest $*)} (${elapsed} s)" ;;
     5) echo "test.sh: FAILED: pytest collected no tests" >&2; exit 1 ;;
     *) echo "test.sh: FAILED: pytest exit code $status (${elapsed} s)" >&2 ;;
 esac
