@@ -53,7 +53,6 @@ class Agent:
 
     name: str
     make_policy: Callable[[], Policy]
-    spec: AgentSpec | None = None
     robot: bool | None = None
     verified: bool = False
     actions: str = 'milp'
@@ -85,7 +84,7 @@ def agent_from_spec(spec: AgentSpec, robot: bool | None = None) -> Agent:
 
     def make_policy():
         return policy if policy is not None else spec.make_policy()
-    return Agent(label(spec), make_policy, spec, robot=robot, verified=spec.verify, actions=actions,
+    return Agent(label(spec), make_policy, robot=robot, verified=spec.verify, actions=actions,
                  support=support, search=search, budget=budget, reallocate=spec.realloc, time_limit_s=limit)
 
 
