@@ -69,18 +69,11 @@ def attempted_and_placed(steps, final_scene) -> tuple[int, int]:
 
 def run_teleport(name, scene, planner) -> dict:
     from rad_core.coverage import measured_coverage
-    from rad_core.sim.twin import Twin, twin_world_config
-    from rad_core.sim.world import World
-    from rad_core.transforms import yaw_quaternion
+    from rad_core.sequencing.twin_build import build_teleported
     t0 = time.perf_counter()
     plan = planner(scene, None)
-    with World(scene, twin_world_config()) as world:
-        twin = Twin(world)
-        for step in plan.steps:
-            world.set_block_pose(step.block, step.position, yaw_quaternion(step.yaw))
-            twin.settle(0.5)
-        registered = twin.registration()      # a block that fell over is set aside, not counted
-        final = registered.scene
+    registered = build_teleported(scene, plan.steps)     # a block that fell over is set aside, not counted
+    final = registered.scene
     steps = [s.to_dict() for s in plan.steps]
     attempted, placed = attempted_and_placed(steps, final)
     return {'scene': name, 'mode': 'teleport', 'faults': 'none', 'coverage': measured_coverage(final),
@@ -92,10 +85,9 @@ def run_teleport(name, scene, planner) -> dict:
 
 
 def run_simulated(name, scene, planner, faults: str, seed: int, max_replans: int) -> dict:
-    from rad_core.trajectory import TrajectoryAborted
-    from rad_core.sequencing.execute import ExecuteConfig, execute_assembly
-    from rad_core.sim.twin import Tolerances, Twin, TwinConfig, twin_world_config
-    from rad_core.sim.world import World
+    from rad_core.sequencing.execute import ExecuteConfig
+    from rad_core.sequencing.twin_build import build_simulated
+    from rad_core.sim.twin import TwinConfig
     level = FAULT_LEVELS[faults]
     twin_config = TwinConfig()
     if level:
@@ -103,32 +95,18 @@ def run_simulated(name, scene, planner, faults: str, seed: int, max_replans: int
         twin_config = TwinConfig(faults=FaultConfig.realistic(seed=seed) if level == 'realistic'
                                  else FaultConfig(seed=seed, **level))
     t0 = time.perf_counter()
-    with World(scene, twin_world_config()) as world:
-        twin = Twin(world, twin_config)
-        sim0 = twin.time
-
-        def move_arm(trajectory):
-            # The tolerances the assembly node sends with every goal (graph.yaml): contact aborts the run.
-            report = twin.execute(trajectory, tolerances=Tolerances(path=0.05, goal=0.01, goal_time=1.0))
-            if report.error_code:      # as rad_ros.plant.ActionPlant: a started trajectory stopped
-                raise TrajectoryAborted(report.error_code, f'trajectory aborted (error code {report.error_code}): '
-                                                           f'{report.error_string}')
-
-        result = execute_assembly(scene, planner, move_arm, twin.execute_gripper, twin.registration,
-                                  ExecuteConfig(settle_s=0.5, max_replans=max_replans),
-                                  joints=lambda: twin.world.joint_positions(), settle=twin.settle,
-                                  plan_motion=planner.motion)
-        sim_s = twin.time - sim0
-        injected = Counter(e.get('fault', e.get('action', '?')) for e in twin.fault_events)
+    built = build_simulated(scene, planner, planner.motion, twin_config,
+                            ExecuteConfig(settle_s=0.5, max_replans=max_replans))
+    result = built.result
     steps = result.steps
     attempted, placed = attempted_and_placed(steps, result.final_scene)
     return {'scene': name, 'mode': 'simulate', 'faults': faults, 'coverage': result.coverage,
             'steps': len(steps), 'replans': result.replans,
             'raw_step_success': max(0.0, 1.0 - len(result.faults) / len(steps)) if steps else 0.0,
             'recovered_step_success': placed / attempted if attempted else 1.0,
-            'success': result.success, 'reason': result.reason, 'injected': dict(injected),
+            'success': result.success, 'reason': result.reason, 'injected': built.injected,
             'lost': dict(result.lost_blocks), 'recovered_faults': result.recovered_faults,
-            'problems': len(result.faults), 'wall_s': time.perf_counter() - t0, 'sim_s': sim_s}
+            'problems': len(result.faults), 'wall_s': time.perf_counter() - t0, 'sim_s': built.sim_s}
 
 
 def summarise(rows: list[dict]) -> dict:

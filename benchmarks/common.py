@@ -1,9 +1,23 @@
-"""What more than one benchmark uses: the generated scenes of Table II and the number format of the tables.
+"""What more than one benchmark uses: the generated scenes of Table II, the number format of the
+tables, and where results go.
+
+Every benchmark writes two committed files under docs/results/: `<name>.md`, the table with the
+command that made it, and `<name>.rows.jsonl`, one compact JSON line per measured row (per scene
+and agent), so a figure can be traced to its scenes. Caches that let an interrupted run resume
+live under out/cache/<name>/ (not committed: the benchmark regenerates them).
 
 Benchmarks import it as `from common import ...` (each script runs from benchmarks/).
 """
 
 from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+RESULTS = ROOT / 'docs' / 'results'
+CACHE = ROOT / 'out' / 'cache'
 
 
 def scenes(grid: int, n: int, clearance: float):
@@ -16,3 +30,38 @@ def scenes(grid: int, n: int, clearance: float):
 
 def fmt(v) -> str:
     return '' if v is None else f'{v:.2f}'
+
+
+def command_line() -> str:
+    """How this benchmark was started, as a reader would type it from the repository root."""
+    return 'python benchmarks/' + ' '.join([Path(sys.argv[0]).name, *sys.argv[1:]])
+
+
+def cache_dir(name: str) -> Path:
+    """out/cache/<name>/, made if missing: a benchmark's resumable per-run results."""
+    path = CACHE / name
+    path.mkdir(parents=True, exist_ok=True)
+    return path
+
+
+def compact(value, digits: int = 4):
+    """A row made small for the rows file: floats rounded, nested lists and dicts kept."""
+    if isinstance(value, float):
+        return round(value, digits)
+    if isinstance(value, dict):
+        return {k: compact(v, digits) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [compact(v, digits) for v in value]
+    return value
+
+
+def write_rows(path: Path, rows) -> Path:
+    """One compact JSON object per line (`compact`), in the order given."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    text = ''.join(json.dumps(compact(r), separators=(',', ':'), sort_keys=False) + '\n' for r in rows)
+    path.write_text(text)
+    return path
+
+
+def read_rows(path: Path) -> list[dict]:
+    return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]

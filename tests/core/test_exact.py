@@ -9,6 +9,8 @@ from rad_core.robot_env import RobotAssemblyEnv, RobotEnvConfig
 from rad_core.scene import Scene
 from rad_core.sequencing.actions import AllocationActions
 from rad_core.sequencing.exact import exact_search
+from rad_core.sequencing.policy import HeurPolicy
+from rad_core.sequencing.search import SEARCHES, EnvModel
 
 from scenes import scene as default_scene
 
@@ -40,6 +42,11 @@ def stable_space(renv):
     return AllocationActions(renv.env, solve(renv.scene, AllocationParams(support='stable')).placements)
 
 
+def model(renv, space):
+    """The search model the branch and bound steps (no scorer: its default child order)."""
+    return EnvModel(renv, None, space)
+
+
 def world_poses(renv):
     return np.array([np.concatenate(renv.world.block_pose(b)) for b in renv.world.blocks])
 
@@ -48,7 +55,7 @@ def test_finds_full_coverage_and_its_line_builds_it_with_the_robot():
     with robot_env(default_scene()) as renv:
         space = stable_space(renv)
         before, poses = renv.env.snapshot(), world_poses(renv)
-        result = exact_search(renv, space, time_limit_s=30)
+        result = exact_search(model(renv, space), time_limit_s=30)
         assert result.complete and result.reason == ''
         assert result.coverage == result.bound == 1.0 and len(result.actions) == 3
         # The env is back where it was given.
@@ -71,7 +78,7 @@ def test_a_pose_only_an_unreachable_block_can_fill_gives_a_proven_lower_coverage
             valid.append(not result.outcome.is_invalid)
             return result
         renv.step = counting_step
-        result = exact_search(renv, stable_space(renv), time_limit_s=60)
+        result = exact_search(model(renv, stable_space(renv)), time_limit_s=60)
         assert result.complete and result.bound == 1.0
         assert result.coverage == pytest.approx(2 / 3) and len(result.actions) == 2
         assert result.states == 13 and sum(valid) == 12 < 18
@@ -80,10 +87,10 @@ def test_a_pose_only_an_unreachable_block_can_fill_gives_a_proven_lower_coverage
 
 def test_a_cut_search_answers_a_lower_bound_and_says_why():
     with robot_env(default_scene()) as renv:
-        result = exact_search(renv, stable_space(renv), time_limit_s=1e-6)
+        result = exact_search(model(renv, stable_space(renv)), time_limit_s=1e-6)
         assert not result.complete and result.coverage == 0.0 and result.actions == []
         assert 'time limit of 1e-06 s reached after 1 states; 0.00 is a lower bound' == result.reason
-        result = exact_search(renv, stable_space(renv), max_states=2)
+        result = exact_search(model(renv, stable_space(renv)), max_states=2)
         assert not result.complete and result.states == 2 and 'state limit of 2' in result.reason
         assert result.coverage > 0 and len(result.actions) == 1
         assert not renv.env.state.placed and not renv.env.state.done
@@ -105,7 +112,7 @@ def test_on_dead_end_is_called_and_its_space_is_searched():
                 return None
             return AllocationActions(at.env, [Placement('I2', 't', 0, ((1, 0, 0), (2, 0, 0)))])
 
-        result = exact_search(renv, AllocationActions(renv.env, cube), time_limit_s=60, on_dead_end=reallocate)
+        result = exact_search(model(renv, AllocationActions(renv.env, cube)), time_limit_s=60, on_dead_end=reallocate)
         assert calls and result.coverage == 1.0
         assert [renv.scene.blocks[a.block].id for a in result.actions] == ['c0', 'i2']
 
@@ -114,11 +121,11 @@ def test_bad_limits_and_orders_are_refused_and_the_env_is_left_as_given():
     with robot_env(default_scene()) as renv:
         space = stable_space(renv)
         with pytest.raises(RadError, match='time_limit_s'):
-            exact_search(renv, space, time_limit_s=0)
+            exact_search(model(renv, space), time_limit_s=0)
         with pytest.raises(RadError, match='max_states'):
-            exact_search(renv, space, max_states=0)
+            exact_search(model(renv, space), max_states=0)
         with pytest.raises(RadError, match='order'):
-            exact_search(renv, space, order=lambda env, actions: actions[:1])
+            exact_search(model(renv, space), order=lambda env, actions: actions[:1])
         calls = []
 
         def fails_below_the_root(env, actions):
@@ -127,28 +134,50 @@ def test_bad_limits_and_orders_are_refused_and_the_env_is_left_as_given():
                 raise RuntimeError('ranking failed')
             return actions
         with pytest.raises(RuntimeError, match='ranking failed'):
-            exact_search(renv, space, order=fails_below_the_root)
+            exact_search(model(renv, space), order=fails_below_the_root)
         assert calls[-1] == 1 and not renv.env.state.placed and not renv.env.state.done
 
 
-def test_rad_eval_exact_plays_its_best_line_and_reports_the_search():
+def test_bnb_is_a_search_whose_move_starts_its_best_line():
+    rng = np.random.default_rng(0)
+    with robot_env(row_scene(2, far=True)) as renv:     # two cubes within reach, one out of it
+        space = stable_space(renv)
+        result = SEARCHES['bnb'](EnvModel(renv, HeurPolicy(), space), rng, budget=60)
+        assert result.info['complete'] and result.info['coverage'] == pytest.approx(2 / 3)
+        assert len(result.line) == 2 and result.action == result.line[0]
+        proposals = [a for a, _ in result.proposals()]
+        assert proposals[0] == result.line[0] and not renv.env.state.placed
+        cut = SEARCHES['bnb'](EnvModel(renv, HeurPolicy(), space), rng, budget=1e-6)
+        assert not cut.info['complete'] and 'time limit' in cut.info['reason']
+        # Cut before it found a line: no verdict, the ranking is the scorer's.
+        assert cut.line is None and cut.children == [] and len(cut.proposals()) == len(cut.actions) > 0
+
+
+def test_rad_eval_exact_plans_and_builds_its_best_line():
     from rad_core.evaluation import evaluate, get_agent
     scene = row_scene(2, far=True)      # two cubes within reach, one out of it: 2 of 3 cells at best
     result = evaluate(get_agent('exact'), [('row', scene)], robot=True, seed=0)
     row = result['scenes'][0]
-    assert result['f'] == 0.0 and row['coverage'] == pytest.approx(2 / 3)
-    assert row['exact_coverage'] == row['coverage'] and row['exact_complete'] is True
-    assert row['exact_states'] >= 1 and row['exact_reason'] == ''
+    assert result['agent'] == 'heur+bnb:60+verify+realloc+support:stable'
+    assert result['f'] == 0.0 and row['coverage'] == pytest.approx(2 / 3) and row['steps'] == 2
 
 
-def test_the_dfs_agent_searches_in_the_networks_order_within_its_time():
-    from dataclasses import replace
+def test_the_networks_bnb_agent_builds_within_its_time_and_a_cut_one_stops_without_failing():
     from rad_core.evaluation import evaluate, get_agent
     agent = get_agent('milp-dqn-mixed-dfs')
-    assert agent.search == 'dfs' and agent.verified and agent.robot
+    assert agent.search == 'bnb' and agent.verified and agent.robot and agent.budget == 10
     result = evaluate(agent, [('row', row_scene(3))], robot=True, seed=0)
-    assert result['scenes'][0]['coverage'] == 1.0 and result['scenes'][0]['exact_complete']
-    cut = evaluate(replace(agent, time_limit_s=1e-6), [('row', row_scene(3))], robot=True, seed=0)
+    assert result['scenes'][0]['coverage'] == 1.0
+    cut = evaluate('milp-dqn-mixed+bnb:1e-06+verify', [('row', row_scene(3))], robot=True, seed=0)
     row = cut['scenes'][0]
-    assert row['exact_complete'] is False and 'time limit' in row['exact_reason'] and row['coverage'] < 1.0
-    assert cut['f'] == 0.0          # whatever it found is played without failing
+    assert cut['f'] == 0.0 and row['steps'] >= 1     # cut searches fall back on the network's ranking
+
+
+def test_the_robot_ceiling_searches_orders_and_reallocations_to_a_proven_answer():
+    from rad_core.sequencing.exact import robot_ceiling
+    found = robot_ceiling(row_scene(2, far=True), time_limit_s=60)
+    assert found.complete and found.reason == '' and found.coverage == pytest.approx(2 / 3)
+    i2 = {'id': 'i2', 'type': 'I2', 'position': [0.5, -0.35, U / 2], 'yaw': 0}
+    # A cube out of reach, an I2 within it: only re-allocating around the far cube fills the row.
+    found = robot_ceiling(row_scene(1, far=True, extra=[i2]), time_limit_s=60)
+    assert found.complete and found.coverage == 1.0

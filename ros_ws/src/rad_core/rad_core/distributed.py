@@ -10,8 +10,9 @@ Tasks carry arguments, not objects: the agent as `AgentArgs` (what `get_agent` n
 the scene as its `Scene.to_dict()` document, the CP-SAT and re-allocation settings as
 plain dicts. So a task means the same on any worker, one rad starts here or one of a
 scheduler elsewhere running the same rad. What is expensive to build (the policy, a
-Q-network; the PyBullet client of the no-robot stability check) each worker thread builds
-once and keeps for the scenes it gets (`_worker_state`).
+Q-network; the PyBullet client of the no-robot stability check; with the robot, the agent's
+planner with its GAMP and planning-twin worlds) each worker thread builds once and keeps for
+the scenes it gets (`_worker_state`).
 
 A worker that dies takes its running and finished-but-not-gathered tasks with it; the
 scheduler runs them again elsewhere (its `distributed.scheduler.allowed-failures`, default
@@ -93,6 +94,19 @@ def _agent_and_policy(args: AgentArgs):
     return agents[args]
 
 
+def _planner(args: AgentArgs, allocation: dict | None, reallocation: dict | None):
+    """This worker thread's robot planner for the agent and settings (`evaluation.robot_planner`:
+    the network, GAMP's world and the sequencer's planning twin), built once and kept."""
+    import json
+    planners = _worker_state().setdefault('planners', {})
+    key = (args, json.dumps(allocation, sort_keys=True), json.dumps(reallocation, sort_keys=True))
+    if key not in planners:
+        from rad_core.evaluation import robot_planner
+        planners[key] = robot_planner(_agent_and_policy(args)[0], _allocation_params(allocation),
+                                      _reallocation_config(reallocation))
+    return planners[key]
+
+
 def _stability():
     state = _worker_state()
     if state['stability'] is None:
@@ -121,10 +135,12 @@ def run_scene(name: str, scene_doc: dict, agent_args: AgentArgs, robot: bool, se
     from rad_core.evaluation import scene_episode, uses_robot
     try:
         agent, policy = _agent_and_policy(agent_args)
-        stability = None if uses_robot(agent, robot) else _stability()
+        with_robot = uses_robot(agent, robot)
+        stability = None if with_robot else _stability()
+        planner = _planner(agent_args, allocation, reallocation) if with_robot else None
         row = scene_episode(agent, Scene.from_dict(scene_doc), robot, seed, execution, policy,
                             allocation=_allocation_params(allocation), stability=stability,
-                            reallocation=_reallocation_config(reallocation))
+                            reallocation=_reallocation_config(reallocation), planner=planner)
     except RadError as e:
         # Subclasses with their own __init__ (SceneError) do not survive pickling back.
         raise RadError(str(e)) from None

@@ -2,11 +2,19 @@
 
 An agent is an `agents.AgentSpec` (scorer, search, verification, re-allocation,
 allocation support; `rad_core.agents` has its text form and presets). Here it runs
-episodes, with the robot in the loop (`RobotAssemblyEnv`: GAMP decides grasp and
-placement, the twin executes, physics judges) or without it (`AssemblyEnv` with
-physical stability, the paper's "HEUR wo robot" oracle). Unverified, it takes the
-best-ranked action blindly (the paper's agents, which therefore fail with f_g / f_p);
-verified, the best one found feasible from the current state (what /plan_assembly does).
+episodes with the robot in the loop or without it.
+
+With the robot, an episode is what the node graph does with the scene: the agent plans
+it as /plan_assembly does (`sequencing.agent_plan.AgentPlanner`: CP-SAT, the sequencer
+and its search, GAMP; `plan_assembly`'s episode gives the return and the outcome), and the
+plan is built in a fresh PyBullet twin (`sequencing.twin_build`: teleporting, or the arm
+simulated through /execute_assembly's loop); coverage is what the twin's registration
+finds built. Unverified, the plan takes the best-ranked action blindly (the paper's agents:
+one GAMP or the stability check refuses ends the episode with f_g / f_p); verified, the
+best one GAMP finds feasible.
+
+Without the robot (`AssemblyEnv` with physical stability, the paper's "HEUR wo robot"
+oracle and Table I), the episode loop runs the agent's ranking, search and checks directly.
 
 Nothing ranked (above terminating) means the termination action, as in the
 paper. Every episode starts from the scene with a fresh CP-SAT allocation
@@ -17,6 +25,7 @@ robot, seed). Every row and result records the agent's canonical text (`agent`).
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, replace
 
@@ -30,9 +39,8 @@ from rad_core.errors import RadError
 from rad_core.mdp import AssemblyEnv, EnvConfig, Outcome
 from rad_core.scene import Scene
 from rad_core.sequencing.actions import action_space
-from rad_core.sequencing.deciders import (exact_decider, policy_decider, search_decider, simulated_check,
-                                          stability_check)
-from rad_core.sequencing.episode import run_episode
+from rad_core.sequencing.deciders import policy_decider, search_decider, stability_check
+from rad_core.sequencing.episode import Episode, run_episode
 from rad_core.sequencing.policy import Policy
 
 KEYS = ('agent', 'R', 'R_std', 'd', 'e', 'f', 'f_g', 'f_p', 'coverage', 'coverage_rel', 'n', 'scenes')
@@ -46,9 +54,9 @@ class Agent:
 
     name: the spec's canonical text (`agents.label`). robot: None follows `evaluate`'s robot
     flag; True / False whatever it says (legacy names fixed it; the branch and bound needs the
-    robot). search: '' or a search of `sequencing.search`, or 'exact' / 'dfs' for the branch and
-    bound without / with the network's order of children. actions and support: the scorer's
-    action space and the allocation it runs with (a model file records both).
+    robot). search: '' or a search of `sequencing.search.SEARCHES`, with its budget (seconds for
+    bnb). actions and support: the scorer's action space and the allocation it runs with (a
+    model file records both).
     """
 
     name: str
@@ -58,11 +66,14 @@ class Agent:
     actions: str = 'milp'
     support: str = 'none'
     search: str = ''
-    budget: int = 5
+    budget: float = 5
     epsilon: float | None = None
     reallocate: bool = False
-    time_limit_s: float = 60.0
-    """Search time per scene of the branch and bound (search='exact' or 'dfs')."""
+
+    @property
+    def spec(self) -> AgentSpec:
+        from rad_core.agents import parse
+        return parse(self.name)
 
 
 def agent_from_spec(spec: AgentSpec, robot: bool | None = None) -> Agent:
@@ -70,14 +81,11 @@ def agent_from_spec(spec: AgentSpec, robot: bool | None = None) -> Agent:
     policy = spec.make_policy() if spec.learned else None
     actions = getattr(policy, 'actions', 'milp')
     support = spec.resolved_support(policy)
-    search, budget, limit = spec.search, 5, 60.0
+    budget = spec.budget if spec.search else 5
     if spec.search == 'bnb':
-        search, limit = ('dfs' if spec.learned else 'exact'), float(spec.budget)
         if robot is False:
             raise RadError(f'{label(spec)}: the branch and bound searches with GAMP and physics: it needs the robot')
         robot = True
-    elif spec.search:
-        budget = int(spec.budget)
     if spec.realloc and actions != 'milp':
         raise RadError(f'realloc applies to agents choosing among the allocation\'s actions, not {label(spec)!r} '
                        f'({actions!r})')
@@ -85,7 +93,7 @@ def agent_from_spec(spec: AgentSpec, robot: bool | None = None) -> Agent:
     def make_policy():
         return policy if policy is not None else spec.make_policy()
     return Agent(label(spec), make_policy, robot=robot, verified=spec.verify, actions=actions,
-                 support=support, search=search, budget=budget, reallocate=spec.realloc, time_limit_s=limit)
+                 support=support, search=spec.search, budget=budget, reallocate=spec.realloc)
 
 
 def get_agent(agent: str | AgentSpec | Agent, checkpoint: str | None = None, verify: bool = False,
@@ -121,71 +129,116 @@ def uses_robot(agent: str | AgentSpec | Agent, robot: bool) -> bool:
     return robot if agent.robot is None else agent.robot
 
 
+PLAN_TIME_LIMIT_S = 600.0
+"""The longest an episode's plan may take with the robot (the branch and bound's searches included)."""
+
+
+def robot_planner(agent: str | Agent, allocation: AllocationParams | None = None, reallocation=None):
+    """The in-process planner of the agent's robot episodes (`AgentPlanner`: what /plan_assembly
+    runs); allocation and reallocation as `scene_episode` takes them. Close it when done."""
+    from rad_core.sequencing.agent_plan import AgentPlanner
+    agent = get_agent(agent)
+    return AgentPlanner(agent.spec, time_limit_s=PLAN_TIME_LIMIT_S, allocation=allocation, reallocation=reallocation)
+
+
 def scene_episode(agent: str | Agent, scene: Scene, robot: bool, seed: int, execution: str = 'teleport',
                   policy: Policy | None = None, allocation: AllocationParams | None = None,
-                  stability=None, reallocation=None) -> dict:
+                  stability=None, reallocation=None, planner=None) -> dict:
     """One episode from the scene as given; the row `evaluate` reports for it.
 
     allocation: CP-SAT settings (default: 10 s, one worker, seed 0: deterministic
     unless the time limit cuts the search). stability: a shared no-robot
     stability check (one PyBullet client for a whole run); default: a fresh one.
     reallocation: a `ReallocationConfig` for agents that re-allocate (default: its defaults).
+    planner: with the robot, the `robot_planner` to plan with (default: a fresh one).
     """
     agent = get_agent(agent)
-    with_robot = uses_robot(agent, robot)
+    if uses_robot(agent, robot):
+        own = planner is None
+        planner = planner if planner is not None else robot_planner(agent, allocation, reallocation)
+        try:
+            return robot_episode(planner, scene, seed, execution)
+        finally:
+            if own:
+                planner.close()
     policy = policy if policy is not None else agent.make_policy()
     placements = solve(scene, allocation or AllocationParams(support=agent.support)).placements
-    renv, own_stability = None, None
-    if with_robot:
-        from rad_core.robot_env import RobotAssemblyEnv, RobotEnvConfig
-        renv = RobotAssemblyEnv(scene, RobotEnvConfig(execution=execution))
-        env = renv.env
-    else:
-        if stability is None:
-            from rad_core.physics import PhysicsStability
-            stability = own_stability = PhysicsStability()
-        env = AssemblyEnv(scene, EnvConfig(stability='physics'), stability=stability)
+    own_stability = None
+    if stability is None:
+        from rad_core.physics import PhysicsStability
+        stability = own_stability = PhysicsStability()
+    env = AssemblyEnv(scene, EnvConfig(stability='physics'), stability=stability)
     try:
         guide = AllocationGuide(scene, placements, env.grid)
         opt = optimum_coverage(env, guide)
         space = action_space(agent.actions, env, placements)
-        verify = None
-        if agent.verified:
-            verify = renv.plan if with_robot else stability_check(env)
-        if agent.search in ('exact', 'dfs'):
-            if renv is None:
-                raise RadError('the branch and bound needs the robot (it searches with GAMP and physics)')
-            decide, exact = exact_decider(renv, space, agent.time_limit_s, agent.reallocate,
-                                          policy if agent.search == 'dfs' else None, reallocation)
-        elif agent.search:
-            decide = search_decider(policy, space, renv if with_robot else env, agent.search, agent.budget,
-                                    agent.epsilon, verify)
+        check = stability_check(env) if agent.verified else None
+        if agent.search:
+            decide = search_decider(policy, space, env, agent.search, int(agent.budget), agent.epsilon, check)
         else:
-            decide = policy_decider(policy, space, verify)
+            decide = policy_decider(policy, space, check)
         reallocator = None
-        if agent.reallocate and agent.search not in ('exact', 'dfs'):
+        if agent.reallocate:
             from rad_core.sequencing.reallocation import ReallocationConfig, Reallocator, with_reallocation
-            reallocator = Reallocator(space, simulated_check(renv) if with_robot else stability_check(env),
-                                      reallocation or ReallocationConfig())
+            reallocator = Reallocator(space, stability_check(env), reallocation or ReallocationConfig())
             decide = with_reallocation(decide, reallocator)
-        act = (lambda d: renv.step(d.action, plan=d.plan)) if with_robot else None
-        episode = run_episode(env, decide, np.random.default_rng(seed), act)
+        episode = run_episode(env, decide, np.random.default_rng(seed))
     finally:
-        if renv is not None:
-            renv.close()
         if own_stability is not None:
             own_stability.close()
     row = {**episode.row(), 'coverage_opt': opt}
-    if with_robot:
-        row['reason'] = episode.reason if episode.outcome.is_invalid else ''
     if reallocator is not None:
         row['reallocations'] = [e.to_dict() for e in reallocator.events]
         row['reallocation_s'] = reallocator.seconds
-    if agent.search in ('exact', 'dfs'):
-        found = exact['result']
-        row.update(exact_coverage=found.coverage, exact_complete=found.complete, exact_bound=found.bound,
-                   exact_states=found.states, exact_s=found.elapsed_s, exact_reason=found.reason)
     return row
+
+
+def robot_episode(planner, scene: Scene, seed: int, execution: str = 'teleport') -> dict:
+    """The row of one robot episode: the planner's plan (seeded with `seed`), built in a fresh
+    twin (`execution`: 'teleport' or 'simulate'). return, outcome: the plan's MDP episode;
+    coverage: what the twin's registration finds built; predicted_coverage: what the plan
+    expected; reason: why an invalid action failed; stop_reason: why the plan stopped short."""
+    from rad_core.coverage import measured_coverage
+    from rad_core.sequencing.twin_build import build_simulated, build_teleported
+    t0 = time.perf_counter()
+    if execution == 'teleport':
+        plan = planner(scene, None, seed)
+        registered = build_teleported(scene, plan.steps)
+        coverage, lost, steps, replans = measured_coverage(registered.scene), registered.set_aside, len(plan.steps), 0
+    elif execution == 'simulate':
+        plans = []
+
+        def plan_from(now: Scene, start):
+            plans.append(planner(now, start, seed))
+            return plans[-1]
+        built = build_simulated(scene, plan_from, planner.motion).result
+        if not plans:
+            raise RadError(f'execution ended before a plan was made: {built.reason}')
+        plan = plans[0]
+        coverage, lost, steps, replans = built.coverage, built.lost_blocks, len(built.steps), built.replans
+    else:
+        raise RadError(f"execution must be 'teleport' or 'simulate', got {execution!r}")
+    episode = plan.episode or Episode(outcome=Outcome.TERMINATED, reason=plan.reason)
+    invalid = episode.outcome is not None and episode.outcome.is_invalid
+    row = {'return': episode.ret, 'outcome': (episode.outcome or Outcome.TERMINATED).value, 'coverage': coverage,
+           'steps': steps, 'coverage_opt': _optimum(scene, plan.allocation),
+           'predicted_coverage': plan.predicted_coverage, 'reason': episode.reason if invalid else '',
+           'stop_reason': plan.reason, 'lost': dict(lost), 'plan_s': plan.timings.get('total', 0.0),
+           'wall_s': time.perf_counter() - t0}
+    if execution == 'simulate':
+        row['replans'] = replans
+    if planner.spec.realloc:
+        row['reallocations'] = [e.to_dict() for e in plan.reallocations]
+        row['reallocation_s'] = plan.timings.get('reallocation', 0.0)
+    return row
+
+
+def _optimum(scene: Scene, allocation) -> float:
+    """The coverage the allocation's poses would give, all built (0 without an allocation)."""
+    if allocation is None or not allocation.has_solution:
+        return 0.0
+    env = AssemblyEnv(scene, EnvConfig(stability='none'))
+    return optimum_coverage(env, AllocationGuide(scene, allocation.placements, env.grid))
 
 
 def summarize(rows: list[dict], agent: str = '') -> dict:
@@ -233,13 +286,16 @@ def evaluate(agent: str | Agent, scenes: Iterable[tuple[str, Scene]], robot: boo
     reallocation: the `ReallocationConfig` of re-allocating agents (default: its defaults).
     """
     agent = get_agent(agent)
-    policy = policy if policy is not None else agent.make_policy()
-    trained_on = getattr(policy, 'actions', agent.actions)
-    if trained_on != agent.actions:
-        raise RadError(f'{getattr(policy, "source", agent.name)} was trained on the {trained_on!r} action space; '
-                       f'agent {agent.name!r} chooses among {agent.actions!r} (pick the agent of that method)')
-    stability = None
-    if not uses_robot(agent, robot):
+    with_robot = uses_robot(agent, robot)
+    stability = planner = None
+    if with_robot:
+        planner = robot_planner(agent, allocation, reallocation)
+    else:
+        policy = policy if policy is not None else agent.make_policy()
+        trained_on = getattr(policy, 'actions', agent.actions)
+        if trained_on != agent.actions:
+            raise RadError(f'{getattr(policy, "source", agent.name)} was trained on the {trained_on!r} action space; '
+                           f'agent {agent.name!r} chooses among {agent.actions!r} (pick the agent of that method)')
         from rad_core.physics import PhysicsStability
         stability = PhysicsStability()
     rows = []
@@ -247,13 +303,13 @@ def evaluate(agent: str | Agent, scenes: Iterable[tuple[str, Scene]], robot: boo
         for i, (name, scene) in enumerate(scenes):
             row = {'name': name, **scene_episode(agent, scene, robot, seed + i, execution, policy,
                                                  allocation=allocation, stability=stability,
-                                                 reallocation=reallocation)}
+                                                 reallocation=reallocation, planner=planner)}
             rows.append(row)
             if progress is not None:
                 progress(row)
     finally:
         if stability is not None:
             stability.close()
+        if planner is not None:
+            planner.close()
     return summarize(rows, agent.name)
-
-

@@ -1,7 +1,8 @@
-"""How a ranking becomes a decision of the episode loop (`sequencing.episode`): the best-ranked
-action, the best one a check finds feasible, a test-time search's move, or the branch and bound's
-line. The checks: GAMP with the robot (`RobotAssemblyEnv.plan`), the physics stability check
-without it, or a simulated step of the planning copy.
+"""How a ranking becomes a decision of the episode loop (`sequencing.episode`) without the
+robot (`rad eval` without --robot, training's evaluations): the best-ranked action, the best
+one a check finds feasible, or a test-time search's move. The checks: the physics stability
+check, or a simulated step of the planning copy. With the robot, decisions are
+/plan_assembly's (`sequencing.plan`), whoever runs it.
 """
 
 from __future__ import annotations
@@ -10,7 +11,6 @@ from typing import NamedTuple
 
 import numpy as np
 
-from rad_core.errors import RadError
 from rad_core.mdp import AssemblyEnv
 from rad_core.sequencing.actions import ActionSpace
 from rad_core.sequencing.episode import Decide, Decision, stop
@@ -79,14 +79,6 @@ def search_decider(policy: Policy, actions: ActionSpace, stepper, search_name: s
     return decide
 
 
-def policy_order(policy: Policy, rng: np.random.Generator):
-    """order(env, actions) for a search: all actions, best score first (ties keep their order)."""
-    def order(env: AssemblyEnv, actions: list) -> list:
-        scores = np.asarray(policy.scores(env, actions, rng), dtype=float)[:-1]
-        return [actions[i] for i in np.argsort(-scores, kind='stable')]
-    return order
-
-
 def simulated_check(stepper):
     """A check that steps the action in a snapshot of the planning copy and goes back:
     success when the step is valid (with the robot: GAMP, execution and physics)."""
@@ -99,44 +91,3 @@ def simulated_check(stepper):
             stepper.restore(snap)
         return Check(not result.outcome.is_invalid, result.reason, plan)
     return check
-
-
-def exact_decider(renv, space, time_limit_s: float, reallocate: bool = False, policy: Policy | None = None,
-                  reallocation=None):
-    """decide() that plays the best line of the branch and bound (`sequencing.exact.exact_search`,
-    with re-allocation at dead ends when `reallocate`), searched on the first call within
-    `time_limit_s`; and the dict that then holds its result. policy: the children's order
-    (best score first; None: the search's default, most target cells then lowest first)."""
-    from rad_core.sequencing.actions import AllocationActions
-    from rad_core.sequencing.exact import exact_search
-    from rad_core.sequencing.reallocation import ReallocationConfig, Reallocator
-    if renv is None:
-        raise RadError('the exact planner needs the robot (it searches with GAMP and physics)')
-    config = reallocation or ReallocationConfig()
-    env, holder = renv.env, {}
-
-    def on_dead_end(_renv, current):
-        # A copy of the line's space (its parent keeps its own), with the no-goods found on the line.
-        sub = AllocationActions(env, current.guide.placements)
-        reallocator = Reallocator(sub, simulated_check(renv), config)
-        reallocator.no_goods = dict(getattr(current, 'no_goods', {}))
-        event = reallocator.stalled(env, 'exact search: dead end')
-        sub.no_goods = reallocator.no_goods
-        return sub if event.changed else None
-
-    def bound_of(_renv) -> float:   # re-allocating: what any allocation of the free cells could cover
-        from rad_core.allocation.cpsat import coverage_bound
-        from rad_core.sequencing.reallocation import placed_scene
-        return coverage_bound(placed_scene(env))
-
-    def decide(env_: AssemblyEnv, rng: np.random.Generator) -> Decision:
-        if 'line' not in holder:
-            holder['result'] = exact_search(renv, space, time_limit_s,
-                                            order=None if policy is None else policy_order(policy, rng),
-                                            on_dead_end=on_dead_end if reallocate else None,
-                                            bound_of=bound_of if reallocate else None)
-            holder['line'] = list(holder['result'].actions)
-        return Decision(holder['line'].pop(0)) if holder['line'] else stop()
-    return decide, holder
-
-

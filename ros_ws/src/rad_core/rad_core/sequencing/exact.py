@@ -1,12 +1,14 @@
 """What the best order of the allocation's poses can build with the robot.
 
 The robot-feasible ceiling: a depth-first branch and bound over the orders in
-which the allocation's open poses can be filled, each move a real step of a
-`RobotAssemblyEnv` (GAMP, execution, physics) from a snapshot, undone with
-`restore`. Unlike the no-robot ceiling (`sequencing.ceiling`), which block of a
-type fills a pose matters here: the robot picks each block from its own place on
-the table, so a move is (block, the cells it fills, its yaw), one per distinct
-final pose of each block still on the table.
+which the allocation's open poses can be filled, each move a real step of the
+search model (`sequencing.search.EnvModel` over a `RobotAssemblyEnv`: GAMP,
+execution, physics) from a snapshot, undone with `restore`. `sequencing.search.bnb`
+serves it as a search like the others (budget: seconds). Unlike the no-robot
+ceiling (`sequencing.ceiling`), which block of a type fills a pose matters here:
+the robot picks each block from its own place on the table, so a move is (block,
+the cells it fills, its yaw), one per distinct final pose of each block still on
+the table.
 
 - A step the robot or physics fails is a dead child (nothing below it).
 - Visited states are memoized by what is placed where (block and cells), so two
@@ -21,8 +23,7 @@ final pose of each block still on the table.
   is not searched again). A re-allocation can cover cells the first allocation
   does not, so such a search needs a bound of its own (`bound_of`, e.g.
   `allocation.cpsat.coverage_bound`: what the blocks left could cover at most);
-  `rad eval --agent exact` uses it, so its complete answers are a true ceiling over
-  orders and re-allocations.
+  with it, complete answers are a true ceiling over orders and re-allocations.
 
 Anytime: when the time or state limit cuts the search, the best line found so
 far comes back with complete=False and its coverage is a lower bound only.
@@ -42,7 +43,7 @@ from rad_core.sequencing.actions import AllocationActions
 _EPS = 1e-9   # coverages are ratios of cell counts computed two ways
 
 Order = Callable[[AssemblyEnv, list[Action]], list[Action]]
-OnDeadEnd = Callable[[object, AllocationActions], 'AllocationActions | None']
+OnDeadEnd = Callable[[object, AllocationActions], 'AllocationActions | None']   # (model, space)
 
 
 @dataclass
@@ -89,21 +90,22 @@ def by_gain_then_height(env: AssemblyEnv, actions: list[Action]) -> list[Action]
     return sorted(actions, key=key)
 
 
-def exact_search(renv, space: AllocationActions, time_limit_s: float = 60.0, max_states: int = 100_000,
+def exact_search(model, time_limit_s: float = 60.0, max_states: int = 100_000,
                  order: Order | None = None, on_dead_end: OnDeadEnd | None = None,
                  bound_of: Callable[[object], float] | None = None) -> ExactResult:
     """Branch and bound over the orders of the allocation's poses with the robot in
-    the loop (module docstring), from renv's current state.
+    the loop (module docstring), from the model's current state.
 
-    renv: a `RobotAssemblyEnv` between steps; it is left in the state it was given.
-    space: the allocation's action space (`AllocationActions`: its guide's poses
-        give the bound).
+    model: a search model with the env it steps and the allocation's action space
+        (`sequencing.search.EnvModel`: `.env`, `.space`, `.step`, `.snapshot`,
+        `.restore`), between steps; it is left in the state it was given. The space's
+        guide (an `AllocationActions`) gives the bound.
     order: `order(env, actions) -> the same actions, best first` (e.g. a policy's
         ranking), so good lines come first; default `by_gain_then_height`.
-    on_dead_end: `on_dead_end(renv, space) -> new space or None`, called where no move
+    on_dead_end: `on_dead_end(model, space) -> new space or None`, called where no move
         succeeds (allocated poses open, or the allocation used up with target cells
-        free; renv is put back in that state after the call).
-    bound_of: `bound_of(renv) -> coverage no continuation from this state beats`, for
+        free; the model is put back in that state after the call).
+    bound_of: `bound_of(model) -> coverage no continuation from this state beats`, for
         searches that re-allocate (a re-allocation can cover cells the first allocation
         does not: its open poses are no bound then); e.g. `allocation.cpsat.coverage_bound`
         of the state. Default: the allocation's own, coverage plus its open target cells.
@@ -112,14 +114,14 @@ def exact_search(renv, space: AllocationActions, time_limit_s: float = 60.0, max
         raise RadError(f'exact_search: time_limit_s must be a positive number of seconds, got {time_limit_s!r}')
     if not (isinstance(max_states, int) and max_states >= 1):
         raise RadError(f'exact_search: max_states must be a positive integer, got {max_states!r}')
-    env = renv.env
+    env, space = model.env, model.space
     if env.state.done:
         raise RadError('exact_search: the episode is over; give it an env between steps')
     order = order or by_gain_then_height
     start_time = time.monotonic()
     deadline = start_time + time_limit_s
-    root = renv.snapshot()
-    bound = optimum_coverage(env, space.guide) if bound_of is None else bound_of(renv)
+    root = model.snapshot()
+    bound = optimum_coverage(env, space.guide) if bound_of is None else bound_of(model)
     best, best_line = env.coverage(), []
     seen: set[frozenset] = set()
 
@@ -152,7 +154,7 @@ def exact_search(renv, space: AllocationActions, time_limit_s: float = 60.0, max
 
     def expand(space, line: list[Action]) -> bool:
         """Search every move of the space from here; whether any step succeeded."""
-        here = renv.snapshot()
+        here = model.snapshot()
         any_valid = False
         try:
             for action, child in moves(space):
@@ -162,13 +164,13 @@ def exact_search(renv, space: AllocationActions, time_limit_s: float = 60.0, max
                     any_valid = True
                     continue
                 check_time()
-                result = renv.step(action)
-                if not result.outcome.is_invalid:
+                _, _, invalid = model.step(action)
+                if not invalid:
                     any_valid = True
                     search(space, line + [action])
-                renv.restore(here)
+                model.restore(here)
         finally:
-            renv.restore(here)
+            model.restore(here)
         return any_valid
 
     def search(space, line: list[Action]) -> None:
@@ -186,7 +188,7 @@ def exact_search(renv, space: AllocationActions, time_limit_s: float = 60.0, max
             raise _AtBound()
         if env.state.done:
             return
-        if bound_of is not None and bound_of(renv) <= best + _EPS:
+        if bound_of is not None and bound_of(model) <= best + _EPS:
             return                                             # nothing from here beats the best
         tried = set()
         while bound_of is not None or optimum_coverage(env, space.guide) > best + _EPS:
@@ -195,9 +197,9 @@ def exact_search(renv, space: AllocationActions, time_limit_s: float = 60.0, max
                 return
             if not open_poses(space) and not (env.grid.is_target & (env.state.occupancy < 0)).any():
                 return                                         # the target is full
-            here = renv.snapshot()
-            new = on_dead_end(renv, space)
-            renv.restore(here)
+            here = model.snapshot()
+            new = on_dead_end(model, space)
+            model.restore(here)
             if new is None or open_poses(new) in tried:
                 return   # no new space, or the same open poses again: nothing new to try
             space = new
@@ -213,6 +215,45 @@ def exact_search(renv, space: AllocationActions, time_limit_s: float = 60.0, max
         reason = (f'{cut.args[0]} reached after {len(seen)} states; '
                   f'{best:.2f} is a lower bound')
     finally:
-        renv.restore(root)
+        model.restore(root)
     return ExactResult(best, best_line, complete, bound, len(seen),
                        time.monotonic() - start_time, reason)
+
+
+def robot_ceiling(scene, time_limit_s: float = 60.0, support: str = 'stable', reallocation=None,
+                  max_states: int = 100_000) -> ExactResult:
+    """What the best order of the scene's allocation, and of its re-allocations at dead ends,
+    builds with the robot: the branch and bound from the empty scene in a planning twin
+    (teleporting execution), children most target cells first, re-allocating where no move
+    succeeds (the no-goods found there excluded) and bounded by what the blocks left could
+    cover at most (`allocation.cpsat.coverage_bound`). A complete answer is the robot-feasible
+    ceiling every agent is compared with; a cut one is a lower bound (its `reason` says so).
+
+    support: the first allocation's support rule; reallocation: a `ReallocationConfig`
+    (default: its defaults, the stable allocation)."""
+    from rad_core.allocation import AllocationParams, solve
+    from rad_core.allocation.cpsat import coverage_bound
+    from rad_core.robot_env import RobotAssemblyEnv, RobotEnvConfig
+    from rad_core.sequencing.deciders import simulated_check
+    from rad_core.sequencing.reallocation import ReallocationConfig, Reallocator, placed_scene
+    from rad_core.sequencing.search import EnvModel
+    config = reallocation or ReallocationConfig()
+    with RobotAssemblyEnv(scene, RobotEnvConfig(execution='teleport')) as renv:
+        renv.reset()
+        env = renv.env
+        space = AllocationActions(env, solve(scene, AllocationParams(support=support)).placements)
+
+        def on_dead_end(_model, current):
+            # A copy of the line's space (its parent keeps its own), with the no-goods found on the line.
+            sub = AllocationActions(env, current.guide.placements)
+            reallocator = Reallocator(sub, simulated_check(renv), config)
+            reallocator.no_goods = dict(getattr(current, 'no_goods', {}))
+            event = reallocator.stalled(env, 'exact search: dead end')
+            sub.no_goods = reallocator.no_goods
+            return sub if event.changed else None
+
+        def bound_of(_model) -> float:   # re-allocating: what any allocation of the free cells could cover
+            return coverage_bound(placed_scene(env))
+
+        return exact_search(EnvModel(renv, None, space), time_limit_s, max_states=max_states,
+                            on_dead_end=on_dead_end, bound_of=bound_of)

@@ -34,11 +34,11 @@ import numpy as np
 
 from rad_core.allocation.result import AllocationResult
 from rad_core.gamp.action import SceneAction
-from rad_core.mdp import Action, AssemblyEnv, EnvConfig
+from rad_core.mdp import AssemblyEnv, EnvConfig
 from rad_core.motion import Motion
 from rad_core.scene import Block, Scene
-from rad_core.sequencing.actions import AllocationActions, scene_action
-from rad_core.sequencing.episode import Decision, run_episode, stop
+from rad_core.sequencing.actions import AllocationActions, mdp_actions, scene_action
+from rad_core.sequencing.episode import Decision, Episode, run_episode, stop
 from rad_core.sequencing.policy import Policy, first_feasible, ranked_actions
 
 
@@ -116,6 +116,9 @@ class AssemblyPlan:
     final_scene: Scene | None = None
     timings: dict = field(default_factory=dict)
     reallocations: list = field(default_factory=list)   # sequencing.reallocation.Reallocation, in order
+    episode: Episode | None = None
+    """The planning copy's MDP episode: discounted return, outcome (an unverified agent's
+    first action that GAMP or the stability check refuses ends it invalid: f_g / f_p), steps."""
 
 
 Allocate = Callable[[Scene], AllocationResult]
@@ -199,13 +202,15 @@ def plan_assembly(scene: Scene, allocate: Allocate, plan_motion: PlanMotion, seq
         if isinstance(ranked, str):
             return stop(ranked)
         found = _first_feasible(env, world['scene'], ranked if verify else ranked[:1], planned_motion, world['q'],
-                                timings)
+                                timings, book=not verify)
         if isinstance(found, str):
             return stop(found)
         action, step = found
         return Decision(action, step)
 
     def act(decision: Decision):
+        if isinstance(decision.plan, MotionPlan):        # unverified: the best-ranked action cannot be done
+            return _book_failure(env, decision.action, decision.plan)
         result = env.step(decision.action)
         if decision.plan is not None:
             step = decision.plan
@@ -228,6 +233,7 @@ def plan_assembly(scene: Scene, allocate: Allocate, plan_motion: PlanMotion, seq
                                   deadline=t0 + time_limit_s)
         decide = with_reallocation(decide, reallocator)
     episode = run_episode(env, decide, np.random.default_rng(seed), act, deadline=t0 + time_limit_s)
+    plan.episode = episode
     if reallocator is not None:
         plan.reallocations = reallocator.events
         timings['reallocation'] = reallocator.seconds
@@ -241,21 +247,6 @@ def plan_assembly(scene: Scene, allocate: Allocate, plan_motion: PlanMotion, seq
     if not plan.success and not plan.reason:
         plan.reason = 'allocated poses remain unbuilt'
     return _done(plan, t0)
-
-
-def mdp_actions(env: AssemblyEnv, ranked: list[SceneAction], allowed) -> list:
-    """The MDP actions of ranked scene actions, in order, keeping only those in `allowed`."""
-    index = {b.id: n for n, b in enumerate(env.scene.blocks)}
-    regions = {t.name: n for n, t in enumerate(env.scene.targets)}
-    allowed, out = set(allowed), []
-    for a in ranked:
-        if a.block_id not in index or a.target not in regions:
-            continue
-        cell = env.grid.index(regions[a.target], a.cell)
-        action = Action(index[a.block_id], int(a.unit), -1 if cell is None else cell, int(a.rotation))
-        if action in allowed:
-            out.append(action)
-    return out
 
 
 class _SharedStability:
@@ -277,8 +268,11 @@ class _SharedStability:
 _STABILITY = _SharedStability()
 
 
-def _first_feasible(env: AssemblyEnv, scene: Scene, ranked, plan_motion: PlanMotion, q, timings):
-    """(action, PlanStep) of the best-ranked action GAMP can execute, or why none."""
+def _first_feasible(env: AssemblyEnv, scene: Scene, ranked, plan_motion: PlanMotion, q, timings,
+                    book: bool = False):
+    """(action, PlanStep) of the best-ranked action GAMP can execute, or why none. book (an
+    unverified agent, given its one best-ranked action): a failure comes back as (action,
+    its failed MotionPlan), for the episode to book it."""
     def check(action) -> MotionPlan:
         outcome, why, _, _ = env.evaluate(action)      # stability first: no motion for a block that falls
         if outcome is not None:
@@ -289,6 +283,8 @@ def _first_feasible(env: AssemblyEnv, scene: Scene, ranked, plan_motion: PlanMot
         return motion
 
     action, motion, failed = first_feasible(env, ranked, check)
+    if action is None and book and failed:
+        return ranked[0], failed[0][1]      # unverified: the one action, and why it fails (booked by act)
     if action is None:
         failures = [f'{scene.blocks[a.block].id}: {m.reason}' for a, m in failed]
         shown = '; '.join(failures[:3]) + (f'; and {len(failures) - 3} more' if len(failures) > 3 else '')
@@ -299,6 +295,17 @@ def _first_feasible(env: AssemblyEnv, scene: Scene, ranked, plan_motion: PlanMot
     anchor = env.grid.centres[cells[0]]   # cells are in unit order: the first is the anchor's
     return action, PlanStep(block.id, block.type, req.target, int(yaw), ijk, action.unit, list(req.cell),
                             action.rotation, motion.grasp, [float(v) for v in anchor], motion.motion)
+
+
+def _book_failure(env: AssemblyEnv, action, motion: MotionPlan):
+    """The MDP step of an action that cannot be done, as the robot env books it: the stability
+    check's own outcome, else a failed grasp (f_g) or a failed placement motion (f_p)."""
+    from rad_core.mdp import Outcome
+    if motion.failure == 'stability':
+        return env.step(action)
+    cells, _ = env.resulting_cells(action)
+    failure = Outcome.INVALID_GRASP if motion.failure == 'grasp' else Outcome.INVALID_PLACEMENT
+    return env.fail(failure, motion.reason, cells)
 
 
 def _done(plan: AssemblyPlan, t0: float) -> AssemblyPlan:

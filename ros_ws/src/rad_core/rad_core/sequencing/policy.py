@@ -49,6 +49,7 @@ class HeurPolicy:
 
     name = 'heur'
     why_none = 'their blocks would not rest fully supported'
+    values = False   # its scores are random tie-breaks, not values: a search orders by its own rule
 
     def scores(self, env: AssemblyEnv, actions: list[Action], rng: np.random.Generator) -> np.ndarray:
         out = np.full(len(actions) + 1, -np.inf)

@@ -40,6 +40,13 @@ does not run into a dead end (every action worth more than stopping fails there)
 the move. So it is never worse than the verified greedy policy within its budget,
 and a block that would leave the rest unbuildable is skipped while another order
 exists.
+
+`bnb` is the branch and bound of `sequencing.exact` as a search: its budget is
+seconds, not simulations; it searches the orders of the allocation's open poses
+(children in the order of Q) for the line that fills the most of the target, and
+the move is that line's first action. The whole line comes back (`SearchResult.line`)
+so a caller can follow it without searching again (the sequencer does). It needs a
+model with the env it steps and the allocation's action space (`EnvModel`).
 """
 
 from __future__ import annotations
@@ -106,6 +113,8 @@ class SearchResult:
     simulations: int = 0                # real steps spent
     root_q: np.ndarray | None = None    # the network's Q at the root: each of `actions`, then terminate
     actions: list[Action] = field(default_factory=list)   # every allowed root action
+    line: list[Action] | None = None    # a search that plans whole lines (bnb): the best one, from the root
+    info: dict = field(default_factory=dict)   # what the search reports beyond the tree (bnb: bound, states...)
 
     def ranking(self) -> list[tuple[Action, float]]:
         """Every root action (termination included) best first, for a verified caller
@@ -129,12 +138,13 @@ class SearchResult:
         for action, value in self.ranking():
             if action.is_terminate:
                 break
-            out.append((action, value))
+            if value > -math.inf:          # -inf rules an action out (HEUR: it would not rest supported)
+                out.append((action, value))
         return out
 
     def to_dict(self) -> dict:
         return {'action': _action_doc(self.action), 'simulations': self.simulations,
-                'children': [c.to_dict() for c in self.children]}
+                'children': [c.to_dict() for c in self.children], **self.info}
 
 
 def _action_doc(a: Action) -> list:
@@ -358,7 +368,53 @@ def first_round(budget: int) -> int:
     return m
 
 
-SEARCHES: dict[str, Callable[..., SearchResult]] = {'mcts': mcts, 'halving': halving, 'lookahead': lookahead}
+def q_order(model: Model):
+    """order(env, actions) for the branch and bound: best Q first (ties keep their order)."""
+    def order(_env, actions: list[Action]) -> list[Action]:
+        q = np.asarray(model.q_values(actions), dtype=float)[:-1]
+        return [actions[i] for i in np.argsort(-q, kind='stable')]
+    return order
+
+
+def bnb(model: Model, rng: np.random.Generator, budget: float = 10.0, epsilon: float = 0.0,
+        max_states: int = 100_000) -> SearchResult:
+    """The branch and bound (`sequencing.exact.exact_search`) within `budget` seconds,
+    children in the order of Q (a scorer whose scores are no values, HEUR: most target
+    cells first, then bottom-up, `exact.by_gain_then_height`): the move is the first action of the best line found
+    (termination when no line fills more of the target than stopping here). The
+    ranking lists that move, then the other allowed actions by Q as a verified caller's
+    fallbacks; with no line it lists nothing. `line` is the whole line; `info` has the
+    line's coverage, whether the search was complete, its bound, states and why it
+    stopped short. rng and epsilon are unused (the search is deterministic)."""
+    from rad_core.sequencing.exact import exact_search
+    if not budget > 0:
+        raise ValueError(f'bnb: budget must be a positive number of seconds, got {budget}')
+    actions, q_all, _, _ = _root(model)
+    by_value = getattr(getattr(model, 'policy', None), 'values', True)
+    found = exact_search(model, float(budget), max_states=max_states, order=q_order(model) if by_value else None)
+    info = {'coverage': found.coverage, 'complete': found.complete, 'bound': found.bound,
+            'states': found.states, 'reason': found.reason}
+    if not found.actions and not found.complete:
+        # Cut before it found anything better than here: no verdict, so the ranking is Q's.
+        return SearchResult(TERMINATE, [], found.states, root_q=q_all, actions=list(actions), info=info)
+    return line_result(list(actions), q_all, list(found.actions), found.coverage, found.states, info)
+
+
+def line_result(actions: list[Action], q_all: np.ndarray, line: list[Action], value: float,
+                simulations: int = 0, info: dict | None = None) -> SearchResult:
+    """The SearchResult of a line (bnb's, or one a caller kept from an earlier search):
+    its first action the move, valued `value`; no line: terminate, nothing proposed."""
+    if not line:
+        return SearchResult(TERMINATE, [], simulations, root_q=q_all, actions=[], line=[], info=info or {})
+    first = line[0]
+    q = float(q_all[actions.index(first)]) if first in actions else value
+    child = Child(first, q, visits=1, value_sum=float(value), depth=len(line))
+    return SearchResult(first, [child], simulations, root_q=q_all, actions=actions, line=list(line),
+                        info=info or {})
+
+
+SEARCHES: dict[str, Callable[..., SearchResult]] = {'mcts': mcts, 'halving': halving, 'lookahead': lookahead,
+                                                   'bnb': bnb}
 
 
 class EnvModel:
@@ -376,9 +432,11 @@ class EnvModel:
         self.policy, self.space = policy, space
         self.gamma = float(self.env.config.gamma)
         self._rng = np.random.default_rng(rng_seed)   # for policies that draw (HEUR); a QPolicy does not
-        # (steps taken before, action) -> the motion plan its simulation used (robot env):
-        # the move can be executed with it instead of planning it again.
+        # (steps taken before, action) -> the motion plan its simulation used (robot env), for
+        # steps from the state the model was made in: the move can be executed with it instead
+        # of planning it again. Deeper steps are not kept (a branch and bound takes thousands).
         self.plans: dict = {}
+        self._root_steps = self.env.state.steps
 
     def actions(self) -> list[Action]:
         return [] if self.env.state.done else list(self.space(self.env))
@@ -395,7 +453,7 @@ class EnvModel:
             self.robot_env.last_plan = None
         result = self.robot_env.step(action)
         plan = getattr(self.robot_env, 'last_plan', None)
-        if plan is not None:
+        if plan is not None and before == self._root_steps:
             self.plans[(before, action)] = plan
         return float(result.reward), bool(result.done), bool(result.outcome.is_invalid)
 

@@ -12,8 +12,9 @@ The agent (`rad_core.agents`, text form): the sequencer uses its scorer (a netwo
 HEUR), its search and the search's budget. `default` is what the node runs: the mixed
 network with the look-ahead search. Verification, re-allocation and the allocation's
 support are the caller's (/plan_assembly always takes the first action GAMP finds
-feasible). With the branch and bound (`bnb`), the best line from the state is kept, so
-later requests along it answer at once (a state off the line searches again).
+feasible). Every search is one of `sequencing.search.SEARCHES`; one that plans whole
+lines (the branch and bound, `bnb`) has its line kept, so later requests along it
+answer at once (a state off the line searches again).
 
 The node's older `policy` names still work: milp-dqn-mcts (the paper's MCTS),
 milp-dqn-halving, milp-dqn-lookahead, milp-dqn-dfs (bnb), milp-dqn (no search) with
@@ -33,9 +34,9 @@ from rad_core.errors import RadError
 from rad_core.gamp.action import SceneAction, start_joints
 from rad_core.mdp import AssemblyEnv, EnvConfig
 from rad_core.scene import Scene
-from rad_core.sequencing.actions import AllocationActions, scene_action
+from rad_core.sequencing.actions import AllocationActions, mdp_actions, scene_action
 from rad_core.sequencing.policy import ranked_indices
-from rad_core.sequencing.search import SEARCHES, EnvModel
+from rad_core.sequencing.search import SEARCHES, EnvModel, line_result
 
 # The sequencer node's older policy names (a search over the shipped mixed network, or HEUR).
 POLICIES = ('milp-dqn-mcts', 'milp-dqn-halving', 'milp-dqn-lookahead', 'milp-dqn-dfs', 'milp-dqn', 'heur')
@@ -169,10 +170,8 @@ class Sequencer:
             ranking.terminate = True
             ranking.reason = ('every allocated pose is built' if left == 0
                               else f'{left} allocated poses left, no unplaced block of their types')
-        elif self.spec.search == 'bnb':
-            self._dfs(scene, env, space, q0, rng, ranking, left)
         elif self.spec.search:
-            self._search(scene, space, q0, rng, ranking, left)
+            self._search(scene, env, space, q0, rng, ranking, left)
         else:
             ts = time.perf_counter()
             scores = np.asarray(self.policy.scores(env, allowed, rng), dtype=float)
@@ -189,56 +188,44 @@ class Sequencer:
         ranking.timings['sequencing'] = time.perf_counter() - t0
         return ranking
 
-    def _search(self, scene: Scene, space: AllocationActions, q0, rng, ranking: Ranking, left: int) -> None:
-        ts = time.perf_counter()
-        renv = self._twin_at(scene, q0)
-        ranking.timings['twin'] = time.perf_counter() - ts
-        ts = time.perf_counter()
-        model = EnvModel(renv, self.policy, space)   # the space is stateless: it serves the twin's env too
-        result = SEARCHES[self.spec.search](model, rng, budget=self.spec.budget, epsilon=self.search_epsilon)
-        ranking.timings['search'] = time.perf_counter() - ts
+    def _search(self, scene: Scene, env: AssemblyEnv, space: AllocationActions, q0, rng, ranking: Ranking,
+                left: int) -> None:
+        """The search's ranking; a search that plans whole lines (bnb) has its line kept, so a
+        later request along it answers with the line's next action without searching again."""
+        key = _line_key(env, space.guide.placements)
+        known = self._lines.get(key)
+        if known is not None:
+            line, value = known
+            model = EnvModel(env, self.policy, space, rng_seed=int(rng.integers(2**31)))
+            actions = model.actions()
+            result = line_result(actions, np.asarray(model.q_values(actions), dtype=float),
+                                 mdp_actions(env, line[:1], actions), value, info={'known_line': True})
+        else:
+            ts = time.perf_counter()
+            renv = self._twin_at(scene, q0)
+            ranking.timings['twin'] = time.perf_counter() - ts
+            ts = time.perf_counter()
+            model = EnvModel(renv, self.policy, space)   # the space is stateless: it serves the twin's env too
+            result = SEARCHES[self.spec.search](model, rng, budget=self.spec.budget, epsilon=self.search_epsilon)
+            ranking.timings['search'] = time.perf_counter() - ts
+            if result.line is not None:
+                if len(self._lines) > 10_000:
+                    self._lines.clear()
+                self._remember_line(scene, space, result.line, float(result.info.get('coverage', 0.0)))
         ranking.search = result.to_dict()
         for action, value in result.proposals():
-            ranking.actions.append(scene_action(renv.env, action))
+            ranking.actions.append(scene_action(env, action))
             ranking.values.append(float(value))
         if not ranking.actions:
             ranking.terminate = True
             tried = sum(1 for c in result.children if not c.action.is_terminate)
-            ranking.reason = (f'{left} allocated poses left, none of them can be built next ('
-                              + (f'the {tried} the search tried failed in the planning twin or are valued '
-                                 f'below stopping)' if tried else 'stopping is valued above all of them)'))
-
-    def _dfs(self, scene: Scene, env: AssemblyEnv, space: AllocationActions, q0, rng, ranking: Ranking,
-             left: int) -> None:
-        """The first action of the best line from here (searched, or known from an earlier
-        search along it), then the other allowed actions by Q as the caller's fallbacks."""
-        from rad_core.sequencing.deciders import policy_order
-        from rad_core.sequencing.exact import exact_search
-        key = _line_key(env, space.guide.placements)
-        known = self._lines.get(key)
-        if known is None:
-            ts = time.perf_counter()
-            renv = self._twin_at(scene, q0)
-            found = exact_search(renv, space, self.spec.budget, order=policy_order(self.policy, rng))
-            ranking.timings['search'] = time.perf_counter() - ts
-            ranking.search = {'coverage': found.coverage, 'complete': found.complete, 'bound': found.bound,
-                              'states': found.states, 'reason': found.reason}
-            if len(self._lines) > 10_000:
-                self._lines.clear()
-            self._remember_line(scene, space, found.actions, found.coverage)
-            known = self._lines[key]
-        line, coverage = known
-        allowed = space(env)
-        scores = np.asarray(self.policy.scores(env, allowed, rng), dtype=float)
-        first = [line[0]] if line else []
-        ranking.actions = first + [a for a in (scene_action(env, allowed[i]) for i in ranked_indices(scores))
-                                   if a not in first]
-        ranking.values = [coverage] * len(first) + [float(scores[i]) for i in ranked_indices(scores)
-                                                         if scene_action(env, allowed[i]) not in first]
-        if not line:
-            ranking.actions, ranking.values, ranking.terminate = [], [], True
-            ranking.reason = (f'{left} allocated poses left, none of them can be built next (the search '
-                              f'found no order that fills more of the target from here)')
+            if result.line is not None:
+                why = 'the search found no order that fills more of the target from here'
+            elif tried:
+                why = f'the {tried} the search tried failed in the planning twin or are valued below stopping'
+            else:
+                why = 'stopping is valued above all of them'
+            ranking.reason = f'{left} allocated poses left, none of them can be built next ({why})'
 
     def _remember_line(self, scene: Scene, space: AllocationActions, actions, coverage: float) -> None:
         """The rest of the line for its first state and for every state along it
