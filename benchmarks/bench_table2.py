@@ -1,18 +1,21 @@
-"""The paper's Table II (robot in the loop) for every sequencer, on both geometries.
+"""The paper's Table II (robot in the loop) for any agents, on both geometries.
 
     python benchmarks/bench_table2.py [--scenes 30] [--grids 4,5] [--clearances 0,0.2]
-        [--agents heur,heur-verified,...] [--force] [--out docs/results/table2.md]
+        [--agents heur,heur-verified,paper,greedy,default] [--force]
 
-Each agent runs with the robot (GAMP + twin, teleporting execution) on the same
-generated two-sided scenes, seeds 0..N-1 (never used in training), through
-`rad_core.evaluation.evaluate`, the code behind `rad eval`. Geometry: clearance 0
-is rad's flush blocks; clearance > 0 makes every block smaller than its cells on
-the sides (the predecessor's robot scenes leave 1 cm between neighbours: 0.2 of a
-5 cm unit), set through the generator. Agents ending in +verify take the best
-action of their ranking that GAMP finds feasible from the current state (no f_g /
-f_p by construction); the search agents spend `budget` real planning-twin steps
-per decision. Results are cached per (agent, grid, clearance, N) as JSON beside the
-table, so an interrupted run resumes; --force recomputes.
+Each agent (a preset or any agent text, `rad_core.agents`) runs with the robot on the
+same generated two-sided scenes, seeds 0..N-1 (never used in training), through
+`rad_core.evaluation.evaluate`, the code behind `rad eval --robot`: the agent plans each
+scene as /plan_assembly does (CP-SAT, the sequencer and its search, GAMP) and the plan is
+built in a fresh PyBullet twin (teleporting execution); coverage is what the twin's
+registration finds built. Geometry: clearance 0 is rad's flush blocks; clearance > 0
+makes every block smaller than its cells on the sides (the predecessor's robot scenes
+leave 1 cm between neighbours: 0.2 of a 5 cm unit). Verified agents take the best action
+of their ranking that GAMP finds feasible (no f_g / f_p by construction).
+
+Writes docs/results/table2.md (the tables and this command) and docs/results/table2.rows.jsonl
+(one line per agent and scene). Results are cached per (agent, grid, clearance, N) under
+out/cache/table2/, so an interrupted run resumes; --force recomputes.
 """
 
 from __future__ import annotations
@@ -21,46 +24,37 @@ import argparse
 import json
 import sys
 import time
-from pathlib import Path
 
 from rad_core import jsonfmt
-from rad_core.evaluation import evaluate, get_agent
+from rad_core.agents import label, parse
+from rad_core.evaluation import evaluate
 from rad_core.progress import ProgressBar
 
-from common import fmt, scenes
+from common import RESULTS, cache_dir, command_line, fmt, scenes, write_rows
 
-ROOT = Path(__file__).resolve().parents[1]
 PAPER = {   # Table II of the paper (two-sided, robot in the loop); absent keys are not reported
     (4, 'heur'): {'R': 0.57, 'e': 0.36, 'f_g': 0.24, 'f_p': 0.16, 'coverage': 0.62},
     (4, 'milp-dqn'): {'R': 1.03, 'e': 0.49, 'f_g': 0.08, 'f_p': 0.08, 'coverage': 0.70},
-    (4, 'milp-dqn-mcts'): {'R': 1.24, 'e': 0.57, 'f_g': 0.02, 'f_p': 0.03, 'coverage': 0.75},
+    (4, 'paper'): {'R': 1.24, 'e': 0.57, 'f_g': 0.02, 'f_p': 0.03, 'coverage': 0.75},
     (5, 'heur'): {'R': 0.34, 'e': 0.29, 'f_g': 0.34, 'f_p': 0.24, 'coverage': 0.47},
     (5, 'milp-dqn'): {'R': 0.98, 'e': 0.53, 'f_g': 0.10, 'f_p': 0.15, 'coverage': 0.58},
-    (5, 'milp-dqn-mcts'): {'R': 1.38, 'e': 0.65, 'f_g': 0.02, 'f_p': 0.06, 'coverage': 0.65},
+    (5, 'paper'): {'R': 1.38, 'e': 0.65, 'f_g': 0.02, 'f_p': 0.06, 'coverage': 0.65},
 }
-DEFAULT_AGENTS = ('heur', 'heur-verified', 'milp-dqn', 'milp-dqn+verify', 'milp-dqn-mcts', 'milp-dqn-mcts+verify',
-                  'milp-dqn-halving+verify', 'milp-dqn-lookahead+verify', 'milp-dqn-mixed+verify',
-                  'milp-dqn-mixed-mcts+verify', 'milp-dqn-mixed-halving+verify', 'milp-dqn-mixed-lookahead+verify',
-                  'milp-dqn-robot+verify', 'milp-dqn-robot-lookahead+verify')
+DEFAULT_AGENTS = ('heur', 'heur-verified', 'milp-dqn', 'paper', 'greedy', 'default')
 COLS = ('R', 'd', 'e', 'f', 'f_g', 'f_p', 'coverage', 'coverage_rel')
 HEADS = {'coverage': 'a-bar', 'coverage_rel': 'a_rel'}
+ROW_KEYS = ('name', 'return', 'outcome', 'coverage', 'predicted_coverage', 'coverage_opt', 'steps', 'reason',
+            'stop_reason', 'lost')
 
 
-def agent_of(label: str):
-    name, _, suffix = label.partition('+')
-    return get_agent(name, verify=suffix == 'verify')
-
-
-def run(label: str, grid: int, n: int, clearance: float, cache: Path, force: bool) -> dict:
-    path = cache / f'{label}-g{grid}-c{clearance:g}-n{n}.json'
+def run(agent: str, grid: int, n: int, clearance: float, force: bool) -> dict:
+    path = cache_dir('table2') / f'{label(parse(agent))}-g{grid}-c{clearance:g}-n{n}.json'
     if path.exists() and not force:
         return json.loads(path.read_text())
-    agent = agent_of(label)
     t0 = time.perf_counter()
     result = evaluate(agent, scenes(grid, n, clearance), robot=True, seed=0,
-                      progress=ProgressBar(n, f'{label} g={grid} c={clearance:g}'))
+                      progress=ProgressBar(n, f'{agent} g={grid} c={clearance:g}'))
     result['seconds'] = time.perf_counter() - t0
-    cache.mkdir(parents=True, exist_ok=True)
     path.write_text(jsonfmt.dumps(result))
     return result
 
@@ -70,43 +64,45 @@ def main() -> int:
     p.add_argument('--scenes', type=int, default=30)
     p.add_argument('--grids', default='4,5')
     p.add_argument('--clearances', default='0,0.2')
-    p.add_argument('--agents', default=','.join(DEFAULT_AGENTS))
+    p.add_argument('--agents', default=','.join(DEFAULT_AGENTS), help='presets or agent texts, comma-separated')
     p.add_argument('--force', action='store_true')
-    p.add_argument('--out', default=str(ROOT / 'docs' / 'results' / 'table2.md'))
     args = p.parse_args()
-    out = Path(args.out)
-    cache = out.parent / 'table2'
     grids = [int(g) for g in args.grids.split(',')]
     clearances = [float(c) for c in args.clearances.split(',')]
-    labels = [a for a in args.agents.split(',') if a]
+    agents = [a for a in args.agents.split(',') if a]
     lines = ['# Table II: the robot in the loop', '',
-             f'Generated two-sided scenes, seeds 0..{args.scenes - 1} per grid size, teleporting execution; '
-             '`python benchmarks/bench_table2.py` (see its docstring). Paper rows from its Table II '
-             '(flush is not the paper\'s geometry: its blocks leave 1 cm between neighbours, clearance 0.2). '
-             's/scene is wall time on a shared 2-core machine whose load varied between rows: compare it '
-             'within a row\'s own run only.', '']
+             f'Made by `{command_line()}` ({time.strftime("%Y-%m-%d")}). Generated two-sided scenes, seeds '
+             f'0..{args.scenes - 1} per grid size; each agent plans as /plan_assembly does and the plan is built '
+             'in a fresh twin (teleporting execution). Paper rows from its Table II (flush is not the paper\'s '
+             'geometry: its blocks leave 1 cm between neighbours, clearance 0.2). s/scene is wall time on a shared '
+             '2-core machine: compare it within one run only. Per-scene rows: [table2.rows.jsonl](table2.rows.jsonl).',
+             '', '| agent | canonical text |', '|---|---|']
+    lines += [f'| {a} | `{label(parse(a))}` |' for a in agents] + ['']
+    rows = []
     for clearance in clearances:
         for grid in grids:
             lines += [f'## g = {grid}, clearance {clearance:g}' + (' (flush)' if not clearance else ''), '',
                       '| agent | ' + ' | '.join(HEADS.get(c, c) for c in COLS) + ' | s/scene |',
                       '|---|' + '---|' * (len(COLS) + 1)]
-            for label in labels:
+            for agent in agents:
                 try:
-                    r = run(label, grid, args.scenes, clearance, cache, args.force)
+                    r = run(agent, grid, args.scenes, clearance, args.force)
                 except Exception as e:  # noqa: BLE001 - one agent's failure should not lose the others
-                    print(f'{label} g={grid} c={clearance}: {type(e).__name__}: {e}', file=sys.stderr)
+                    print(f'{agent} g={grid} c={clearance}: {type(e).__name__}: {e}', file=sys.stderr)
                     continue
-                lines.append(f'| {label} | ' + ' | '.join(fmt(r.get(c)) for c in COLS)
+                rows += [{'agent': r['agent'], 'grid': grid, 'clearance': clearance,
+                          **{k: row[k] for k in ROW_KEYS if k in row}} for row in r['scenes']]
+                lines.append(f'| {agent} | ' + ' | '.join(fmt(r.get(c)) for c in COLS)
                              + f' | {r["seconds"] / r["n"]:.1f} |')
-                print(f'{label:32s} g={grid} c={clearance:g} ' + ' '.join(f'{c}={fmt(r.get(c))}' for c in COLS),
+                print(f'{agent:16s} g={grid} c={clearance:g} ' + ' '.join(f'{c}={fmt(r.get(c))}' for c in COLS),
                       flush=True)
-                paper = PAPER.get((grid, label))
+                paper = PAPER.get((grid, agent))
                 if paper and clearance:
-                    lines.append(f'| {label} (paper) | ' + ' | '.join(fmt(paper.get(c)) for c in COLS) + ' | |')
+                    lines.append(f'| {agent} (paper) | ' + ' | '.join(fmt(paper.get(c)) for c in COLS) + ' | |')
             lines.append('')
-            out.parent.mkdir(parents=True, exist_ok=True)
-            out.write_text('\n'.join(lines) + '\n')
-    print(f'wrote {out}')
+            (RESULTS / 'table2.md').write_text('\n'.join(lines) + '\n')
+            write_rows(RESULTS / 'table2.rows.jsonl', rows)
+    print(f'wrote {RESULTS / "table2.md"}')
     return 0
 
 

@@ -153,6 +153,7 @@ def test_an_unverified_plan_stops_where_its_best_ranked_action_fails_and_a_verif
         return solve(s)
     blind = plan_for_agent(parse('heur'), scene, allocate, glued_first, HeurPolicy(), seed=1)
     assert not blind.success and blind.steps == [] and asked == [first]
-    assert blind.reason.startswith('no feasible next action (1 tried)') and 'glued down' in blind.reason
+    # The refused action ends the episode as a failed grasp (f_g), with GAMP's reason.
+    assert blind.reason == f'grasp: {first} is glued down' and blind.episode.outcome.value == 'invalid_grasp'
     checked = plan_for_agent(parse('heur+verify'), scene, allocate, glued_first, HeurPolicy(), seed=1)
     assert checked.steps and first not in [s.block for s in checked.steps]   # it built around the glued block

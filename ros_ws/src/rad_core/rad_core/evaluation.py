@@ -25,7 +25,6 @@ robot, seed). Every row and result records the agent's canonical text (`agent`).
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, replace
 
@@ -200,7 +199,6 @@ def robot_episode(planner, scene: Scene, seed: int, execution: str = 'teleport')
     expected; reason: why an invalid action failed; stop_reason: why the plan stopped short."""
     from rad_core.coverage import measured_coverage
     from rad_core.sequencing.twin_build import build_simulated, build_teleported
-    t0 = time.perf_counter()
     if execution == 'teleport':
         plan = planner(scene, None, seed)
         registered = build_teleported(scene, plan.steps)
@@ -223,8 +221,7 @@ def robot_episode(planner, scene: Scene, seed: int, execution: str = 'teleport')
     row = {'return': episode.ret, 'outcome': (episode.outcome or Outcome.TERMINATED).value, 'coverage': coverage,
            'steps': steps, 'coverage_opt': _optimum(scene, plan.allocation),
            'predicted_coverage': plan.predicted_coverage, 'reason': episode.reason if invalid else '',
-           'stop_reason': plan.reason, 'lost': dict(lost), 'plan_s': plan.timings.get('total', 0.0),
-           'wall_s': time.perf_counter() - t0}
+           'stop_reason': plan.reason, 'lost': dict(lost)}
     if execution == 'simulate':
         row['replans'] = replans
     if planner.spec.realloc:

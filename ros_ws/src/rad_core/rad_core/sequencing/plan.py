@@ -175,7 +175,7 @@ def plan_assembly(scene: Scene, allocate: Allocate, plan_motion: PlanMotion, seq
         ranking = sequencer(world['scene'], list(allowed_actions.guide.placements), world['q'])
         timings['sequencer_call'] = timings.get('sequencer_call', 0.0) + time.perf_counter() - ts
         timings['sequencing'] += float(ranking.timings.get('sequencing', 0.0))
-        if not ranking.actions:
+        if not ranking.actions or (ranking.terminate and not verify):
             return ranking.reason or 'the sequencer proposes to stop'
         ranked = mdp_actions(env, ranking.actions, allowed)
         return ranked or (f'the sequencer proposed {len(ranking.actions)} actions, none of them among the '

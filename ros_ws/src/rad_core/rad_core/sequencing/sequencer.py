@@ -104,8 +104,9 @@ class SequencerConfig:
 
 @dataclass
 class Ranking:
-    """What to try next, best first. terminate: the policy prefers stopping over every
-    action (then actions is empty and reason says why)."""
+    """What to try next, best first: the agent's own choice first. terminate: the agent's
+    choice is to stop (reason says why); actions is then empty, or, after a search whose
+    move is to stop, lists what a verified caller may still try."""
 
     actions: list[SceneAction] = field(default_factory=list)
     values: list[float] = field(default_factory=list)
@@ -216,6 +217,17 @@ class Sequencer:
         for action, value in result.proposals():
             ranking.actions.append(scene_action(env, action))
             ranking.values.append(float(value))
+        move = result.action
+        if not move.is_terminate and (not ranking.actions or ranking.actions[0] != scene_action(env, move)):
+            # The search's own choice leads, even one whose simulated step failed: an unverified
+            # caller takes the move (and fails with it, as the paper's agents do); a verified one
+            # checks it first like any other.
+            value = next((c.value for c in result.children if c.action == move), float('nan'))
+            ranking.actions.insert(0, scene_action(env, move))
+            ranking.values.insert(0, float(value))
+        if move.is_terminate and ranking.actions:
+            ranking.terminate = True      # the agent would stop; the actions are a verified caller's fallbacks
+            ranking.reason = f'{left} allocated poses left; the search values stopping above building them'
         if not ranking.actions:
             ranking.terminate = True
             tried = sum(1 for c in result.children if not c.action.is_terminate)
