@@ -1,26 +1,24 @@
-"""Re-allocation on stall and the robot-feasible ceiling (issue 9), robot in the loop.
+"""Re-allocation on stall, the branch and bound and the robot-feasible ceiling, robot in the loop.
 
-    python benchmarks/bench_reallocation.py [--scenes 30] [--grids 4,5] [--clearances 0,0.2]
-        [--shapes train,holdout,tight] [--agents LABEL,...] [--force | --cached-only]
-        [--out docs/results/reallocation.md]
+    python benchmarks/bench_reallocation.py [--scenes 30] [--grids 4,5] [--clearances 0]
+        [--shapes holdout,tight] [--agents TEXT,...] [--ceiling-s 60] [--force | --cached-only]
 
-Every agent runs with the robot (GAMP + twin, teleporting execution) on generated
-two-sided scenes, seeds 0..N-1, through `rad_core.evaluation.evaluate` (the code
-behind `rad eval`). Labels: an agent name, then '+verify' (take only actions the
-planning copy finds feasible), '+realloc' (re-allocate on stall, `rad eval
---reallocate`), '+realloc-fewer' / '+realloc-flat' (the same, with the re-solve
-preferring fewer poses / flatter blocks among equally good allocations: the
-preference ablation), '+stable' / '+flat' (the first allocation stable / stable and flat,
-whatever the agent's own), 'exact' (the exact
-planner over orders and re-allocations, 60 s per scene: the robot-feasible ceiling where
-its search completes, a lower bound elsewhere).
+Every agent (a preset or an agent text, `rad_core.agents`) runs through
+`rad_core.evaluation.evaluate` with the robot, the code behind `rad eval --robot`: it plans
+each scene as /plan_assembly does and the plan is built in a fresh twin (teleporting
+execution). Scenes: generated two-sided scenes, seeds 0..N-1, and hand-made shape sets
+('train', 'holdout', or 'tight': the held-out shapes with their blocks packed 2 cm apart).
+The ceiling is `sequencing.exact.robot_ceiling` (the branch and bound over orders and
+re-allocations from the empty scene, --ceiling-s per scene): proven where its search
+completes, a lower bound elsewhere.
 
-Columns: the paper's metrics, a-bar (coverage of the whole target), 'of paper'
-(coverage over the coverage the paper's unconstrained allocation fills, the
-issue's target measure), 'to ceiling' (the exact planner's coverage minus the
-agent's, on the scenes where the exact search completed), re-allocations per scene
-and the share of episode time spent re-allocating (checks + CP-SAT). Results are
-cached per (label, grid, clearance, N) beside the table; --force recomputes.
+Columns: the paper's metrics, a-bar (coverage of the whole target), 'of paper' (coverage
+over what the paper's unconstrained allocation fills), 'to ceiling' (the ceiling's
+coverage minus the agent's, on the scenes where the ceiling is proven), re-allocations
+per scene and the share of episode time spent re-allocating (checks + CP-SAT).
+
+Writes docs/results/reallocation.md and docs/results/reallocation.rows.jsonl; results are
+cached per (agent, scene set) under out/cache/reallocation/; --force recomputes.
 """
 
 from __future__ import annotations
@@ -29,24 +27,23 @@ import argparse
 import json
 import sys
 import time
-from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 
 from rad_core import jsonfmt
+from rad_core.agents import label, parse
 from rad_core.allocation import AllocationParams, solve
-from rad_core.evaluation import evaluate, get_agent
+from rad_core.evaluation import evaluate
 from rad_core.progress import ProgressBar
 
-from common import fmt, scenes   # the same generated scenes as Table II, the same number format
+from common import RESULTS, cache_dir, command_line, fmt, scenes, write_rows
 
-ROOT = Path(__file__).resolve().parents[1]
-DEFAULT_AGENTS = ('heur-verified', 'heur-verified+stable', 'heur-verified+realloc', 'milp-dqn-mcts+verify',
-                  'milp-dqn-mcts+verify+realloc', 'milp-dqn-mixed-lookahead+verify',
-                  'milp-dqn-mixed-lookahead+verify+realloc', 'milp-dqn-mixed-lookahead+verify+realloc-fewer',
-                  'milp-dqn-mixed-lookahead+verify+realloc-flat', 'milp-dqn-mixed-lookahead+verify+flat+realloc-flat',
-                  'milp-dqn-mixed-dfs', 'milp-dqn-mixed-dfs+realloc', 'exact')
+DEFAULT_AGENTS = ('heur-verified', 'heur+verify+support:stable', 'heur+verify+realloc', 'milp-dqn+mcts:5+verify',
+                  'milp-dqn+mcts:5+verify+realloc', 'milp-dqn-mixed+verify+support:stable', 'greedy',
+                  'milp-dqn-mixed+lookahead:5+verify+support:stable', 'default',
+                  'milp-dqn-mixed+bnb:10+verify+support:stable', 'milp-dqn-mixed+bnb:10+verify+realloc+support:stable',
+                  'exact')
+ROW_KEYS = ('name', 'return', 'outcome', 'coverage', 'predicted_coverage', 'coverage_opt', 'steps', 'stop_reason')
 
 
 def shape_scenes(split: str):
@@ -68,40 +65,43 @@ def cell_name(grid, n: int, clearance: float) -> str:
     return f'g{grid}-c{clearance:g}-n{n}' if isinstance(grid, int) else f'shapes-{grid}'
 
 
-def run(label: str, grid, n: int, clearance: float, cache: Path, force: bool) -> dict:
-    path = cache / f'{label}-{cell_name(grid, n, clearance)}.json'
+def run(agent: str, grid, n: int, clearance: float, force: bool) -> dict:
+    path = cache_dir('reallocation') / f'{label(parse(agent))}-{cell_name(grid, n, clearance)}.json'
     if path.exists() and not force:
         return json.loads(path.read_text())
-    from rad_core.sequencing.reallocation import ReallocationConfig
-    parts = label.split('+')
-    agent = get_agent(parts[0], verify='verify' in parts,
-                      reallocate=any(p.startswith('realloc') for p in parts))
-    realloc, allocation = ReallocationConfig(), None
-    if 'stable' in parts:
-        allocation = AllocationParams(support='stable')
-    for prefer in ('fewer', 'flat'):
-        if f'realloc-{prefer}' in parts:
-            realloc = replace(realloc, params=replace(realloc.params, prefer=prefer))
-        if prefer in parts:
-            allocation = AllocationParams(support='stable', prefer=prefer)
     t0 = time.perf_counter()
-    result = evaluate(agent, cell_scenes(grid, n, clearance), robot=True, seed=0, reallocation=realloc,
-                      allocation=allocation, progress=ProgressBar(n, f'{label} {cell_name(grid, n, clearance)}'))
+    result = evaluate(agent, cell_scenes(grid, n, clearance), robot=True, seed=0,
+                      progress=ProgressBar(n, f'{agent} {cell_name(grid, n, clearance)}'))
     result['seconds'] = time.perf_counter() - t0
-    cache.mkdir(parents=True, exist_ok=True)
     path.write_text(jsonfmt.dumps(result))
     return result
 
 
-def paper_fill(grid, n: int, clearance: float, cache: Path) -> list[float]:
+def ceiling(grid, n: int, clearance: float, seconds: float, force: bool) -> list[dict]:
+    """Per scene: the robot-feasible ceiling's coverage, whether it is proven, its states and time."""
+    from rad_core.sequencing.exact import robot_ceiling
+    path = cache_dir('reallocation') / f'ceiling-{seconds:g}s-{cell_name(grid, n, clearance)}.json'
+    if path.exists() and not force:
+        return json.loads(path.read_text())
+    out = []
+    for name, scene in cell_scenes(grid, n, clearance):
+        found = robot_ceiling(scene, seconds)
+        out.append({'name': name, 'coverage': found.coverage, 'complete': found.complete, 'states': found.states,
+                    'seconds': found.elapsed_s, 'reason': found.reason})
+        print(f'ceiling {name}: {found.coverage:.3f} {"proven" if found.complete else "lower bound"} '
+              f'({found.states} states, {found.elapsed_s:.0f} s)', flush=True)
+    path.write_text(json.dumps(out))
+    return out
+
+
+def paper_fill(grid, n: int, clearance: float) -> list[float]:
     """Per scene: the target fraction the paper's unconstrained allocation fills."""
-    path = cache / f'paper-fill-{cell_name(grid, n, clearance)}.json'
+    path = cache_dir('reallocation') / f'paper-fill-{cell_name(grid, n, clearance)}.json'
     if path.exists():
         return json.loads(path.read_text())
     from rad_core.coverage import placements_coverage
     out = [placements_coverage(scene, solve(scene, AllocationParams()).placements)
            for _, scene in cell_scenes(grid, n, clearance)]
-    cache.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(out))
     return out
 
@@ -110,28 +110,31 @@ def main() -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument('--scenes', type=int, default=30)
     p.add_argument('--grids', default='4,5')
-    p.add_argument('--clearances', default='0,0.2')
-    p.add_argument('--shapes', default='', help="hand-made shape sets too: train,holdout,tight")
-    p.add_argument('--agents', default=','.join(DEFAULT_AGENTS))
+    p.add_argument('--clearances', default='0')
+    p.add_argument('--shapes', default='holdout,tight', help="hand-made shape sets too: train,holdout,tight")
+    p.add_argument('--agents', default=','.join(DEFAULT_AGENTS), help='presets or agent texts, comma-separated')
+    p.add_argument('--ceiling-s', type=float, default=60.0, help='seconds per scene of the ceiling; 0: none')
     p.add_argument('--force', action='store_true')
     p.add_argument('--cached-only', action='store_true', help='only write the table from results already cached')
-    p.add_argument('--out', default=str(ROOT / 'docs' / 'results' / 'reallocation.md'))
     args = p.parse_args()
-    out = Path(args.out)
-    cache = out.parent / 'reallocation'
     grids = [int(g) for g in args.grids.split(',') if g] + [s for s in args.shapes.split(',') if s]
     clearances = [float(c) for c in args.clearances.split(',')]
-    labels = [a for a in args.agents.split(',') if a]
-    lines = ['# Re-allocation on stall and the robot-feasible ceiling', '',
-             f'Generated two-sided scenes, seeds 0..{args.scenes - 1}, robot in the loop, teleporting execution; '
-             '`python benchmarks/bench_reallocation.py` (see its docstring for the columns). '
-             's/scene: wall time on the shared 2-core machine.', '']
+    agents = [a for a in args.agents.split(',') if a]
+    lines = ['# Re-allocation on stall, the branch and bound and the robot-feasible ceiling', '',
+             f'Made by `{command_line()}` ({time.strftime("%Y-%m-%d")}). Generated two-sided scenes, seeds '
+             f'0..{args.scenes - 1}, and hand-made shapes; each agent plans as /plan_assembly does and the plan is '
+             'built in a fresh twin (teleporting execution); see the benchmark\'s docstring for the columns. '
+             's/scene: wall time on the shared 2-core machine. Per-scene rows: '
+             '[reallocation.rows.jsonl](reallocation.rows.jsonl).', '',
+             '| agent | canonical text |', '|---|---|']
+    lines += [f'| {a} | `{label(parse(a))}` |' for a in agents] + ['']
+    rows = []
     for clearance in clearances:
         for grid in grids:
             if not isinstance(grid, int) and clearance != clearances[0]:
                 continue   # the shapes are flush
-            fill = paper_fill(grid, args.scenes, clearance, cache)
-            exact = None
+            cell = cell_name(grid, args.scenes, clearance)
+            fill = paper_fill(grid, args.scenes, clearance)
             title = (f'## g = {grid}, clearance {clearance:g}' + (' (flush)' if not clearance else '')
                      if isinstance(grid, int) else f'## shapes: {grid}')
             lines += [title, '',
@@ -139,41 +142,44 @@ def main() -> int:
                       '| agent | R | e | f | a-bar | of paper | to ceiling | re-alloc/scene | re-alloc time '
                       '| s/scene |',
                       '|---|---|---|---|---|---|---|---|---|---|']
-            results = {}
-            for label in labels:
-                cached = cache / f'{label}-{cell_name(grid, args.scenes, clearance)}.json'
+            roof = None
+            if args.ceiling_s > 0 and not args.cached_only:
+                roof = ceiling(grid, args.scenes, clearance, args.ceiling_s, args.force)
+            for agent in agents:
+                cached = cache_dir('reallocation') / f'{label(parse(agent))}-{cell}.json'
                 if args.cached_only and not cached.exists():
                     continue
                 try:
-                    results[label] = run(label, grid, args.scenes, clearance, cache, args.force)
+                    r = run(agent, grid, args.scenes, clearance, args.force)
                 except Exception as e:  # noqa: BLE001 - one agent's failure should not lose the others
-                    print(f'{label} g={grid} c={clearance}: {type(e).__name__}: {e}', file=sys.stderr)
-            if 'exact' in results:
-                exact = results['exact']['scenes']
-            for label, r in results.items():
-                rows = r['scenes']
-                of_paper = np.mean([row['coverage'] / f if f > 0 else 1.0 for row, f in zip(rows, fill)])
+                    print(f'{agent} {cell}: {type(e).__name__}: {e}', file=sys.stderr)
+                    continue
+                scene_rows = r['scenes']
+                rows += [{'agent': r['agent'], 'set': cell, **{k: row[k] for k in ROW_KEYS if k in row},
+                          'reallocations': len(row.get('reallocations', ()))} for row in scene_rows]
+                of_paper = np.mean([row['coverage'] / f if f > 0 else 1.0 for row, f in zip(scene_rows, fill)])
                 gap = None
-                if exact is not None:
-                    done = [(e['coverage'], row['coverage']) for e, row in zip(exact, rows)
-                            if e.get('exact_complete')]
+                if roof is not None:
+                    done = [(c['coverage'], row['coverage']) for c, row in zip(roof, scene_rows) if c['complete']]
                     gap = float(np.mean([a - b for a, b in done])) if done else None
-                events = [len(row.get('reallocations', ())) for row in rows]
-                share = sum(row.get('reallocation_s', 0.0) for row in rows) / max(r['seconds'], 1e-9)
-                lines.append(f'| {label} | {fmt(r["R"])} | {fmt(r["e"])} | {fmt(r["f"])} | {fmt(r["coverage"])} '
+                events = [len(row.get('reallocations', ())) for row in scene_rows]
+                share = sum(row.get('reallocation_s', 0.0) for row in scene_rows) / max(r['seconds'], 1e-9)
+                lines.append(f'| {agent} | {fmt(r["R"])} | {fmt(r["e"])} | {fmt(r["f"])} | {fmt(r["coverage"])} '
                              f'| {of_paper:.3f} | {fmt(gap)} | {np.mean(events):.1f} | {share:.0%} '
                              f'| {r["seconds"] / r["n"]:.1f} |')
-                print(f'{label:48s} {cell_name(grid, args.scenes, clearance)} cov={r["coverage"]:.3f} '
-                      f'of_paper={of_paper:.3f} '
+                print(f'{agent:52s} {cell} cov={r["coverage"]:.3f} of_paper={of_paper:.3f} '
                       f'gap={fmt(gap)} realloc={np.mean(events):.1f} share={share:.0%}', flush=True)
-            if exact is not None:
-                complete = sum(1 for e in exact if e.get('exact_complete'))
-                lines += ['', f'Exact search complete on {complete} of {len(exact)} scenes (the others count as '
-                          'lower bounds and are left out of "to ceiling").']
+            if roof is not None:
+                proven = [c for c in roof if c['complete']]
+                lines.append(f'| ceiling ({args.ceiling_s:g} s) | | | | {fmt(np.mean([c["coverage"] for c in roof]))} '
+                             f'| | | | | {np.mean([c["seconds"] for c in roof]):.1f} |')
+                lines += ['', f'The ceiling is proven on {len(proven)} of {len(roof)} scenes (the others are lower '
+                          'bounds, left out of "to ceiling").']
+                rows += [{'agent': 'ceiling', 'set': cell, **c} for c in roof]
             lines.append('')
-            out.parent.mkdir(parents=True, exist_ok=True)
-            out.write_text('\n'.join(lines) + '\n')
-    print(f'wrote {out}')
+            (RESULTS / 'reallocation.md').write_text('\n'.join(lines) + '\n')
+            write_rows(RESULTS / 'reallocation.rows.jsonl', rows)
+    print(f'wrote {RESULTS / "reallocation.md"}')
     return 0
 
 
