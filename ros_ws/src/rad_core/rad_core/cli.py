@@ -4,6 +4,9 @@
     rad scene check scene.json
     rad scene render scene.json -o scene.png [--allocation allocation.json] [--robot]
     rad scene stats --grid G --sides S --scenes N
+    rad scene from-mesh MODEL [NAME=MODEL ...] --unit U [--size N | --scale S] [--up z] [--hollow] -o scene.json
+    rad scene from-voxels FILE.npy|FILE.binvox [...] --unit U [--up z] [--hollow] -o scene.json
+    rad scene supply scene.json [--types I2,L3,... | --inventory FILE] [--objective fewest|cheapest] -o scene.json
     rad allocate scene.json [--time-limit S] [--seed N] [--workers W] [--solver cp-sat|highs]
     rad demo [--scene FILE] [--out DIR] [--rtf X] [--faults none|realistic|FILE] [--cycles N]
     rad limits RESULT.json [--robot panda|fr3] [--joint-prefix P]
@@ -97,6 +100,77 @@ def cmd_scene_render(args) -> int:
     save_scene_png(scene, args.output, allocation=allocation, width=args.width, height=args.height, robot=robot)
     print(f'wrote {args.output}')
     return 0
+
+
+def _supply_types(args, scene=None) -> tuple[dict, dict | None, dict]:
+    """The block types, the inventory (None: any number) and the costs the supply flags name."""
+    from rad_core.blocks import DEFAULT_LIBRARY
+    from rad_core.supply import library, parse_costs, pick_types, read_inventory
+    known = library(scene)
+    if args.types and args.inventory:
+        raise RadError('give --types or --inventory, not both (an inventory names its types)')
+    costs = parse_costs(args.cost) if args.cost else {}
+    inventory = None
+    if args.inventory:
+        inventory, file_costs = read_inventory(args.inventory, known)
+        types = {n: known[n] for n in inventory}
+        costs = {**file_costs, **costs}
+    elif args.types:
+        types = pick_types(args.types, known)
+    else:
+        types = dict(scene.block_types) if scene is not None else dict(DEFAULT_LIBRARY)
+    return types, inventory, costs
+
+
+def _supply_and_write(args, targets, unit: float, clearance: float = 0.0, scene=None) -> int:
+    """Choose and lay out the blocks (or none, with --no-supply), write the scene, say how well it covers."""
+    from rad_core.supply import SupplyParams, supply, target_only
+    types, inventory, costs = _supply_types(args, scene)
+    if getattr(args, 'no_supply', False):
+        _write_text(target_only(targets, unit, types).dumps(), args.output)
+        cells = sum(len(t.filled) for t in targets)
+        _say(args, f'target only: {len(targets)} regions, {cells} target cells, no blocks '
+                   f'(rad scene supply lays them out)')
+        return 0
+    params = SupplyParams(objective=args.objective, costs=costs, time_limit_s=args.time_limit, seed=args.seed)
+    result, report = supply(targets, unit, types, inventory, params, clearance)
+    _write_text(result.dumps(), args.output)
+    if args.report:
+        _write_text(jsonfmt.dumps(report.to_dict()), args.report)
+    _say(args, report.summary())
+    if not report.exact:
+        _say(args, f'rad: warning: the blocks cannot cover the target exactly with these types: '
+                   f'{report.covered} of {report.target_cells} target cells can be covered'
+                   + (f', {report.filler_cells} cells off the target hold blocks up' if report.filler_cells else ''))
+    return 0
+
+
+def _say(args, line: str) -> None:
+    """A line for the user: stdout when the scene went to a file, stderr when it went to stdout."""
+    print(line, file=sys.stderr if args.output in (None, '-') else sys.stdout)
+
+
+def cmd_scene_from_mesh(args) -> int:
+    from rad_core.voxels import mesh_models, place_regions, region_names
+    models = mesh_models(region_names(args.models), args.unit, size=args.size, scale=args.scale, up=args.up,
+                         hollow=args.hollow)
+    return _supply_and_write(args, place_regions(models, args.unit), args.unit)
+
+
+def cmd_scene_from_voxels(args) -> int:
+    from rad_core.voxels import place_regions, region_names, voxel_models
+    models = voxel_models(region_names(args.files), args.unit, up=args.up, hollow=args.hollow)
+    return _supply_and_write(args, place_regions(models, args.unit), args.unit)
+
+
+def cmd_scene_supply(args) -> int:
+    from rad_core.grid import Grid, blocks_on_grid
+    scene = _read_scene(args.scene)
+    placed = blocks_on_grid(scene, Grid(scene))
+    if placed:
+        raise RadError(f'{args.scene}: {len(placed)} blocks already sit in the target; supply lays out the blocks '
+                       f'for an empty target (remove them from "blocks")')
+    return _supply_and_write(args, scene.targets, scene.unit, scene.clearance, scene)
 
 
 def cmd_allocate(args) -> int:
@@ -364,6 +438,29 @@ def _add_solver_args(p: argparse.ArgumentParser) -> None:
     p.add_argument('--workers', type=int, default=1, help='CP-SAT workers (1 = deterministic)')
 
 
+def _add_target_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument('--unit', type=float, default=0.05, help='cell edge (the cube edge), metres (default: 0.05)')
+    p.add_argument('--up', choices=['x', 'y', 'z'], default='z', help="the model's axis that points up (default: z)")
+    p.add_argument('--hollow', action='store_true', help='only the surface shell, not the solid inside')
+
+
+def _add_supply_args(p: argparse.ArgumentParser, no_supply: bool = True) -> None:
+    p.add_argument('--types', metavar='T1,T2,...', help='block types to lay out (default: the scene\'s, or the '
+                                                          'default set cube,I2,I3,I2_up,L3,L3_up,T4,T4_up,O4_up,S4_up)')
+    p.add_argument('--inventory', metavar='FILE',
+                   help='JSON: type -> count or {"count": N, "cost": C}: only these blocks')
+    p.add_argument('--objective', choices=['fewest', 'cheapest'], default='fewest',
+                   help='among the best covers, the fewest blocks or the lowest cost (default: fewest)')
+    p.add_argument('--cost', metavar='T=C,...', help='per-type costs for --objective cheapest (others cost 1)')
+    p.add_argument('--seed', type=int, default=0, help='solver and layout seed')
+    p.add_argument('--time-limit', type=float, default=10.0, metavar='S', help='solver time limit, seconds')
+    p.add_argument('--report', metavar='FILE', help='write how well the blocks cover (JSON) here')
+    if no_supply:
+        p.add_argument('--no-supply', action='store_true',
+                       help='write the target and the block types only, no blocks (for rad scene supply)')
+    p.add_argument('-o', '--output', help='output scene file (default: stdout)')
+
+
 def build_parser(command: str | None = 'train') -> argparse.ArgumentParser:
     """The whole parser, built without importing torch, OR-Tools, PyBullet or Dask: each command imports
     what it uses when it runs. Only `rad train`'s --<config field> flags need a heavy import (TrainConfig
@@ -399,6 +496,31 @@ def build_parser(command: str | None = 'train') -> argparse.ArgumentParser:
     p.add_argument('--scenes', type=int, default=1000)
     p.add_argument('--seed', type=int, default=0)
     p.set_defaults(func=cmd_scene_stats)
+    p = scene.add_parser('from-mesh', help='a target from a mesh (STL, OBJ, PLY), with the blocks to build it',
+                         description='Voxelize meshes at the unit (a cell is a target cell when its centre is inside '
+                                     'the solid), place them as target regions in front of the robot, choose and lay '
+                                     'out the blocks (docs/formats.md).')
+    p.add_argument('models', nargs='+', metavar='MODEL',
+                   help='mesh file, or NAME=FILE to name its region; several files: regions back to back along y')
+    _add_target_args(p)
+    p.add_argument('--size', type=int, metavar='N', help='the longest side of the models, in cells')
+    p.add_argument('--scale', type=float, metavar='S', help='metres per mesh unit (default: 1, a model in metres)')
+    _add_supply_args(p)
+    p.set_defaults(func=cmd_scene_from_mesh)
+    p = scene.add_parser('from-voxels', help='a target from a voxel grid (.npy boolean z-up, binvox), with blocks',
+                         description='One cell per voxel; place the grids as target regions in front of the robot, '
+                                     'choose and lay out the blocks (docs/formats.md).')
+    p.add_argument('files', nargs='+', metavar='FILE', help='.npy or .binvox file, or NAME=FILE to name its region')
+    _add_target_args(p)
+    _add_supply_args(p)
+    p.set_defaults(func=cmd_scene_from_voxels)
+    p = scene.add_parser('supply', help='choose the blocks for a scene\'s target and lay them out on the table',
+                         description='CP-SAT over the allocation\'s placements: an exact, stable cover with the '
+                                     'fewest (or cheapest) blocks where one exists, else the most it can cover; '
+                                     'the blocks replace the scene\'s.')
+    p.add_argument('scene', help='scene file (its block types are offered unless --types or --inventory), - for stdin')
+    _add_supply_args(p, no_supply=False)
+    p.set_defaults(func=cmd_scene_supply)
 
     p = sub.add_parser('allocate', help='solve the allocation MILP for a scene, print rad-allocation/1 JSON')
     p.add_argument('scene', help='scene file, or - for stdin')

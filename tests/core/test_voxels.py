@@ -1,0 +1,235 @@
+"""Targets from files (rad_core.voxels): meshes and voxel grids give the cells they should,
+placed where the arm builds, and bad files are errors that name the problem and the fix."""
+
+import math
+import re
+
+import numpy as np
+import pytest
+import trimesh
+from trimesh.exchange import binvox
+
+from rad_core import voxels
+from rad_core.errors import RadError
+from rad_core.scene import Scene
+from rad_core.shapes import STRUCTURE_X
+
+UNIT = 0.05
+
+
+def cells_of(grid) -> set:
+    return {tuple(int(v) for v in c) for c in np.argwhere(grid)}
+
+
+def save(mesh, path) -> str:
+    mesh.export(path)
+    return str(path)
+
+
+def one(path, **kw) -> np.ndarray:
+    return voxels.mesh_models([('m', str(path))], UNIT, **kw)[0].cells
+
+
+# ---- voxelization ---------------------------------------------------------------
+
+def test_a_cube_n_cells_long_gives_n_cubed_cells_not_n_plus_one(tmp_path):
+    # Its faces lie on cell borders: a surface sampler would mark the cells on both sides.
+    path = save(trimesh.creation.box(extents=(0.15, 0.15, 0.15)), tmp_path / 'cube.stl')
+    grid = one(path, scale=1.0)
+    assert grid.shape == (3, 3, 3) and grid.all()
+    assert one(path, size=4).shape == (4, 4, 4) and one(path, size=4).all()
+    hollow = one(path, scale=1.0, hollow=True)
+    assert hollow.sum() == 26 and not hollow[1, 1, 1]
+
+
+def test_an_l_gives_its_cells_at_any_mesh_scale(tmp_path):
+    l_cells = np.zeros((3, 2, 3), dtype=bool)
+    l_cells[:, :, 0] = True
+    l_cells[0, :, :] = True
+    for pitch, fmt in ((1.0, 'obj'), (25.0, 'ply'), (0.05, 'stl')):     # mesh units, mm, m
+        path = save(voxels.cells_to_mesh(l_cells, pitch), tmp_path / f'l.{fmt}')
+        got = one(path, size=3)
+        assert got.shape == l_cells.shape and cells_of(got) == cells_of(l_cells), fmt
+    # The same in metres at --scale 1: 0.05 m per cell is one cell each.
+    assert cells_of(one(tmp_path / 'l.stl', scale=1.0)) == cells_of(l_cells)
+
+
+def test_a_torus_like_ring_has_its_hole(tmp_path):
+    ring = trimesh.creation.annulus(r_min=1.2, r_max=2.5, height=1.0, sections=64)
+    grid = one(save(ring, tmp_path / 'ring.ply'), size=5)
+    assert grid.shape == (5, 5, 1)
+    # Cell centres at -2..2 around the axis: inside when 1.2 < distance < 2.5.
+    expected = {(i, j, 0) for i in range(5) for j in range(5) if 1.2 < math.hypot(i - 2, j - 2) < 2.5}
+    assert cells_of(grid) == expected
+    assert not grid[2, 2, 0] and len(expected) == 16
+
+
+def test_up_axis_turns_without_mirroring(tmp_path):
+    # A chiral corner: x, y and z arms of different lengths.
+    grid = np.zeros((3, 2, 4), dtype=bool)
+    grid[:, 0, 0] = True
+    grid[0, :, 0] = True
+    grid[0, 0, :] = True
+    z_up = voxels.cells_to_mesh(grid)
+    for up in ('y', 'x'):
+        turn = np.eye(4)
+        turn[:3, :3] = voxels._UP[up].T            # as a modeller with that axis up would save it
+        mesh = z_up.copy()
+        mesh.apply_transform(turn)
+        got = one(save(mesh, tmp_path / f'corner_{up}.stl'), size=4, up=up)
+        assert cells_of(got) == cells_of(grid), up
+        # A voxel grid saved that way reads back the same with the same --up.
+        np.save(tmp_path / f'corner_{up}.npy', voxels.crop(_turn_cells(grid, voxels._UP[up].T)))
+        back = voxels.voxel_models([('v', str(tmp_path / f'corner_{up}.npy'))], UNIT, up=up)[0].cells
+        assert cells_of(back) == cells_of(grid), up
+
+
+def _turn_cells(grid, rotation):
+    idx = np.argwhere(grid) @ np.asarray(rotation).T.round().astype(int)
+    idx -= idx.min(axis=0)
+    out = np.zeros(idx.max(axis=0) + 1, dtype=bool)
+    out[tuple(idx.T)] = True
+    return out
+
+
+def test_several_models_keep_their_proportions_with_size(tmp_path):
+    big = save(trimesh.creation.box(extents=(4, 1, 2)), tmp_path / 'big.stl')
+    small = save(trimesh.creation.box(extents=(2, 1, 1)), tmp_path / 'small.stl')
+    models = voxels.mesh_models([('a', big), ('b', small)], UNIT, size=4)
+    assert [m.cells.shape for m in models] == [(4, 1, 2), (2, 1, 1)]
+
+
+# ---- voxel files --------------------------------------------------------------------
+
+def test_npy_and_binvox_give_their_voxels_cropped_onto_the_table(tmp_path):
+    grid = np.zeros((4, 4, 4), dtype=bool)
+    grid[1, 1, 1:4] = True
+    grid[2, 1, 1] = True
+    expected = {(0, 0, 0), (0, 0, 1), (0, 0, 2), (1, 0, 0)}    # the empty layer under it is gone
+    np.save(tmp_path / 'g.npy', grid)
+    np.save(tmp_path / 'g_int.npy', grid.astype(np.uint8) * 7)
+    (tmp_path / 'g.binvox').write_bytes(binvox.export_binvox(trimesh.voxel.VoxelGrid(grid)))
+    for name in ('g.npy', 'g_int.npy', 'g.binvox'):
+        cells = voxels.voxel_models([('v', str(tmp_path / name))], UNIT)[0].cells
+        assert cells_of(cells) == expected, name
+
+
+@pytest.mark.parametrize('array, problem', [
+    (np.zeros((3, 3), dtype=bool), '3D array'),
+    (np.zeros((2, 2, 2), dtype=float), 'dtype float64'),
+    (np.zeros((2, 2, 2), dtype=bool), 'empty'),
+])
+def test_bad_voxel_arrays_are_refused_with_the_reason(tmp_path, array, problem):
+    np.save(tmp_path / 'bad.npy', array)
+    with pytest.raises(RadError, match=problem):
+        voxels.voxel_models([('v', str(tmp_path / 'bad.npy'))], UNIT)
+
+
+def test_an_object_array_is_not_unpickled(tmp_path):
+    np.save(tmp_path / 'obj.npy', np.array([{'a': 1}], dtype=object), allow_pickle=True)
+    with pytest.raises(RadError, match='not a readable .npy'):
+        voxels.load_voxel_grid(str(tmp_path / 'obj.npy'))
+
+
+def test_a_voxel_grid_too_large_names_the_limit(tmp_path):
+    np.save(tmp_path / 'wide.npy', np.ones((12, 1, 1), dtype=bool))
+    with pytest.raises(RadError, match=r'12 x 1 x 1 cells.*8 x 6 x 7'):
+        voxels.voxel_models([('v', str(tmp_path / 'wide.npy'))], UNIT)
+    # The same voxels fit at a smaller unit.
+    assert voxels.voxel_models([('v', str(tmp_path / 'wide.npy'))], 0.03)[0].cells.shape == (12, 1, 1)
+
+
+# ---- bad meshes -------------------------------------------------------------------
+
+def test_an_open_mesh_is_refused_for_a_solid_and_read_hollow(tmp_path):
+    box = trimesh.creation.box(extents=(0.15, 0.1, 0.1))
+    keep = np.ones(len(box.faces), dtype=bool)
+    keep[:2] = False                                  # one side of the box missing
+    box.update_faces(keep)
+    path = save(box, tmp_path / 'open.stl')
+    with pytest.raises(RadError, match=r'not watertight \(\d+ open edges\).*--hollow'):
+        one(path, scale=1.0)
+    surface = one(path, scale=1.0, hollow=True)
+    assert surface.shape == (3, 2, 2) and surface.all()      # every cell has surface in it
+
+
+@pytest.mark.parametrize('name, content, problem', [
+    ('model.fbx', b'x', "unknown mesh format '.fbx'"),
+    ('model.npy', b'x', r"\.npy is read by rad scene from-voxels"),
+    ('model.stl', b'', 'no triangles|not a readable'),
+    ('model.obj', b'this is not a mesh\n', 'no triangles|not a readable'),
+    ('model.ply', b'ply\nformat nonsense\n', 'not a readable|no triangles'),
+])
+def test_unreadable_files_name_the_file_and_the_problem(tmp_path, name, content, problem):
+    path = tmp_path / name
+    path.write_bytes(content)
+    with pytest.raises(RadError, match=problem) as e:
+        one(path)
+    assert str(path) in str(e.value)
+
+
+def test_a_missing_file_and_a_flat_mesh(tmp_path):
+    with pytest.raises(RadError, match='no such file'):
+        one(tmp_path / 'nothing.stl')
+    flat = trimesh.Trimesh(vertices=[[0, 0, 0], [1, 0, 0], [0, 1, 0]], faces=[[0, 1, 2]])
+    with pytest.raises(RadError, match='flat'):
+        one(save(flat, tmp_path / 'flat.stl'))
+
+
+def test_a_model_thinner_than_a_cell_is_empty_with_advice(tmp_path):
+    thin = trimesh.creation.annulus(r_min=2.4, r_max=2.5, height=1.0, sections=64)
+    with pytest.raises(RadError, match='thinner than a cell.*larger --size'):
+        one(save(thin, tmp_path / 'thin.stl'), size=5)
+
+
+def test_too_large_names_a_size_and_a_scale_that_fit(tmp_path):
+    path = save(trimesh.creation.box(extents=(1.0, 0.2, 0.3)), tmp_path / 'wall.stl')     # 20 x 4 x 6 cells
+    with pytest.raises(RadError) as e:
+        one(path, scale=1.0)
+    message = str(e.value)
+    assert '20 x 4 x 6 cells' in message
+    size = int(re.search(r'--size (\d+) or less', message).group(1))
+    scale = float(re.search(r'--scale ([0-9.]+) or less', message).group(1))
+    assert one(path, size=size).shape[0] == size          # what it suggests does fit
+    assert one(path, scale=scale).shape[0] <= 8
+    with pytest.raises(RadError, match='too large|cells of'):
+        one(path, size=size + 1)
+
+
+def test_bad_flags(tmp_path):
+    path = save(trimesh.creation.box(extents=(0.1, 0.1, 0.1)), tmp_path / 'c.stl')
+    for kw, problem in (({'size': 2, 'scale': 1.0}, 'not both'), ({'size': 0}, '--size'),
+                        ({'scale': -1.0}, '--scale'), ({'up': 'w'}, 'up axis')):
+        with pytest.raises(RadError, match=problem):
+            one(path, **kw)
+    with pytest.raises(RadError, match='--unit'):
+        voxels.mesh_models([('m', path)], 0.5)
+
+
+# ---- regions ---------------------------------------------------------------------------
+
+def test_two_faces_land_where_the_generator_puts_its_two_sides():
+    face = np.ones((4, 1, 3), dtype=bool)
+    regions = voxels.place_regions([voxels.Model('left', '', face), voxels.Model('right', '', face)], UNIT)
+    left, right = regions
+    assert left.origin == pytest.approx((STRUCTURE_X - 1.5 * UNIT, UNIT / 2, UNIT / 2))
+    assert right.origin == pytest.approx((STRUCTURE_X - 1.5 * UNIT, -UNIT / 2, UNIT / 2))
+    # A valid scene: regions back to back, not overlapping, resting on the table.
+    scene = Scene.from_dict({'format': 'rad-scene/1', 'unit': UNIT, 'block_types': {'cube': [[0, 0, 0]]},
+                             'blocks': [], 'targets': [t.to_dict() for t in regions]})
+    assert scene.num_target_cells == 24
+
+
+def test_region_names_from_files_or_given_and_never_twice():
+    assert voxels.region_names(['a/arch.stl', 'deck=b/arch.stl']) == [('arch', 'a/arch.stl'), ('deck', 'b/arch.stl')]
+    with pytest.raises(RadError, match="named 'arch'"):
+        voxels.region_names(['a/arch.stl', 'b/arch.stl'])
+
+
+def test_cells_to_mesh_is_closed_and_encloses_its_cells():
+    grid = np.zeros((3, 3, 2), dtype=bool)
+    grid[:, :, 0] = True
+    grid[1, 1, 1] = True
+    mesh = voxels.cells_to_mesh(grid, 0.5)
+    assert mesh.is_watertight and mesh.is_winding_consistent
+    assert mesh.volume == pytest.approx(grid.sum() * 0.125)
