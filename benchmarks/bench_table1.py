@@ -1,7 +1,8 @@
-"""The paper's Table I (two-sided, no robot) for rad's agents, written to docs/RESULTS.md.
+"""The paper's Table I (two-sided, no robot) for rad's agents, written to docs/results/table1.md.
 
-    python benchmarks/bench_table1.py                 # 200 scenes per grid, g = 3, 4, 5, 6
+    python benchmarks/bench_table1.py                 # 200 scenes per grid, g = 3, 4, 5, 6 (hours)
     python benchmarks/bench_table1.py --scenes 20     # a quick look
+    python benchmarks/bench_table1.py --from-rows     # the table again from table1.rows.jsonl, no episodes
 
 Rows per grid size, all on the same generated scenes (seeds 0.. : never seen in
 training, which uses seeds from 1,000,000, nor in validation, 500,000..):
@@ -20,32 +21,40 @@ training, which uses seeds from 1,000,000, nor in validation, 500,000..):
   this allocation.
 
 Also the hand-made shapes (`rad_core.shapes`), training and held-out splits
-separately. Results per (agent, condition) are cached as JSON under
-docs/results/ so an interrupted run resumes; --force recomputes. Every number
-comes from `rad_core.evaluation.evaluate`, the code behind `rad eval`.
+separately. Every number comes from `rad_core.evaluation.evaluate`, the code behind
+`rad eval`. Each (agent, allocation, scene set) run is cached as JSON under
+out/cache/table1/ so an interrupted run resumes (--force recomputes); the per-scene
+rows of all of them go to docs/results/table1.rows.jsonl (`run_rows`), from which
+--from-rows rebuilds the table (`evaluation.summarize` over each run's rows) without
+running an episode.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
+from common import RESULTS, ROOT, cache_dir, command_line, read_rows, write_rows
 
 from rad_core import jsonfmt
 from rad_core.allocation import AllocationParams, solve
-from rad_core.evaluation import evaluate, get_agent
-from rad_core.progress import ProgressBar
-from rad_core.scene_sources import generated_scenes
+from rad_core.errors import RadError
+from rad_core.evaluation import evaluate, get_agent, summarize
 from rad_core.mdp import AssemblyEnv, EnvConfig
 from rad_core.physics import PhysicsStability
+from rad_core.progress import ProgressBar
+from rad_core.scene_sources import generated_scenes
 from rad_core.sequencing.actions import AllocationActions
 from rad_core.sequencing.ceiling import coverage_ceiling
 
-ROOT = Path(__file__).resolve().parents[1]
+NAME = 'table1'
+ROWS = RESULTS / f'{NAME}.rows.jsonl'
 PAPER = {  # Table I of the paper: R (std), e, d, coverage
     3: {'DQN': (0.63, 0.02, 0.59, 0.27, 0.71), 'DQN-REL': (0.67, 0.01, 0.70, 0.23, 0.68),
         'MILP-DQN': (1.22, 0.01, 0.31, 0.53, 0.87)},
@@ -54,6 +63,11 @@ PAPER = {  # Table I of the paper: R (std), e, d, coverage
     5: {'MILP-DQN': (1.92, 0.05, 0.17, 0.42, 0.85)},
 }
 PAPER_CORRECTED = {3: 0.97, 4: 0.91, 5: 0.87}   # the paper's coverage corrected for the allocation (MILP-DQN)
+CURVES = {  # the training runs of this table, as their learning curves group them
+    'milp-dqn': ['milp-dqn-s0', 'milp-dqn-s1', 'milp-dqn-s2'],
+    'baselines and ablation': ['milp-dqn-s0', 'milp-dqn-double-s0', 'dqn-s0', 'dqn-rel-s0'],
+    'mixed': ['milp-dqn-mixed-s0']}
+CEILING = 'ceiling'   # the agent field of the ceiling's rows
 
 
 def run_agent(label: str, agent: str, checkpoint: str | None, scenes, cache: Path, force: bool,
@@ -71,6 +85,12 @@ def run_agent(label: str, agent: str, checkpoint: str | None, scenes, cache: Pat
     return result
 
 
+def ceiling_result(rows: list[dict]) -> dict:
+    """The ceiling's mean over the scenes where the search finished (rows: name, ceiling)."""
+    known = [r['ceiling'] for r in rows if r['ceiling'] is not None]
+    return {'ceiling': float(np.mean(known)) if known else None, 'unknown': len(rows) - len(known), 'scenes': rows}
+
+
 def run_ceiling(scenes, cache: Path, force: bool, support: str = 'none') -> dict:
     if cache.exists() and not force:
         return json.loads(cache.read_text())
@@ -83,11 +103,85 @@ def run_ceiling(scenes, cache: Path, force: bool, support: str = 'none') -> dict
         rows.append({'name': name, 'ceiling': coverage_ceiling(env, space)})
         bar()
     stability.close()
-    known = [r['ceiling'] for r in rows if r['ceiling'] is not None]
-    out = {'ceiling': float(np.mean(known)) if known else None, 'unknown': len(rows) - len(known), 'scenes': rows}
+    out = ceiling_result(rows)
     cache.parent.mkdir(parents=True, exist_ok=True)
     cache.write_text(jsonfmt.dumps(out))
     return out
+
+
+def run_rows(key: str, support: str, cond: str, result: dict) -> list[dict]:
+    """One run's rows for the rows file: which run (agent key, allocation, scene set) and
+    per scene what `evaluate` measured (return, outcome, coverage, coverage_opt, steps) or,
+    for the ceiling, the best order's coverage (None where the search gave up)."""
+    out = []
+    for s in result['scenes']:
+        out.append({'agent': key, 'allocation': support, 'set': cond, 'scene': s['name'],
+                    **{k: v for k, v in s.items() if k != 'name'}})
+    return out
+
+
+class Measured:
+    """Results measured now (or read from out/cache/table1/): the runs' checkpoints under
+    `runs`; a run whose training has not finished is left out. `rows` collects every run's
+    per-scene rows in the table's order, for the rows file."""
+
+    def __init__(self, runs: Path, cache: Path, force: bool, scenes: int, shape_seeds: int):
+        self.runs, self.cache, self.force, self.rows = runs, cache, force, []
+        self.scenes, self.shape_seeds = scenes, shape_seeds
+
+    def cache_file(self, key: str, support: str, cond: str) -> Path:
+        """The cache of a run; its name holds the number of scenes (or layouts per shape),
+        so a quick run with --scenes 20 never reads a full run's results."""
+        tag = '' if support == 'none' else '_stable'
+        size = f'n{self.scenes}' if grid_of(cond) is not None else f'k{self.shape_seeds}'
+        return self.cache / f'{key}{tag}_{cond}-{size}.json'
+
+    def checkpoint(self, run: str) -> str | None:
+        """A finished run's model (curves.png is written when a run ends), else None."""
+        path = self.runs / run / 'model.pt'
+        return str(path) if path.exists() and (self.runs / run / 'curves.png').exists() else None
+
+    def agent(self, label: str, key: str, agent: str, run: str | None, verify: bool, support: str, cond: str,
+              make: Callable) -> dict | None:
+        checkpoint = self.checkpoint(run) if run else None
+        if run and checkpoint is None:
+            return None
+        result = run_agent(label, agent, checkpoint, make(), self.cache_file(key, support, cond), self.force,
+                           support, verify)
+        self.rows += run_rows(key, support, cond, result)
+        return result
+
+    def ceiling(self, support: str, cond: str, make: Callable) -> dict:
+        result = run_ceiling(make(), self.cache_file(CEILING, support, cond), self.force, support)
+        self.rows += run_rows(CEILING, support, cond, result)
+        return result
+
+
+class FromRows:
+    """Results rebuilt from a rows file (`run_rows`): each run's figures are
+    `evaluation.summarize` over its scenes' rows, exactly what `evaluate` returned."""
+
+    def __init__(self, path: Path):
+        if not path.exists():
+            raise RadError(f'{path} does not exist: run the benchmark without --from-rows to measure the rows')
+        self.runs: dict[tuple[str, str, str], list[dict]] = {}
+        for row in read_rows(path):
+            run = (row.pop('agent'), row.pop('allocation'), row.pop('set'))
+            self.runs.setdefault(run, []).append({'name': row.pop('scene'), **row})
+
+    def sets(self) -> list[str]:
+        """The scene sets in the order of the file."""
+        return list(dict.fromkeys(s for _, _, s in self.runs))
+
+    def agent(self, label, key, agent, run, verify, support, cond, make) -> dict | None:
+        rows = self.runs.get((key, support, cond))
+        return summarize(rows, key) if rows else None
+
+    def ceiling(self, support: str, cond: str, make: Callable) -> dict:
+        rows = self.runs.get((CEILING, support, cond))
+        if not rows:
+            raise RadError(f'the rows file has no ceiling rows for {cond} with --support {support}')
+        return ceiling_result(rows)
 
 
 def ceiling_rel(result: dict, ceiling: dict) -> float | None:
@@ -123,6 +217,52 @@ def mean_of_seeds(results: list[dict]) -> tuple[dict, dict]:
     return mean, {'R_seed_std': float(np.std([r['R'] for r in results]))}
 
 
+def section(source, cond: str, make: Callable, g: int | None, support: str, seeds: list[int]) -> list[tuple]:
+    """The table rows of one scene set and allocation: (label, result, extra), runs that
+    `source` does not have left out."""
+    def agent(label, key, agent_name=None, run=None, verify=False):
+        return source.agent(label, key + ('+verify' if verify else ''), agent_name or key, run, verify, support, cond,
+                            make)
+
+    rows = [('HEUR (wo robot)', agent('heur-norobot', 'heur-norobot'), {})]
+    if g is not None and support == 'none':
+        for label, name in (('DQN', 'dqn-s0'), ('DQN-REL', 'dqn-rel-s0')):
+            rows.append((label, agent(label, name, label.lower(), name), {}))
+    per_seed = [(s, agent(f'milp-dqn-s{s}', f'milp-dqn-s{s}', 'milp-dqn', f'milp-dqn-s{s}')) for s in seeds]
+    per_seed = [(s, r) for s, r in per_seed if r is not None]
+    if per_seed:
+        mean, extra = mean_of_seeds([r for _, r in per_seed])
+        rows.append((f'**MILP-DQN** (trained at g = 3, mean of {len(per_seed)} seeds)', mean, extra))
+        if support == 'none':
+            rows += [(f'MILP-DQN seed {s}', r, {}) for s, r in per_seed]
+    if support == 'none':
+        rows.append(('MILP-DQN, double DQN (seed 0, ablation)',
+                     agent('double', 'milp-dqn-double-s0', 'milp-dqn', 'milp-dqn-double-s0'), {}))
+    rows.append(('MILP-DQN seed 0 + verify', agent('s0+verify', 'milp-dqn-s0', 'milp-dqn', 'milp-dqn-s0', True), {}))
+    rows.append(('**MILP-DQN-mixed** (g = 3..5 + training shapes, stable allocations)',
+                 agent('mixed', 'milp-dqn-mixed-s0', 'milp-dqn', 'milp-dqn-mixed-s0'), {}))
+    rows.append(('**MILP-DQN-mixed + verify**',
+                 agent('mixed+verify', 'milp-dqn-mixed-s0', 'milp-dqn', 'milp-dqn-mixed-s0', True), {}))
+    return [r for r in rows if r[1] is not None]
+
+
+def grid_of(cond: str) -> int | None:
+    """g of a generated set ('g4'), None for the hand-made shapes ('shapes-holdout')."""
+    return int(cond[1:]) if cond[0] == 'g' and cond[1:].isdigit() else None
+
+
+def conditions(args) -> list[tuple[str, Callable, int | None]]:
+    """(scene set, its scenes' factory, g) to measure: the grids, then the shapes' splits."""
+    grids = [int(g) for g in args.grids.split(',')]
+    out = [(f'g{g}', lambda g=g: generated_scenes(g, 2, args.scenes, 0), g) for g in grids]
+    from rad_core import shapes
+    for split in () if args.skip_shapes else ('train', 'holdout'):
+        names = shapes.SPLITS[split]
+        out.append((f'shapes-{split}', lambda names=names: [(f'{n}-seed{s}', shapes.shape_scene(n, s))
+                                                            for n in names for s in range(args.shape_seeds)], None))
+    return out
+
+
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument('--scenes', type=int, default=200)
@@ -130,87 +270,64 @@ def main() -> int:
     p.add_argument('--seeds', default='0,1,2', help='MILP-DQN training seeds (runs/milp-dqn-s<seed>/model.pt)')
     p.add_argument('--runs', default=str(ROOT / 'runs'), help='folder of the training runs')
     p.add_argument('--shape-seeds', type=int, default=5, help='block layouts per hand-made shape')
-    p.add_argument('--results', default=str(ROOT / 'docs' / 'results'))
-    p.add_argument('--out', default=str(ROOT / 'docs' / 'RESULTS.md'))
+    p.add_argument('--rows', type=Path, default=ROWS, help='the per-scene rows file '
+                   '(written, or read with --from-rows)')
+    p.add_argument('--out', type=Path, default=RESULTS / f'{NAME}.md')
     p.add_argument('--force', action='store_true', help='recompute cached results')
     p.add_argument('--skip-shapes', action='store_true', help='only the generated scenes (e.g. to split a run '
                    'over two processes; a last run without it assembles everything from the cache)')
+    p.add_argument('--from-rows', action='store_true', help='rebuild the table from --rows without running '
+                   'anything (the scene sets and runs are those of the file)')
     args = p.parse_args()
-    runs, res = Path(args.runs), Path(args.results)
-    grids = [int(g) for g in args.grids.split(',')]
     seeds = [int(s) for s in args.seeds.split(',')]
-
-    def ckpt(name: str) -> str | None:
-        """A finished run's model (curves.png is written when a run ends), else None."""
-        path = runs / name / 'model.pt'
-        return str(path) if path.exists() and (runs / name / 'curves.png').exists() else None
-
-    conditions = [(f'g{g}', lambda g=g: generated_scenes(g, 2, args.scenes, 0), g) for g in grids]
-    from rad_core import shapes
-    for split in () if args.skip_shapes else ('train', 'holdout'):
-        names = shapes.SPLITS[split]
-        conditions.append((f'shapes-{split}', lambda names=names: [(f'{n}-seed{s}', shapes.shape_scene(n, s))
-                                                                   for n in names for s in range(args.shape_seeds)],
-                           None))
+    if args.from_rows:
+        source = FromRows(args.rows)
+        sets = [(cond, None, grid_of(cond)) for cond in source.sets()]
+    else:
+        source = Measured(Path(args.runs), cache_dir(NAME), args.force, args.scenes, args.shape_seeds)
+        sets = conditions(args)
     report = {}
-    for cond, make, g in conditions:
+    for cond, make, g in sets:
         print(f'--- {cond}', file=sys.stderr)
-        sections = []
-        for support in ('none', 'stable'):
-            tag = '' if support == 'none' else '_stable'
-
-            def agent(label, name, checkpoint=None, agent_name=None, verify=False):
-                key = name + ('+verify' if verify else '')
-                return run_agent(label, agent_name or name, checkpoint, make(), res / f'{key}{tag}_{cond}.json',
-                                 args.force, support, verify)
-
-            ceiling = run_ceiling(make(), res / f'ceiling{tag}_{cond}.json', args.force, support)
-            rows = [('HEUR (wo robot)', agent('heur-norobot', 'heur-norobot'), {})]
-            if g is not None and support == 'none':
-                for label, name in (('DQN', 'dqn-s0'), ('DQN-REL', 'dqn-rel-s0')):
-                    if ckpt(name):
-                        rows.append((label, agent(label, name, ckpt(name), label.lower()), {}))
-            per_seed = [agent(f'milp-dqn-s{s}', f'milp-dqn-s{s}', ckpt(f'milp-dqn-s{s}'), 'milp-dqn')
-                        for s in seeds if ckpt(f'milp-dqn-s{s}')]
-            if per_seed:
-                mean, extra = mean_of_seeds(per_seed)
-                rows.append((f'**MILP-DQN** (trained at g = 3, mean of {len(per_seed)} seeds)', mean, extra))
-                if support == 'none':
-                    rows += [(f'MILP-DQN seed {s}', r, {}) for s, r in zip(seeds, per_seed)]
-            if support == 'none' and ckpt('milp-dqn-double-s0'):
-                rows.append(('MILP-DQN, double DQN (seed 0, ablation)',
-                             agent('double', 'milp-dqn-double-s0', ckpt('milp-dqn-double-s0'), 'milp-dqn'), {}))
-            if ckpt('milp-dqn-s0'):
-                rows.append(('MILP-DQN seed 0 + verify', agent('s0+verify', 'milp-dqn-s0', ckpt('milp-dqn-s0'),
-                                                               'milp-dqn', verify=True), {}))
-            if ckpt('milp-dqn-mixed-s0'):
-                mixed = ckpt('milp-dqn-mixed-s0')
-                rows.append(('**MILP-DQN-mixed** (g = 3..5 + training shapes, stable allocations)',
-                             agent('mixed', 'milp-dqn-mixed-s0', mixed, 'milp-dqn'), {}))
-                rows.append(('**MILP-DQN-mixed + verify**',
-                             agent('mixed+verify', 'milp-dqn-mixed-s0', mixed, 'milp-dqn', verify=True), {}))
-            sections.append((support, rows, ceiling))
-        report[cond] = (sections, g)
-    write_markdown(report, Path(args.out), args)
+        report[cond] = ([(support, section(source, cond, make, g, support, seeds), source.ceiling(support, cond, make))
+                         for support in ('none', 'stable')], g)
+    if not args.from_rows:
+        write_rows(args.rows, source.rows)
+        print(f'wrote {args.rows}')
+    write_markdown(report, args.out, args.rows, args.from_rows)
     print(f'wrote {args.out}')
     return 0
 
 
-def write_markdown(report: dict, out: Path, args) -> None:
-    lines = ['# Results', '',
-             'Generated by `python benchmarks/bench_table1.py` (this file is overwritten; per-agent JSON with every',
-             'scene\'s row is in `docs/results/`). Two-sided scenes, no robot, physics decides stability.',
-             f'{args.scenes} generated scenes per grid size (generator seeds 0..{args.scenes - 1}, never used in',
+def scenes_per_grid(report: dict) -> int:
+    """How many generated scenes each grid's runs had (the first grid's ceiling rows)."""
+    grids = [sections for sections, g in report.values() if g is not None]
+    return len(grids[0][0][2]['scenes']) if grids else 0
+
+
+def link(path: Path, page: Path) -> str:
+    """path relative to the folder of page, as a Markdown link target."""
+    return Path(os.path.relpath(path, page.parent)).as_posix()
+
+
+def write_markdown(report: dict, out: Path, rows: Path, from_rows: bool) -> None:
+    n = scenes_per_grid(report)
+    made = (f'Rebuilt by `{command_line()}` from the per-scene rows in [{rows.name}]({link(rows, out)}) (written by '
+            'the run that measured them, `python benchmarks/bench_table1.py` without `--from-rows`).'
+            if from_rows else f'Made by `{command_line()}`; every scene\'s row is in [{rows.name}]({link(rows, out)}).')
+    lines = ['# Table I: the agents without the robot', '', made,
+             'Two-sided scenes, no robot, physics decides stability.',
+             f'{n} generated scenes per grid size (generator seeds 0..{n - 1}, never used in',
              'training or validation); agents trained at g = 3 only (the paper\'s * condition), on',
              '`data/train-g3.jsonl.gz` (50,000 scenes with their CP-SAT allocations).', '']
     for cond, (sections, g) in report.items():
         star = '*' if g == 3 else ''
         title = f'g = {g}{star}' if g is not None else f'hand-made shapes, {cond.split("-")[1]} split'
         lines += [f'## {title}', '']
-        for support, rows, ceiling in sections:
+        for support, rows_, ceiling in sections:
             head = ("The paper's allocation (MILP, `--support none`)" if support == 'none' else
                     "rad's stability-aware allocation (`--support stable`)")
-            lines += [f'{head}:', ''] + table(rows, ceiling) + ['']
+            lines += [f'{head}:', ''] + table(rows_, ceiling) + ['']
         ceiling = sections[0][2]
         if g in PAPER:
             lines += ['', 'The paper, same grid size: ' + '; '.join(
@@ -221,14 +338,14 @@ def write_markdown(report: dict, out: Path, args) -> None:
             lines.append(f'\nThe ceiling search gave up on {ceiling["unknown"]} scenes (too many orders); '
                          'they are left out of "coverage / ceiling".')
         lines.append('')
-    training = Path(args.results) / 'training'
+    training = RESULTS / 'training'
     lines += training_cost(training)
-    curves = plot_curves(training, out.parent / 'img')
+    curves = plot_curves(training, ROOT / 'docs' / 'img', redraw=not from_rows)
     if curves:
         lines += ['## Learning curves', '', 'Greedy validation return and coverage (50 scenes at g = 3, seeds from '
                   '500,000), training return and TD loss, against environment steps; from each run\'s progress.csv.',
-                  ''] + [f'![{name}](img/{path.name})' for name, path in curves] + ['']
-    notes = Path(args.results) / 'notes.md'
+                  ''] + [f'![{name}]({link(path, out)})' for name, path in curves] + ['']
+    notes = RESULTS / 'notes.md'
     if notes.exists():
         lines += [notes.read_text().rstrip(), '']
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -236,7 +353,8 @@ def write_markdown(report: dict, out: Path, args) -> None:
 
 
 def training_cost(training: Path) -> list[str]:
-    """Per run: budget, wall time, throughput, memory, and when the greedy validation
+    """Per run of this table (`CURVES`; the robot's runs have their own table,
+    robot_training.md): budget, wall time, throughput, memory, and when the greedy validation
     first reached the paper's Table I level at g = 3 (R >= 1.22 and coverage >= 0.87)."""
     from rad_core.learning.curves import read_progress
     out = ['## Training cost', '',
@@ -245,7 +363,8 @@ def training_cost(training: Path) -> list[str]:
            'g = 3) with R >= 1.22 and coverage >= 0.87, the paper\'s Table I MILP-DQN at g = 3*.', '',
            '| run | env steps | gradient steps | wall | env steps/s | gradient steps/s | peak RSS | paper level at |',
            '|---|---|---|---|---|---|---|---|']
-    for progress in sorted(training.glob('*.csv')):
+    runs = sorted({run for group in CURVES.values() for run in group})
+    for progress in [training / f'{run}.csv' for run in runs if (training / f'{run}.csv').exists()]:
         rows = read_progress(progress)
         if not rows:
             continue
@@ -258,19 +377,18 @@ def training_cost(training: Path) -> list[str]:
     return out + ['']
 
 
-def plot_curves(training: Path, img: Path) -> list[tuple[str, Path]]:
+def plot_curves(training: Path, img: Path, redraw: bool = True) -> list[tuple[str, Path]]:
     """Learning curves from docs/results/training/<run>.csv (copied there from
-    runs/<run>/progress.csv by scripts/ship_weights.sh)."""
+    runs/<run>/progress.csv by scripts/ship_weights.sh); redraw False draws only the
+    missing pictures (a table rebuilt from its rows leaves the committed ones as they are)."""
     from rad_core.learning.curves import plot_progress
-    groups = {'milp-dqn': ['milp-dqn-s0', 'milp-dqn-s1', 'milp-dqn-s2'],
-              'baselines and ablation': ['milp-dqn-s0', 'milp-dqn-double-s0', 'dqn-s0', 'dqn-rel-s0'],
-              'mixed': ['milp-dqn-mixed-s0']}
     out = []
-    for name, runs in groups.items():
+    for name, runs in CURVES.items():
         paths = [training / f'{r}.csv' for r in runs if (training / f'{r}.csv').exists()]
         if paths:
             path = img / f'curves_{name.split()[0]}.png'
-            plot_progress(paths, path, title=name, labels=[p.stem for p in paths])
+            if redraw or not path.exists():
+                plot_progress(paths, path, title=name, labels=[p.stem for p in paths])
             out.append((name, path))
     return out
 
