@@ -115,6 +115,29 @@ def test_the_node_graph_and_the_in_process_planner_take_the_same_actions(graph):
         planner.close()
 
 
+def test_the_papers_agent_plans_the_same_over_dds_and_in_process(node_process, ros_node, tmp_path):
+    """The unverified paper agent (MCTS over the g = 3 network, no GAMP check): both paths take the
+    same actions and stop on the same refused action, with the same reason."""
+    from rad_core.sequencing.agent_plan import AgentPlanner
+    global SEQUENCER
+    saved, SEQUENCER = SEQUENCER, {'agent': 'paper'}
+    try:
+        g = start_graph(node_process, ros_node, tmp_path, assembly={'agent': 'paper'})
+    finally:
+        SEQUENCER = saved
+    planner = AgentPlanner('paper')
+    try:
+        for scene in (generate_scene(GeneratorConfig(grid=4), 0), generate_scene(GeneratorConfig(grid=4), 2)):
+            r = g.plan(scene_json=scene.dumps())
+            local = planner(scene)
+            assert (r.success, r.reason) == (local.success, local.reason)
+            assert [(s.block_id, s.target) for s in r.steps] == [(s.block, s.target) for s in local.steps]
+        assert not local.success and local.episode.outcome.is_invalid   # seed 2 fails as the paper's agents do
+    finally:
+        planner.close()
+        stop_graph(g)
+
+
 def test_a_pose_the_robot_cannot_build_is_reallocated(graph):
     # Real GAMP: the I2 that the only full allocation needs lies out of the arm's reach.
     blocks = [{'id': 'c0', 'type': 'cube', 'position': [0.4, -0.25, U / 2], 'yaw': 0},
