@@ -18,13 +18,16 @@ would refuse is counted beside) and compared with the truth:
   registration makes there;
 - the fit's rms residual, mm.
 Printed and written per (n, sigma): median and 95th percentile, and the ratio of the error at the
-table point to sigma (the noise's gain). Writes the tables as Markdown (--out) and everything as
-JSON beside it.
+table point to sigma (the noise's gain). Writes the tables as Markdown (--out) and beside it
+one compact JSON line per (n, sigma) with every statistic (<out>.rows.jsonl, floats to 6
+significant digits: `write_rows`'s 4 decimals would flatten the noise-free rows' 1e-14 errors
+to 0 and move the table's third digit).
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import os
 import sys
@@ -32,8 +35,8 @@ import time
 from pathlib import Path
 
 import numpy as np
+from common import RESULTS, command_line
 
-ROOT = Path(__file__).resolve().parents[1]
 WORKSPACE = (np.array([0.25, -0.4, 0.05]), np.array([0.75, 0.4, 0.6]))
 ORIGIN_RANGE = 3.0
 
@@ -93,6 +96,23 @@ def table(rows: list[dict]) -> list[str]:
     return lines
 
 
+def significant(value, digits: int = 6):
+    """value with its floats (nested in lists and dicts too) rounded to `digits` significant digits."""
+    if isinstance(value, float):
+        return float(f'{value:.{digits}g}')
+    if isinstance(value, dict):
+        return {k: significant(v, digits) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [significant(v, digits) for v in value]
+    return value
+
+
+def write_rows(path: Path, rows: list[dict]) -> Path:
+    """One JSON line per row, floats to 6 significant digits (`significant`)."""
+    path.write_text(''.join(json.dumps(significant(r), separators=(',', ':')) + '\n' for r in rows))
+    return path
+
+
 def _floats(text: str, kind=float) -> list:
     try:
         return [kind(v) for v in text.split(',') if v.strip()]
@@ -107,23 +127,19 @@ def main() -> int:
     p.add_argument('--points', default='8,15,30', help='pairs per set, comma-separated')
     p.add_argument('--noise-mm', default='0,0.1,0.5,1,2', help='marker noise sigma per axis, mm, comma-separated')
     p.add_argument('--seed', type=int, default=0)
-    p.add_argument('--out', default=str(ROOT / 'docs/results/calibration.md'))
+    p.add_argument('--out', default=str(RESULTS / 'calibration.md'), help='the table; the rows go beside it')
     args = p.parse_args()
     points, noise = _floats(args.points, int), _floats(args.noise_mm)
     t0 = time.perf_counter()
     rows = run(args.transforms, args.draws, points, noise, args.seed)
     wall = time.perf_counter() - t0
-    command = ' '.join(['python benchmarks/bench_calibration.py', *sys.argv[1:]])
+    command = command_line()
     lines = table(rows)
     print('\n'.join(lines))
     print(f'wall time {wall:.1f} s')
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    from rad_core import jsonfmt
-    out.with_suffix('.json').write_text(jsonfmt.dumps({
-        'command': command, 'wall_s': wall, 'seed': args.seed, 'transforms': args.transforms, 'draws': args.draws,
-        'workspace_m': [WORKSPACE[0].tolist(), WORKSPACE[1].tolist()], 'origin_range_m': ORIGIN_RANGE,
-        'rows': rows}))
+    rows_file = write_rows(out.with_suffix('.rows.jsonl'), rows)
     head = ['# Calibration of the motion-capture frame: error of the fitted transform against the marker noise', '',
             f'`{command}` ({wall:.1f} s wall on {os.cpu_count()} cores; see the script\'s docstring). '
             f'{args.transforms} random transforms x {args.draws} point sets per row; marker positions uniform in '
@@ -132,9 +148,10 @@ def main() -> int:
             'a point on the table top at its centre, mapped by the fit and by the truth. "/ sigma": its median '
             'over sigma. "Refused at 5 mm": fits `rad calibrate` would refuse with its default bound. The translation '
             'error is where the motion-capture origin lands, metres from the points, so the rotation error\'s lever '
-            'adds to it; the error at the table centre is what registration of a block sees.', '']
+            'adds to it; the error at the table centre is what registration of a block sees. '
+            f'Every row\'s statistics: [{rows_file.name}]({rows_file.name}).', '']
     out.write_text('\n'.join(head + lines) + '\n')
-    print(f'wrote {out} and {out.with_suffix(".json")}')
+    print(f'wrote {out} and {rows_file}')
     return 0
 
 

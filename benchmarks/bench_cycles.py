@@ -8,18 +8,18 @@ in-process on one `Twin` built as the twin node builds it (the whole arm motion 
 node's path and goal tolerances); the next cycle builds from what motion capture sees. Plans:
 the agent as the node graph runs it (`sequencing.agent_plan.AgentPlanner`, `default`).
 Per cycle: build coverage, steps, replans, take-apart success, blocks lost, drift from the
-heap (mm, mean and max), wall time. Results: OUT.md and OUT.json.
+heap (mm, mean and max), wall time. Results: OUT.md (the table) and OUT.rows.jsonl (one compact
+line per cycle); the per-scene summary is printed.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
+from common import RESULTS, command_line, write_rows
 
 
 SCENES = (('default g4 seed 8', ('generated', 4, 8)), ('g5 seed 503', ('generated', 5, 503)),
@@ -83,14 +83,14 @@ def main() -> None:
     p.add_argument('--faults', default='none')
     p.add_argument('--seed', type=int, default=0)
     p.add_argument('--agent', default='default', help='the agent (rad_core.agents), as the node graph runs it')
-    p.add_argument('--out', type=Path, default=Path('docs/results/cycles'))
+    p.add_argument('--out', type=Path, default=RESULTS / 'cycles', help='OUT.md and OUT.rows.jsonl')
     args = p.parse_args()
     from rad_core.sequencing.agent_plan import AgentPlanner
     planner = AgentPlanner(args.agent)
     rows = []
     for name, spec in SCENES:
         rows += run_cycles(name, scene_of(spec), planner, args.cycles, args.faults, args.seed)
-    command = 'python benchmarks/' + ' '.join([Path(sys.argv[0]).name, *sys.argv[1:]])
+    command = command_line()
     summary = {}
     for name, _ in SCENES:
         rs = [r for r in rows if r['scene'] == name]
@@ -101,11 +101,11 @@ def main() -> None:
                          'lost': sorted({b for r in rs for b in r['lost']}),
                          'drift_max_mm': float(max(r['drift_max_mm'] for r in rs)) if rs else None}
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.with_suffix('.json').write_text(json.dumps({'command': command, 'faults': args.faults,
-                                                         'summary': summary, 'rows': rows}, indent=1) + '\n')
+    rows_file = write_rows(args.out.with_suffix('.rows.jsonl'), rows)
     lines = ['# Build, take apart, build again', '',
              f'Made by `{command}` ({time.strftime("%Y-%m-%d")}; agent {planner.agent}; faults {args.faults}; '
-             'in-process loops of /execute_assembly and /take_apart on one twin, no reset).', '',
+             'in-process loops of /execute_assembly and /take_apart on one twin, no reset). '
+             f'Every cycle\'s row: [{rows_file.name}]({rows_file.name}).', '',
              '| scene | cycle | coverage | steps (build + take apart) | replans | take-apart | lost | '
              'drift mean / max mm | wall s |', '|---|---|---|---|---|---|---|---|---|']
     for r in rows:

@@ -2,7 +2,7 @@
 
     python benchmarks/bench_execution.py [--grids 4 5] [--scenes 5] [--shapes holdout]
         [--faults none mocap placement slip miss nudge drops realistic] [--agent default]
-        [--runs out/bench_execution/runs.jsonl] [--out docs/results/execution]
+        [--runs out/cache/execution/runs.jsonl] [--out docs/results/execution]
 
 What /execute_assembly runs, in-process: the execute / verify / replan loop
 (`rad_core.sequencing.execute.execute_assembly`, the function the assembly node calls),
@@ -21,8 +21,9 @@ Per run: coverage (registered target cells filled at the end), steps executed, r
 raw per-step success (steps that went as planned / steps), recovered per-step success
 (blocks whose placement was attempted that end on a target cell / such blocks), faults
 injected (the twin's fault events), wall and simulated time. Every run is appended to
---runs as one JSON line and skipped when run again (the benchmark resumes); the summary
-goes to OUT.md and OUT.json.
+--runs (a cache, not committed) as one JSON line and skipped when run again (the benchmark
+resumes); the summary goes to OUT.md, the runs it summarises to OUT.rows.jsonl (one compact
+line per run).
 """
 
 from __future__ import annotations
@@ -34,6 +35,7 @@ from collections import Counter
 from pathlib import Path
 
 import numpy as np
+from common import RESULTS, cache_dir, command_line, write_rows
 
 FAULT_LEVELS = {
     # One fault at a realistic level each, then all together (FaultConfig.realistic()).
@@ -136,10 +138,11 @@ def summarise(rows: list[dict]) -> dict:
     return out
 
 
-def write_markdown(path: Path, summary: dict, args, command: str, agent: str) -> None:
+def write_markdown(path: Path, summary: dict, args, command: str, agent: str, rows: str) -> None:
     lines = ['# Execution: the whole arm motion simulated, against teleporting, and under faults', '',
              f'Made by `{command}` ({time.strftime("%Y-%m-%d")}; agent {agent}; '
-             'the in-process execute / verify / replan loop of /execute_assembly, a real PyBullet twin).', '',
+             'the in-process execute / verify / replan loop of /execute_assembly, a real PyBullet twin). '
+             f'Every run\'s row: [{rows}]({rows}).', '',
              '| run | runs | coverage | delta vs reference | steps | replans | raw step success '
              '| recovered step success | failed runs | faults injected | wall s |',
              '|---|---|---|---|---|---|---|---|---|---|---|']
@@ -154,7 +157,6 @@ def write_markdown(path: Path, summary: dict, args, command: str, agent: str) ->
 
 
 def main() -> None:
-    import sys
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument('--grids', type=int, nargs='*', default=[4, 5])
     p.add_argument('--scenes', type=int, default=5, help='generated scenes per grid size')
@@ -163,9 +165,11 @@ def main() -> None:
     p.add_argument('--faults', nargs='*', default=list(FAULT_LEVELS), choices=list(FAULT_LEVELS))
     p.add_argument('--agent', default='default', help='the agent (rad_core.agents), as the node graph runs it')
     p.add_argument('--max-replans', type=int, default=10)
-    p.add_argument('--runs', type=Path, default=Path('out/bench_execution/runs.jsonl'))
-    p.add_argument('--out', type=Path, default=Path('docs/results/execution'))
+    p.add_argument('--runs', type=Path, default=None, help='the resumable cache of runs '
+                   '(default out/cache/execution/runs.jsonl)')
+    p.add_argument('--out', type=Path, default=RESULTS / 'execution', help='OUT.md and OUT.rows.jsonl')
     args = p.parse_args()
+    args.runs = args.runs or cache_dir('execution') / 'runs.jsonl'
     args.runs.parent.mkdir(parents=True, exist_ok=True)
     done = {}
     if args.runs.exists():
@@ -198,10 +202,8 @@ def main() -> None:
         print(f'{key:>22}: coverage {s["coverage"]:.3f}{versus}'
               + f', recovered step success {s["recovered_step_success"]:.3f}, failed runs {s["failed_runs"]}')
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    command = 'python benchmarks/' + ' '.join([Path(sys.argv[0]).name, *sys.argv[1:]])
-    args.out.with_suffix('.json').write_text(json.dumps({'command': command, 'agent': planner.agent,
-                                                         'summary': summary, 'runs': rows}, indent=1) + '\n')
-    write_markdown(args.out.with_suffix('.md'), summary, args, command, planner.agent)
+    rows_file = write_rows(args.out.with_suffix('.rows.jsonl'), rows)
+    write_markdown(args.out.with_suffix('.md'), summary, args, command_line(), planner.agent, rows_file.name)
 
 
 if __name__ == '__main__':

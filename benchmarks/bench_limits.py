@@ -34,8 +34,9 @@ rounding.
 Motion time per build: after, the arm trajectories' durations plus the gripper's moves
 (|travel| at 0.05 m/s per finger, at least 0.1 s each); before, the trajectories'
 durations (the fingers moved inside them). Prints per scene set the worst ratios, the
-trajectories over the limits, motion time and coverage before / after; writes the
-per-scene rows as JSON and the tables as Markdown (`--out`, beside it `limits.json`).
+trajectories over the limits, motion time and coverage before / after; writes the tables as
+Markdown (`--out`) and beside it one compact JSON line per (scene, variant) (`limits.rows.jsonl`,
+each with the sha256 of the rad_core it ran, `source_digest`).
 """
 
 from __future__ import annotations
@@ -52,8 +53,8 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
+from common import RESULTS, command_line, write_rows
 
-ROOT = Path(__file__).resolve().parents[1]
 VARIANTS = ('before', 'panda', 'fr3')
 MODELS = ('panda', 'fr3')
 GRIPPER_SPEED = 0.05       # m/s per finger (franka_gripper's 0.1 m/s of width; the twin's gripper_speed)
@@ -376,7 +377,7 @@ def main() -> int:
     p.add_argument('--shapes', default=DEFAULT_SHAPES, help='hand-made shapes (rad_core.shapes.SPECS names)')
     p.add_argument('--jobs', type=int, default=2, help='worker processes at once')
     p.add_argument('--quick', action='store_true', help='2 scenes per set (a smoke run)')
-    p.add_argument('--out', default=str(ROOT / 'docs/results/limits.md'))
+    p.add_argument('--out', default=str(RESULTS / 'limits.md'), help='the tables; the rows go beside them')
     p.add_argument('--worker', choices=VARIANTS, help=argparse.SUPPRESS)
     p.add_argument('--worker-in', help=argparse.SUPPRESS)
     p.add_argument('--worker-out', help=argparse.SUPPRESS)
@@ -402,7 +403,7 @@ def main() -> int:
             rows.extend(result)
     wall = time.perf_counter() - t0
     summary = summarize(rows, list(sets))
-    command = ' '.join(['python benchmarks/bench_limits.py', *sys.argv[1:]])
+    command = command_line()
     lines = tables(summary)
     print()
     print('\n'.join(lines))
@@ -415,21 +416,20 @@ def main() -> int:
     print(f'wall time {wall:.0f} s')
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    for r in rows:
+    for r in rows:   # which code the row came from: its digest, not the path it was imported from
         r.pop('rad_core', None)
-    doc = {'command': command, 'wall_s': wall, 'rad_core_sha256': digests,
-           'grasp_time_model': {'speed': GRIPPER_SPEED, 'min_s': GRIPPER_MIN_S}, 'summary': summary, 'rows': rows}
-    from rad_core import jsonfmt
-    out.with_suffix('.json').write_text(jsonfmt.dumps(doc))
+        r['rad_core_sha256'] = digests['before' if r['variant'] == 'before' else 'after']
+    rows_file = write_rows(out.with_suffix('.rows.jsonl'), rows)
     head = ['# Franka limits of planned motions: before (velocity rule, 9 joints) and after (ruckig, 7 arm joints)',
             '', f'`{command}` ({wall:.0f} s wall on {os.cpu_count()} cores; see the script\'s docstring for what '
             'is measured). Ratios: peak over all trajectories of |v|, |a|, |jerk| over the robot\'s published '
             'limit, sampled at 1 kHz as the controller interpolates; "over 1.0": trajectories a real Franka would '
             'stop on (the twin\'s strict rule), "over 1.001": over by more than rounding. Motion time: arm '
             'trajectories plus gripper moves (after), trajectory durations (before). '
-            'Coverage measured on the twin after executing the plan; "fallen blocks" are left out of it.', '']
+            'Coverage measured on the twin after executing the plan; "fallen blocks" are left out of it. '
+            f'Every (scene, variant) row: [{rows_file.name}]({rows_file.name}).', '']
     out.write_text('\n'.join(head + lines) + '\n')
-    print(f'wrote {out} and {out.with_suffix(".json")}')
+    print(f'wrote {out} and {rows_file}')
     return 1 if errors else 0
 
 

@@ -20,7 +20,9 @@ stays what 0.5 s (the default) says, over many exploratory placements.
 eval: `rad_core.evaluation.evaluate` with the robot (its default execution and
 settling, a fresh world per scene, no markov, no cache: the evaluation's own
 setting, not the training's) for the model and the no-robot network it started
-from, on evaluation scenes 0.. with the stable allocation; --json writes the rows.
+from, on evaluation scenes 0.. with the stable allocation; --rows (default
+docs/results/robot_training.rows.jsonl, '' for none) gets one compact line per (run, grid):
+its figures and its scenes' rows.
 
 A benchmark, not a test: figures depend on the machine and its load.
 """
@@ -32,9 +34,11 @@ import cProfile
 import pstats
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import torch
+from common import RESULTS, write_rows
 
 from rad_core.allocation import AllocationParams, solve
 from rad_core.generator import GeneratorConfig, generate_scene
@@ -219,10 +223,9 @@ def cmd_settle(args) -> None:
 
 
 def cmd_eval(args) -> None:
-    import json
     from rad_core.evaluation import evaluate, get_agent
     from rad_core.scene_sources import generated_scenes
-    out = {}
+    out = []
     runs = [('trained with the robot', args.model, False), ('start (no robot)', args.baseline, False)]
     if args.verify:
         runs.append(('trained, + verify (GAMP)', args.model, True))
@@ -234,14 +237,12 @@ def cmd_eval(args) -> None:
         for g in (int(v) for v in args.grids.split(',')):
             t0 = time.perf_counter()
             r = evaluate(agent, generated_scenes(g, 2, args.scenes, 0), robot=True, seed=0)
-            out[f'{label} g{g}'] = {k: v for k, v in r.items() if k != 'scenes'}
+            out.append({'run': label, 'grid': g, 'model': model, 'allocation': 'stable', **r})
             print(f'{label:24s} g = {g}: R {r["R"]:.2f}  coverage {r["coverage"]:.3f}  rel {r["coverage_rel"]:.3f}  '
                   f'f {r["f"]:.2f} (f_g {r["f_g"]:.2f}, f_p {r["f_p"]:.2f})  d {r["d"]:.2f}  e {r["e"]:.2f}  '
                   f'n {r["n"]}  ({time.perf_counter() - t0:.0f} s)', flush=True)
-    if args.json:
-        with open(args.json, 'w') as f:
-            json.dump({'model': args.model, 'baseline': args.baseline, 'scenes': args.scenes,
-                       'allocation': 'stable', 'results': out}, f, indent=1)
+    if args.rows:
+        print(f'wrote {write_rows(Path(args.rows), out)}')
 
 
 def main(argv=None) -> int:
@@ -270,7 +271,8 @@ def main(argv=None) -> int:
     p.add_argument('--baseline', default='milp-dqn-mixed')
     p.add_argument('--grids', default='4,5')
     p.add_argument('--scenes', type=int, default=30)
-    p.add_argument('--json', default='')
+    p.add_argument('--rows', default=str(RESULTS / 'robot_training.rows.jsonl'),
+                   help="one line per (run, grid): figures and per-scene rows ('' for none)")
     p.add_argument('--verify', action='store_true', help='also the model taking the best GAMP-feasible action')
     p.set_defaults(func=cmd_eval)
     args = ap.parse_args(argv)
