@@ -75,6 +75,17 @@ def test_target_only_then_supply_with_an_inventory(tmp_path, capsys):
     assert Scene.load(out).type_counts() == {'cube': 2, 'I3': 1}
 
 
+def test_clearance_is_set_once_and_kept_by_supply(tmp_path, capsys):
+    target, out = tmp_path / 'target.json', tmp_path / 'scene.json'
+    rc, _, _ = run(['scene', 'from-mesh', letter_t(tmp_path / 't.stl'), '--size', 3, '--no-supply', '--clearance', 0.2,
+                    '-o', target], capsys)
+    assert rc == 0 and Scene.load(target).clearance == 0.2
+    rc, _, _ = run(['scene', 'supply', target, '-o', out], capsys)
+    assert rc == 0 and Scene.load(out).clearance == 0.2 and len(Scene.load(out).blocks) == 2
+    rc, _, err = run(['scene', 'supply', target, '--clearance', 0.7, '-o', out], capsys)
+    assert rc == 2 and 'clearance' in err
+
+
 def test_from_voxels_with_two_named_regions_back_to_back(tmp_path, capsys):
     face = np.zeros((3, 1, 2), dtype=bool)
     face[:, 0, 0] = True

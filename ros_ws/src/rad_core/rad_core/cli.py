@@ -126,8 +126,9 @@ def _supply_and_write(args, targets, unit: float, clearance: float = 0.0, scene=
     """Choose and lay out the blocks (or none, with --no-supply), write the scene, say how well it covers."""
     from rad_core.supply import SupplyParams, supply, target_only
     types, inventory, costs = _supply_types(args, scene)
+    clearance = clearance if args.clearance is None else args.clearance
     if getattr(args, 'no_supply', False):
-        _write_text(target_only(targets, unit, types).dumps(), args.output)
+        _write_text(target_only(targets, unit, types, clearance).dumps(), args.output)
         cells = sum(len(t.filled) for t in targets)
         _say(args, f'target only: {len(targets)} regions, {cells} target cells, no blocks '
                    f'(rad scene supply lays them out)')
@@ -455,6 +456,9 @@ def _add_supply_args(p: argparse.ArgumentParser, no_supply: bool = True) -> None
     p.add_argument('--seed', type=int, default=0, help='solver and layout seed')
     p.add_argument('--time-limit', type=float, default=10.0, metavar='S', help='solver time limit, seconds')
     p.add_argument('--report', metavar='FILE', help='write how well the blocks cover (JSON) here')
+    p.add_argument('--clearance', type=float, metavar='C',
+                   help="gap between neighbouring blocks, a fraction of the unit (0.2: the paper's 1 cm at 5 cm; "
+                        "default: the scene's, 0 for a new one)")
     if no_supply:
         p.add_argument('--no-supply', action='store_true',
                        help='write the target and the block types only, no blocks (for rad scene supply)')

@@ -302,6 +302,7 @@ def supply(targets: Sequence[TargetRegion], unit: float, types: Mapping[str, Blo
     return Scene.from_dict(scene.to_dict()), report
 
 
-def target_only(targets: Sequence[TargetRegion], unit: float, types: Mapping[str, BlockType]) -> Scene:
+def target_only(targets: Sequence[TargetRegion], unit: float, types: Mapping[str, BlockType],
+                clearance: float = 0.0) -> Scene:
     """A scene of the targets and the block types offered, with no block yet (for `rad scene supply`)."""
-    return Scene.from_dict(Scene(unit, dict(types), (), tuple(targets)).to_dict())
+    return Scene.from_dict(Scene(unit, dict(types), (), tuple(targets), clearance).to_dict())
