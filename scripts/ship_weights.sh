@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Copy the trained model files that ship with rad into the package (small files:
 # weights and config only, no replay). Which run ships under each name is written
-# in docs/RESULTS.md; by default the MILP-DQN seed with the best greedy validation
+# in docs/results/table1.md; by default the MILP-DQN seed with the best greedy validation
 # return ships as milp-dqn.
 #   bash scripts/ship_weights.sh [milp-dqn-run]
 set -eo pipefail

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Train the shipped sequencing agents (docs/RESULTS.md, the paper's Table I condition:
+# Train the shipped sequencing agents (docs/results/table1.md, the paper's Table I condition:
 # train at g = 3, evaluate at g = 3..6 on unseen seeds). Resumable: run it again and
 # every run continues from its last checkpoint; finished runs are skipped.
 #   bash scripts/train_agents.sh            # all runs, two at a time (one per core)
