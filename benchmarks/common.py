@@ -55,10 +55,10 @@ def compact(value, digits: int = 4):
     return value
 
 
-def write_rows(path: Path, rows) -> Path:
-    """One compact JSON object per line (`compact`), in the order given."""
+def write_rows(path: Path, rows, digits: int = 4) -> Path:
+    """One compact JSON object per line (`compact`, floats to `digits` decimals), in the order given."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    text = ''.join(json.dumps(compact(r), separators=(',', ':'), sort_keys=False) + '\n' for r in rows)
+    text = ''.join(json.dumps(compact(r, digits), separators=(',', ':'), sort_keys=False) + '\n' for r in rows)
     path.write_text(text)
     return path
 
