@@ -14,9 +14,11 @@
   the stability check), not the best-ranked one blindly (the paper's agents fail then).
 - realloc: when nothing can be built next while allocated poses remain, exclude the
   poses that fail (no-goods) and solve the allocation again over the free cells.
-- support: the allocation's support rule, `none` (the paper's MILP) or `stable`
-  (every allocated block can rest on something); left out: the scorer's own (a
-  model file records the allocation it was trained on; `none` for heur).
+- support: the allocation's support rule, `none` (the paper's MILP), `stable`
+  (every allocated block can rest on something) or `arm` (stable, and nothing the
+  arm can never do: no type the hand cannot take, no block it cannot pick, no pose
+  out of reach; `allocation.arm`); left out: the scorer's own (a model file records
+  the allocation it was trained on; `none` for heur).
 
 The text form is the value: `parse(label(a)) == a` for every agent, `label` prints
 the canonical text that result documents record, and `rad eval --agent <that
@@ -36,7 +38,7 @@ from rad_core.errors import RadError
 
 SEARCHES = ('mcts', 'halving', 'lookahead', 'bnb')
 SIMULATION_SEARCHES = ('mcts', 'halving', 'lookahead')
-SUPPORTS = ('none', 'stable')
+SUPPORTS = ('none', 'stable', 'arm')
 DEFAULT_BUDGET = {'mcts': 5, 'halving': 5, 'lookahead': 5, 'bnb': 10.0}
 NETWORKS = ('milp-dqn', 'milp-dqn-mixed', 'milp-dqn-robot', 'dqn', 'dqn-rel')
 

@@ -35,6 +35,11 @@ blocks span fewer levels (a top-down hand places a block beside lower or equal
 neighbours, not beside taller ones: its palm passes 10 mm above the block's top).
 Ablated in docs/results/reallocation.md.
 
+`support='arm'` (rad's, stable as above) first rules out what the arm can never do,
+whatever the order (`allocation.arm`): block types the open hand cannot take from above,
+blocks on the table it cannot pick where they lie, poses whose every grasp is out of
+reach; the result's `arm` says what and why.
+
 `exclude` (no-goods) removes (block type, pose) pairs from the model: poses
 the robot or physics already failed to build from the current state, when
 sequencing stalled and the allocation is solved again over the cells still
@@ -60,7 +65,7 @@ from rad_core.grid import Grid, blocks_on_grid
 from rad_core.scene import Scene
 
 
-SUPPORT_MODES = ('none', 'stable')
+SUPPORT_MODES = ('none', 'stable', 'arm')
 PREFER_MODES = ('none', 'fewer', 'flat')
 
 
@@ -78,7 +83,8 @@ class AllocationParams:
     seed: int = 0
     num_workers: int = 1
     support: str = 'none'
-    """'none' (the paper's MILP) or 'stable' (every allocated block can stand where it goes)."""
+    """'none' (the paper's MILP), 'stable' (every allocated block can stand where it goes) or 'arm'
+    (stable, and nothing the arm can never do: `allocation.arm`)."""
     prefer: str = 'none'
     """Tie-break among equally good stable allocations: 'none', 'fewer' (fewer poses) or 'flat'
     (blocks spanning fewer levels)."""
@@ -88,8 +94,8 @@ class AllocationParams:
             raise RadError(f'support must be one of {", ".join(SUPPORT_MODES)}, got {self.support!r}')
         if self.prefer not in PREFER_MODES:
             raise RadError(f'prefer must be one of {", ".join(PREFER_MODES)}, got {self.prefer!r}')
-        if self.prefer != 'none' and self.support != 'stable':
-            raise RadError(f"prefer={self.prefer!r} needs support='stable'")
+        if self.prefer != 'none' and self.support == 'none':
+            raise RadError(f"prefer={self.prefer!r} needs support='stable' or 'arm'")
         if not (isinstance(self.time_limit_s, (int, float)) and math.isfinite(self.time_limit_s)
                 and self.time_limit_s > 0):
             raise RadError(f'time_limit_s must be a positive number of seconds, got {self.time_limit_s!r}')
@@ -240,6 +246,10 @@ def solve(scene: Scene, params: AllocationParams = AllocationParams(), exclude=(
         candidates = [c for c in candidates
                       if pose_key(c.placement.type, c.placement.target, c.placement.cells) not in banned]
     counts = available_counts(scene, grid)
+    arm = None
+    if params.support == 'arm':
+        from rad_core.allocation.arm import arm_filter
+        candidates, counts, arm = arm_filter(scene, grid, candidates)
     occupied = None
     if params.support != 'none':
         occupied = np.zeros(grid.num_cells, dtype=bool)
@@ -269,14 +279,14 @@ def solve(scene: Scene, params: AllocationParams = AllocationParams(), exclude=(
         # scale * c^T g + coverage <= bound with 0 <= coverage < scale: c^T g <= bound / scale.
         bound = math.floor(float(solver.best_objective_bound) / scale + 1e-9) if scale > 1 \
             else float(solver.best_objective_bound)
-        return AllocationResult(name, value, min(float(bound), free_targets), elapsed, chosen)
+        return AllocationResult(name, value, min(float(bound), free_targets), elapsed, chosen, arm=arm)
     if status == cp_model.UNKNOWN and incumbent:
         # CP-SAT's bound means nothing without a status; only the cell count is proven.
         value = float(sum(candidates[n].value for n in incumbent))
         chosen = tuple(candidates[n].placement for n in sorted(incumbent))
         return AllocationResult('OPTIMAL' if value >= free_targets else 'FEASIBLE', value, free_targets, elapsed,
-                                chosen)
-    return AllocationResult(name, 0.0, 0.0, elapsed)
+                                chosen, arm=arm)
+    return AllocationResult(name, 0.0, 0.0, elapsed, arm=arm)
 
 
 def _filled_targets(scene: Scene, grid: Grid) -> int:

@@ -24,6 +24,8 @@ class AllocationResult:
     solve_time_s: float
     placements: tuple[Placement, ...] = ()
     solver: str = field(default='cp-sat', compare=False)
+    arm: object = field(default=None, compare=False)
+    """With support='arm': what the arm-aware filter ruled out (`allocation.arm.ArmFilter`)."""
 
     @property
     def has_solution(self) -> bool:
@@ -37,6 +39,7 @@ class AllocationResult:
             'bound': self.bound,
             'solve_time_s': self.solve_time_s,
             'placements': [p.to_dict() for p in self.placements],
+            **({'arm': self.arm.to_dict()} if self.arm is not None else {}),
         }
 
     @classmethod

@@ -1,0 +1,128 @@
+"""What the arm can never do, whatever the order: the allocation's arm-aware filter.
+
+The paper's allocation is blind to the robot: it proposes block types the open hand
+cannot take from above, poses whose every grasp lies beyond the arm's reach, and
+blocks on the table the arm cannot pick where they lie. The sequencer then meets
+them one pose at a time, and re-allocation excludes them pose by pose, so the same
+unbuildable block comes back at the next pose. `support='arm'` (rad's allocation,
+`cpsat.solve`) rules them out before solving, at the level they fail:
+
+- a block TYPE with no top-down grasp at the scene's unit and clearance
+  (`gamp.grasps.block_grasps` is empty: units wider than the open hand, or no unit free
+  from above with both finger columns clear, e.g. a 2x2 square) is not allocated at all;
+- a BLOCK on the table whose every grasp target lies outside the workspace
+  (`gamp.ik.out_of_workspace`: below the table, or farther from the shoulder than the
+  arm reaches) is not available: its type's count drops by one;
+- a POSE (type, cells) whose every grasp target lies outside the workspace is not a
+  candidate.
+
+Each test is conservative: it only rules out what GAMP's own first checks refuse for
+every grasp, whatever the other blocks, the arm's start or the order; so no
+allocation the robot could build is lost. What is left (collisions with neighbours,
+joint limits of a particular IK solution) stays with GAMP at sequencing time. An
+approach blocked by target cells that must already be built is NOT tested: the only
+cells certainly built before a pose are those it rests on, below it, which a top-down
+hand never reaches (its fingertips stop within the grasped unit).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from rad_core.allocation.placements import Candidate
+from rad_core.grid import Grid, blocks_on_grid
+from rad_core.scene import Scene
+
+
+@dataclass
+class ArmFilter:
+    """What `arm_filter` ruled out, with why: types and blocks by name, poses counted."""
+
+    types: dict[str, str] = field(default_factory=dict)
+    blocks: dict[str, str] = field(default_factory=dict)
+    poses: int = 0
+    pose_reasons: dict[str, int] = field(default_factory=dict)   # reason -> poses it ruled out
+
+    def to_dict(self) -> dict:
+        return {'types': dict(self.types), 'blocks': dict(self.blocks), 'poses': self.poses,
+                'pose_reasons': dict(self.pose_reasons)}
+
+    def summary(self) -> str:
+        parts = [f'type {t}: {why}' for t, why in sorted(self.types.items())]
+        parts += [f'block {b}: {why}' for b, why in sorted(self.blocks.items())]
+        if self.poses:
+            parts.append(f'{self.poses} poses out of reach')
+        return '; '.join(parts) or 'nothing ruled out'
+
+
+def type_grasps(scene: Scene) -> dict[str, tuple]:
+    """Every block type's top-down grasps at the scene's unit and clearance (as GAMP offers them)."""
+    from rad_core.gamp.grasps import block_grasps
+    width = scene.unit * (1.0 - scene.clearance)
+    return {name: block_grasps(btype, width) for name, btype in scene.block_types.items()}
+
+
+def _no_grasp_reason(scene: Scene, name: str) -> str:
+    from rad_core.gamp.grasps import MAX_GRASP_WIDTH
+    width = scene.unit * (1.0 - scene.clearance)
+    if width > MAX_GRASP_WIDTH:
+        return (f'no top-down grasp: {width * 1000:.0f} mm units are wider than the open hand takes '
+                f'({MAX_GRASP_WIDTH * 1000:.0f} mm)')
+    return f'no top-down grasp: no unit of a {name} is free from above with both finger columns clear'
+
+
+def _unreachable(points: np.ndarray) -> str:
+    """'' if any of the grasp targets can be reached, else the first one's reason."""
+    from rad_core.gamp.ik import out_of_workspace
+    first = ''
+    for p in points:
+        why = out_of_workspace(np.asarray(p, dtype=float))
+        if not why:
+            return ''
+        first = first or why
+    return first
+
+
+def block_unit_centres(scene: Scene, b: int) -> np.ndarray:
+    """World centres of a block's units where it lies (its position is unit 0's centre)."""
+    block = scene.blocks[b]
+    offsets = scene.block_types[block.type].rotated(block.yaw)
+    return np.asarray(block.position, dtype=float) + np.asarray(offsets, dtype=float) * scene.unit
+
+
+def arm_filter(scene: Scene, grid: Grid, candidates: list[Candidate]) -> tuple[list[Candidate], dict, ArmFilter]:
+    """(the candidates the arm could build, blocks available per type, what was ruled out and why).
+
+    Blocks already on the grid are not counted (as `cpsat.available_counts`)."""
+    grasps = type_grasps(scene)
+    report = ArmFilter()
+    for name, gs in grasps.items():
+        if not gs:
+            report.types[name] = _no_grasp_reason(scene, name)
+    placed = blocks_on_grid(scene, grid)
+    counts = {name: 0 for name in scene.block_types}
+    for b, block in enumerate(scene.blocks):
+        if b in placed or block.type in report.types:
+            continue
+        units = block_unit_centres(scene, b)
+        why = _unreachable(units[sorted({g.unit for g in grasps[block.type]})])
+        if why:
+            report.blocks[block.id] = f'cannot be picked where it lies: {why}'
+            continue
+        counts[block.type] += 1
+    kept = []
+    for cand in candidates:
+        name = cand.placement.type
+        if name in report.types:
+            continue
+        centres = grid.centres[list(cand.cell_ids)]
+        why = _unreachable(centres[sorted({g.unit for g in grasps[name]})])
+        if why:
+            report.poses += 1
+            key = why.split(':')[0] + ': ' + ('target below the table' if 'below' in why else 'beyond the reach')
+            report.pose_reasons[key] = report.pose_reasons.get(key, 0) + 1
+            continue
+        kept.append(cand)
+    return kept, counts, report
