@@ -19,6 +19,7 @@ link's bounding box) and then measured exactly with getClosestPoints.
 
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass
 from collections.abc import Callable, Iterable
 
@@ -92,13 +93,73 @@ def self_collision_pairs(world: World) -> list[tuple[int, int]]:
 
 
 def make_collision_fn(world: World, exclude: Iterable[str] = (), attached: Attachment | None = None,
-                      config: CollisionConfig = CollisionConfig()) -> CollisionFn:
+                      config: CollisionConfig = CollisionConfig(), remember: bool = False) -> CollisionFn:
     """fn(q) -> '' when configuration q (9,) is free, else what collides (one reason).
 
     exclude: block ids the robot may touch (none, usually). The attached block is
     never an obstacle of the robot (the fingers hold it), but it is checked
     against every other block and the table.
+
+    remember: answer a configuration probed before in the same world state (every block's
+    and obstacle's pose, the table, exclude, attachment, margins: `_world_key` when fn is
+    made) from memory (`_MEMO`), after posing the robot and the held block at q as the probe
+    does. Only for callers that move nothing but the robot and the held block between
+    probes of one fn (the planner: each fn is made where the world stays put).
     """
+    probe = _make_probe(world, exclude, attached, config)
+    if not remember:
+        return probe
+    memo = _memo_for(world, _world_key(world, exclude, attached, config))
+
+    def collision(q: np.ndarray) -> str:
+        q = np.asarray(q, dtype=float)
+        key = q.tobytes()
+        reason = memo.get(key)
+        if reason is None:
+            reason = memo[key] = probe(q)
+        else:
+            # What the probe leaves behind: the robot at q, the held block in the hand.
+            world.set_joint_positions(q, hold=False)
+            if attached is not None:
+                place_attached(world, attached)
+        return reason
+
+    return collision
+
+
+# World -> {world key -> {q bytes -> reason}}: answers of remembering probes. The key pins
+# everything a probe reads besides q, so an answer is reused only where the same probe
+# would run again on the same bodies in the same poses. Bounded: cleared when it grows large.
+_MEMO: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+_MEMO_MAX_STATES = 256
+
+
+def _memo_for(world: World, key: tuple) -> dict:
+    states = _MEMO.setdefault(world, {})
+    if key not in states and len(states) >= _MEMO_MAX_STATES:
+        states.clear()
+    return states.setdefault(key, {})
+
+
+def _world_key(world: World, exclude, attached: Attachment | None, config: CollisionConfig) -> tuple:
+    """What a probe's answer depends on besides q: the bodies (ids, names, types, unit), their
+    poses as Bullet holds them (the held block's comes from q and the attachment), the table, the
+    excluded blocks, the attachment and the margins."""
+    p, cid = world.pybullet, world.client
+    held = attached.block_id if attached is not None else None
+    scene = world.scene
+    shapes = ((scene.unit, scene.clearance, tuple(b.type for b in scene.blocks),
+               tuple(o.type for o in scene.obstacles)) if scene is not None else None)
+    blocks = tuple((bid, body, None if bid == held else p.getBasePositionAndOrientation(body, physicsClientId=cid))
+                   for bid, body in world.blocks.items())
+    obstacles = tuple((oid, body, p.getBasePositionAndOrientation(body, physicsClientId=cid))
+                      for oid, body in world.obstacles.items())
+    table = (world.table, p.getAABB(world.table, -1, physicsClientId=cid))
+    return shapes, blocks, obstacles, table, frozenset(exclude), attached, config
+
+
+def _make_probe(world: World, exclude, attached: Attachment | None, config: CollisionConfig) -> CollisionFn:
+    """The collision check of `make_collision_fn`, run every time."""
     p, cid, robot = world.pybullet, world.client, world.robot
     exclude = set(exclude)
     if attached is not None:
@@ -112,9 +173,10 @@ def make_collision_fn(world: World, exclude: Iterable[str] = (), attached: Attac
     link_name[-1] = 'base'
     links = robot_links(world)
     pairs = self_collision_pairs(world)
+    box_links = sorted({a for pair in pairs for a in pair} | set(links))
     carried = world.blocks[attached.block_id] if attached is not None else None
     carried_obstacles = (obstacles - {carried}) if carried is not None else set()
-    m = config.robot_margin
+    m, s = config.robot_margin, config.self_margin
 
     def collision(q: np.ndarray) -> str:
         world.set_joint_positions(q, hold=False)
@@ -127,21 +189,39 @@ def make_collision_fn(world: World, exclude: Iterable[str] = (), attached: Attac
                 pts = p.getClosestPoints(carried, body, 0.0, physicsClientId=cid)
                 if any(pt[8] < -config.block_penetration for pt in pts):
                     return f'carried block hits {names[body]}'
-        for link in links:
-            lo, hi = p.getAABB(robot, link, physicsClientId=cid)
-            near = p.getOverlappingObjects([v - m for v in lo], [v + m for v in hi], physicsClientId=cid) or ()
-            for body in {b for b, _ in near if b in obstacles}:
-                pts = p.getClosestPoints(robot, body, m, linkIndexA=link, physicsClientId=cid)
-                if any(pt[8] < m for pt in pts):
-                    return f'{link_name[link]} hits {names[body]}'
+        boxes = {link: p.getAABB(robot, link, physicsClientId=cid) for link in box_links}
+        # Broad phase over the whole arm first: a body Bullet's broadphase does not find near
+        # the union of the links' boxes is near none of them, so when there is none, no
+        # link's own query below could find one.
+        lo = [min(boxes[link][0][k] for link in links) - m for k in range(3)]
+        hi = [max(boxes[link][1][k] for link in links) + m for k in range(3)]
+        if any(b in obstacles for b, _ in p.getOverlappingObjects(lo, hi, physicsClientId=cid) or ()):
+            for link in links:
+                lo, hi = boxes[link]
+                near = p.getOverlappingObjects([v - m for v in lo], [v + m for v in hi], physicsClientId=cid) or ()
+                for body in {b for b, _ in near if b in obstacles}:
+                    pts = p.getClosestPoints(robot, body, m, linkIndexA=link, physicsClientId=cid)
+                    if any(pt[8] < m for pt in pts):
+                        return f'{link_name[link]} hits {names[body]}'
         for a, b in pairs:
-            pts = p.getClosestPoints(robot, robot, config.self_margin, linkIndexA=a, linkIndexB=b,
-                                     physicsClientId=cid)
-            if any(pt[8] < config.self_margin for pt in pts):
+            # Links whose bounding boxes (which hold their collision shapes, margins included)
+            # are farther apart than self_margin along an axis cannot be closer than it: no
+            # contact point below the margin, so no need to ask for one.
+            if _apart(boxes[a], boxes[b], s):
+                continue
+            pts = p.getClosestPoints(robot, robot, s, linkIndexA=a, linkIndexB=b, physicsClientId=cid)
+            if any(pt[8] < s for pt in pts):
                 return f'self-collision {link_name[a]} / {link_name[b]}'
         return ''
 
     return collision
+
+
+def _apart(box_a, box_b, gap: float) -> bool:
+    """Whether two axis-aligned boxes ((lo, hi), (lo, hi)) are more than `gap` apart along some axis."""
+    (alo, ahi), (blo, bhi) = box_a, box_b
+    return (alo[0] > bhi[0] + gap or blo[0] > ahi[0] + gap or alo[1] > bhi[1] + gap or blo[1] > ahi[1] + gap
+            or alo[2] > bhi[2] + gap or blo[2] > ahi[2] + gap)
 
 
 def check_path(collision_fn: CollisionFn, q_from: np.ndarray, q_to: np.ndarray,

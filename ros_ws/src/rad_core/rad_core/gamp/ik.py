@@ -29,7 +29,8 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
+import weakref
+from dataclasses import dataclass, replace
 from collections.abc import Sequence
 
 import numpy as np
@@ -40,6 +41,10 @@ from rad_core.transforms import quaternion_angle_deg
 
 
 SHOULDER = np.array([0.0, 0.0, 0.333])
+
+# World -> {inputs of solve_pose, generator state -> (IkResult, generator state after)}.
+_IK_MEMO: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+_IK_MEMO_MAX = 20_000
 
 
 @dataclass(frozen=True)
@@ -101,7 +106,6 @@ def solve_pose(world: World, position, quaternion, seeds: Sequence[np.ndarray] =
     answer are those of the first seed (HOME's when there is none).
     """
     start = time.perf_counter()
-    p, cid, robot = world.pybullet, world.client, world.robot
     position = np.asarray(position, dtype=float)
     quaternion = np.asarray(quaternion, dtype=float)
     rng = rng if rng is not None else np.random.default_rng(0)
@@ -115,6 +119,30 @@ def solve_pose(world: World, position, quaternion, seeds: Sequence[np.ndarray] =
         rest[6] = rest_joint7
     rest[7:] = fingers
     candidates = [_full(s, fingers) for s in seeds] + [rest]
+    # The answer is a function of the robot model and these inputs (calculateInverseKinematics reads
+    # only the joints it is seeded with; no block enters), and of the generator's state where the
+    # random restarts are reached: remembered per world with the state it leaves the generator in.
+    memo = _IK_MEMO.setdefault(world, {})
+    if len(memo) >= _IK_MEMO_MAX:
+        memo.clear()
+    key = (position.tobytes(), quaternion.tobytes(), np.stack(candidates).tobytes(), config,
+           repr(rng.bit_generator.state))
+    found = memo.get(key)
+    if found is not None:
+        result, rng_after = found
+        rng.bit_generator.state = rng_after
+        return replace(result, q=None if result.q is None else result.q.copy(), calls=0,
+                       seconds=time.perf_counter() - start)
+    result = _solve_pose(world, position, quaternion, candidates, fingers, rest, config, rng)
+    result.seconds = time.perf_counter() - start
+    memo[key] = (replace(result, q=None if result.q is None else result.q.copy()), rng.bit_generator.state)
+    return result
+
+
+def _solve_pose(world: World, position: np.ndarray, quaternion: np.ndarray, candidates: list[np.ndarray],
+                fingers: np.ndarray, rest: np.ndarray, config: IkConfig, rng: np.random.Generator) -> IkResult:
+    """The attempts of `solve_pose` (seconds left 0 for the caller to fill in)."""
+    p, cid, robot = world.pybullet, world.client, world.robot
     lo, hi = panda.LOWER, panda.UPPER
     limits = dict(lowerLimits=lo.tolist(), upperLimits=hi.tolist(), jointRanges=(hi - lo).tolist(),
                   restPoses=rest.tolist())
@@ -144,7 +172,7 @@ def solve_pose(world: World, position, quaternion, seeds: Sequence[np.ndarray] =
             q[7:] = fingers
             within = panda.within_limits(q)
             if within and pos_err <= config.position_tol and orn_err <= config.orientation_tol_deg:
-                return IkResult(True, q, pos_err, orn_err, '', calls, time.perf_counter() - start)
+                return IkResult(True, q, pos_err, orn_err, '', calls)
             score = pos_err + 0.001 * orn_err + (0.0 if within else 1.0)
             if score < best[0] + 0.001 * best[1] + (0.0 if best[2] is None or best[2] else 1.0):
                 best = (pos_err, orn_err, within)
@@ -154,7 +182,7 @@ def solve_pose(world: World, position, quaternion, seeds: Sequence[np.ndarray] =
                   f'{pos_err * 1000:.0f} mm, {orn_err:.1f} deg)')
     else:
         reason = f'unreachable: best residual {pos_err * 1000:.0f} mm, {orn_err:.1f} deg'
-    return IkResult(False, None, pos_err, orn_err, reason, calls, time.perf_counter() - start)
+    return IkResult(False, None, pos_err, orn_err, reason, calls)
 
 
 def solve_top_down(world: World, position, closing_yaw: float, seeds: Sequence[np.ndarray] = (),

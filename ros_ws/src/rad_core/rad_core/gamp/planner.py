@@ -220,7 +220,7 @@ def _plan_pick(world, block_id, grasp_point, hand_yaw, start, open_f, closed_f, 
                rng) -> dict:
     start_open = start.copy()
     start_open[7:] = open_f
-    free = clock.timed(make_collision_fn(world, config=config.collision))
+    free = clock.timed(make_collision_fn(world, config=config.collision, remember=True))
     q_grasp = _ik(world, grasp_point, hand_yaw, [start_open, panda.HOME], open_f, config, clock, rng,
                   'IK at the grasp')
     _probe(free, q_grasp, 'at the grasp')
@@ -230,7 +230,7 @@ def _plan_pick(world, block_id, grasp_point, hand_yaw, start, open_f, closed_f, 
     # The hand holds the block from here on.
     world.set_joint_positions(q_grasp, hold=False)
     attachment = attachment_from_world(world, block_id)
-    carry = clock.timed(make_collision_fn(world, attached=attachment, config=config.collision))
+    carry = clock.timed(make_collision_fn(world, attached=attachment, config=config.collision, remember=True))
     q_closed = _with_fingers(q_grasp, closed_f)
     lift = [_with_fingers(q, closed_f) for q in column]
     _check_column(carry, q_closed, lift, config, 'lifting the block', 'lifting the block')
@@ -249,7 +249,7 @@ def _plan_place(world, block_id, pick, place_point, position, yaw_deg, hand_yaw,
     _segment(carry, top, column[-1], config, 'carrying the block over')
     # Released: the block stays exactly at its final pose, the fingers open.
     world.set_block_pose(block_id, position, yaw_quaternion(yaw_deg))
-    after = clock.timed(make_collision_fn(world, config=config.collision))
+    after = clock.timed(make_collision_fn(world, config=config.collision, remember=True))
     q_open = _with_fingers(q_place, open_f)
     _probe(after, q_open, 'opening the fingers')
     retreat = [_with_fingers(q, open_f) for q in column]
