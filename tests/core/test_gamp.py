@@ -9,7 +9,9 @@ from rad_core.allocation import AllocationParams, solve
 from rad_core.blocks import DEFAULT_LIBRARY
 from rad_core.errors import RadError
 from rad_core.gamp import GampResult, Grasp, allocated_pose, block_grasps, placement_pose, plan_action
-from rad_core.gamp.collision import attachment_from_world, place_attached
+from rad_core.gamp.collision import (CollisionConfig, _apart, attachment_from_world, make_collision_fn,
+                                     place_attached, robot_links, self_collision_pairs)
+from rad_core.gamp.ik import solve_pose, solve_top_down
 from rad_core.generator import GeneratorConfig, generate_scene
 from rad_core.motion import GripperCommand, Motion
 from rad_core.robot_model import PANDA, robot_model
@@ -312,3 +314,142 @@ def test_a_set_aside_block_the_hand_touches_is_no_obstacle_to_leaving():
         assert list(world.obstacles) == ['fallen']
     finally:
         world.close()
+
+
+# ---- what makes a probe cheap changes no answer --------------------------------
+
+def _reference_collision(world, attached=None, config=CollisionConfig()):
+    """The probe as it was before its shortcuts: every link's own broadphase query, every
+    self-collision pair measured."""
+    p, cid, robot = world.pybullet, world.client, world.robot
+    exclude = {attached.block_id} if attached is not None else set()
+    obstacles = {b for bid, b in world.blocks.items() if bid not in exclude} | {world.table}
+    links, pairs, m = robot_links(world), self_collision_pairs(world), config.robot_margin
+
+    def collision(q):
+        world.set_joint_positions(q, hold=False)
+        if attached is not None:
+            place_attached(world, attached)
+            carried = world.blocks[attached.block_id]
+            lo, hi = p.getAABB(carried, -1, physicsClientId=cid)
+            for body in sorted({b for b, _ in p.getOverlappingObjects(lo, hi, physicsClientId=cid) or ()
+                                if b in obstacles - {carried}}):
+                if any(pt[8] < -config.block_penetration
+                       for pt in p.getClosestPoints(carried, body, 0.0, physicsClientId=cid)):
+                    return 'carried'
+        for link in links:
+            lo, hi = p.getAABB(robot, link, physicsClientId=cid)
+            near = p.getOverlappingObjects([v - m for v in lo], [v + m for v in hi], physicsClientId=cid) or ()
+            for body in {b for b, _ in near if b in obstacles}:
+                if any(pt[8] < m for pt in p.getClosestPoints(robot, body, m, linkIndexA=link, physicsClientId=cid)):
+                    return 'obstacle'
+        for a, b in pairs:
+            if any(pt[8] < config.self_margin for pt in p.getClosestPoints(
+                    robot, robot, config.self_margin, linkIndexA=a, linkIndexB=b, physicsClientId=cid)):
+                return 'self'
+        return ''
+
+    return collision
+
+
+def _kind(reason: str) -> str:
+    return ('' if not reason else 'carried' if reason.startswith('carried') else
+            'self' if reason.startswith('self-collision') else 'obstacle')
+
+
+def _near_configurations(world, block_id, n, rng):
+    """Configurations that bring the hand down among the blocks (many collide, many do not)."""
+    pos, _ = world.block_pose(block_id)
+    out = []
+    for _ in range(n):
+        target = pos + rng.uniform([-0.08, -0.08, -0.01], [0.08, 0.08, 0.15])
+        r = solve_top_down(world, target, rng.uniform(-math.pi, math.pi), rng=rng)
+        q = r.q if r.ok else rng.uniform(panda.LOWER, panda.UPPER)
+        out.append(q + rng.normal(0.0, 0.15, 9) * np.r_[np.ones(7), 0.0, 0.0])
+    return out
+
+
+def test_pruned_probes_answer_as_the_full_check(generated):
+    """The arm-wide broadphase query and the self-collision pairs pruned by bounding boxes give the
+    same verdict and kind of reason as querying every link and measuring every pair."""
+    scene, _, world = generated
+    rng = np.random.default_rng(3)
+    block_id = scene.blocks[0].id
+    kinds = []
+    with world.preserved():
+        qs = _near_configurations(world, block_id, 60, rng)
+        fast, slow = make_collision_fn(world), _reference_collision(world)
+        for q in qs:
+            kinds.append((_kind(fast(q)), slow(q)))
+        world.set_joint_positions(qs[0], hold=False)
+        attached = attachment_from_world(world, block_id)
+        fast, slow = make_collision_fn(world, attached=attached), _reference_collision(world, attached)
+        for q in qs:
+            kinds.append((_kind(fast(q)), slow(q)))
+    assert all(a == b for a, b in kinds), [k for k in kinds if k[0] != k[1]]
+    seen = {b for _, b in kinds}
+    assert '' in seen and 'obstacle' in seen      # the set exercises both answers
+
+
+def test_links_apart_by_their_boxes_never_touch():
+    """The pruning rule: a pair whose AABBs are apart by more than the margin has no contact point
+    below it (measured on random configurations, where many pairs do touch)."""
+    with World() as world:
+        p, cid, robot = world.pybullet, world.client, world.robot
+        rng = np.random.default_rng(5)
+        pairs, pruned, touching = self_collision_pairs(world), 0, 0
+        for _ in range(200):
+            world.set_joint_positions(rng.uniform(panda.LOWER, panda.UPPER), hold=False)
+            for a, b in pairs:
+                pts = p.getClosestPoints(robot, robot, 0.01, linkIndexA=a, linkIndexB=b, physicsClientId=cid)
+                close = min((pt[8] for pt in pts), default=math.inf)
+                touching += close < 0.0
+                if _apart(p.getAABB(robot, a, physicsClientId=cid), p.getAABB(robot, b, physicsClientId=cid), 0.0):
+                    pruned += 1
+                    assert close > 0.0
+        assert pruned > 1000 and touching > 0
+
+
+def test_remembered_probes_answer_and_leave_the_world_as_a_probe_does(generated):
+    scene, _, world = generated
+    rng = np.random.default_rng(4)
+    block_id = scene.blocks[0].id
+    with world.preserved():
+        qs = _near_configurations(world, block_id, 12, rng)
+        world.set_joint_positions(qs[0], hold=False)
+        attached = attachment_from_world(world, block_id)
+        plain = make_collision_fn(world, attached=attached)
+        remembering = make_collision_fn(world, attached=attached, remember=True)
+        first = [remembering(q) for q in qs]
+        for q, reason in zip(qs[::-1], first[::-1]):     # every answer now from memory
+            assert remembering(q) == reason == plain(q)
+            plain_pose = world.block_pose(block_id), world.joint_positions()
+            remembering(q)
+            assert np.array_equal(world.joint_positions(), plain_pose[1])
+            assert all(np.array_equal(a, b) for a, b in zip(world.block_pose(block_id), plain_pose[0]))
+        # Another world state is another key: a block moved away changes the answer it may give.
+        other = scene.blocks[1].id
+        world.set_block_pose(other, [0.0, 0.7, 0.5])
+        moved = make_collision_fn(world, attached=attached, remember=True)
+        assert [moved(q) for q in qs] == [_plain_now(world, attached, q) for q in qs]
+
+
+def _plain_now(world, attached, q):
+    return make_collision_fn(world, attached=attached)(q)
+
+
+def test_remembered_ik_is_the_ik_and_leaves_the_generator_where_solving_does():
+    with World() as world:
+        target, quat = np.array([0.5, 0.1, 0.08]), panda.top_down_quaternion(0.3)
+        far = np.array([0.0, 0.95, 0.05])                # unreachable: the random restarts draw
+        for position in (target, far):
+            a, b = np.random.default_rng(11), np.random.default_rng(11)
+            first = solve_pose(world, position, quat, [panda.HOME], rng=a)
+            again = solve_pose(world, position, quat, [panda.HOME], rng=b)
+            assert again.calls == 0 and first.calls > 0          # from memory
+            assert first.ok == again.ok and first.reason == again.reason
+            assert (first.q is None and again.q is None) or np.array_equal(first.q, again.q)
+            assert a.bit_generator.state == b.bit_generator.state
+        # A generator in another state is another question (its restarts would differ).
+        c = np.random.default_rng(12)
+        assert solve_pose(world, far, quat, [panda.HOME], rng=c).calls > 0

@@ -118,3 +118,41 @@ def test_load_scene_replaces_blocks_and_close_is_idempotent(scene):
     assert set(w.blocks) == set(first)
     w.close()
     w.close()
+
+
+def _kinematic_state(world):
+    p, cid, r = world.pybullet, world.client, world.robot
+    n = p.getNumJoints(r, physicsClientId=cid)
+    links = p.getLinkStates(r, list(range(n)), computeLinkVelocity=True, computeForwardKinematics=True,
+                            physicsClientId=cid)
+    joints = p.getJointStates(r, list(range(n)), physicsClientId=cid)
+    boxes = [p.getAABB(r, link, physicsClientId=cid) for link in range(-1, n)]
+    return links, [j[:2] for j in joints], boxes
+
+
+def test_setting_joints_in_one_command_equals_one_command_per_joint(world):
+    """set_joint_positions sends one reset for all joints: the joints, their velocities, every
+    link's pose and velocity and bounding box come out bit for bit as nine resetJointState would."""
+    p, cid, r = world.pybullet, world.client, world.robot
+    rng = np.random.default_rng(7)
+    for _ in range(30):
+        q = rng.uniform(panda.LOWER, panda.UPPER)
+        for j in world.joints:                 # moving joints first, so zero velocities must be set
+            p.resetJointState(r, j, 0.1, 0.5, physicsClientId=cid)
+        for j, v in zip(world.joints, q):
+            p.resetJointState(r, j, float(v), 0.0, physicsClientId=cid)
+        one_by_one = _kinematic_state(world)
+        for j in world.joints:
+            p.resetJointState(r, j, 0.1, 0.5, physicsClientId=cid)
+        world.set_joint_positions(q, hold=False)
+        assert _kinematic_state(world) == one_by_one
+
+
+def test_preserved_restores_joint_velocities_exactly(world):
+    p, cid, r = world.pybullet, world.client, world.robot
+    for j, v in zip(world.joints, np.linspace(-0.3, 0.3, 9)):
+        p.resetJointState(r, j, float(panda.HOME[world.joints.index(j)]), float(v), physicsClientId=cid)
+    before = _kinematic_state(world)
+    with world.preserved():
+        world.set_joint_positions(np.zeros(9))
+    assert _kinematic_state(world) == before
