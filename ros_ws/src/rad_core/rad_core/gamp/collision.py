@@ -174,6 +174,10 @@ def _make_probe(world: World, exclude, attached: Attachment | None, config: Coll
     links = robot_links(world)
     pairs = self_collision_pairs(world)
     box_links = sorted({a for pair in pairs for a in pair} | set(links))
+    row = {link: i for i, link in enumerate(box_links)}
+    pair_a = np.array([row[a] for a, _ in pairs], dtype=np.int64)
+    pair_b = np.array([row[b] for _, b in pairs], dtype=np.int64)
+    link_rows = np.array([row[link] for link in links], dtype=np.int64)
     carried = world.blocks[attached.block_id] if attached is not None else None
     carried_obstacles = (obstacles - {carried}) if carried is not None else set()
     m, s = config.robot_margin, config.self_margin
@@ -190,11 +194,12 @@ def _make_probe(world: World, exclude, attached: Attachment | None, config: Coll
                 if any(pt[8] < -config.block_penetration for pt in pts):
                     return f'carried block hits {names[body]}'
         boxes = {link: p.getAABB(robot, link, physicsClientId=cid) for link in box_links}
+        box = np.array([boxes[link] for link in box_links])          # (links, lo/hi, xyz)
         # Broad phase over the whole arm first: a body Bullet's broadphase does not find near
         # the union of the links' boxes is near none of them, so when there is none, no
         # link's own query below could find one.
-        lo = [min(boxes[link][0][k] for link in links) - m for k in range(3)]
-        hi = [max(boxes[link][1][k] for link in links) + m for k in range(3)]
+        lo = (box[link_rows, 0].min(axis=0) - m).tolist()
+        hi = (box[link_rows, 1].max(axis=0) + m).tolist()
         if any(b in obstacles for b, _ in p.getOverlappingObjects(lo, hi, physicsClientId=cid) or ()):
             for link in links:
                 lo, hi = boxes[link]
@@ -203,12 +208,12 @@ def _make_probe(world: World, exclude, attached: Attachment | None, config: Coll
                     pts = p.getClosestPoints(robot, body, m, linkIndexA=link, physicsClientId=cid)
                     if any(pt[8] < m for pt in pts):
                         return f'{link_name[link]} hits {names[body]}'
-        for a, b in pairs:
-            # Links whose bounding boxes (which hold their collision shapes, margins included)
-            # are farther apart than self_margin along an axis cannot be closer than it: no
-            # contact point below the margin, so no need to ask for one.
-            if _apart(boxes[a], boxes[b], s):
-                continue
+        # Links whose bounding boxes (which hold their collision shapes, margins included) are
+        # farther apart than self_margin along an axis cannot be closer than it: no contact
+        # point below the margin, so no need to ask for one (`_apart`, for all pairs at once).
+        near = ~(((box[pair_a, 0] > box[pair_b, 1] + s) | (box[pair_b, 0] > box[pair_a, 1] + s)).any(axis=1))
+        for k in np.flatnonzero(near):
+            a, b = pairs[k]
             pts = p.getClosestPoints(robot, robot, s, linkIndexA=a, linkIndexB=b, physicsClientId=cid)
             if any(pt[8] < s for pt in pts):
                 return f'self-collision {link_name[a]} / {link_name[b]}'

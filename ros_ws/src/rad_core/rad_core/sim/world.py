@@ -264,7 +264,7 @@ class World:
         # One reset command for all joints (Bullet's CMD_INIT_POSE, as resetJointState sends one per
         # joint): the same joint positions, zero velocities and link transforms, measured bit for bit
         # (tests/core/test_world.py), at a sixth of the cost of nine commands.
-        p.resetJointStatesMultiDof(self.robot, joints, [[float(v)] for v in q], [[0.0]] * len(joints),
+        p.resetJointStatesMultiDof(self.robot, joints, q.reshape(-1, 1).tolist(), [[0.0]] * len(joints),
                                    physicsClientId=cid)
         if hold:
             p.setJointMotorControlArray(self.robot, joints, p.POSITION_CONTROL, targetPositions=q.tolist(),
