@@ -158,7 +158,7 @@ def test_rad_eval_exact_plans_and_builds_its_best_line():
     scene = row_scene(2, far=True)      # two cubes within reach, one out of it: 2 of 3 cells at best
     result = evaluate(get_agent('exact'), [('row', scene)], robot=True, seed=0)
     row = result['scenes'][0]
-    assert result['agent'] == 'heur+bnb:60+verify+realloc+support:stable'
+    assert result['agent'] == 'heur+bnb:60+verify+realloc+support:arm'
     assert result['f'] == 0.0 and row['coverage'] == pytest.approx(2 / 3) and row['steps'] == 2
 
 

@@ -127,12 +127,12 @@ def label(spec: AgentSpec) -> str:
 PRESETS = {
     # What the sequencer node and /plan_assembly run by default (the node graph always verifies
     # with GAMP, re-allocates and allocates with support).
-    'default': 'milp-dqn-mixed+lookahead:5+verify+realloc+support:stable',
-    'greedy': 'milp-dqn-mixed+verify+realloc+support:stable',
+    'default': 'milp-dqn-mixed+lookahead:5+verify+realloc+support:arm',
+    'greedy': 'milp-dqn-mixed+verify+realloc+support:arm',
     'paper': 'milp-dqn+mcts:5+support:none',         # the paper's MILP-DQN-MCTS
     'heur': 'heur',                                   # the paper's HEUR
     'heur-verified': 'heur+verify',
-    'exact': 'heur+bnb:60+verify+realloc+support:stable',   # the robot-feasible ceiling
+    'exact': 'heur+bnb:60+verify+realloc+support:arm',   # the robot-feasible ceiling
 }
 
 # The names rad used before agents had parts: (text, robot), robot None = as the caller says.

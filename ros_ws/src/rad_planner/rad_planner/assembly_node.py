@@ -75,7 +75,7 @@ from rad_core.agents import parse
 from rad_core.errors import RadError
 from rad_core.scene import Scene
 from rad_core.sequencing.execute import ExecuteConfig, execute_assembly
-from rad_core.sequencing.agent_plan import plan_for_agent
+from rad_core.sequencing.agent_plan import plan_for_agent, reallocation_support
 from rad_core.sequencing.plan import MotionPlan
 from rad_core.sequencing.sequencer import Ranking
 from rad_core.robot_model import robot_model
@@ -313,8 +313,9 @@ class AssemblyNode(Node):
         return allocation_from_response(response)
 
     def reallocate(self, scene: Scene, exclude, time_limit_s: float | None = None):
-        """The re-solve on stall: always the stable allocation (every new block can rest on something)."""
-        return self.allocate(scene, exclude, time_limit_s, support='stable')
+        """The re-solve on stall: the stable allocation (every new block can rest on something), arm-aware
+        when the agent's allocation is (`reallocation_support`)."""
+        return self.allocate(scene, exclude, time_limit_s, support=reallocation_support(self.support))
 
     def plan_motion(self, scene: Scene, action, start) -> MotionPlan:
         request = self.plan_action_request(scene, start)

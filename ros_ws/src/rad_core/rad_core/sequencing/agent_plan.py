@@ -34,6 +34,12 @@ def plan_for_agent(spec: AgentSpec, scene: Scene, allocate, plan_motion, rank, r
                          reallocation=reallocation, verify=spec.verify)
 
 
+def reallocation_support(support: str) -> str:
+    """The support rule of re-allocations: stable (every new block can rest on something), and
+    arm-aware when the agent's first allocation is ('arm')."""
+    return 'arm' if support == 'arm' else 'stable'
+
+
 class AgentPlanner:
     """`plan_for_agent` with in-process parts: CP-SAT (10 s, one worker), GAMP and the agent's
     sequencer. planner(scene, start, seed) -> AssemblyPlan; `motion` and `gamp` for execution.
@@ -68,9 +74,10 @@ class AgentPlanner:
         return solve(scene, replace(params, time_limit_s=limit, support=support or self.support), exclude)
 
     def reallocate(self, scene: Scene, exclude, time_limit_s: float | None = None):
-        """As the assembly node re-allocates: the stable allocation (or the reallocation config's)."""
+        """As the assembly node re-allocates: `reallocation_support` of the agent's (or the
+        reallocation config's, when one was given)."""
         params = self.reallocation.params if self.reallocation is not None else None
-        support = params.support if params is not None else 'stable'
+        support = params.support if params is not None else reallocation_support(self.support)
         return self.allocate(scene, exclude, time_limit_s, support=support, params=params)
 
     def __call__(self, scene: Scene, start=None, seed: int = 0) -> AssemblyPlan:

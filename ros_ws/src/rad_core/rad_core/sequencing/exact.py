@@ -220,7 +220,7 @@ def exact_search(model, time_limit_s: float = 60.0, max_states: int = 100_000,
                        time.monotonic() - start_time, reason)
 
 
-def robot_ceiling(scene, time_limit_s: float = 60.0, support: str = 'stable', reallocation=None,
+def robot_ceiling(scene, time_limit_s: float = 60.0, support: str = 'arm', reallocation=None,
                   max_states: int = 100_000) -> ExactResult:
     """What the best order of the scene's allocation, and of its re-allocations at dead ends,
     builds with the robot: the branch and bound from the empty scene in a planning twin
@@ -230,14 +230,15 @@ def robot_ceiling(scene, time_limit_s: float = 60.0, support: str = 'stable', re
     ceiling every agent is compared with; a cut one is a lower bound (its `reason` says so).
 
     support: the first allocation's support rule; reallocation: a `ReallocationConfig`
-    (default: its defaults, the stable allocation)."""
+    (default: its defaults with the re-solves' support `agent_plan.reallocation_support(support)`)."""
     from rad_core.allocation import AllocationParams, solve
     from rad_core.allocation.cpsat import coverage_bound
     from rad_core.robot_env import RobotAssemblyEnv, RobotEnvConfig
     from rad_core.sequencing.deciders import simulated_check
     from rad_core.sequencing.reallocation import ReallocationConfig, Reallocator, placed_scene
     from rad_core.sequencing.search import EnvModel
-    config = reallocation or ReallocationConfig()
+    from rad_core.sequencing.agent_plan import reallocation_support
+    config = reallocation or ReallocationConfig(params=AllocationParams(support=reallocation_support(support)))
     with RobotAssemblyEnv(scene, RobotEnvConfig(execution='teleport')) as renv:
         renv.reset()
         env = renv.env
