@@ -34,7 +34,7 @@ from rad_core.progress import ProgressBar
 
 from common import RESULTS, cache_dir, command_line, fmt, write_rows
 
-DEFAULT_AGENTS = ('default', 'milp-dqn-mixed+lookahead:5+verify+realloc+support:arm', 'heur-verified')
+DEFAULT_AGENTS = ('default', 'milp-dqn-mixed+lookahead:5+verify+realloc+support:stable', 'greedy', 'heur-verified')
 ROW_KEYS = ('name', 'return', 'outcome', 'coverage', 'coverage_opt', 'steps', 'stop_reason')
 
 
