@@ -453,3 +453,33 @@ def test_remembered_ik_is_the_ik_and_leaves_the_generator_where_solving_does():
         # A generator in another state is another question (its restarts would differ).
         c = np.random.default_rng(12)
         assert solve_pose(world, far, quat, [panda.HOME], rng=c).calls > 0
+
+
+def test_a_grasp_whose_lift_fails_leaves_the_block_where_it_lies_for_the_next_one(monkeypatch):
+    """The lift check carries the block with the hand; when it fails, the next grasp must be planned
+    with the block back where it lies (a fault made on demand: the first lift is refused)."""
+    from rad_core.gamp import planner
+    scene = _scene([('b', 'cube', (0.5, -0.2, U / 2))])
+    seen, refused, real_check = [], [], planner._check_column
+
+    def first_lift_refused(fn, q, column, config, where, where_path):
+        if where == 'lifting the block' and not refused:
+            refused.append(True)
+            for q_lift in column:
+                fn(q_lift)                  # carried along the lift, as the real check does
+            raise planner._Blocked('lifting the block: refused here on demand')
+        return real_check(fn, q, column, config, where, where_path)
+
+    real_pick = planner._plan_pick
+
+    def pick(world, block_id, *args, **kw):
+        seen.append(tuple(np.round(world.block_pose(block_id)[0], 9)))
+        return real_pick(world, block_id, *args, **kw)
+
+    monkeypatch.setattr(planner, '_check_column', first_lift_refused)
+    monkeypatch.setattr(planner, '_plan_pick', pick)
+    with World(scene) as world:
+        before = tuple(np.round(world.block_pose('b')[0], 9))
+        r = plan_action(world, 'b', [0.45, 0.2, U / 2], 0)
+    assert r.success and refused
+    assert len(seen) >= 2 and all(p == before for p in seen)

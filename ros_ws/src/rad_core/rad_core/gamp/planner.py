@@ -190,6 +190,9 @@ def plan_action(world: World, block_id: str, position, yaw_deg: float, start=Non
                                       rise_pick, config, clock, rng)
                 except _Blocked as e:
                     pick_reason = pick_reason or str(e)
+                    # A lift check that failed carried the block with the hand: put it back, so the
+                    # next grasp is planned against the world as it is (as after a failed placement).
+                    world.set_block_pose(block_id, block_pos, block_quat)
                     continue
                 try:
                     place = _plan_place(world, block_id, pick, place_point, position, yaw_deg,
