@@ -12,10 +12,10 @@ are derived (see PAPER). a_rel is a-bar over the allocation optimum's coverage
 the robot's cost the way the paper's numbers allow: a-bar of HEUR over a-bar of
 the oracle.
 
-Measured at bb918da (200 scenes, teleport, 2 busy cores, 643 s in all): HEUR
-f_g + f_p 0.52 / 0.71 at g = 4 / 5 (paper 0.40 / 0.58), a-bar 0.64 / 0.50 (paper
-0.62 / 0.47); oracle a-bar 0.88 / 0.85 (paper 0.81 / 0.78); heur-verified no
-f_g / f_p, a-bar 0.72 / 0.65, at about 3x HEUR's time (each step plans twice).
+Measured on 2026-12-02 on the shared plan path (200 scenes, teleport, 2 busy cores, 436 s in
+all; docs/evaluation.md): HEUR f_g + f_p 0.48 / 0.69 at g = 4 / 5 (paper 0.40 / 0.58), a-bar
+0.67 / 0.50 (paper 0.62 / 0.47); oracle a-bar 0.88 / 0.85 (paper 0.81 / 0.78); heur-verified
+no f_g / f_p, a-bar 0.74 / 0.64.
 """
 
 from __future__ import annotations
