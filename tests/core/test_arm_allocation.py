@@ -57,3 +57,16 @@ def test_prefer_needs_a_support_rule():
     with pytest.raises(Exception, match="needs support='stable' or 'arm'"):
         solve(square_scene(), AllocationParams(prefer='fewer'))
     assert solve(square_scene(), AllocationParams(support='arm', prefer='fewer')).has_solution
+
+
+def test_a_plan_whose_allocation_places_nothing_says_what_the_arm_cannot_do():
+    from rad_core.sequencing.plan import plan_assembly
+    from rad_core.sequencing.policy import HeurPolicy
+
+    def never(*_):
+        raise AssertionError('nothing to plan a motion for')
+    plan = plan_assembly(square_scene(far_target=True), lambda s: solve(s, AllocationParams(support='arm')),
+                         never, HeurPolicy())
+    assert not plan.success and plan.steps == []
+    assert plan.reason.startswith('the allocation places no block') and 'out of reach' in plan.reason
+    assert 'no top-down grasp' in plan.reason                    # and the square type, too

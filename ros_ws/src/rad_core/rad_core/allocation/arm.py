@@ -53,7 +53,8 @@ class ArmFilter:
         parts = [f'type {t}: {why}' for t, why in sorted(self.types.items())]
         parts += [f'block {b}: {why}' for b, why in sorted(self.blocks.items())]
         if self.poses:
-            parts.append(f'{self.poses} poses out of reach')
+            why = ', '.join(f'{k} ({n})' for k, n in sorted(self.pose_reasons.items()))
+            parts.append(f'{self.poses} poses out of reach: {why}')
         return '; '.join(parts) or 'nothing ruled out'
 
 
@@ -126,3 +127,34 @@ def arm_filter(scene: Scene, grid: Grid, candidates: list[Candidate]) -> tuple[l
             continue
         kept.append(cand)
     return kept, counts, report
+
+
+def finger_costs(scene: Scene, grid: Grid, candidates: list[Candidate]) -> list[int]:
+    """Per candidate pose, how hard a top-down hand finds it to hold at its final place: over
+    its grasps, the fewest finger sides that land on a target cell of its region (0: some grasp
+    closes with both fingers beside cells no block will ever fill; 2: every grasp has target
+    cells on both sides, so whichever neighbour is built first blocks it). `prefer='open'`
+    minimizes the sum among equally good allocations (`cpsat.build_model`)."""
+    from rad_core.blocks import rotation_z
+    grasps = type_grasps(scene)
+    out = []
+    for cand in candidates:
+        gs = grasps.get(cand.placement.type, ())
+        if not gs:
+            out.append(2)
+            continue
+        rot = rotation_z(cand.placement.yaw)
+        ids = list(cand.cell_ids)
+        region = int(grid.region_of[ids[0]])
+        best = 2
+        for g in gs:
+            d = rot @ np.array([1, 0, 0] if g.yaw == 0 else [0, 1, 0])
+            at = grid.ijk[ids[g.unit]]
+            sides = 0
+            for s in (1, -1):
+                c = grid.index(region, at + s * d)
+                if c is not None and bool(grid.is_target[c]):
+                    sides += 1
+            best = min(best, sides)
+        out.append(best)
+    return out

@@ -66,7 +66,7 @@ from rad_core.scene import Scene
 
 
 SUPPORT_MODES = ('none', 'stable', 'arm')
-PREFER_MODES = ('none', 'fewer', 'flat')
+PREFER_MODES = ('none', 'fewer', 'flat', 'open')
 
 
 @dataclass(frozen=True)
@@ -86,8 +86,9 @@ class AllocationParams:
     """'none' (the paper's MILP), 'stable' (every allocated block can stand where it goes) or 'arm'
     (stable, and nothing the arm can never do: `allocation.arm`)."""
     prefer: str = 'none'
-    """Tie-break among equally good stable allocations: 'none', 'fewer' (fewer poses) or 'flat'
-    (blocks spanning fewer levels)."""
+    """Tie-break among equally good stable allocations: 'none', 'fewer' (fewer poses), 'flat'
+    (blocks spanning fewer levels) or 'open' (poses a top-down hand can hold from free sides:
+    `arm.finger_cost`)."""
 
     def validate(self) -> None:
         if self.support not in SUPPORT_MODES:
@@ -116,7 +117,7 @@ def available_counts(scene: Scene, grid: Grid) -> dict[str, int]:
 
 
 def build_model(candidates: list[Candidate], counts: dict[str, int], support: str = 'none',
-                grid: Grid | None = None, occupied=None, prefer: str = 'none'):
+                grid: Grid | None = None, occupied=None, prefer: str = 'none', costs: list[int] | None = None):
     """CP-SAT model and its decision variables, one per candidate pose.
 
     support='stable' needs the grid and the cells already occupied (bool per cell).
@@ -144,7 +145,7 @@ def build_model(candidates: list[Candidate], counts: dict[str, int], support: st
     covered = [int(grid.is_target[list(cand.cell_ids)].sum()) for cand in candidates]
     # The preference as a cost per pose, minimized below coverage: 'fewer' 1 per pose, 'flat'
     # the levels a pose spans above its lowest (a tall block next to a lower one blocks the palm).
-    cost = [_pose_cost(cand, grid, prefer) for cand in candidates]
+    cost = costs if costs is not None else [_pose_cost(cand, grid, prefer) for cand in candidates]
     levels = sum(cost) + 1                       # the cost level spans 0..levels-1
     second = levels * sum(k * w[n] for n, k in enumerate(covered)) + (levels - 1) - sum(
         c * w[n] for n, c in enumerate(cost) if c)
@@ -255,7 +256,11 @@ def solve(scene: Scene, params: AllocationParams = AllocationParams(), exclude=(
         occupied = np.zeros(grid.num_cells, dtype=bool)
         for cells in blocks_on_grid(scene, grid).values():
             occupied[cells] = True
-    model, w, scale = build_model(candidates, counts, params.support, grid, occupied, params.prefer)
+    costs = None
+    if params.prefer == 'open':
+        from rad_core.allocation.arm import finger_costs
+        costs = finger_costs(scene, grid, candidates)
+    model, w, scale = build_model(candidates, counts, params.support, grid, occupied, params.prefer, costs)
     incumbent = set(greedy(candidates, counts)) if params.support == 'none' else set()
     for n, var in enumerate(w):
         model.add_hint(var, n in incumbent)

@@ -157,6 +157,11 @@ def plan_assembly(scene: Scene, allocate: Allocate, plan_motion: PlanMotion, seq
     # resting on nothing): the sequencer and its search judge the actions they checked, but a ranking
     # goes on below them, and an action taken from there must not put a block where it tips or falls.
     env = AssemblyEnv(scene, EnvConfig(stability='physics'), stability=_STABILITY)
+    if not allocation.placements and (env.grid.is_target & (env.state.occupancy < 0)).any():
+        arm = getattr(allocation, 'arm', None)
+        plan.reason = 'the allocation places no block' + (f' (what the arm cannot do: {arm.summary()})'
+                                                          if arm is not None else '')
+        return _done(plan, t0)
     allowed_actions = AllocationActions(env, allocation.placements)   # its guide changes on re-allocation
     world = {'scene': scene, 'q': start}   # the planning copy: scene and arm joints
 
