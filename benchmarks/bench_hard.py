@@ -13,7 +13,8 @@ Columns: a-bar (coverage of the whole target, the issue's figure), f (episodes t
 an invalid action: a grasp or placement GAMP refused or a block that fell), completed (d),
 re-allocations per scene, seconds per scene, then each scene's coverage.
 
-Writes <results>/hard.md and <results>/hard.rows.jsonl (results: docs/results by default);
+Writes <results>/hard.md and <results>/hard.rows.jsonl (results: docs/results by default;
+hard-prefer-P.md and its rows with --prefer P);
 results are cached per (agent, split, seed, limit) under out/cache/hard/; --force recomputes.
 """
 
@@ -47,15 +48,22 @@ def set_name(split: str, seed: int, limit: int | None) -> str:
     return f'hard-{split}-seed{seed}' + (f'-first{limit}' if limit else '')
 
 
-def run(agent: str, split: str, seed: int, limit: int | None, force: bool) -> dict:
-    """The agent's evaluation on the set, from the cache when there is one."""
-    path = cache_dir('hard') / f'{label(parse(agent))}-{set_name(split, seed, limit)}.json'
+def run(agent: str, split: str, seed: int, limit: int | None, force: bool, prefer: str = 'none') -> dict:
+    """The agent's evaluation on the set, from the cache when there is one. prefer: a CP-SAT
+    tie-break for the first allocation (`AllocationParams.prefer`; 'none': the agent's own)."""
+    tag = '' if prefer == 'none' else f'-prefer-{prefer}'
+    path = cache_dir('hard') / f'{label(parse(agent))}{tag}-{set_name(split, seed, limit)}.json'
     if path.exists() and not force:
         return json.loads(path.read_text())
     names = case_names(split, limit)
     scenes = [(name, hard_shapes.hard_scene(name, seed)) for name in names]
+    allocation = None
+    if prefer != 'none':
+        from rad_core.allocation import AllocationParams
+        allocation = AllocationParams(support=parse(agent).support or 'stable', prefer=prefer)
     t0 = time.perf_counter()
-    result = evaluate(agent, scenes, robot=True, seed=0, progress=ProgressBar(len(scenes), agent))
+    result = evaluate(agent, scenes, robot=True, seed=0, progress=ProgressBar(len(scenes), agent),
+                      allocation=allocation)
     result['seconds'] = time.perf_counter() - t0
     path.write_text(jsonfmt.dumps(result))
     return result
@@ -80,19 +88,23 @@ def main() -> int:
     p.add_argument('--limit', type=int, default=None, help="only the split's first N cases (a smoke run)")
     p.add_argument('--seed', type=int, default=0, help='layout seed of every scene')
     p.add_argument('--results', default=str(RESULTS), help='folder of hard.md and hard.rows.jsonl')
+    p.add_argument('--prefer', default='none', choices=('none', 'fewer', 'flat', 'open'),
+                   help="a tie-break for every agent's first allocation (AllocationParams.prefer)")
     p.add_argument('--force', action='store_true')
     p.add_argument('--cached-only', action='store_true', help='only write the table from results already cached')
     args = p.parse_args()
     agents = [a for a in args.agents.split(',') if a]
+    stem = 'hard' if args.prefer == 'none' else f'hard-prefer-{args.prefer}'   # the table a run writes
     names = case_names(args.split, args.limit)
     cell = set_name(args.split, args.seed, args.limit)
     results = []
     for agent in agents:
-        cached = cache_dir('hard') / f'{label(parse(agent))}-{cell}.json'
+        tag = '' if args.prefer == 'none' else f'-prefer-{args.prefer}'
+        cached = cache_dir('hard') / f'{label(parse(agent))}{tag}-{cell}.json'
         if args.cached_only and not cached.exists():
             continue
         try:
-            r = run(agent, args.split, args.seed, args.limit, args.force)
+            r = run(agent, args.split, args.seed, args.limit, args.force, args.prefer)
         except Exception as e:  # noqa: BLE001 - one agent's failure should not lose the others
             print(f'{agent} {cell}: {type(e).__name__}: {e}', file=sys.stderr)
             continue
@@ -105,7 +117,7 @@ def main() -> int:
              f'`rad_core.hard_shapes` ({len(names)} scenes, layout seed {args.seed}); each agent plans as '
              '/plan_assembly does and the plan is built in a fresh twin (teleporting execution). a-bar: coverage of '
              'the whole target; f: episodes ended on an invalid action; d: completed. s/scene: wall time on the '
-             'shared 2-core machine. Per-scene rows: [hard.rows.jsonl](hard.rows.jsonl).', '',
+             f'shared 2-core machine. Per-scene rows: [{stem}.rows.jsonl]({stem}.rows.jsonl).', '',
              '| agent | canonical text | a-bar | f | d | re-alloc/scene | s/scene | '
              + ' | '.join(names) + ' |',
              '|---|---|---|---|---|---|---|' + '---|' * len(names)]
@@ -121,9 +133,9 @@ def main() -> int:
     lines += ['', '## The cases', ''] + case_table(names) + ['']
     out = Path(args.results)
     out.mkdir(parents=True, exist_ok=True)
-    (out / 'hard.md').write_text('\n'.join(lines) + '\n')
-    write_rows(out / 'hard.rows.jsonl', rows)
-    print(f'wrote {out / "hard.md"}')
+    (out / f'{stem}.md').write_text('\n'.join(lines) + '\n')
+    write_rows(out / f'{stem}.rows.jsonl', rows)
+    print(f'wrote {out / f"{stem}.md"}')
     return 0
 
 
