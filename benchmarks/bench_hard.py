@@ -21,19 +21,16 @@ results are cached per (agent, split, seed, limit) under out/cache/hard/; --forc
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-from rad_core import hard_shapes, jsonfmt
-from rad_core.agents import label, parse
-from rad_core.evaluation import evaluate
-from rad_core.progress import ProgressBar
+from rad_core import hard_shapes
+from rad_core.agents import parse
 
-from common import RESULTS, cache_dir, command_line, fmt, write_rows
+from common import RESULTS, cache_path, cached_evaluation, command_line, fmt, write_rows
 
 DEFAULT_AGENTS = ('default', 'milp-dqn-mixed+lookahead:5+verify+realloc+support:stable', 'greedy', 'heur-verified')
 ROW_KEYS = ('name', 'return', 'outcome', 'coverage', 'coverage_opt', 'steps', 'stop_reason')
@@ -51,22 +48,18 @@ def set_name(split: str, seed: int, limit: int | None) -> str:
 def run(agent: str, split: str, seed: int, limit: int | None, force: bool, prefer: str = 'none') -> dict:
     """The agent's evaluation on the set, from the cache when there is one. prefer: a CP-SAT
     tie-break for the first allocation (`AllocationParams.prefer`; 'none': the agent's own)."""
-    tag = '' if prefer == 'none' else f'-prefer-{prefer}'
-    path = cache_dir('hard') / f'{label(parse(agent))}{tag}-{set_name(split, seed, limit)}.json'
-    if path.exists() and not force:
-        return json.loads(path.read_text())
-    names = case_names(split, limit)
-    scenes = [(name, hard_shapes.hard_scene(name, seed)) for name in names]
     allocation = None
     if prefer != 'none':
         from rad_core.allocation import AllocationParams
         allocation = AllocationParams(support=parse(agent).support or 'stable', prefer=prefer)
-    t0 = time.perf_counter()
-    result = evaluate(agent, scenes, robot=True, seed=0, progress=ProgressBar(len(scenes), agent),
-                      allocation=allocation)
-    result['seconds'] = time.perf_counter() - t0
-    path.write_text(jsonfmt.dumps(result))
-    return result
+    return cached_evaluation('hard', agent, cache_set(split, seed, limit, prefer),
+                             lambda: [(name, hard_shapes.hard_scene(name, seed)) for name in case_names(split, limit)],
+                             force, allocation=allocation)
+
+
+def cache_set(split: str, seed: int, limit: int | None, prefer: str) -> str:
+    """The cache's name for the set and the first allocation's tie-break."""
+    return ('' if prefer == 'none' else f'prefer-{prefer}-') + set_name(split, seed, limit)
 
 
 def case_table(names: list[str]) -> list[str]:
@@ -99,9 +92,8 @@ def main() -> int:
     cell = set_name(args.split, args.seed, args.limit)
     results = []
     for agent in agents:
-        tag = '' if args.prefer == 'none' else f'-prefer-{args.prefer}'
-        cached = cache_dir('hard') / f'{label(parse(agent))}{tag}-{cell}.json'
-        if args.cached_only and not cached.exists():
+        if args.cached_only and not cache_path('hard', agent, cache_set(args.split, args.seed, args.limit,
+                                                                        args.prefer)).exists():
             continue
         try:
             r = run(agent, args.split, args.seed, args.limit, args.force, args.prefer)

@@ -30,13 +30,10 @@ import time
 
 import numpy as np
 
-from rad_core import jsonfmt
-from rad_core.agents import label, parse
 from rad_core.allocation import AllocationParams, solve
-from rad_core.evaluation import evaluate
-from rad_core.progress import ProgressBar
 
-from common import RESULTS, cache_dir, command_line, fmt, scenes, write_rows
+from common import (RESULTS, agent_legend, cache_dir, cache_path, cached_evaluation, command_line, fmt, scenes,
+                    write_rows)
 
 DEFAULT_AGENTS = ('heur-verified', 'heur+verify+support:stable', 'heur+verify+realloc', 'milp-dqn+mcts:5+verify',
                   'milp-dqn+mcts:5+verify+realloc', 'milp-dqn-mixed+verify+support:stable', 'greedy',
@@ -66,15 +63,8 @@ def cell_name(grid, n: int, clearance: float) -> str:
 
 
 def run(agent: str, grid, n: int, clearance: float, force: bool) -> dict:
-    path = cache_dir('reallocation') / f'{label(parse(agent))}-{cell_name(grid, n, clearance)}.json'
-    if path.exists() and not force:
-        return json.loads(path.read_text())
-    t0 = time.perf_counter()
-    result = evaluate(agent, cell_scenes(grid, n, clearance), robot=True, seed=0,
-                      progress=ProgressBar(n, f'{agent} {cell_name(grid, n, clearance)}'))
-    result['seconds'] = time.perf_counter() - t0
-    path.write_text(jsonfmt.dumps(result))
-    return result
+    return cached_evaluation('reallocation', agent, cell_name(grid, n, clearance),
+                             lambda: cell_scenes(grid, n, clearance), force)
 
 
 def ceiling(grid, n: int, clearance: float, seconds: float, force: bool) -> list[dict]:
@@ -125,9 +115,7 @@ def main() -> int:
              f'0..{args.scenes - 1}, and hand-made shapes; each agent plans as /plan_assembly does and the plan is '
              'built in a fresh twin (teleporting execution); see the benchmark\'s docstring for the columns. '
              's/scene: wall time on the shared 2-core machine. Per-scene rows: '
-             '[reallocation.rows.jsonl](reallocation.rows.jsonl).', '',
-             '| agent | canonical text |', '|---|---|']
-    lines += [f'| {a} | `{label(parse(a))}` |' for a in agents] + ['']
+             '[reallocation.rows.jsonl](reallocation.rows.jsonl).', ''] + agent_legend(agents)
     rows = []
     for clearance in clearances:
         for grid in grids:
@@ -146,8 +134,7 @@ def main() -> int:
             if args.ceiling_s > 0 and not args.cached_only:
                 roof = ceiling(grid, args.scenes, clearance, args.ceiling_s, args.force)
             for agent in agents:
-                cached = cache_dir('reallocation') / f'{label(parse(agent))}-{cell}.json'
-                if args.cached_only and not cached.exists():
+                if args.cached_only and not cache_path('reallocation', agent, cell).exists():
                     continue
                 try:
                     r = run(agent, grid, args.scenes, clearance, args.force)

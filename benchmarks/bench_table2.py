@@ -21,16 +21,11 @@ out/cache/table2/, so an interrupted run resumes; --force recomputes.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 
-from rad_core import jsonfmt
-from rad_core.agents import label, parse
-from rad_core.evaluation import evaluate
-from rad_core.progress import ProgressBar
 
-from common import RESULTS, cache_dir, command_line, fmt, scenes, write_rows
+from common import RESULTS, agent_legend, cached_evaluation, command_line, fmt, scenes, write_rows
 
 PAPER = {   # Table II of the paper (two-sided, robot in the loop); absent keys are not reported
     (4, 'heur'): {'R': 0.57, 'e': 0.36, 'f_g': 0.24, 'f_p': 0.16, 'coverage': 0.62},
@@ -48,15 +43,8 @@ ROW_KEYS = ('name', 'return', 'outcome', 'coverage', 'predicted_coverage', 'cove
 
 
 def run(agent: str, grid: int, n: int, clearance: float, force: bool) -> dict:
-    path = cache_dir('table2') / f'{label(parse(agent))}-g{grid}-c{clearance:g}-n{n}.json'
-    if path.exists() and not force:
-        return json.loads(path.read_text())
-    t0 = time.perf_counter()
-    result = evaluate(agent, scenes(grid, n, clearance), robot=True, seed=0,
-                      progress=ProgressBar(n, f'{agent} g={grid} c={clearance:g}'))
-    result['seconds'] = time.perf_counter() - t0
-    path.write_text(jsonfmt.dumps(result))
-    return result
+    return cached_evaluation('table2', agent, f'g{grid}-c{clearance:g}-n{n}', lambda: scenes(grid, n, clearance),
+                             force)
 
 
 def main() -> int:
@@ -76,8 +64,7 @@ def main() -> int:
              'in a fresh twin (teleporting execution). Paper rows from its Table II (flush is not the paper\'s '
              'geometry: its blocks leave 1 cm between neighbours, clearance 0.2). s/scene is wall time on a shared '
              '2-core machine: compare it within one run only. Per-scene rows: [table2.rows.jsonl](table2.rows.jsonl).',
-             '', '| agent | canonical text |', '|---|---|']
-    lines += [f'| {a} | `{label(parse(a))}` |' for a in agents] + ['']
+             ''] + agent_legend(agents)
     rows = []
     for clearance in clearances:
         for grid in grids:

@@ -65,3 +65,37 @@ def write_rows(path: Path, rows, digits: int = 4) -> Path:
 
 def read_rows(path: Path) -> list[dict]:
     return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+
+
+def cache_path(bench: str, agent: str, set_name: str) -> Path:
+    """Where a benchmark keeps one agent's evaluation of one scene set (keyed by the agent's
+    canonical text, so a preset and its spelled-out text share it)."""
+    from rad_core.agents import label, parse
+    return cache_dir(bench) / f'{label(parse(agent))}-{set_name}.json'
+
+
+def cached_evaluation(bench: str, agent: str, set_name: str, make_scenes, force: bool = False, **kw) -> dict:
+    """`evaluation.evaluate` of the agent with the robot (seed 0) on make_scenes(), a list of
+    (name, scene), from `cache_path` unless force; the result's 'seconds' is its wall time.
+    kw: further arguments of evaluate (allocation, reallocation)."""
+    import time
+
+    from rad_core import jsonfmt
+    from rad_core.evaluation import evaluate
+    from rad_core.progress import ProgressBar
+    path = cache_path(bench, agent, set_name)
+    if path.exists() and not force:
+        return json.loads(path.read_text())
+    scenes = list(make_scenes())
+    t0 = time.perf_counter()
+    result = evaluate(agent, scenes, robot=True, seed=0, progress=ProgressBar(len(scenes), f'{agent} {set_name}'),
+                      **kw)
+    result['seconds'] = time.perf_counter() - t0
+    path.write_text(jsonfmt.dumps(result))
+    return result
+
+
+def agent_legend(agents) -> list[str]:
+    """Markdown lines: each agent as given and its canonical text."""
+    from rad_core.agents import label, parse
+    return ['| agent | canonical text |', '|---|---|'] + [f'| {a} | `{label(parse(a))}` |' for a in agents] + ['']
