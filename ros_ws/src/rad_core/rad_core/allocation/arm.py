@@ -60,18 +60,14 @@ class ArmFilter:
 
 def type_grasps(scene: Scene) -> dict[str, tuple]:
     """Every block type's top-down grasps at the scene's unit and clearance (as GAMP offers them)."""
-    from rad_core.gamp.grasps import block_grasps
-    width = scene.unit * (1.0 - scene.clearance)
+    from rad_core.gamp.grasps import block_grasps, grasp_width
+    width = grasp_width(scene.unit, scene.clearance)
     return {name: block_grasps(btype, width) for name, btype in scene.block_types.items()}
 
 
 def _no_grasp_reason(scene: Scene, name: str) -> str:
-    from rad_core.gamp.grasps import MAX_GRASP_WIDTH
-    width = scene.unit * (1.0 - scene.clearance)
-    if width > MAX_GRASP_WIDTH:
-        return (f'no top-down grasp: {width * 1000:.0f} mm units are wider than the open hand takes '
-                f'({MAX_GRASP_WIDTH * 1000:.0f} mm)')
-    return f'no top-down grasp: no unit of a {name} is free from above with both finger columns clear'
+    from rad_core.gamp.grasps import grasp_width, no_grasp_reason
+    return 'no top-down grasp: ' + no_grasp_reason(scene.block_types[name], grasp_width(scene.unit, scene.clearance))
 
 
 def _unreachable(points: np.ndarray) -> str:

@@ -51,6 +51,18 @@ class Grasp:
         return f'unit {self.unit} yaw {self.yaw}'
 
 
+def grasp_width(unit: float, clearance: float = 0.0) -> float:
+    """The width (m) the fingers close on: a unit's outer faces, which a scene's clearance sets back."""
+    return unit * (1.0 - clearance)
+
+
+def no_grasp_reason(btype: BlockType, unit_size: float) -> str:
+    """Why `block_grasps(btype, unit_size)` offers nothing."""
+    if unit_size > MAX_GRASP_WIDTH:
+        return f'{unit_size * 1000:.0f} mm units are wider than the hand takes ({MAX_GRASP_WIDTH * 1000:.0f} mm)'
+    return f'no unit of a {btype.name} is free from above'
+
+
 def block_grasps(btype: BlockType, unit_size: float = 0.05) -> tuple[Grasp, ...]:
     """Every grasp the rule of the module docstring allows, best first (`grasp_order`)."""
     if unit_size > MAX_GRASP_WIDTH:

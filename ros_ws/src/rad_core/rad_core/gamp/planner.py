@@ -37,7 +37,7 @@ import numpy as np
 from rad_core.errors import RadError
 from rad_core.gamp.collision import (CollisionConfig, attachment_from_world, check_path,
                                      make_collision_fn)
-from rad_core.gamp.grasps import MAX_GRASP_WIDTH, Grasp, block_grasps
+from rad_core.gamp.grasps import Grasp, block_grasps, grasp_width, no_grasp_reason
 from rad_core.gamp.ik import IkConfig, hand_yaw_options, solve_top_down
 from rad_core.gamp.trajectory import TimingConfig, plan_motion
 from rad_core.motion import Motion
@@ -153,14 +153,12 @@ def plan_action(world: World, block_id: str, position, yaw_deg: float, start=Non
     btype = scene.block_types[scene.block(block_id).type]
     clock = _Clock()
     rng = np.random.default_rng(config.seed)
-    # The fingers close on a unit's outer faces, which a scene's clearance sets back.
-    width = unit * (1.0 - scene.clearance)
+    width = grasp_width(unit, scene.clearance)
     grasps = block_grasps(btype, width)
     result = GampResult(False)
     if not grasps:
-        why = (f'{width * 1000:.0f} mm units are wider than the hand takes ({MAX_GRASP_WIDTH * 1000:.0f} mm)'
-               if width > MAX_GRASP_WIDTH else f'no unit of a {btype.name} is free from above')
-        return _finish(result, 'grasp', f'grasp: block {block_id} has no top-down grasp: {why}', clock, t0)
+        return _finish(result, 'grasp', f'grasp: block {block_id} has no top-down grasp: '
+                                        f'{no_grasp_reason(btype, width)}', clock, t0)
 
     open_f = min(panda.FINGER_OPEN, width / 2 + config.finger_clearance)
     closed_f = max(0.0, width / 2 - config.grip_squeeze)
