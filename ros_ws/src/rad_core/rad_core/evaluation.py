@@ -137,7 +137,8 @@ def robot_planner(agent: str | Agent, allocation: AllocationParams | None = None
     runs); allocation and reallocation as `scene_episode` takes them. Close it when done."""
     from rad_core.sequencing.agent_plan import AgentPlanner
     agent = get_agent(agent)
-    return AgentPlanner(agent.spec, time_limit_s=PLAN_TIME_LIMIT_S, allocation=allocation, reallocation=reallocation)
+    return AgentPlanner(agent.spec, time_limit_s=PLAN_TIME_LIMIT_S, allocation=allocation, reallocation=reallocation,
+                        policy=agent.make_policy())     # the network get_agent loaded, not a second copy
 
 
 def scene_episode(agent: str | Agent, scene: Scene, robot: bool, seed: int, execution: str = 'teleport',

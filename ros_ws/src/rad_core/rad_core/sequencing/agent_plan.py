@@ -46,16 +46,17 @@ class AgentPlanner:
 
     allocation: the first allocation's CP-SAT settings (default: 10 s, one worker, the agent's
     support); reallocation: a `ReallocationConfig` for re-allocating agents (default: the
-    assembly node's, the stable allocation; its params set the re-solves' CP-SAT settings)."""
+    assembly node's, the stable allocation; its params set the re-solves' CP-SAT settings);
+    policy: the agent's scorer when the caller has already loaded it."""
 
     def __init__(self, agent: str | AgentSpec = 'default', allocation_time_limit_s: float = 10.0,
-                 time_limit_s: float = 120.0, allocation=None, reallocation=None):
+                 time_limit_s: float = 120.0, allocation=None, reallocation=None, policy=None):
         from rad_core.gamp.action import MotionPlanner
         from rad_core.sequencing.plan import local_motion_planner
         from rad_core.sequencing.sequencer import Sequencer, SequencerConfig
         self.spec = parse(agent) if isinstance(agent, str) else agent
         self.agent = label(self.spec)
-        self.sequencer = Sequencer(SequencerConfig(agent=self.agent))
+        self.sequencer = Sequencer(SequencerConfig(agent=self.agent), policy)
         self.support = allocation.support if allocation is not None else self.spec.resolved_support(
             self.sequencer.policy)
         self.allocation, self.reallocation = allocation, reallocation

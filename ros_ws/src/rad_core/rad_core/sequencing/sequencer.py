@@ -117,7 +117,8 @@ class Ranking:
 
 
 class Sequencer:
-    def __init__(self, config: SequencerConfig = SequencerConfig()):
+    def __init__(self, config: SequencerConfig = SequencerConfig(), policy=None):
+        """policy: the agent's scorer when the caller has already loaded it (default: loaded here)."""
         config.validate()
         self.config = config
         self.spec = config.spec()
@@ -125,7 +126,7 @@ class Sequencer:
         self._renv = None   # the planning twin, made on the first search
         # bnb: state -> (the rest of its best line, the coverage the line reaches)
         self._lines: dict[tuple, tuple[list[SceneAction], float]] = {}
-        self.policy = self.spec.make_policy()
+        self.policy = policy if policy is not None else self.spec.make_policy()
         if self.spec.learned:
             if self.policy.actions != 'milp':
                 raise RadError(f'{self.policy.source} was trained on the {self.policy.actions!r} action space; '
