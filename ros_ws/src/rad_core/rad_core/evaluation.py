@@ -278,8 +278,9 @@ def evaluate(agent: str | Agent, scenes: Iterable[tuple[str, Scene]], robot: boo
     motion that moved another block counts as f_p), coverage (target-cell
     coverage, the paper's a-bar), coverage_rel (coverage over the allocation
     optimum's coverage, the paper's corrected a-bar), n, and scenes (one row each).
-    progress(row) is called after each episode. policy: an already built policy
-    (default: the agent's, built once for the run). allocation: CP-SAT settings,
+    progress(row) is called after each episode. policy: an already built policy for runs
+    without the robot (default: the agent's, built once for the run; with the robot the
+    planner uses the agent's own). allocation: CP-SAT settings,
     e.g. AllocationParams(support='stable') (default: the agent's, usually the paper's MILP).
     reallocation: the `ReallocationConfig` of re-allocating agents (default: its defaults).
     """
