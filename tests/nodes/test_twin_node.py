@@ -95,11 +95,24 @@ def arm_target(**offsets) -> np.ndarray:
     return q
 
 
+def fresh_messages(t, key: str, count: int = 1, timeout: float = 5.0):
+    """The next `count` messages of t.seen[key] published from now on.
+
+    Messages still queued in the subscription from before the call (a loaded machine delivers them
+    late) are skipped by their stamp: the twin stamps with the same system clock as this node."""
+    now = t.node.get_clock().now().nanoseconds
+
+    def fresh():
+        return [m for m in t.seen[key] if m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec >= now]
+
+    t.seen[key].clear()
+    assert spin_until(t.node, lambda: len(fresh()) >= count, timeout=timeout), f'no fresh {key} messages'
+    return fresh()
+
+
 def fresh_joint_states(t, count: int = 1, timeout: float = 5.0):
     """The next `count` joint_states messages published from now on."""
-    t.seen['joints'].clear()
-    assert spin_until(t.node, lambda: len(t.seen['joints']) >= count, timeout=timeout), 'no joint_states'
-    return list(t.seen['joints'])
+    return fresh_messages(t, 'joints', count, timeout)
 
 
 def send_arm_goal(t, traj, timeout: float = 10.0):
@@ -346,9 +359,7 @@ def test_set_block_pose_checks_id_workspace_and_numbers(twin, ros_node):
     assert 'outside the workspace' in move(bid, 0.5, -0.3, -0.5).reason
     assert Scene.loads(twin.state().scene_json).to_dict() == twin.scene.to_dict()
     assert move(bid, 0.45, -0.55, 0.025).success
-    twin.seen['bodies'].clear()
-    spin_until(twin.node, lambda: twin.seen['bodies'], timeout=5.0)
-    body = [b for b in twin.seen['bodies'][-1].rigidbodies if b.rigid_body_name == bid][0]
+    body = [b for b in fresh_messages(twin, 'bodies')[-1].rigidbodies if b.rigid_body_name == bid][0]
     assert body.pose.position.y == pytest.approx(-0.55, abs=0.005)
 
 
