@@ -159,6 +159,46 @@ def test_a_failing_pose_becomes_a_no_good_and_the_sequencer_goes_on_with_a_new_a
     assert doc['placements'][0]['type'] == 'cube' and doc['changed'] is True
 
 
+def grasp_fails_for(block_ids: set[int], env: AssemblyEnv):
+    """A check whose GAMP cannot pick the given blocks where they lie (failure 'grasp', a mock
+    fault: real GAMP fails only where the table is laid out so) and passes the rest."""
+    def check(action) -> Check:
+        if action.block in block_ids:
+            return Check(False, 'grasp: all 2 grasps blocked: left finger hits block x', failure='grasp')
+        return Check(True)
+    return check
+
+
+def test_a_block_that_cannot_be_picked_is_excluded_as_a_block_until_the_table_changes():
+    blocks = [{'id': 'c0', 'type': 'cube', 'position': [0.4, -0.2, U / 2], 'yaw': 0},
+              {'id': 'c1', 'type': 'cube', 'position': [0.5, -0.2, U / 2], 'yaw': 0},
+              {'id': 'i0', 'type': 'I2', 'position': [0.6, -0.2, U / 2], 'yaw': 0},
+              {'id': 'i1', 'type': 'I2', 'position': [0.6, -0.3, U / 2], 'yaw': 0}]
+    scene = small_scene(blocks=blocks, targets=ROW)
+    env = AssemblyEnv(scene, EnvConfig(stability='support'))
+    ids = [b.id for b in scene.blocks]
+    first = solve(scene, replace(STABLE, prefer='fewer'))
+    assert [p.type for p in first.placements] == ['I2']
+    space = AllocationActions(env, first.placements)
+    realloc = Reallocator(space, grasp_fails_for({ids.index('i0'), ids.index('i1')}, env))
+    event = realloc.stalled(env, 'stuck')
+    # Every I2 failed to be picked: the pose is not blamed, both blocks are left out of the re-solve.
+    assert event.no_goods == []
+    assert sorted(d['block'] for d in event.blocks) == ['i0', 'i1'] and 'finger' in event.blocks[0]['reason']
+    assert event.changed and sorted(p.type for p in event.placements) == ['cube', 'cube']
+    assert 'and 2 blocks that cannot be picked' in event.summary()
+    assert event.to_dict()['blocks'][0]['type'] == 'I2'
+    # The same pose again later: the excluded blocks are not tried again, and stay excluded.
+    again = realloc.stalled(env, 'stuck')
+    assert again.blocks == [] and {d['block'] for d in realloc.blocked.values()} == {'i0', 'i1'}
+    # A block leaves the table (it may have been what blocked the others): the exclusion is lifted,
+    # the next re-solve may use the I2s again, and they are checked again where a pose asks for them.
+    env.step([a for a in space(env) if not a.is_terminate and a.block == ids.index('c0')][0])
+    realloc.stalled(env, 'stuck')
+    assert realloc.blocked == {}
+    assert {'i0', 'i1'} <= {b.id for b in realloc._without_blocked(placed_scene(env), env).blocks}
+
+
 def test_a_pose_waiting_for_its_support_is_not_a_no_good():
     scene = small_scene()
     env = AssemblyEnv(scene, EnvConfig(stability='support'))
@@ -216,8 +256,11 @@ def test_with_the_robot_an_unreachable_block_is_excluded_and_another_type_fills_
     row = again['scenes'][0]
     assert again['coverage'] == 1.0 and again['f'] == 0.0
     assert len(row['reallocations']) == 1
-    no_good = row['reallocations'][0]['no_goods'][0]
-    assert no_good['type'] == 'I2' and 'i0' in no_good['reason'] and 'unreachable' in no_good['reason']
+    event = row['reallocations'][0]
+    # The I2 cannot be picked where it lies: the block is excluded, not the pose it was asked for.
+    assert event['no_goods'] == []
+    [blocked] = event['blocks']
+    assert blocked['block'] == 'i0' and blocked['type'] == 'I2' and 'unreachable' in blocked['reason']
     assert row['reallocation_s'] > 0
 
 

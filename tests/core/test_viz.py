@@ -91,12 +91,14 @@ def test_re_allocations_in_plan_json_are_read_and_shown_in_the_summary():
     event = Reallocation(2, 'no feasible next action (1 tried): b3: placement: hand hits block b1',
                          [{'type': 'cube', 'target': 'front', 'cells': [[1, 0, 0]],
                            'reason': 'b3: hand hits block b1'}],
-                         'OPTIMAL', 3.0, 3.0, 0.02, [Placement('I2', 'front', 0, ((1, 0, 0), (2, 0, 0)))], True)
+                         'OPTIMAL', 3.0, 3.0, 0.02, [Placement('I2', 'front', 0, ((1, 0, 0), (2, 0, 0)))], True,
+                         [{'block': 'b7', 'type': 'I3', 'reason': 'grasp: all 3 grasps blocked'}])
     plan = viz.parse_plan(json.dumps({'reallocations': [event.to_dict()]}))
     assert plan.reallocations[0]['step'] == 2
     text = viz.plan_summary(plan)
     assert '1 re-allocations' in text and 'after step 2' in text and 'hand hits block b1' in text
     assert '1 new poses (OPTIMAL)' in text
+    assert '1 blocks that cannot be picked (b7: grasp: all 3 grasps blocked)' in text
     with pytest.raises(RadError, match='reallocations must be a list'):
         viz.parse_plan(json.dumps({'reallocations': [{'step': 'two'}]}))
 

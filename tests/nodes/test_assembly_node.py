@@ -149,7 +149,9 @@ def test_a_pose_the_robot_cannot_build_is_reallocated(graph):
     assert len(r.reallocations) == 2, r.reason
     event, used_up = r.reallocations
     assert event.step == 0 and event.changed and event.status == 'OPTIMAL'
-    assert [p.type for p in event.no_goods] == ['I2'] and 'unreachable' in event.no_good_reasons[0]
+    # The I2 cannot be picked where it lies: excluded as a block, its pose not blamed.
+    assert event.excluded_blocks == ['far'] and 'unreachable' in event.excluded_block_reasons[0]
+    assert list(event.no_goods) == []
     assert [p.type for p in event.placements] == ['cube']
     # After the cube: the allocation is built, a target cell is free, nothing left could fill it.
     assert used_up.step == 1 and not used_up.changed and not used_up.placements

@@ -260,8 +260,11 @@ def plan_summary(plan: PlanDoc) -> str:
             excluded = '; '.join(f"{d.get('type')} {d.get('cells')}: {d.get('reason', '')}" for d in e['no_goods'])
             outcome = (f"{len(e.get('placements', []))} new poses ({e.get('status', '')})" if e.get('changed')
                        else 'nothing new')
+            blocks = '; '.join(f"{d.get('block')}: {d.get('reason', '')}" for d in e.get('blocks', []))
             lines.append(f"- after step {e['step']}: {e['reason']}; excluded {len(e['no_goods'])} poses"
-                         + (f' ({excluded})' if excluded else '') + f'; {outcome}')
+                         + (f' ({excluded})' if excluded else '')
+                         + (f" and {len(e['blocks'])} blocks that cannot be picked ({blocks})" if blocks else '')
+                         + f'; {outcome}')
     if plan.timings:
         lines += ['', '| stage | seconds |', '|---|---|']
         lines += [f'| {k} | {v:.4f} |' for k, v in plan.timings.items()]

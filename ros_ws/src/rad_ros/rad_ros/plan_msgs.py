@@ -28,7 +28,9 @@ def reallocation_to_msg(event) -> Reallocation:
         step=int(event.step), reason=event.reason,
         no_goods=[placement_to_msg(Placement(d['type'], d['target'], 0, tuple(tuple(c) for c in d['cells'])))
                   for d in event.no_goods],
-        no_good_reasons=[d['reason'] for d in event.no_goods], status=event.status,
+        no_good_reasons=[d['reason'] for d in event.no_goods],
+        excluded_blocks=[d['block'] for d in event.blocks], excluded_block_reasons=[d['reason'] for d in event.blocks],
+        status=event.status,
         objective=float(event.objective), bound=float(event.bound), solve_time_s=float(event.solve_time_s),
         placements=[placement_to_msg(p) for p in event.placements], changed=bool(event.changed))
 

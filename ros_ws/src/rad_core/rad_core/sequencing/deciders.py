@@ -11,7 +11,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from rad_core.mdp import AssemblyEnv
+from rad_core.mdp import AssemblyEnv, Outcome
 from rad_core.sequencing.actions import ActionSpace
 from rad_core.sequencing.episode import Decide, Decision, stop
 from rad_core.sequencing.policy import Policy, first_feasible, ranked_actions
@@ -21,6 +21,7 @@ class Check(NamedTuple):
     success: bool
     reason: str = ''
     plan: object = None     # the motion plan the check found, when it planned one
+    failure: str = ''       # 'grasp' when the block cannot be picked where it lies (as GAMP says)
 
 
 def stability_check(env: AssemblyEnv):
@@ -89,5 +90,6 @@ def simulated_check(stepper):
             plan = getattr(stepper, 'last_plan', None)
         finally:
             stepper.restore(snap)
-        return Check(not result.outcome.is_invalid, result.reason, plan)
+        return Check(not result.outcome.is_invalid, result.reason, plan,
+                     'grasp' if result.outcome is Outcome.INVALID_GRASP else '')
     return check

@@ -249,8 +249,9 @@ def robot_ceiling(scene, time_limit_s: float = 60.0, support: str = 'arm', reall
             sub = AllocationActions(env, current.guide.placements)
             reallocator = Reallocator(sub, simulated_check(renv), config)
             reallocator.no_goods = dict(getattr(current, 'no_goods', {}))
+            reallocator.blocked = dict(getattr(current, 'blocked', {}))
             event = reallocator.stalled(env, 'exact search: dead end')
-            sub.no_goods = reallocator.no_goods
+            sub.no_goods, sub.blocked = reallocator.no_goods, reallocator.blocked
             return sub if event.changed else None
 
         def bound_of(_model) -> float:   # re-allocating: what any allocation of the free cells could cover

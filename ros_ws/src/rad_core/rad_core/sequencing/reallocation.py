@@ -12,6 +12,12 @@ still open, the `Reallocator`:
    so they stay excluded for the rest of the episode. A pose that fails only
    because what should hold it up is not built yet is not a no-good; the
    re-solved allocation must give it new support or drop it;
+   no-goods are kept at the level the failure belongs to: a block that cannot be
+   picked where it lies (GAMP's failure 'grasp': every grasp blocked, by its
+   neighbours on the table or the arm's reach) is excluded as a block, whatever
+   pose it was asked for, and the pose is not blamed when every block of its type
+   failed that way. The table only loses blocks, so such a block is excluded
+   until a block leaves the table (its neighbour may have been what blocked it);
 3. solves the allocation again (also when the allocation is used up while target
    cells are still free: what is built now may hold up poses it could not) (CP-SAT, proven optimal for each problem it
    solves, or the anytime bound) over the cells still free, with the placed
@@ -80,17 +86,20 @@ class Reallocation:
     solve_time_s: float = 0.0
     placements: list[Placement] = field(default_factory=list)
     changed: bool = False          # the new allocation offers poses the old one did not
+    blocks: list[dict] = field(default_factory=list)     # blocks excluded: {block, type, reason}
 
     def to_dict(self) -> dict:
-        return {'step': self.step, 'reason': self.reason, 'no_goods': self.no_goods, 'status': self.status,
+        return {'step': self.step, 'reason': self.reason, 'no_goods': self.no_goods, 'blocks': self.blocks,
+                'status': self.status,
                 'objective': self.objective, 'bound': self.bound, 'solve_time_s': self.solve_time_s,
                 'placements': [p.to_dict() for p in self.placements], 'changed': self.changed}
 
     def summary(self) -> str:
         verdict = (f'{len(self.placements)} poses ({self.status}, objective {self.objective:g}, '
                    f'bound {self.bound:g})' if self.changed else 'nothing new')
+        blocks = f' and {len(self.blocks)} blocks that cannot be picked' if self.blocks else ''
         return (f're-allocation after {self.step} placements: {self.reason}; excluded {len(self.no_goods)} '
-                f'poses; {verdict}')
+                f'poses{blocks}; {verdict}')
 
 
 def placed_scene(env: AssemblyEnv) -> Scene:
@@ -132,6 +141,7 @@ class Reallocator:
         self.deadline = deadline
         self.events: list[Reallocation] = []
         self.no_goods: dict[tuple, dict] = {}
+        self.blocked: dict[int, dict] = {}    # block index -> {block, type, reason, table}: not pickable
         self.seconds = 0.0
 
     def can_retry(self, env: AssemblyEnv) -> bool:
@@ -151,8 +161,11 @@ class Reallocator:
         default = ('no allocated pose can be built next' if guide.open_poses(env.state)
                    else 'the allocation is built and target cells are still free')
         event = Reallocation(len(env.state.placed), reason or default)
+        table = frozenset(env.unplaced())
+        # A block excluded while the table held more blocks may be free now: check it again.
+        self.blocked = {b: d for b, d in self.blocked.items() if d['table'] == table}
         for k in guide.open_poses(env.state):
-            failure = self._pose_failure(env, guide, k)
+            failure = self._pose_failure(env, guide, k, table, event)
             if failure is None or not rests_now(env.grid, guide.pose_cells[k], occupied):
                 continue
             p = guide.placements[k]
@@ -169,7 +182,7 @@ class Reallocator:
             event.reason += '; no time left to re-allocate'
         else:
             limit = self.config.params.time_limit_s if left is None else min(self.config.params.time_limit_s, left)
-            result = self.allocate(self.scene_of(env), exclude, limit)
+            result = self.allocate(self._without_blocked(self.scene_of(env), env), exclude, limit)
             event.status, event.objective, event.bound = result.status, result.objective, result.bound
             event.solve_time_s = result.solve_time_s
             event.placements = list(result.placements)
@@ -183,16 +196,36 @@ class Reallocator:
         self.seconds += time.perf_counter() - t0
         return event
 
-    def _pose_failure(self, env: AssemblyEnv, guide: AllocationGuide, k: int) -> str | None:
-        """None when some block can fill pose k now, else the first failure's reason
-        (each distinct motion checked once, as a verified agent goes down its ranking)."""
-        action, _, failed = first_feasible(env, guide.pose_actions(k, env.state), self.check)
+    def _pose_failure(self, env: AssemblyEnv, guide: AllocationGuide, k: int, table: frozenset,
+                      event: Reallocation) -> str | None:
+        """None when pose k is not to blame: some block can fill it now, or every block of its
+        type failed to be picked (those blocks are excluded instead, see the module docstring);
+        else the first failure's reason (each distinct motion checked once, as a verified agent
+        goes down its ranking). Blocks already excluded are not tried again."""
+        actions = [a for a in guide.pose_actions(k, env.state) if a.block not in self.blocked]
+        action, _, failed = first_feasible(env, actions, self.check)
         if action is not None:
             return None
+        placing = [(a, r) for a, r in failed if getattr(r, 'failure', '') != 'grasp']
+        for a, r in failed:
+            if getattr(r, 'failure', '') == 'grasp' and a.block not in self.blocked:
+                block = env.scene.blocks[a.block]
+                self.blocked[a.block] = {'block': block.id, 'type': block.type, 'reason': r.reason, 'table': table}
+                event.blocks.append({'block': block.id, 'type': block.type, 'reason': r.reason})
         if not failed:
-            return 'no block of its type is left'
-        first, result = failed[0]
+            return None if any(a.block in self.blocked for a in guide.pose_actions(k, env.state)) \
+                else 'no block of its type is left'
+        if not placing:
+            return None
+        first, result = placing[0]
         return f'{env.scene.blocks[first.block].id}: {result.reason}'
+
+    def _without_blocked(self, scene: Scene, env: AssemblyEnv) -> Scene:
+        """The scene to re-allocate from, without the table blocks that cannot be picked."""
+        if not self.blocked:
+            return scene
+        gone = {d['block'] for d in self.blocked.values()}
+        return replace(scene, blocks=tuple(b for b in scene.blocks if b.id not in gone))
 
 
 def with_reallocation(decide: Decide, reallocator: Reallocator) -> Decide:
