@@ -210,3 +210,12 @@ def test_a_new_scene_or_plan_clears_only_what_it_does_not_log_again(tmp_path):
     assert cleared('/world/blocks/c1') and cleared('/world/blocks/i0')
     assert not cleared('/world/blocks/c0') and not cleared('/world/targets/front/target_cells')
     assert cleared('/world/plan/allocation/0')          # the shorter plan has no allocation at all
+
+
+def test_a_step_that_moves_blocks_aside_says_so():
+    step = {'block': 'b4', 'type': 'cube', 'target': 'front', 'yaw': 0, 'cells': [[0, 0, 0]],
+            'moved_aside': [{'block': 'b1', 'position': [0.35, 0.22, 0.02], 'yaw': 270}]}
+    plan = viz.parse_plan(json.dumps({'steps': [step]}))
+    assert plan.steps[0].moved_aside[0]['block'] == 'b1'
+    assert '(first moves b1 aside)' in viz.step_text(0, plan.steps[0])
+    assert '1. b4 (cube) -> front yaw 0 (first moves b1 aside)' in viz.plan_summary(plan)

@@ -43,3 +43,16 @@ def test_rigid_bodies_message_like_mocap4r2():
     assert msg.rigidbodies[0].rigid_body_name == 'block_b0'
     pos, quat = pose_from_msg(msg.rigidbodies[0].pose)
     assert pos == pytest.approx([0.4, -0.2, 0.025]) and quat[3] == pytest.approx(0.7071068)
+
+
+def test_blocks_moved_aside_round_trip_and_mismatched_lengths_are_refused():
+    from rad_core.errors import RadError
+    from rad_ros.motion import moved_aside_from_msgs, moved_aside_to_msgs
+    moves = [{'block': 'b1', 'position': [0.35, 0.22, 0.02], 'yaw': 270},
+             {'block': 'b7', 'position': [0.5, -0.18, 0.025], 'yaw': 0}]
+    blocks, poses = moved_aside_to_msgs(moves)
+    assert blocks == ['b1', 'b7'] and poses[0].position.y == pytest.approx(0.22)
+    assert moved_aside_from_msgs(blocks, poses) == moves
+    assert moved_aside_to_msgs([]) == ([], [])
+    with pytest.raises(RadError, match='2 moved-aside blocks but 1 poses'):
+        moved_aside_from_msgs(blocks, poses[:1])

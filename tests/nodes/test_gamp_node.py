@@ -115,3 +115,20 @@ def test_a_place_pose_puts_the_anchor_there_and_a_pose_no_scene_holds_is_refused
         r = plan(scene, block.id, 0, '', (0, 0, 0), 0, place=place)
         assert not r.success and r.failure == 'invalid_request' and expected in r.reason, r.reason
     assert proc.is_running()
+
+
+def test_a_pick_blocked_by_a_neighbour_moves_it_aside_first_and_says_where(gamp):
+    from pathlib import Path
+    from rad_core.scene import Scene
+    from rad_ros.motion import moved_aside_from_msgs
+    _, plan = gamp
+    scene = Scene.loads((Path(__file__).resolve().parents[2] / 'scenes' / 'hard' / 'pento_floor.json').read_text())
+    target = scene.targets[0]
+    r = plan(scene, 'b4', 0, target.name, tuple(target.filled[-1]), 0)    # b1 lies too close for the fingers
+    assert r.success, r.reason
+    [aside] = moved_aside_from_msgs(r.moved_aside_blocks, r.moved_aside_poses)
+    assert aside['block'] == 'b1' and aside['position'][2] == pytest.approx(scene.block('b1').position[2])
+    assert [g.action for g in r.gripper].count('grasp') == 2
+    spread = generate_scene(GeneratorConfig(grid=3), 5)        # nothing in the way: nothing moved
+    plain = plan(spread, *first_action(spread))
+    assert plain.success and list(plain.moved_aside_blocks) == [] and list(plain.moved_aside_poses) == []

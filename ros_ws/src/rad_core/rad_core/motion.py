@@ -103,6 +103,13 @@ class Motion:
         """Seconds of arm motion (gripper moves come on top)."""
         return float(sum(t.duration for t in self.trajectories))
 
+    def then(self, other: Motion) -> Motion:
+        """This motion followed by `other` (which starts where this one ends)."""
+        n = len(self.trajectories)
+        return Motion(self.trajectories + other.trajectories,
+                      self.gripper + [GripperCommand(g.action, g.position, g.max_effort, g.before + n,
+                                                     g.expected_position) for g in other.gripper])
+
     def to_dict(self) -> dict:
         return {'trajectories': [t.to_dict() for t in self.trajectories],
                 'gripper': [g.to_dict() for g in self.gripper]}

@@ -357,6 +357,52 @@ def lay_out(kinds: Sequence[str], types: Mapping[str, BlockType], targets: Seque
     return blocks
 
 
+def footprint(block: Block, types: Mapping[str, BlockType], unit: float) -> np.ndarray:
+    """(units, 2) xy centres of a block's units (its yaw rounded to a quarter turn)."""
+    yaw = int(round(block.yaw / 90.0)) * 90 % 360
+    return np.asarray(block.position[:2], dtype=float) + unit * types[block.type].rotated(yaw)[:, :2]
+
+
+def move_aside_spot(scene: Scene, block_id: str, config: LayoutConfig = LayoutConfig(), clear_of: Sequence[str] = (),
+                   hand: float = 0.12) -> tuple | None:
+    """Where to put a block that lies in another's way: a free place on the table under the rules
+    `lay_out` lays blocks out by (within reach, in front of the robot, clear of the target regions,
+    `config.gap` from every other block so the open gripper fits) and `hand` (m) from the blocks in
+    `clear_of` (the ones it was moved to free: the hand comes down on them next), with the block's
+    own yaw, the one nearest to where it lies (a short carry). (position, yaw), or None."""
+    block = scene.block(block_id)
+    types, unit = scene.block_types, scene.unit
+    yaw = int(round(block.yaw / 90.0)) * 90 % 360
+    offs = types[block.type].rotated(yaw)
+    xs = np.arange(0.0, config.reach[1] + 1e-9, config.step)
+    ys = np.arange(-config.reach[1], config.reach[1] + 1e-9, config.step)
+    grid = np.stack(np.meshgrid(xs, ys, indexing='ij'), axis=-1).reshape(-1, 2)
+    pts = grid[:, None, :] + unit * offs[None, :, :2]
+    r = np.linalg.norm(pts, axis=-1)
+    ok = np.all((r >= config.reach[0]) & (r <= config.reach[1]), axis=1)
+    ok &= np.all(np.degrees(np.abs(np.arctan2(pts[..., 1], pts[..., 0]))) <= config.max_bearing_deg, axis=1)
+    for t in scene.targets:
+        lo, hi = t.bounds(unit)
+        pad = unit / 2 + config.region_margin
+        ok &= ~np.any(np.all((pts > lo[:2] - pad) & (pts < hi[:2] + pad), axis=-1), axis=1)
+    others = [footprint(b, types, unit) for b in scene.blocks if b.id != block_id]
+    obstacles = [*others, *[np.asarray(o.position[:2], dtype=float)[None] for o in scene.obstacles]]
+    if obstacles:
+        taken = np.concatenate(obstacles)
+        near = np.all(np.abs(pts[:, :, None, :] - taken[None, None, :, :]) < unit + config.gap - 1e-9, axis=-1)
+        ok &= ~near.any(axis=(1, 2))
+    for bid in clear_of:
+        theirs = footprint(scene.block(bid), types, unit)
+        near = np.all(np.abs(pts[:, :, None, :] - theirs[None, None, :, :]) < unit + hand, axis=-1)
+        ok &= ~near.any(axis=(1, 2))
+    if not ok.any():
+        return None
+    distance = np.linalg.norm(grid - np.asarray(block.position[:2]), axis=-1)
+    cand = int(np.argmin(np.where(ok, distance, np.inf)))
+    z = unit / 2 - int(offs[:, 2].min()) * unit
+    return (round(float(grid[cand][0]), 6), round(float(grid[cand][1]), 6), round(z, 6)), yaw
+
+
 LAYOUT_ATTEMPTS = 4
 
 

@@ -240,7 +240,9 @@ def parse_plan(text: str) -> PlanDoc:
 
 def step_text(i: int, step: PlanStep) -> str:
     cells = ' '.join(f'[{a},{b},{c}]' for a, b, c in step.cells)
-    return f'step {i + 1}: {step.block} ({step.type}) -> {step.target} yaw {step.yaw} cells {cells}'
+    aside = (' (first moves ' + ', '.join(d['block'] for d in step.moved_aside) + ' aside)'
+             if step.moved_aside else '')
+    return f'step {i + 1}: {step.block} ({step.type}) -> {step.target} yaw {step.yaw} cells {cells}{aside}'
 
 
 def plan_summary(plan: PlanDoc) -> str:
@@ -253,7 +255,9 @@ def plan_summary(plan: PlanDoc) -> str:
     if plan.predicted_coverage is not None:
         lines.append(f'\npredicted coverage: {plan.predicted_coverage:.3f}')
     lines += ['', f'{len(plan.steps)} steps:', '']
-    lines += [f'{i + 1}. {s.block} ({s.type}) -> {s.target} yaw {s.yaw}' for i, s in enumerate(plan.steps)]
+    lines += [f'{i + 1}. {s.block} ({s.type}) -> {s.target} yaw {s.yaw}'
+              + (f" (first moves {', '.join(d['block'] for d in s.moved_aside)} aside)" if s.moved_aside else '')
+              for i, s in enumerate(plan.steps)]
     if plan.reallocations:
         lines += ['', f'{len(plan.reallocations)} re-allocations (sequencing stalled):', '']
         for e in plan.reallocations:

@@ -33,7 +33,7 @@ from rad_core.sim.workspace import Workspace
 from rad_core.transforms import matrix_from_quaternion
 from rad_msgs.srv import PlanAction
 from rad_ros.conversions import scene_from_request
-from rad_ros.motion import motion_to_msgs, pose_from_msg
+from rad_ros.motion import motion_to_msgs, pose_from_msg, moved_aside_to_msgs
 from rad_ros.plant import ActionPlant
 from rad_ros.node_main import main_for
 
@@ -97,6 +97,7 @@ class GampNode(Node):
         response.grasp.unit, response.grasp.yaw_deg = int(result.grasp.unit), int(result.grasp.yaw)
         response.trajectories, response.gripper = motion_to_msgs(result.motion.to_dict(),
                                                                  self.get_parameter('frame_id').value)
+        response.moved_aside_blocks, response.moved_aside_poses = moved_aside_to_msgs(result.moved_aside)
         if request.execute:
             threading.Thread(target=self.execute, args=(request.action.block_id, result.motion), daemon=True).start()
         sent = ' (sent for execution)' if request.execute else ''

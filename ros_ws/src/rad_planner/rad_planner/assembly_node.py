@@ -92,7 +92,7 @@ from rad_ros.node_main import run_node
 from rad_ros.plan_msgs import fill_plan_response, plan_json
 from rad_ros.sequencer_msgs import action_to_msg, ranking_from_response, sequence_request
 from rad_ros.mocap_input import MocapInput, calibration_tf
-from rad_ros.motion import motion_from_msgs
+from rad_ros.motion import motion_from_msgs, moved_aside_from_msgs
 from rad_ros.plant import ActionPlant
 from rad_ros.qos import LATCHED
 from rad_planner.take_apart import serve_take_apart
@@ -343,7 +343,8 @@ class AssemblyNode(Node):
                 raise RadError(f'plan_action answered a trajectory the {self.model.name} would refuse '
                                f'(trajectory {k}): {why}')
             start_q = np.asarray(traj['points'][-1]['positions'])
-        return MotionPlan(True, '', '', (response.grasp.unit, response.grasp.yaw_deg), motion)
+        return MotionPlan(True, '', '', (response.grasp.unit, response.grasp.yaw_deg), motion,
+                          moved_aside_from_msgs(response.moved_aside_blocks, response.moved_aside_poses))
 
     def plan(self, scene: Scene, time_limit: float, start):
         plan = plan_for_agent(self.agent, scene, self.allocate, self.plan_motion, self.rank, self.reallocate,

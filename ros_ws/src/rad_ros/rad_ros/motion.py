@@ -15,6 +15,9 @@ from control_msgs.msg import GripperCommand
 from rad_msgs.msg import GripperStep, RigidBodies, RigidBody
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
+from rad_core.errors import RadError
+from rad_core.transforms import yaw_of_quaternion, yaw_quaternion
+
 
 def duration_to_s(d: Duration) -> float:
     return d.sec + d.nanosec * 1e-9
@@ -81,6 +84,25 @@ def pose_msg(position, quaternion) -> Pose:
 def pose_from_msg(pose: Pose) -> tuple[list[float], list[float]]:
     p, q = pose.position, pose.orientation
     return [p.x, p.y, p.z], [q.x, q.y, q.z, q.w]
+
+
+def moved_aside_to_msgs(moved_aside) -> tuple[list[str], list[Pose]]:
+    """Blocks moved aside ({'block', 'position', 'yaw'} in order) as the moved_aside_blocks and
+    moved_aside_poses fields of PlanAction's response and of PlanStep."""
+    return ([str(d['block']) for d in moved_aside],
+            [pose_msg(d['position'], yaw_quaternion(d['yaw'])) for d in moved_aside])
+
+
+def moved_aside_from_msgs(blocks, poses) -> list[dict]:
+    """The inverse of `moved_aside_to_msgs` (yaws to whole degrees)."""
+    if len(blocks) != len(poses):
+        raise RadError(f'{len(blocks)} moved-aside blocks but {len(poses)} poses')
+    out = []
+    for block, pose in zip(blocks, poses):
+        position, quaternion = pose_from_msg(pose)
+        out.append({'block': str(block), 'position': [round(v, 6) for v in position],
+                    'yaw': int(round(yaw_of_quaternion(quaternion))) % 360})
+    return out
 
 
 def rigid_bodies_msg(bodies, frame_number: int, stamp, frame_id: str) -> RigidBodies:

@@ -8,7 +8,7 @@ from rad_core.sequencing.plan import AssemblyPlan
 from rad_core.transforms import yaw_quaternion
 from rad_core.allocation import Placement
 from rad_ros.conversions import cells_msg, placement_to_msg
-from rad_ros.motion import motion_to_msgs, pose_msg
+from rad_ros.motion import motion_to_msgs, pose_msg, moved_aside_to_msgs
 
 
 def step_to_msg(step, frame_id: str) -> PlanStep:
@@ -19,6 +19,7 @@ def step_to_msg(step, frame_id: str) -> PlanStep:
     msg.target_pose = pose_msg(step.position, yaw_quaternion(step.yaw))
     if step.motion:
         msg.trajectories, msg.gripper = motion_to_msgs(step.motion, frame_id)
+    msg.moved_aside_blocks, msg.moved_aside_poses = moved_aside_to_msgs(step.moved_aside)
     return msg
 
 

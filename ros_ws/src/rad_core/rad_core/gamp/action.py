@@ -8,15 +8,18 @@ assembly planner calls it directly.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+import re
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from rad_core.errors import RadError
 from rad_core.gamp.planner import GampConfig, GampResult, placement_pose, plan_action
-from rad_core.scene import Scene
+from rad_core.scene import Block, Scene
+from rad_core.shapes import LayoutConfig, footprint, move_aside_spot
 from rad_core.sim import panda
 from rad_core.sim.world import World
+from rad_core.transforms import yaw_quaternion
 
 
 @dataclass(frozen=True)
@@ -150,4 +153,79 @@ class MotionPlanner:
         position, yaw = target_pose(scene, action)
         start = self.load(scene, start)
         seat = position + seat_shift(scene, action.block_id, position, yaw) if scene.measured_offsets else position
-        return plan_action(self.world, action.block_id, seat, yaw, start=start, config=self.config), position, yaw
+        result = plan_action(self.world, action.block_id, seat, yaw, start=start, config=self.config)
+        if result.failure == 'grasp' and self.config.move_aside > 0:
+            result = self._move_aside_first(scene, action.block_id, seat, yaw, start, result, self.config.move_aside)
+        return result, position, yaw
+
+    def _move_aside_first(self, scene: Scene, block_id: str, seat, yaw: int, start, blocked: GampResult,
+                         moves: int) -> GampResult:
+        """The block's pick is blocked: move a neighbour on the table that its grasps hit (as
+        `blocked.reason` names them, nearest first, at most `MOVE_ASIDE_TRIES`) to a free place
+        first, then plan the block's pick and place from there; where another neighbour still
+        blocks it, move that one too (at most `moves` in all). `blocked`, its reason saying what
+        was tried, when no way works."""
+        tried = []
+        named = set(re.findall(r'hits block (\S+?)(?=[;:,)]|\s|$)', blocked.reason))
+        blockers = [b for b in table_neighbours(scene, block_id) if b in named]
+        for other in blockers[:MOVE_ASIDE_TRIES]:
+            spot = (move_aside_spot(scene, other, clear_of=[block_id])
+                    or move_aside_spot(scene, other, MOVE_ASIDE_LAYOUT, clear_of=[block_id]))
+            if spot is None:
+                tried.append(f'{other}: no free place on the table')
+                continue
+            spot_position, spot_yaw = spot
+            first = plan_action(self.world, other, spot_position, spot_yaw, start=start, config=self.config)
+            if not first.success:
+                tried.append(f'{other}: {first.reason}')
+                continue
+            pose = self.world.block_pose(other)
+            self.world.set_block_pose(other, spot_position, yaw_quaternion(spot_yaw))
+            try:
+                then = plan_action(self.world, block_id, seat, yaw, start=first.motion.final_joints(),
+                                   config=self.config)
+                if then.failure == 'grasp' and moves > 1:
+                    aside = replace(scene, blocks=tuple(
+                        Block(b.id, b.type, tuple(spot_position), spot_yaw) if b.id == other else b
+                        for b in scene.blocks))
+                    then = self._move_aside_first(aside, block_id, seat, yaw, first.motion.final_joints(), then,
+                                                 moves - 1)
+            finally:
+                self.world.set_block_pose(other, *pose)
+            if not then.success:
+                tried.append(f'{other} moved aside: {then.reason}')
+                continue
+            then.motion = first.motion.then(then.motion)
+            then.moved_aside = [{'block': other, 'position': list(spot_position), 'yaw': spot_yaw}, *then.moved_aside]
+            then.ik_calls += first.ik_calls + blocked.ik_calls
+            then.timings = {k: then.timings[k] + first.timings[k] + blocked.timings[k] for k in then.timings}
+            return then
+        if tried:
+            blocked.reason += '; moving a neighbour aside first: ' + '; '.join(tried)
+        return blocked
+
+
+MOVE_ASIDE_TRIES = 3
+"""Neighbours in a block's way that `MotionPlanner` tries to move aside, nearest first, at each move."""
+MOVE_ASIDE_LAYOUT = LayoutConfig(reach=(0.3, 0.7), max_bearing_deg=100.0)
+"""Where a block moved aside may go when the layout's own area (`shapes.LayoutConfig`) has no
+free place: wider (a table the layout filled has room left beside the robot and farther out;
+GAMP says whether the arm gets there)."""
+
+
+def table_neighbours(scene: Scene, block_id: str, reach: float = 0.08) -> list[str]:
+    """Blocks on the table (not in a target region) within `reach` (m, between unit faces) of the
+    block, nearest first: the ones whose moving away could free its grasps."""
+    unit, types = scene.unit, scene.block_types
+    ours = footprint(scene.block(block_id), types, unit)
+    boxes = [t.bounds(unit) for t in scene.targets]
+    found = []
+    for other in scene.blocks:
+        if other.id == block_id or any(np.all((np.asarray(other.position) > lo) & (np.asarray(other.position) < hi))
+                                       for lo, hi in boxes):
+            continue
+        theirs = footprint(other, types, unit)
+        gap = float(np.abs(ours[:, None, :] - theirs[None, :, :]).max(axis=-1).min()) - unit
+        if gap < reach:
+            found.append((gap, other.id))
+    return [bid for _, bid in sorted(found)]

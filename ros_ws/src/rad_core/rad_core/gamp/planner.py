@@ -73,6 +73,11 @@ class GampConfig:
     """Seed of the IK's random restarts: the same request gives the same plan."""
     ik: IkConfig = field(default_factory=IkConfig)
     collision: CollisionConfig = field(default_factory=CollisionConfig)
+    move_aside: int = 2
+    """When no grasp of a block on the table is free because neighbours stand too close, move
+    them out of the way first, to free places on the table (`shapes.move_aside_spot`): at most
+    this many per step (0: never). Used by `gamp.action.MotionPlanner` (the gamp node,
+    /plan_assembly, `rad eval` with the robot); `plan_action` itself plans one pick and place."""
     timing: TimingConfig = field(default_factory=TimingConfig)
 
 
@@ -93,6 +98,9 @@ class GampResult:
     motion: Motion | None = None
     timings: dict = field(default_factory=lambda: {'ik_s': 0.0, 'collision_s': 0.0, 'total_s': 0.0})
     ik_calls: int = 0
+    moved_aside: list = field(default_factory=list)
+    """Blocks the motion first moves out of the way on the table, in order:
+    {'block', 'position' (anchor, m), 'yaw' (deg)}; the motion holds their pick and place first."""
 
 
 def placement_pose(scene: Scene, block_id: str, unit: int, cell_centre, rotation: int,

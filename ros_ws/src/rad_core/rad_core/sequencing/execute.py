@@ -70,7 +70,7 @@ from rad_core.motion import GripperCommand, GripperResult, Motion, run_motion
 from rad_core.robot_model import PANDA, envelope
 from rad_core.trajectory import Trajectory, TrajectoryAborted
 from rad_core.scene import Scene
-from rad_core.sequencing.plan import AssemblyPlan, PlanMotion, moved
+from rad_core.sequencing.plan import AssemblyPlan, PlanMotion
 from rad_core.sim.mocap import Registration
 from rad_core.sim.panda import HOME
 from rad_core.sequencing.result import deviation, result_document
@@ -204,7 +204,7 @@ def execute_assembly(scene: Scene, plan: Plan, move_arm: MoveArm, move_gripper: 
                 result.allocation = assembly.allocation
                 promised = current
                 for step in assembly.steps:
-                    promised = moved(promised, step.block, step.position, step.yaw)
+                    promised = step.scene_after(promised)
                 result.planned_coverage = measured_coverage(promised)
             result.reallocations += [e.to_dict() for e in assembly.reallocations]
             problem = None
@@ -226,7 +226,8 @@ def execute_assembly(scene: Scene, plan: Plan, move_arm: MoveArm, move_gripper: 
                         result.faults.append({'step': len(result.steps), 'block': step.block, 'problem': problem,
                                               'recovered': False})
                         break
-                    step = replace(step, motion=fresh.motion, grasp=tuple(fresh.grasp))
+                    step = replace(step, motion=fresh.motion, grasp=tuple(fresh.grasp),
+                                   moved_aside=list(fresh.moved_aside))
                 motion = Motion.from_dict(step.motion)
                 failed = _run_step(motion, move_arm, move_gripper, step_start, joints, config)
                 # A failed grasp, or a trajectory the controller aborted (something held the arm back), has
@@ -235,7 +236,7 @@ def execute_assembly(scene: Scene, plan: Plan, move_arm: MoveArm, move_gripper: 
                     [step_start[:7], [motion.opening] * 2])
                 settle(config.settle_s)
                 report(len(result.steps), len(assembly.steps), step.block, 'verifying', failed)
-                expected = moved(current, step.block, step.position, step.yaw)
+                expected = step.scene_after(current)
                 result.steps.append({**step.to_dict(), **({'failure': failed} if failed else {})})
                 try:
                     current = measure()

@@ -51,6 +51,7 @@ class MotionPlan:
     reason: str = ''
     grasp: tuple[int, int] = (0, 0)   # unit, yaw
     motion: dict | None = None        # rad_core.motion.Motion.to_dict(): {"trajectories", "gripper"}
+    moved_aside: list = field(default_factory=list)   # blocks moved out of the way first (GampResult.moved_aside)
 
 
 @dataclass
@@ -63,6 +64,10 @@ class PlanStep:
     motion); the motion's "trajectories" (exactly as sent to the arm controller) and "gripper"
     commands are keys of the step. `from_dict` reads it back. Only block to cells are required: a
     step read from a document that lacks the rest has the defaults (0, empty, None for the motion).
+
+    moved_aside: blocks on the table in the way of the grasp that the motion first moves to free
+    places, in order: {'block', 'position' (anchor, m), 'yaw' (deg)} (`MotionPlanner`'s move aside);
+    in the dict form only when there are any.
     """
 
     block: str
@@ -76,12 +81,20 @@ class PlanStep:
     grasp: tuple[int, int] = (0, 0)
     position: list[float] = field(default_factory=list)
     motion: dict | None = None
+    moved_aside: list = field(default_factory=list)
 
     def to_dict(self) -> dict:
         return {'block': self.block, 'type': self.type, 'target': self.target, 'yaw': self.yaw,
                 'cells': self.cells, 'unit': self.unit, 'cell': self.cell, 'rotation': self.rotation,
                 'grasp': {'unit': self.grasp[0], 'yaw': self.grasp[1]}, 'position': self.position,
+                **({'moved_aside': self.moved_aside} if self.moved_aside else {}),
                 **(self.motion or {'trajectories': [], 'gripper': []})}
+
+    def scene_after(self, scene: Scene) -> Scene:
+        """The scene once this step is done: the blocks it moved aside, then its block, at their new poses."""
+        for d in self.moved_aside:
+            scene = moved(scene, d['block'], d['position'], d['yaw'])
+        return moved(scene, self.block, self.position, self.yaw)
 
     @classmethod
     def from_dict(cls, d: dict) -> PlanStep:
@@ -98,7 +111,9 @@ class PlanStep:
                    (int(grasp.get('unit', 0)), int(grasp.get('yaw', 0))),
                    [float(v) for v in d.get('position', ())],
                    {'trajectories': d['trajectories'], 'gripper': d.get('gripper') or []}
-                   if d.get('trajectories') else None)
+                   if d.get('trajectories') else None,
+                   [{'block': str(s['block']), 'position': [float(v) for v in s['position']], 'yaw': int(s['yaw'])}
+                    for s in d.get('moved_aside') or []])
 
     def final_joints(self) -> np.ndarray:
         """The 9 joints (arm, fingers) where this step's motion leaves the robot."""
@@ -220,7 +235,7 @@ def plan_assembly(scene: Scene, allocate: Allocate, plan_motion: PlanMotion, seq
         if decision.plan is not None:
             step = decision.plan
             plan.steps.append(step)
-            world['scene'] = moved(world['scene'], step.block, step.position, step.yaw)
+            world['scene'] = step.scene_after(world['scene'])
             world['q'] = step.final_joints()
         return result
 
@@ -299,7 +314,8 @@ def _first_feasible(env: AssemblyEnv, scene: Scene, ranked, plan_motion: PlanMot
     req, block = scene_action(env, action), scene.blocks[action.block]
     anchor = env.grid.centres[cells[0]]   # cells are in unit order: the first is the anchor's
     return action, PlanStep(block.id, block.type, req.target, int(yaw), ijk, action.unit, list(req.cell),
-                            action.rotation, motion.grasp, [float(v) for v in anchor], motion.motion)
+                            action.rotation, motion.grasp, [float(v) for v in anchor], motion.motion,
+                            list(motion.moved_aside))
 
 
 def _book_failure(env: AssemblyEnv, action, motion: MotionPlan):
@@ -325,5 +341,5 @@ def local_motion_planner(planner) -> PlanMotion:
         if not result.success:
             return MotionPlan(False, result.failure, result.reason)
         return MotionPlan(True, '', '', (int(result.grasp.unit), int(result.grasp.yaw)),
-                          result.motion.to_dict())
+                          result.motion.to_dict(), list(result.moved_aside))
     return plan_motion

@@ -31,15 +31,18 @@ class SimulatedBuild:
 
 
 def build_teleported(scene: Scene, steps, settle_s: float = 0.5):
-    """Put each step's block (`PlanStep`: block, position, yaw) where the plan says, settle
-    `settle_s` simulated seconds after each, and register the world: a `sim.mocap.Registration`
-    (its scene: where every block is; set_aside: blocks no scene can express, with why)."""
+    """Put each step's block (`PlanStep`: block, position, yaw; first the blocks it moves out of
+    the way, `moved_aside`) where the plan says, settle `settle_s` simulated seconds after each, and
+    register the world: a `sim.mocap.Registration` (its scene: where every block is; set_aside:
+    blocks no scene can express, with why)."""
     from rad_core.sim.twin import Twin, twin_world_config
     from rad_core.sim.world import World
     from rad_core.transforms import yaw_quaternion
     with World(scene, twin_world_config()) as world:
         twin = Twin(world)
         for step in steps:
+            for d in getattr(step, 'moved_aside', ()):
+                world.set_block_pose(d['block'], d['position'], yaw_quaternion(d['yaw']))
             world.set_block_pose(step.block, step.position, yaw_quaternion(step.yaw))
             twin.settle(settle_s)
         return twin.registration()
