@@ -219,3 +219,13 @@ def test_a_step_that_moves_blocks_aside_says_so():
     assert plan.steps[0].moved_aside[0]['block'] == 'b1'
     assert '(first moves b1 aside)' in viz.step_text(0, plan.steps[0])
     assert '1. b4 (cube) -> front yaw 0 (first moves b1 aside)' in viz.plan_summary(plan)
+
+
+def test_anytime_points_are_read_shown_and_bad_ones_refused():
+    doc = {'anytime': [{'t': 0.8, 'coverage': 0.83, 'plan': 'scorer'}, {'t': 2.9, 'coverage': 0.9, 'plan': 'search'}]}
+    plan = viz.parse_plan(json.dumps(doc))
+    assert [a['coverage'] for a in plan.anytime] == [0.83, 0.9]
+    text = viz.plan_summary(plan)
+    assert 'scorer plan best at 0.80 s, coverage 0.830' in text and 'search plan best at 2.90 s' in text
+    with pytest.raises(RadError, match='anytime must be a list'):
+        viz.parse_plan(json.dumps({'anytime': [{'t': 'soon', 'coverage': 1.0}]}))

@@ -88,6 +88,9 @@ def test_plans_from_json_and_from_motion_capture(graph):
         assert r.success, r.reason
         assert r.allocation_status == 'OPTIMAL' and r.allocation_objective == DEMO_SCENE.num_target_cells
         assert r.predicted_coverage == 1.0 and len(r.steps) == len(r.allocation)
+        # Anytime planning: the first plan (the scorer's) fills the target, so no search follows.
+        assert list(r.anytime_plans) == ['scorer'] and list(r.anytime_coverages) == [1.0]
+        assert 0 < r.anytime_times_s[0] <= next(t.seconds for t in r.timings if t.stage == 'total')
         stages = {t.stage for t in r.timings}
         assert {'allocation', 'sequencing', 'motion', 'registration', 'total'} <= stages
         for step in r.steps:

@@ -17,6 +17,7 @@ Entity paths (all under /world, z up, metres, the scene frame = robot base frame
   /world/plan/step, /world/plan/done         on the `step` timeline: the step's block, all placed before it
   /plan/step_text                            TextDocument per step, on `step`
   /plan/timings/<stage>, /plan/predicted_coverage   Scalars, on `ros_time`
+  /plan/anytime_coverage                            Scalars: the best plan's coverage at each moment
   /plan/summary                              TextDocument (markdown), on `ros_time`
 
 The robot's links use Rerun's named transform frames (the URDF loader logs a
@@ -177,6 +178,7 @@ class PlanDoc:
     timings: dict[str, float] = field(default_factory=dict)
     predicted_coverage: float | None = None
     reallocations: tuple[dict, ...] = ()   # Reallocation.to_dict() of each re-allocation, in order
+    anytime: tuple[dict, ...] = ()         # anytime planning: {'t', 'coverage', 'plan'} after each plan
 
 
 def _check_cells(value, where: str) -> None:
@@ -234,8 +236,14 @@ def parse_plan(text: str) -> PlanDoc:
             isinstance(e, dict) and isinstance(e.get('step'), int) and isinstance(e.get('reason'), str)
             and isinstance(e.get('no_goods', []), list) for e in reallocations):
         raise RadError('reallocations must be a list of objects with an integer step, a reason and no_goods')
+    anytime = doc.get('anytime') or []
+    if not isinstance(anytime, list) or not all(
+            isinstance(a, dict) and all(isinstance(a.get(k), (int, float)) and not isinstance(a.get(k), bool)
+                                        and math.isfinite(a[k]) for k in ('t', 'coverage'))
+            for a in anytime):
+        raise RadError('anytime must be a list of objects with finite t (s) and coverage')
     return PlanDoc(allocation, tuple(steps), {str(k): float(v) for k, v in timings.items()},
-                   None if coverage is None else float(coverage), tuple(reallocations))
+                   None if coverage is None else float(coverage), tuple(reallocations), tuple(anytime))
 
 
 def step_text(i: int, step: PlanStep) -> str:
@@ -254,6 +262,9 @@ def plan_summary(plan: PlanDoc) -> str:
                      f'{len(a.placements)} placements')
     if plan.predicted_coverage is not None:
         lines.append(f'\npredicted coverage: {plan.predicted_coverage:.3f}')
+    if plan.anytime:
+        lines.append('\nanytime: ' + '; '.join(f"{a.get('plan', 'plan')} plan best at {a['t']:.2f} s, "
+                                                  f"coverage {a['coverage']:.3f}" for a in plan.anytime))
     lines += ['', f'{len(plan.steps)} steps:', '']
     lines += [f'{i + 1}. {s.block} ({s.type}) -> {s.target} yaw {s.yaw}'
               + (f" (first moves {', '.join(d['block'] for d in s.moved_aside)} aside)" if s.moved_aside else '')
@@ -389,6 +400,14 @@ def log_plan(rec, scene: Scene, plan: PlanDoc, stamp_s: float, previous: PlanDoc
         rec.log(f'plan/timings/{entity_part(stage)}', rr.Scalars(seconds))
     if plan.predicted_coverage is not None:
         rec.log('plan/predicted_coverage', rr.Scalars(plan.predicted_coverage))
+    if plan.anytime:
+        # The coverage of the best plan so far, at each moment since the request (which began
+        # the last point's t before the plan arrived).
+        began = stamp_s - float(plan.anytime[-1]['t'])
+        for a in plan.anytime:
+            set_ros_time(rec, began + float(a['t']))
+            rec.log('plan/anytime_coverage', rr.Scalars(float(a['coverage'])))
+        set_ros_time(rec, stamp_s)
     rec.log('plan/summary', rr.TextDocument(plan_summary(plan), media_type=rr.MediaType.MARKDOWN))
 
     rec.reset_time()

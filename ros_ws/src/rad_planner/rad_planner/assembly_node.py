@@ -75,7 +75,7 @@ from rad_core.agents import parse
 from rad_core.errors import RadError
 from rad_core.scene import Scene
 from rad_core.sequencing.execute import ExecuteConfig, execute_assembly
-from rad_core.sequencing.agent_plan import plan_for_agent, reallocation_support
+from rad_core.sequencing.agent_plan import IMPROVE_TIME_S, plan_for_agent, reallocation_support
 from rad_core.sequencing.plan import MotionPlan
 from rad_core.sequencing.sequencer import Ranking
 from rad_core.robot_model import robot_model
@@ -105,7 +105,7 @@ class AssemblyNode(Node):
                             ('task_file', ''), ('service_timeout_s', 60.0), ('stale_after_s', 2.0),
                             ('settle_s', 0.5), ('position_tol', 0.005), ('max_replans', 3),
                             ('step_timeout_factor', 3.0), ('frame_id', 'world'), ('sequencer_timeout_s', 20.0),
-                            ('agent', 'default'), ('max_reallocations', 10),
+                            ('agent', 'default'), ('max_reallocations', 10), ('improve_time_s', IMPROVE_TIME_S),
                             ('robot', 'panda'), ('joint_prefix', ''), ('arm_controller', 'joint_trajectory_controller'),
                             ('gripper_action', 'franka_gripper/gripper_action'), ('gripper_result_is_width', False),
                             ('path_tolerance', 0.05), ('goal_tolerance', 0.01), ('goal_time_tolerance', 1.0),
@@ -292,13 +292,17 @@ class AssemblyNode(Node):
             raise RadError(f'{what} did not answer within {timeout:g} s')
         return future.result()
 
-    def rank(self, scene: Scene, placements, start) -> Ranking:
+    def rank(self, scene: Scene, placements, start, scorer_only: bool = False) -> Ranking:
         timeout = float(self.param('sequencer_timeout_s'))
         if not timeout > 0:
             raise RadError(f'the sequencer_timeout_s parameter must be positive, got {timeout}')
-        response = self.call(self.sequence_client, sequence_request(scene, placements, start), timeout,
-                             f'the sequencer node (service {self.sequence_client.srv_name})')
+        response = self.call(self.sequence_client, sequence_request(scene, placements, start, scorer_only=scorer_only),
+                             timeout, f'the sequencer node (service {self.sequence_client.srv_name})')
         return ranking_from_response(response)
+
+    def quick_rank(self, scene: Scene, placements, start) -> Ranking:
+        """The sequencer's scorer alone, without its search (anytime planning's first plan)."""
+        return self.rank(scene, placements, start, scorer_only=True)
 
     def allocate(self, scene: Scene, exclude=(), time_limit_s: float | None = None, support: str | None = None):
         """/allocate for a scene state; exclude: no-goods (re-allocation)."""
@@ -349,7 +353,8 @@ class AssemblyNode(Node):
     def plan(self, scene: Scene, time_limit: float, start):
         plan = plan_for_agent(self.agent, scene, self.allocate, self.plan_motion, self.rank, self.reallocate,
                               support=self.support, seed=int(self.param('seed')), start=start,
-                              time_limit_s=time_limit, max_reallocations=int(self.param('max_reallocations')))
+                              time_limit_s=time_limit, max_reallocations=int(self.param('max_reallocations')),
+                              quick_rank=self.quick_rank, improve_time_s=float(self.param('improve_time_s')))
         self.plan_pub.publish(String(data=json.dumps(plan_json(plan))))
         return plan
 

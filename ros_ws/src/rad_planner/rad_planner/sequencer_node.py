@@ -57,7 +57,8 @@ class SequencerNode(Node):
         response.policy = self.policy
         try:
             scene, placements, start, max_actions = sequence_inputs(request)
-            ranking = self.sequencer.rank(scene, placements, start=start, max_actions=max_actions)
+            ranking = self.sequencer.rank(scene, placements, start=start, max_actions=max_actions,
+                                          scorer_only=bool(request.scorer_only))
             fill_sequence_response(response, ranking, self.policy)
         except RadError as e:
             response.success, response.reason = False, str(e)

@@ -48,6 +48,9 @@ def fill_plan_response(response, plan: AssemblyPlan, timings: dict, frame_id: st
     response.timings = [StageTiming(stage=k, seconds=float(v)) for k, v in timings.items()]
     response.scene_json = plan.scene.dumps()
     response.reallocations = [reallocation_to_msg(e) for e in plan.reallocations]
+    response.anytime_times_s = [float(a['t']) for a in plan.anytime]
+    response.anytime_coverages = [float(a['coverage']) for a in plan.anytime]
+    response.anytime_plans = [str(a['plan']) for a in plan.anytime]
     return response
 
 
@@ -58,4 +61,4 @@ def plan_json(plan: AssemblyPlan) -> dict:
                       for s in plan.steps],
             'timings': plan.timings, 'predicted_coverage': plan.predicted_coverage,
             'success': plan.success, 'reason': plan.reason,
-            'reallocations': [e.to_dict() for e in plan.reallocations]}
+            'reallocations': [e.to_dict() for e in plan.reallocations], 'anytime': plan.anytime}

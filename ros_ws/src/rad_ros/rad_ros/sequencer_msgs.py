@@ -31,11 +31,12 @@ def action_from_msg(msg: AssemblyAction) -> SceneAction:
                        int(msg.rotation))
 
 
-def sequence_request(scene: Scene, placements, start=None, max_actions: int = 0) -> Sequence.Request:
+def sequence_request(scene: Scene, placements, start=None, max_actions: int = 0,
+                     scorer_only: bool = False) -> Sequence.Request:
     """The request ranking the next actions of `scene` (its current state) for these placements."""
     return Sequence.Request(scene_json=scene.dumps(), allocation=[placement_to_msg(p) for p in placements],
                             start_positions=[] if start is None else [float(v) for v in start],
-                            max_actions=int(max_actions))
+                            max_actions=int(max_actions), scorer_only=bool(scorer_only))
 
 
 def sequence_inputs(request) -> tuple[Scene, list, list[float] | None, int]:

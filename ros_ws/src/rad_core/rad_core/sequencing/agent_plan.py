@@ -10,18 +10,33 @@ so a figure measured with it is a statement about what the node graph does.
 
 from __future__ import annotations
 
+import math
+import time
+
 from rad_core.agents import AgentSpec, label, parse
+from rad_core.errors import RadError
 from rad_core.scene import Scene
 from rad_core.sequencing.plan import AssemblyPlan, plan_assembly
 
 
+IMPROVE_TIME_S = 2.0
+"""Anytime planning's default budget (s) for improving on the first plan (see `plan_for_agent`)."""
+
+
 def plan_for_agent(spec: AgentSpec, scene: Scene, allocate, plan_motion, rank, reallocate=None, *,
                    support: str | None = None, seed: int = 0, start=None, time_limit_s: float = 60.0,
-                   max_reallocations: int = 10, reallocation=None) -> AssemblyPlan:
+                   max_reallocations: int = 10, reallocation=None, quick_rank=None,
+                   improve_time_s: float = IMPROVE_TIME_S) -> AssemblyPlan:
     """allocate(scene, support=S) and reallocate(scene, no-goods, time limit) -> AllocationResult;
     plan_motion and rank as `plan_assembly` takes them. support: the allocation support when
     the caller has resolved it (default: `spec.resolved_support()`, which reads a model file).
-    reallocation: a `ReallocationConfig` (default: its defaults with max_reallocations)."""
+    reallocation: a `ReallocationConfig` (default: its defaults with max_reallocations).
+
+    Anytime planning, for a verified agent with a search and a `quick_rank` (its scorer alone,
+    `Sequencer.rank(..., scorer_only=True)`): a first complete plan ranked by the scorer (about a
+    second at the paper's sizes); when it leaves target cells unfilled, the agent's own plan (with
+    its search) within `improve_time_s` more (and the time limit), kept only where it fills more.
+    `AssemblyPlan.anytime` records each plan's time and coverage. Otherwise one plan, as before."""
     from rad_core.sequencing.reallocation import ReallocationConfig
     support = support or spec.resolved_support()
     if spec.realloc:
@@ -29,9 +44,30 @@ def plan_for_agent(spec: AgentSpec, scene: Scene, allocate, plan_motion, rank, r
         reallocation.validate()
     else:
         reallocation = None
-    return plan_assembly(scene, lambda s: allocate(s, support=support), plan_motion, rank, seed=seed, start=start,
-                         time_limit_s=time_limit_s, reallocate=reallocate if spec.realloc else None,
-                         reallocation=reallocation, verify=spec.verify)
+    if not (math.isfinite(improve_time_s) and improve_time_s >= 0):
+        raise RadError(f'improve_time_s must be finite and >= 0, got {improve_time_s}')
+
+    def plan_with(ranker, limit: float) -> AssemblyPlan:
+        return plan_assembly(scene, lambda s: allocate(s, support=support), plan_motion, ranker, seed=seed,
+                             start=start, time_limit_s=limit, reallocate=reallocate if spec.realloc else None,
+                             reallocation=reallocation, verify=spec.verify)
+
+    if quick_rank is None or not spec.search or not spec.verify:
+        return plan_with(rank, time_limit_s)
+    t0 = time.perf_counter()
+    best = plan_with(quick_rank, time_limit_s)
+    anytime = [{'t': time.perf_counter() - t0, 'coverage': best.predicted_coverage, 'plan': 'scorer'}]
+    left = min(improve_time_s, time_limit_s - (time.perf_counter() - t0))
+    if best.predicted_coverage < 1.0 - 1e-9 and left > 0:
+        searched = plan_with(rank, left)
+        invalid = searched.episode is not None and searched.episode.outcome.is_invalid
+        if searched.predicted_coverage > best.predicted_coverage + 1e-9 and not invalid:
+            best = searched
+        anytime.append({'t': time.perf_counter() - t0, 'coverage': best.predicted_coverage,
+                        'plan': 'search' if best is searched else 'scorer'})
+    best.anytime = anytime
+    best.timings['total'] = time.perf_counter() - t0
+    return best
 
 
 def reallocation_support(support: str) -> str:
@@ -47,10 +83,13 @@ class AgentPlanner:
     allocation: the first allocation's CP-SAT settings (default: 10 s, one worker, the agent's
     support); reallocation: a `ReallocationConfig` for re-allocating agents (default: the
     assembly node's, the stable allocation; its params set the re-solves' CP-SAT settings);
-    policy: the agent's scorer when the caller has already loaded it."""
+    policy: the agent's scorer when the caller has already loaded it; improve_time_s: anytime
+    planning's budget after the first plan (`plan_for_agent`; the assembly node's parameter of
+    the same name)."""
 
     def __init__(self, agent: str | AgentSpec = 'default', allocation_time_limit_s: float = 10.0,
-                 time_limit_s: float = 120.0, allocation=None, reallocation=None, policy=None):
+                 time_limit_s: float = 120.0, allocation=None, reallocation=None, policy=None,
+                 improve_time_s: float = IMPROVE_TIME_S):
         from rad_core.gamp.action import MotionPlanner
         from rad_core.sequencing.plan import local_motion_planner
         from rad_core.sequencing.sequencer import Sequencer, SequencerConfig
@@ -61,6 +100,7 @@ class AgentPlanner:
             self.sequencer.policy)
         self.allocation, self.reallocation = allocation, reallocation
         self.allocation_time_limit_s, self.time_limit_s = allocation_time_limit_s, time_limit_s
+        self.improve_time_s = improve_time_s
         self.gamp = MotionPlanner()
         self.motion = local_motion_planner(self.gamp)
 
@@ -85,7 +125,12 @@ class AgentPlanner:
         self.sequencer.forget()     # lines a branch and bound kept belong to the last scene's requests
         return plan_for_agent(self.spec, scene, self.allocate, self.motion, self.sequencer.rank, self.reallocate,
                               support=self.support, seed=seed, start=start, time_limit_s=self.time_limit_s,
-                              reallocation=self.reallocation)
+                              reallocation=self.reallocation, quick_rank=self.quick_rank,
+                              improve_time_s=self.improve_time_s)
+
+    def quick_rank(self, scene: Scene, placements, start=None):
+        """The agent's scorer alone (anytime planning's first plan)."""
+        return self.sequencer.rank(scene, placements, start, scorer_only=True)
 
     def close(self) -> None:
         self.sequencer.close()

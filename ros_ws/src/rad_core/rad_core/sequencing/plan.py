@@ -134,6 +134,10 @@ class AssemblyPlan:
     episode: Episode | None = None
     """The planning copy's MDP episode: discounted return, outcome (an unverified agent's
     first action that GAMP or the stability check refuses ends it invalid: f_g / f_p), steps."""
+    anytime: list = field(default_factory=list)
+    """Anytime planning (`agent_plan.plan_for_agent`): after each plan, {'t': seconds since the
+    start, 'coverage': the best predicted coverage so far, 'plan': 'scorer' | 'search' (which
+    plan is the best so far)}; empty for a single plan."""
 
 
 Allocate = Callable[[Scene], AllocationResult]

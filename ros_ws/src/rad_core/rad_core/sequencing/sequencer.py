@@ -151,9 +151,11 @@ class Sequencer:
             self._renv.close()
             self._renv = None
 
-    def rank(self, scene: Scene, placements, start=None, max_actions: int = 0) -> Ranking:
+    def rank(self, scene: Scene, placements, start=None, max_actions: int = 0, scorer_only: bool = False) -> Ranking:
         """Rank the allocation's next actions in `scene` (blocks already placed sit in
         their cells). start: the arm's joints (7 or 9 values) or None for home.
+        scorer_only: rank by the agent's scorer alone, without its search (anytime
+        planning's first plan, `plan_for_agent`).
         Raises RadError when the request does not fit (placements outside the scene's
         regions, unknown block types, bad joints)."""
         t0 = time.perf_counter()
@@ -172,7 +174,7 @@ class Sequencer:
             ranking.terminate = True
             ranking.reason = ('every allocated pose is built' if left == 0
                               else f'{left} allocated poses left, no unplaced block of their types')
-        elif self.spec.search:
+        elif self.spec.search and not scorer_only:
             self._search(scene, env, space, q0, rng, ranking, left)
         else:
             ts = time.perf_counter()
