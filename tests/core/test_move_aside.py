@@ -69,9 +69,11 @@ def test_a_blocked_pick_moves_the_neighbour_aside_first_and_plans_both_motions(p
     scene = hard('pento_floor')
     target = scene.targets[0]
     action = SceneAction('b4', 0, target.name, tuple(target.filled[-1]), 0)
-    blocked, _, _ = plain(scene, action)
+    blocked, _, _ = plain(scene, action, move_aside=True)         # move_aside 0 in the config: never
     assert not blocked.success and blocked.failure == 'grasp' and 'hits block b1' in blocked.reason
-    result, position, yaw = moving(scene, action)
+    assert 'moving a neighbour aside' not in blocked.reason
+    assert not moving(scene, action)[0].success           # asked for one pick and place: as blocked
+    result, position, yaw = moving(scene, action, move_aside=True)
     assert result.success, result.reason
     [aside] = result.moved_aside
     assert aside['block'] == 'b1'
@@ -91,7 +93,7 @@ def test_move_aside_off_says_why_and_a_block_nothing_frees_keeps_its_reason(plan
     _, moving = planners
     scene = hard('pyramid_box')      # b5's grasps hit b8, a 2x2 block the hand cannot take from above
     target = scene.targets[0]
-    result, _, _ = moving(scene, SceneAction('b5', 0, target.name, tuple(target.filled[0]), 0))
+    result, _, _ = moving(scene, SceneAction('b5', 0, target.name, tuple(target.filled[0]), 0), move_aside=True)
     assert not result.success and result.failure == 'grasp'
     assert 'moving a neighbour aside first: b8' in result.reason and 'no top-down grasp' in result.reason
 
@@ -100,7 +102,8 @@ def test_plan_steps_carry_the_moves_and_the_scene_after_follows_them(planners):
     _, moving = planners
     scene = hard('pento_floor')
     target = scene.targets[0]
-    plan = local_motion_planner(moving)(scene, SceneAction('b4', 0, target.name, tuple(target.filled[-1]), 0), None)
+    plan = local_motion_planner(moving)(scene, SceneAction('b4', 0, target.name, tuple(target.filled[-1]), 0), None,
+                                        move_aside=True)
     assert plan.success and [d['block'] for d in plan.moved_aside] == ['b1']
     step = PlanStep('b4', 'cube', target.name, 0, [list(target.filled[-1])], position=[0.45, 0.1, 0.02],
                     motion=plan.motion, moved_aside=plan.moved_aside)

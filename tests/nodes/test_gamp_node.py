@@ -22,8 +22,9 @@ def gamp(node_process, ros_node):
     proc = node_process('rad_gamp', 'gamp_node', *ros_args({'seed': 0}))
     client = wait_for_service(ros_node, PlanAction, 'plan_action', timeout=30.0)
 
-    def plan(scene, block_id, unit, target, cell, rotation, start=(), execute=False, place=None):
-        req = PlanAction.Request(scene_json=scene.dumps(), start_positions=list(start), execute=execute)
+    def plan(scene, block_id, unit, target, cell, rotation, start=(), execute=False, place=None, move_aside=False):
+        req = PlanAction.Request(scene_json=scene.dumps(), start_positions=list(start), execute=execute,
+                                 move_aside=move_aside)
         if place is not None:     # (position, quaternion): the anchor goes there, not to the cell
             req.place_at_pose, req.place_pose = True, pose_msg(*place)
         req.action.block_id, req.action.unit, req.action.target, req.action.rotation = block_id, unit, target, rotation
@@ -124,11 +125,13 @@ def test_a_pick_blocked_by_a_neighbour_moves_it_aside_first_and_says_where(gamp)
     _, plan = gamp
     scene = Scene.loads((Path(__file__).resolve().parents[2] / 'scenes' / 'hard' / 'pento_floor.json').read_text())
     target = scene.targets[0]
-    r = plan(scene, 'b4', 0, target.name, tuple(target.filled[-1]), 0)    # b1 lies too close for the fingers
+    plain = plan(scene, 'b4', 0, target.name, tuple(target.filled[-1]), 0)    # b1 lies too close for the fingers
+    assert not plain.success and plain.failure == 'grasp' and 'hits block b1' in plain.reason
+    r = plan(scene, 'b4', 0, target.name, tuple(target.filled[-1]), 0, move_aside=True)
     assert r.success, r.reason
     [aside] = moved_aside_from_msgs(r.moved_aside_blocks, r.moved_aside_poses)
     assert aside['block'] == 'b1' and aside['position'][2] == pytest.approx(scene.block('b1').position[2])
     assert [g.action for g in r.gripper].count('grasp') == 2
     spread = generate_scene(GeneratorConfig(grid=3), 5)        # nothing in the way: nothing moved
-    plain = plan(spread, *first_action(spread))
-    assert plain.success and list(plain.moved_aside_blocks) == [] and list(plain.moved_aside_poses) == []
+    free = plan(spread, *first_action(spread), move_aside=True)
+    assert free.success and list(free.moved_aside_blocks) == [] and list(free.moved_aside_poses) == []

@@ -74,7 +74,7 @@ class GampNode(Node):
             return plan_action(self.planner.world, a.block_id, position, yaw, start=start,
                                config=self.planner.config)
         action = SceneAction(a.block_id, a.unit, a.target, (a.cell.i, a.cell.j, a.cell.k), a.rotation)
-        result, _, _ = self.planner(scene, action, start=request.start_positions)
+        result, _, _ = self.planner(scene, action, start=request.start_positions, move_aside=request.move_aside)
         return result
 
     def plan_action_callback(self, request, response):

@@ -321,9 +321,10 @@ class AssemblyNode(Node):
         when the agent's allocation is (`reallocation_support`)."""
         return self.allocate(scene, exclude, time_limit_s, support=reallocation_support(self.support))
 
-    def plan_motion(self, scene: Scene, action, start) -> MotionPlan:
+    def plan_motion(self, scene: Scene, action, start, move_aside: bool = False) -> MotionPlan:
         request = self.plan_action_request(scene, start)
         request.action = action_to_msg(action)
+        request.move_aside = bool(move_aside)
         return self.ask_plan_action(request, start)
 
     @staticmethod

@@ -149,12 +149,16 @@ class MotionPlanner:
             drop_obstacles_on_the_hand(self.world, panda.HOME if start is None else start)
         return start
 
-    def __call__(self, scene: Scene, action: SceneAction, start=None) -> tuple[GampResult, np.ndarray, int]:
+    def __call__(self, scene: Scene, action: SceneAction, start=None,
+                 move_aside: bool = False) -> tuple[GampResult, np.ndarray, int]:
+        """GAMP's answer, the anchor position and yaw of the action. move_aside: when the block's
+        grasps are blocked by neighbours on the table, move them aside first (`_move_aside_first`;
+        at most `config.move_aside` of them); false: one pick and place."""
         position, yaw = target_pose(scene, action)
         start = self.load(scene, start)
         seat = position + seat_shift(scene, action.block_id, position, yaw) if scene.measured_offsets else position
         result = plan_action(self.world, action.block_id, seat, yaw, start=start, config=self.config)
-        if result.failure == 'grasp' and self.config.move_aside > 0:
+        if move_aside and result.failure == 'grasp' and self.config.move_aside > 0:
             result = self._move_aside_first(scene, action.block_id, seat, yaw, start, result, self.config.move_aside)
         return result, position, yaw
 

@@ -74,10 +74,11 @@ class GampConfig:
     ik: IkConfig = field(default_factory=IkConfig)
     collision: CollisionConfig = field(default_factory=CollisionConfig)
     move_aside: int = 2
-    """When no grasp of a block on the table is free because neighbours stand too close, move
-    them out of the way first, to free places on the table (`shapes.move_aside_spot`): at most
-    this many per step (0: never). Used by `gamp.action.MotionPlanner` (the gamp node,
-    /plan_assembly, `rad eval` with the robot); `plan_action` itself plans one pick and place."""
+    """When no grasp of a block on the table is free because neighbours stand too close, and the
+    caller asks for it, move them out of the way first, to free places on the table
+    (`shapes.move_aside_spot`): at most this many per step (0: never). Used by
+    `gamp.action.MotionPlanner` (the gamp node's `move_aside` request; `plan_assembly` asks for
+    it); `plan_action` itself plans one pick and place."""
     timing: TimingConfig = field(default_factory=TimingConfig)
 
 

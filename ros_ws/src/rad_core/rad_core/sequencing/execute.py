@@ -219,7 +219,8 @@ def execute_assembly(scene: Scene, plan: Plan, move_arm: MoveArm, move_gripper: 
                     # planned again and left the arm elsewhere: plan this motion again from the world as
                     # measured (the first step's was planned from it).
                     fresh = plan_motion(current, SceneAction(step.block, step.unit, step.target, tuple(step.cell),
-                                                             step.rotation), step_start)
+                                                             step.rotation), step_start,
+                                        **({'move_aside': True} if step.moved_aside else {}))
                     if not fresh.success:
                         problem = (f'block {step.block}: planned again against the blocks where motion capture '
                                    f'sees them, it cannot be placed ({fresh.reason})')

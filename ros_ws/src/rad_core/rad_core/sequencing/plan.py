@@ -25,6 +25,7 @@ that fail become no-goods, the allocation is solved again over the free cells
 
 from __future__ import annotations
 
+import inspect
 import threading
 import time
 from dataclasses import dataclass, field, replace
@@ -209,13 +210,17 @@ def plan_assembly(scene: Scene, allocate: Allocate, plan_motion: PlanMotion, seq
     # GAMP's answers from the current planning state (the state changes only with a step):
     # a re-allocation's checks reuse what the step's own choice already planned.
     memo: dict = {}
+    # Motion planners that can move blocks aside (the in-process one, the gamp node's client) are asked to.
+    aside = {'move_aside': True} if 'move_aside' in inspect.signature(plan_motion).parameters else {}
 
     def planned_motion(scene_now: Scene, action: SceneAction, q) -> MotionPlan:
+        """GAMP's answer; a pick its neighbours on the table block is planned with them moved aside
+        first, where the motion planner can (`MotionPlanner`'s move_aside)."""
         key = (len(plan.steps), action)
         if key not in memo:
             if len(memo) > 4096:
                 memo.clear()
-            memo[key] = plan_motion(scene_now, action, q)
+            memo[key] = plan_motion(scene_now, action, q, **aside)
         return memo[key]
 
     def decide(env: AssemblyEnv, rng) -> Decision:
@@ -340,8 +345,8 @@ def _done(plan: AssemblyPlan, t0: float) -> AssemblyPlan:
 
 def local_motion_planner(planner) -> PlanMotion:
     """Adapt an in-process `gamp.action.MotionPlanner` to the PlanMotion signature."""
-    def plan_motion(scene: Scene, action: SceneAction, start) -> MotionPlan:
-        result, _, _ = planner(scene, action, start=start)
+    def plan_motion(scene: Scene, action: SceneAction, start, move_aside: bool = False) -> MotionPlan:
+        result, _, _ = planner(scene, action, start=start, move_aside=move_aside)
         if not result.success:
             return MotionPlan(False, result.failure, result.reason)
         return MotionPlan(True, '', '', (int(result.grasp.unit), int(result.grasp.yaw)),
