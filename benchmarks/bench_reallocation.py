@@ -27,6 +27,7 @@ import argparse
 import json
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -105,8 +106,11 @@ def main() -> int:
     p.add_argument('--agents', default=','.join(DEFAULT_AGENTS), help='presets or agent texts, comma-separated')
     p.add_argument('--ceiling-s', type=float, default=60.0, help='seconds per scene of the ceiling; 0: none')
     p.add_argument('--force', action='store_true')
+    p.add_argument('--results', default=str(RESULTS),
+                   help='folder of reallocation.md and its rows (a run of a few agents elsewhere keeps the full table)')
     p.add_argument('--cached-only', action='store_true', help='only write the table from results already cached')
     args = p.parse_args()
+    out = Path(args.results)
     grids = [int(g) for g in args.grids.split(',') if g] + [s for s in args.shapes.split(',') if s]
     clearances = [float(c) for c in args.clearances.split(',')]
     agents = [a for a in args.agents.split(',') if a]
@@ -164,9 +168,10 @@ def main() -> int:
                           'bounds, left out of "to ceiling").']
                 rows += [{'agent': 'ceiling', 'set': cell, **c} for c in roof]
             lines.append('')
-            (RESULTS / 'reallocation.md').write_text('\n'.join(lines) + '\n')
-            write_rows(RESULTS / 'reallocation.rows.jsonl', rows)
-    print(f'wrote {RESULTS / "reallocation.md"}')
+            out.mkdir(parents=True, exist_ok=True)
+            (out / 'reallocation.md').write_text('\n'.join(lines) + '\n')
+            write_rows(out / 'reallocation.rows.jsonl', rows)
+    print(f'wrote {out / "reallocation.md"}')
     return 0
 
 

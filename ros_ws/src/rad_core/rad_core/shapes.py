@@ -312,16 +312,8 @@ def lay_out(kinds: Sequence[str], types: Mapping[str, BlockType], targets: Seque
     robot's right (-y) like the generator's while one is free there, else on its
     left. The seed so changes the order, yaws and places without leaving reach.
     """
-    xs = np.arange(0.0, config.reach[1] + 1e-9, config.step)
-    ys = np.arange(-config.reach[1], config.reach[1] + 1e-9, config.step)
-    grid = np.stack(np.meshgrid(xs, ys, indexing='ij'), axis=-1).reshape(-1, 2)
-    boxes = []
-    for t in targets:
-        lo, hi = t.bounds(unit)
-        pad = unit / 2 + config.region_margin
-        boxes.append((lo[:2] - pad, hi[:2] + pad))
+    grid, boxes = _lattice(config), _region_boxes(targets, unit, config)
     taken = np.zeros((0, 2))
-    sep = unit + config.gap - 1e-9
     blocks = []
     for n, kind in enumerate(kinds):
         # The yaw is drawn first and kept when the block fits that way, so yaws stay
@@ -330,15 +322,7 @@ def lay_out(kinds: Sequence[str], types: Mapping[str, BlockType], targets: Seque
         for yaw in rng.permutation(YAWS):
             offs = types[kind].rotated(int(yaw))
             pts = grid[:, None, :] + unit * offs[None, :, :2]          # (candidates, units, 2)
-            r = np.linalg.norm(pts, axis=-1)
-            ok = np.all((r >= config.reach[0]) & (r <= config.reach[1]), axis=1)
-            bearing = np.degrees(np.abs(np.arctan2(pts[..., 1], pts[..., 0])))
-            ok &= np.all(bearing <= config.max_bearing_deg, axis=1)
-            for lo, hi in boxes:
-                ok &= ~np.any(np.all((pts > lo) & (pts < hi), axis=-1), axis=1)
-            if len(taken):
-                near = np.all(np.abs(pts[:, :, None, :] - taken[None, None, :, :]) < sep, axis=-1)
-                ok &= ~near.any(axis=(1, 2))
+            ok = _free(pts, boxes, taken, unit + config.gap, config)
             right = ok & np.all(pts[..., 1] < 0, axis=1)
             options[int(yaw)] = (offs, pts, right if right.any() else ok, bool(right.any()))
             if right.any():
@@ -355,6 +339,38 @@ def lay_out(kinds: Sequence[str], types: Mapping[str, BlockType], targets: Seque
         blocks.append(Block(f'b{n}', kind, tuple(round(float(v), 6) for v in pos), yaw))
         taken = np.concatenate([taken, grid[cand] + unit * offs[:, :2]])
     return blocks
+
+
+def _lattice(config: LayoutConfig) -> np.ndarray:
+    """(candidates, 2) anchor positions on the table where a layout may put a block."""
+    xs = np.arange(0.0, config.reach[1] + 1e-9, config.step)
+    ys = np.arange(-config.reach[1], config.reach[1] + 1e-9, config.step)
+    return np.stack(np.meshgrid(xs, ys, indexing='ij'), axis=-1).reshape(-1, 2)
+
+
+def _region_boxes(targets: Sequence[TargetRegion], unit: float, config: LayoutConfig) -> list:
+    """The target regions' xy boxes, padded by half a unit and the layout's margin."""
+    pad = unit / 2 + config.region_margin
+    return [(lo[:2] - pad, hi[:2] + pad) for lo, hi in (t.bounds(unit) for t in targets)]
+
+
+def _free(pts: np.ndarray, boxes, taken: np.ndarray, sep: float, config: LayoutConfig) -> np.ndarray:
+    """Which candidates (pts: (candidates, units, 2) unit centres) lie within reach, in front of
+    the robot, outside the boxes and less than `sep` (m, per axis) from no point of `taken`."""
+    r = np.linalg.norm(pts, axis=-1)
+    ok = np.all((r >= config.reach[0]) & (r <= config.reach[1]), axis=1)
+    bearing = np.degrees(np.abs(np.arctan2(pts[..., 1], pts[..., 0])))
+    ok &= np.all(bearing <= config.max_bearing_deg, axis=1)
+    for lo, hi in boxes:
+        ok &= ~np.any(np.all((pts > lo) & (pts < hi), axis=-1), axis=1)
+    return ok & ~_near(pts, taken, sep)
+
+
+def _near(pts: np.ndarray, taken: np.ndarray, sep: float) -> np.ndarray:
+    """Which candidates have a unit less than `sep` (m, per axis) from a point of `taken`."""
+    if not len(taken):
+        return np.zeros(len(pts), dtype=bool)
+    return np.all(np.abs(pts[:, :, None, :] - taken[None, None, :, :]) < sep - 1e-9, axis=-1).any(axis=(1, 2))
 
 
 def footprint(block: Block, types: Mapping[str, BlockType], unit: float) -> np.ndarray:
@@ -374,27 +390,14 @@ def move_aside_spot(scene: Scene, block_id: str, config: LayoutConfig = LayoutCo
     types, unit = scene.block_types, scene.unit
     yaw = int(round(block.yaw / 90.0)) * 90 % 360
     offs = types[block.type].rotated(yaw)
-    xs = np.arange(0.0, config.reach[1] + 1e-9, config.step)
-    ys = np.arange(-config.reach[1], config.reach[1] + 1e-9, config.step)
-    grid = np.stack(np.meshgrid(xs, ys, indexing='ij'), axis=-1).reshape(-1, 2)
+    grid = _lattice(config)
     pts = grid[:, None, :] + unit * offs[None, :, :2]
-    r = np.linalg.norm(pts, axis=-1)
-    ok = np.all((r >= config.reach[0]) & (r <= config.reach[1]), axis=1)
-    ok &= np.all(np.degrees(np.abs(np.arctan2(pts[..., 1], pts[..., 0]))) <= config.max_bearing_deg, axis=1)
-    for t in scene.targets:
-        lo, hi = t.bounds(unit)
-        pad = unit / 2 + config.region_margin
-        ok &= ~np.any(np.all((pts > lo[:2] - pad) & (pts < hi[:2] + pad), axis=-1), axis=1)
     others = [footprint(b, types, unit) for b in scene.blocks if b.id != block_id]
-    obstacles = [*others, *[np.asarray(o.position[:2], dtype=float)[None] for o in scene.obstacles]]
-    if obstacles:
-        taken = np.concatenate(obstacles)
-        near = np.all(np.abs(pts[:, :, None, :] - taken[None, None, :, :]) < unit + config.gap - 1e-9, axis=-1)
-        ok &= ~near.any(axis=(1, 2))
+    taken = np.concatenate([*others, *[np.asarray(o.position[:2], dtype=float)[None] for o in scene.obstacles]]
+                           or [np.zeros((0, 2))])
+    ok = _free(pts, _region_boxes(scene.targets, unit, config), taken, unit + config.gap, config)
     for bid in clear_of:
-        theirs = footprint(scene.block(bid), types, unit)
-        near = np.all(np.abs(pts[:, :, None, :] - theirs[None, None, :, :]) < unit + hand, axis=-1)
-        ok &= ~near.any(axis=(1, 2))
+        ok &= ~_near(pts, footprint(scene.block(bid), types, unit), unit + hand)
     if not ok.any():
         return None
     distance = np.linalg.norm(grid - np.asarray(block.position[:2]), axis=-1)
