@@ -67,3 +67,13 @@ def test_missing_file_and_bad_time_limit(tmp_path):
     scene.write_text(json.dumps(doc()))
     r = rad('allocate', str(scene), '--time-limit', '0')
     assert r.returncode == 2 and 'time_limit_s must be a positive' in r.stderr
+
+
+def test_rad_eval_accepts_every_allocation_support_the_agents_use():
+    from rad_core.cli import build_parser
+    parser = build_parser('eval')
+    for support in ('none', 'stable', 'arm'):
+        args = parser.parse_args(['eval', '--agent', 'greedy', '--support', support])
+        assert args.support == support
+    with pytest.raises(SystemExit):
+        parser.parse_args(['eval', '--support', 'everywhere'])
