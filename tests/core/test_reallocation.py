@@ -196,7 +196,7 @@ def test_a_block_that_cannot_be_picked_is_excluded_as_a_block_until_the_table_ch
     env.step([a for a in space(env) if not a.is_terminate and a.block == ids.index('c0')][0])
     realloc.stalled(env, 'stuck')
     assert realloc.blocked == {}
-    assert {'i0', 'i1'} <= {b.id for b in realloc._without_blocked(placed_scene(env), env).blocks}
+    assert {'i0', 'i1'} <= {b.id for b in realloc._without_blocked(placed_scene(env)).blocks}
 
 
 def test_a_pose_waiting_for_its_support_is_not_a_no_good():

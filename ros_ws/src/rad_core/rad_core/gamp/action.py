@@ -15,7 +15,7 @@ import numpy as np
 
 from rad_core.errors import RadError
 from rad_core.gamp.planner import GampConfig, GampResult, placement_pose, plan_action
-from rad_core.scene import Block, Scene
+from rad_core.scene import Scene
 from rad_core.shapes import LayoutConfig, footprint, move_aside_spot
 from rad_core.sim import panda
 from rad_core.sim.world import World
@@ -190,7 +190,7 @@ class MotionPlanner:
                                    config=self.config)
                 if then.failure == 'grasp' and moves > 1:
                     aside = replace(scene, blocks=tuple(
-                        Block(b.id, b.type, tuple(spot_position), spot_yaw) if b.id == other else b
+                        replace(b, position=tuple(spot_position), yaw=spot_yaw) if b.id == other else b
                         for b in scene.blocks))
                     then = self._move_aside_first(aside, block_id, seat, yaw, first.motion.final_joints(), then,
                                                  moves - 1)

@@ -182,7 +182,7 @@ class Reallocator:
             event.reason += '; no time left to re-allocate'
         else:
             limit = self.config.params.time_limit_s if left is None else min(self.config.params.time_limit_s, left)
-            result = self.allocate(self._without_blocked(self.scene_of(env), env), exclude, limit)
+            result = self.allocate(self._without_blocked(self.scene_of(env)), exclude, limit)
             event.status, event.objective, event.bound = result.status, result.objective, result.bound
             event.solve_time_s = result.solve_time_s
             event.placements = list(result.placements)
@@ -202,25 +202,27 @@ class Reallocator:
         type failed to be picked (those blocks are excluded instead, see the module docstring);
         else the first failure's reason (each distinct motion checked once, as a verified agent
         goes down its ranking). Blocks already excluded are not tried again."""
-        actions = [a for a in guide.pose_actions(k, env.state) if a.block not in self.blocked]
+        candidates = guide.pose_actions(k, env.state)
+        actions = [a for a in candidates if a.block not in self.blocked]
         action, _, failed = first_feasible(env, actions, self.check)
         if action is not None:
             return None
-        placing = [(a, r) for a, r in failed if getattr(r, 'failure', '') != 'grasp']
+        if not failed:      # nothing left to try: its blocks are excluded, or there are none
+            return None if len(actions) < len(candidates) else 'no block of its type is left'
+        placing = []
         for a, r in failed:
-            if getattr(r, 'failure', '') == 'grasp' and a.block not in self.blocked:
+            if getattr(r, 'failure', '') != 'grasp':
+                placing.append((a, r))
+            elif a.block not in self.blocked:
                 block = env.scene.blocks[a.block]
                 self.blocked[a.block] = {'block': block.id, 'type': block.type, 'reason': r.reason, 'table': table}
                 event.blocks.append({'block': block.id, 'type': block.type, 'reason': r.reason})
-        if not failed:
-            return None if any(a.block in self.blocked for a in guide.pose_actions(k, env.state)) \
-                else 'no block of its type is left'
         if not placing:
             return None
         first, result = placing[0]
         return f'{env.scene.blocks[first.block].id}: {result.reason}'
 
-    def _without_blocked(self, scene: Scene, env: AssemblyEnv) -> Scene:
+    def _without_blocked(self, scene: Scene) -> Scene:
         """The scene to re-allocate from, without the table blocks that cannot be picked."""
         if not self.blocked:
             return scene
