@@ -56,7 +56,22 @@ def start_graph(node_process, ros_node, tmp_path, scene: Scene = DEMO_SCENE, twi
     g = Graph()
     g.procs, g.node, g.actions, g.twin_args = procs, ros_node, actions, twin_args
     g.plan = lambda **kw: call_service(ros_node, client, PlanAssembly.Request(**kw), timeout=120.0)
+    _wait_until_the_assembly_node_has_joint_states(g)
     return g
+
+
+def _wait_until_the_assembly_node_has_joint_states(g, timeout: float = 30.0) -> None:
+    """The test node seeing the plant does not mean the assembly node does: under load its joint_states
+    subscription can match the twin seconds later. Probe with a request that stops right after the joint
+    check (a time limit too short to plan) until the reason is no longer the missing joint states."""
+    deadline = time.monotonic() + timeout
+    while True:
+        reason = g.plan(scene_json=SMALL.dumps(), time_limit_s=1e-9).reason
+        if not reason.startswith('no /joint_states'):
+            return
+        if time.monotonic() > deadline:
+            raise TimeoutError(f'the assembly node has no joint states {timeout} s after the plant came up: {reason}')
+        time.sleep(0.2)
 
 
 def stop_graph(g) -> None:
