@@ -63,7 +63,8 @@ def _allocation_params(args):
 
 def cmd_scene_generate(args) -> int:
     from rad_core.generator import GeneratorConfig, generate_scene
-    config = GeneratorConfig(grid=args.grid, sides=args.sides, unit=args.unit, clearance=args.clearance)
+    config = GeneratorConfig(grid=args.grid, sides=args.sides, unit=args.unit, clearance=args.clearance,
+                             supply=args.supply, feeder_order=args.feeder_order, feeder_window=args.feeder_window)
     _write_text(generate_scene(config, args.seed).dumps(), args.output)
     return 0
 
@@ -71,7 +72,9 @@ def cmd_scene_generate(args) -> int:
 def cmd_scene_check(args) -> int:
     scene = _read_scene(args.scene)
     counts = {k: v for k, v in scene.type_counts().items() if v}
-    print(f'ok: {len(scene.blocks)} blocks {counts}, {len(scene.targets)} target regions, '
+    feeder = (f' ({len(scene.feeder.blocks)} in a {scene.feeder.order} feeder at {list(scene.feeder.station)})'
+              if scene.feeder is not None else '')
+    print(f'ok: {len(scene.blocks)} blocks {counts}{feeder}, {len(scene.targets)} target regions, '
           f'{scene.num_target_cells} target cells, unit {scene.unit} m')
     return 0
 
@@ -481,6 +484,13 @@ def build_parser(command: str | None = 'train') -> argparse.ArgumentParser:
     p.add_argument('--unit', type=float, default=0.05, help='grid pitch (the cube edge of flush blocks), metres')
     p.add_argument('--clearance', type=float, default=0.0,
                    help='gap between neighbouring blocks, a fraction of the unit (0: flush; 0.2: 1 cm at 5 cm)')
+    p.add_argument('--supply', choices=('auto', 'table', 'feeder'), default='auto',
+                   help='where the blocks start: on the table, in a feeder presenting them at a station, or auto '
+                        '(the table where they fit within reach, else the feeder: g >= 8)')
+    p.add_argument('--feeder-order', choices=('request', 'queue'), default='request',
+                   help="a feeder's order: the plan asks for any block (request) or the feeder dictates (queue)")
+    p.add_argument('--feeder-window', type=int, default=3,
+                   help='a queue feeder: how many of its first blocks the robot may take from (a tray)')
     p.add_argument('-o', '--output', help='output file (default: stdout)')
     p.set_defaults(func=cmd_scene_generate)
     p = scene.add_parser('check', help='validate a scene file')

@@ -14,6 +14,18 @@ Q-network; the PyBullet client of the no-robot stability check; with the robot, 
 planner with its GAMP and planning-twin worlds) each worker thread builds once and keeps for
 the scenes it gets (`_worker_state`).
 
+Workers warm once, at start-up, not per task. The cluster rad starts (`dask_client(workers=N)`,
+`rad eval --workers N`) forks its workers from this process on Linux (`START_METHOD`), so they
+begin with what it has imported (torch, OR-Tools, PyBullet, rad) instead of importing it all
+again (about 5 s of one core each, most of what made a small run slow); each sets torch to one
+thread before anything runs (`dask_setup`: a process forked after torch ran on several threads
+would hang in OpenMP otherwise). `evaluate_distributed` then registers `WarmUp`, a worker plugin
+that builds the agent, its policy and the planner's worlds (or the stability check) on every
+worker before the first scene is sent, and again on any worker that joins later (a nanny's
+replacement). Scenes are sent longest first (`scene_cost`: blocks and target cells), so the
+workers finish together instead of one waiting on a big scene sent last; a worker holds one
+scene at a time (worker-saturation 1.0), so none waits behind another's queue at the end.
+
 A worker that dies takes its running and finished-but-not-gathered tasks with it; the
 scheduler runs them again elsewhere (its `distributed.scheduler.allowed-failures`, default
 3 deaths per task, before it gives up with KilledWorker). Tasks are pure (same arguments,
@@ -29,6 +41,7 @@ from __future__ import annotations
 
 import dataclasses
 import importlib.util
+import json
 import sys
 import threading
 import uuid
@@ -36,6 +49,8 @@ from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
+
+from distributed.diagnostics.plugin import WorkerPlugin
 
 from rad_core.errors import RadError
 from rad_core.scene import Scene
@@ -46,6 +61,9 @@ CONNECT_TIMEOUT_S = 5.0
 """How long connecting to a --scheduler may take before it counts as unreachable."""
 WAIT_WORKERS_S = 60.0
 """How long to wait for a --scheduler's cluster to have the workers asked for."""
+START_METHOD = 'fork' if sys.platform.startswith('linux') else 'spawn'
+"""How the cluster rad starts makes its worker processes: forked from this (already warm)
+process where that is safe (Linux), else spawned (fresh interpreters that import everything)."""
 
 
 @dataclass(frozen=True)
@@ -75,6 +93,16 @@ class AgentArgs:
 _local = threading.local()
 
 
+def dask_setup(worker=None) -> None:
+    """Worker preload of the cluster rad starts (run in the new worker process before any task):
+    torch on one thread, as Dask's OMP_NUM_THREADS=1 gives spawned workers. A forked worker
+    inherits torch already initialized, where the variable no longer counts, and torch on
+    several threads in a process forked after its parent ran OpenMP threads hangs."""
+    torch = sys.modules.get('torch')
+    if torch is not None:
+        torch.set_num_threads(1)
+
+
 def _worker_state() -> dict:
     """This worker thread's built agents and policies ({AgentArgs: (agent, policy)}) and its
     no-robot stability check. Per thread, not per process: a PyBullet client is not
@@ -82,6 +110,7 @@ def _worker_state() -> dict:
     cluster runs one, so this is once per worker process)."""
     state = getattr(_local, 'state', None)
     if state is None:
+        dask_setup()   # this thread too: torch's thread count is per thread under OpenMP
         state = _local.state = {'agents': {}, 'stability': None}
     return state
 
@@ -97,7 +126,6 @@ def _agent_and_policy(args: AgentArgs):
 def _planner(args: AgentArgs, allocation: dict | None, reallocation: dict | None):
     """This worker thread's robot planner for the agent and settings (`evaluation.robot_planner`:
     the network, GAMP's world and the sequencer's planning twin), built once and kept."""
-    import json
     planners = _worker_state().setdefault('planners', {})
     key = (args, json.dumps(allocation, sort_keys=True), json.dumps(reallocation, sort_keys=True))
     if key not in planners:
@@ -129,6 +157,58 @@ def _reallocation_config(doc: dict | None):
     return ReallocationConfig(**{**doc, 'params': _allocation_params(doc['params'])})
 
 
+def warm(agent_args: AgentArgs, robot: bool, allocation: dict | None = None,
+         reallocation: dict | None = None) -> float:
+    """Build in this worker thread what `run_scene` needs for the agent and settings (the agent,
+    its policy, with the robot the planner and its worlds, else the stability check) and keep
+    it; return the seconds it took (0 when it was built already)."""
+    import time
+
+    from rad_core.evaluation import uses_robot
+    t0 = time.perf_counter()
+    agent, _ = _agent_and_policy(agent_args)
+    if uses_robot(agent, robot):
+        _planner(agent_args, allocation, reallocation)
+    else:
+        _stability()
+    return time.perf_counter() - t0
+
+
+class WarmUp(WorkerPlugin):
+    """A Dask worker plugin: `warm` on every worker of the cluster, now and on any that joins
+    later, in the thread pool that runs its tasks (so the scenes find everything built).
+    Idempotent under its name, which the agent and settings determine: registering the same
+    again on a cluster that has it does nothing."""
+
+    idempotent = True
+
+    def __init__(self, agent_args: AgentArgs, robot: bool, allocation: dict | None = None,
+                 reallocation: dict | None = None):
+        self.agent_args, self.robot, self.allocation, self.reallocation = agent_args, robot, allocation, reallocation
+        doc = json.dumps([dataclasses.asdict(agent_args), robot, allocation, reallocation], sort_keys=True)
+        self.name = f'rad-warm-up-{uuid.uuid5(uuid.NAMESPACE_OID, doc).hex[:12]}'
+
+    async def setup(self, worker) -> None:
+        import asyncio
+        executor = worker.executors.get('default')
+        if executor is None:   # no thread pool to warm: the first scenes warm it
+            return
+        # One thread: all of a worker of rad's cluster; on a worker with more, the others warm
+        # on their first scene.
+        await asyncio.get_running_loop().run_in_executor(
+            executor, warm, self.agent_args, self.robot, self.allocation, self.reallocation)
+
+
+def warm_up(client, agent_args: AgentArgs, robot: bool, allocation: dict | None = None,
+            reallocation: dict | None = None) -> str:
+    """Register `WarmUp` on the client's cluster and return once every worker is warm; return
+    the plugin's name (`client.unregister_worker_plugin(name)` stops warming workers that join
+    later; what is built stays)."""
+    plugin = WarmUp(agent_args.portable(), robot, allocation, reallocation)
+    client.register_plugin(plugin, name=plugin.name)
+    return plugin.name
+
+
 def run_scene(name: str, scene_doc: dict, agent_args: AgentArgs, robot: bool, seed: int, execution: str,
               allocation: dict | None = None, reallocation: dict | None = None) -> dict:
     """One scene's row, exactly as `evaluation.evaluate` makes it (the task every worker runs)."""
@@ -150,11 +230,17 @@ def run_scene(name: str, scene_doc: dict, agent_args: AgentArgs, robot: bool, se
 # ---- the client side -------------------------------------------------------------
 @contextmanager
 def dask_client(workers: int | None = None, scheduler: str | None = None, dashboard: bool = False,
-                connect_timeout_s: float = CONNECT_TIMEOUT_S, wait_workers_s: float = WAIT_WORKERS_S) -> Iterator:
+                connect_timeout_s: float = CONNECT_TIMEOUT_S, wait_workers_s: float = WAIT_WORKERS_S,
+                start_method: str | None = None) -> Iterator:
     """A `distributed.Client`, closed (with the cluster rad started) on exit.
 
     Without scheduler: a LocalCluster of `workers` processes with one thread each, all on
     127.0.0.1, the dashboard off unless `dashboard` (then on 127.0.0.1:8787; it needs bokeh).
+    start_method: how its worker processes start, 'fork' (from this process: what it has
+    imported comes free; `START_METHOD`, what `evaluate_distributed` asks for), 'spawn' or
+    'forkserver'; default Dask's (spawn). Each worker holds one task at a time
+    (worker-saturation 1.0: with tasks of seconds, the scheduler's queue balances best) and
+    runs `dask_setup` first.
     With scheduler (an address such as tcp://127.0.0.1:8786): a client of that scheduler;
     `workers` is then the least number of workers to wait for (default 1), at most
     wait_workers_s. An address that does not answer within connect_timeout_s is a RadError.
@@ -189,8 +275,16 @@ def dask_client(workers: int | None = None, scheduler: str | None = None, dashbo
         return
     if dashboard and importlib.util.find_spec('bokeh') is None:
         raise RadError('--dashboard needs bokeh (pip install bokeh), or run without --dashboard')
-    with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host=LOOPBACK,
-                      dashboard_address=DASHBOARD_ADDRESS if dashboard else None) as cluster, \
+    if start_method not in (None, 'fork', 'spawn', 'forkserver'):
+        raise RadError(f"start_method must be 'fork', 'spawn' or 'forkserver', got {start_method!r}")
+    import dask
+    config = {'distributed.scheduler.worker-saturation': 1.0, 'distributed.worker.preload': [__name__]}
+    if start_method is not None:
+        config['distributed.worker.multiprocessing-method'] = start_method
+    # Kept for the whole run: a nanny that restarts its worker reads the method again.
+    with dask.config.set(config), \
+            LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host=LOOPBACK,
+                         dashboard_address=DASHBOARD_ADDRESS if dashboard else None) as cluster, \
             Client(cluster, set_as_default=False) as client:
         client.wait_for_workers(workers, timeout=wait_workers_s)
         if dashboard:
@@ -240,11 +334,14 @@ def evaluate_distributed(agent_args: AgentArgs, scenes: Iterable[tuple[str, Scen
                          progress: Callable[[dict], None] | None = None, workers: int | None = None,
                          scheduler: str | None = None, execution: str = 'teleport', allocation=None,
                          reallocation=None, dashboard: bool = False, client=None, policy=None,
-                         retries: int = 0) -> dict:
+                         retries: int = 0, start_method: str | None = START_METHOD) -> dict:
     """`evaluation.evaluate` with one Dask task per scene; the same result for the same seeds.
 
     The cluster: `client` if given (left open), else `dask_client(workers, scheduler,
-    dashboard)` for the duration of the run. progress(row) is called as rows come back
+    dashboard, start_method=start_method)` for the duration of the run (its start-up
+    forks the workers from this process, which has built the agent already: see the module
+    docstring). Every worker is warm (`warm_up`) before the first scene is sent, and the
+    scenes go out longest first (`scene_cost`). progress(row) is called as rows come back
     (completion order); the result's rows are in scene order. allocation, reallocation:
     an `AllocationParams` / `ReallocationConfig` (default: the agent's / its defaults).
     policy: an already built policy, only checked here against the agent's action space
@@ -270,20 +367,35 @@ def evaluate_distributed(agent_args: AgentArgs, scenes: Iterable[tuple[str, Scen
     if client is not None:
         rows = _run(client, agent_args, scenes, robot, seed, progress, execution, alloc_doc, realloc_doc, retries)
     else:
-        with dask_client(workers, scheduler, dashboard) as own:
+        with dask_client(workers, scheduler, dashboard, start_method=start_method) as own:
             rows = _run(own, agent_args, scenes, robot, seed, progress, execution, alloc_doc, realloc_doc, retries)
     return summarize(rows, agent.name)
 
 
+def scene_cost(scene: Scene) -> int:
+    """A scene's expected evaluation time, as a rank only: its blocks times its target cells
+    (the allocation's size, and the steps the sequencer plans, each over the candidates left)."""
+    cells = sum(len(t.filled) for t in scene.targets)
+    return len(scene.blocks) * max(cells, 1)
+
+
 def _run(client, agent_args, scenes, robot, seed, progress, execution, alloc_doc, realloc_doc, retries) -> list:
-    """Submit one task per scene, collect the rows as they finish, return them in scene order."""
+    """Warm every worker, submit one task per scene (the costliest first), collect the rows as
+    they finish, return them in scene order."""
     from distributed import as_completed
     from distributed.scheduler import KilledWorker
+    try:
+        plugin = warm_up(client, agent_args, robot, alloc_doc, realloc_doc)
+    except RadError as e:
+        raise RadError(f'warming the workers up: {e}') from None
     run = uuid.uuid4().hex[:12]   # explicit keys: unique per run, one per scene index
     index = {}
     for i, (name, scene) in enumerate(scenes):
+        # Higher priority runs first: longest first, so the workers finish together; the
+        # index breaks ties in scene order. A row does not depend on where or when it runs.
         future = client.submit(run_scene, name, scene.to_dict(), agent_args, robot, seed + i, execution,
-                               alloc_doc, realloc_doc, key=f'rad-scene-{run}-{i:06d}', retries=retries)
+                               alloc_doc, realloc_doc, key=f'rad-scene-{run}-{i:06d}', retries=retries,
+                               priority=scene_cost(scene))
         index[future] = i
     rows: dict[int, dict] = {}
     try:
@@ -305,6 +417,10 @@ def _run(client, agent_args, scenes, robot, seed, progress, execution, alloc_doc
         pending = [f for f in index if not f.done()]
         if pending:
             client.cancel(pending)
+        try:   # workers that join later need not warm up for this run; what is built stays
+            client.unregister_worker_plugin(plugin)
+        except Exception:   # noqa: BLE001 - tidying up only: a cluster gone or a worker lost
+            pass
     missing = [scenes[i][0] for i in range(len(scenes)) if i not in rows]
     if missing:
         raise RadError(f'no result for scene(s) {", ".join(missing)}')

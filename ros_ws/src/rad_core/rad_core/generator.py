@@ -11,6 +11,9 @@ on its face towards the robot's right (-y).
 The blocks on the table are a random tiling of the target cells (so a perfect
 assembly exists) plus extras, laid out in rows on the robot's right; a block the
 arm could not reach there (`GeneratorConfig.reach`) goes to rows on its left.
+Where the table within reach cannot hold them all (g = 8 and more), the scene gets a
+feeder instead (`GeneratorConfig.supply`, `rad_core.scene.Feeder`): every block waits in
+it and is presented at a station on the robot's right, in the order the plan asks for.
 """
 
 from __future__ import annotations
@@ -22,7 +25,9 @@ import numpy as np
 
 from rad_core.blocks import DEFAULT_LIBRARY, BlockType
 from rad_core.errors import RadError
-from rad_core.scene import MAX_CLEARANCE, Block, Scene, TargetRegion
+from rad_core.scene import FEEDER_ORDERS, MAX_CLEARANCE, Block, Feeder, Scene, TargetRegion, station_position
+
+SUPPLIES = ('auto', 'table', 'feeder')
 
 # Types that fit a one-cell-deep region at yaw 0 or 180 (they lie in the x-z plane).
 PLANAR_TYPES = ('cube', 'I2', 'I3', 'I2_up', 'L3_up', 'T4_up', 'O4_up', 'S4_up')
@@ -53,6 +58,13 @@ class GeneratorConfig:
         (flush blocks, the default) or e.g. 0.2, the predecessor's 1 cm between
         neighbouring 5 cm cells. It changes no random draw: a seed gives the same
         layout with either.
+    supply: where the blocks start: 'table' (laid out in rows; an error where they do
+        not fit within reach), 'feeder' (all in a feeder presenting them at
+        `station`), or 'auto' (the table where they fit, else the feeder). The target
+        of a seed is the same with each.
+    station: (x, y) (m) of the feeder's station: right of the structure, within reach.
+    feeder_order: 'request' (the plan takes any block) or 'queue' (the feeder's
+        order, a random one, with a window of `feeder_window` blocks to take from).
     """
 
     grid: int = 3
@@ -67,6 +79,10 @@ class GeneratorConfig:
     gap: float = 0.05
     reach: float = 0.77
     clearance: float = 0.0
+    supply: str = 'auto'
+    station: tuple[float, float] = (0.42, -0.3)
+    feeder_order: str = 'request'
+    feeder_window: int = 3
 
     def validate(self) -> None:
         if not (isinstance(self.grid, int) and 1 <= self.grid <= 12):
@@ -84,6 +100,12 @@ class GeneratorConfig:
                 and 0 <= self.clearance < MAX_CLEARANCE):
             raise RadError(f'clearance must be a fraction of the unit in 0 <= clearance < {MAX_CLEARANCE}, '
                            f'got {self.clearance!r}')
+        if self.supply not in SUPPLIES:
+            raise RadError(f'supply must be one of {", ".join(SUPPLIES)}, got {self.supply!r}')
+        if self.feeder_order not in FEEDER_ORDERS:
+            raise RadError(f'feeder_order must be one of {", ".join(FEEDER_ORDERS)}, got {self.feeder_order!r}')
+        if not (isinstance(self.feeder_window, int) and self.feeder_window >= 1):
+            raise RadError(f'feeder_window must be a positive integer, got {self.feeder_window!r}')
 
 
 def sample_polygon(g: int, rng: np.random.Generator) -> np.ndarray:
@@ -182,9 +204,26 @@ def generate_scene(config: GeneratorConfig = GeneratorConfig(), seed: int = 0) -
     extras = [str(rng.choice(sorted(DEFAULT_LIBRARY))) for _ in range(n_extra)]
     kinds = needed + extras
     rng.shuffle(kinds)
-    blocks = _lay_out(kinds, config, rng)
+    feeder = None
+    if config.supply == 'feeder':
+        blocks = None
+    else:
+        try:
+            blocks = _lay_out(kinds, config, rng)
+        except RadError:
+            if config.supply == 'table':
+                raise
+            blocks = None
+    if blocks is None:
+        # Every block in the feeder, presented at the station; the queue's order is the shuffled one.
+        blocks = [Block(f'b{n}', kind, station_position(DEFAULT_LIBRARY[kind], config.station, 0, u), 0)
+                  for n, kind in enumerate(kinds)]
+        feeder = Feeder(tuple(float(v) for v in config.station), tuple(b.id for b in blocks), 0,
+                        config.feeder_order, config.feeder_window if config.feeder_order == 'queue' else 1)
     used = sorted({b.type for b in blocks})
-    return Scene(u, {n: DEFAULT_LIBRARY[n] for n in used}, tuple(blocks), tuple(targets), float(config.clearance))
+    scene = Scene(u, {n: DEFAULT_LIBRARY[n] for n in used}, tuple(blocks), tuple(targets), float(config.clearance),
+                  feeder=feeder)
+    return Scene.from_dict(scene.to_dict()) if feeder is not None else scene
 
 
 def _lay_out(kinds: list[str], config: GeneratorConfig, rng: np.random.Generator) -> list[Block]:

@@ -248,6 +248,7 @@ class RobotAssemblyEnv:
         if not plan.success:
             failure = Outcome.INVALID_GRASP if plan.failure == 'grasp' else Outcome.INVALID_PLACEMENT
             return self._remember(key, env.fail(failure, plan.reason, cells))
+        self.world.present(block_id)     # from the feeder, where the scene has one
         before = {b: self.world.block_pose(b) for b in self.world.blocks}
         self._execute(plan, block_id, position, yaw)
         problem = self._judge(before, block_id, position, yaw)
@@ -317,7 +318,11 @@ class RobotAssemblyEnv:
         if self.config.markov:
             placed = {self.scene.blocks[b].id for b in self.env.state.placed}
             for block_id, (position, quaternion) in self._start_poses.items():
-                if block_id not in placed:
+                if block_id in placed:
+                    continue
+                if self.scene.in_feeder(block_id):
+                    self.world.return_to_feeder(block_id)
+                else:
                     self.world.set_block_pose(block_id, position, quaternion)
             self.world.set_joint_positions(panda.HOME)
         self.world.set_block_velocities_zero()

@@ -30,6 +30,19 @@ on a side, turned off the 90-degree yaws), each with its type and measured pose
 (position, quaternion x y z w). They are no blocks of the scene (nothing plans to
 pick or count them), but the motion planning world holds them where they lie, so
 no arm motion is planned through them.
+
+A scene may also have a ``feeder`` (optional): blocks that do not lie on the table at the
+start but arrive at a pick station, as in cells with a part feeder or a tray refilled
+between picks. ``feeder.blocks`` lists the ids of the blocks still in it, in the order it
+holds them; ``feeder.station`` is the (x, y) on the table (m) where it presents one block
+at a time, footprint centred there, at ``feeder.yaw``. Each such block's scene pose is its
+pose at the station (the parser computes it: ``position`` may be left out, and a given
+one must match), so the allocation, the MDP and the network see where the robot will
+take it. The physics world keeps the blocks in the feeder out of the way until one is
+presented (`rad_core.sim.world.World.present`). ``feeder.order``: ``request`` (the plan
+asks for any block, as a feeder with a magazine per type) or ``queue`` (the feeder
+dictates: only the first ``feeder.window`` blocks of the list can be taken next, a tray of
+that many places refilled from the queue). A block placed leaves the feeder.
 """
 
 from __future__ import annotations
@@ -92,6 +105,44 @@ class Obstacle:
                 'quaternion': list(self.quaternion)}
 
 
+FEEDER_ORDERS = ('request', 'queue')
+
+
+@dataclass(frozen=True)
+class Feeder:
+    """Blocks that arrive at a pick station (module docstring)."""
+
+    station: tuple[float, float]
+    blocks: tuple[str, ...]
+    yaw: int = 0
+    order: str = 'request'
+    window: int = 1
+
+    def available(self) -> tuple[str, ...]:
+        """The ids the robot may take next: any in the feeder, or the queue's first `window`."""
+        return self.blocks if self.order == 'request' else self.blocks[:self.window]
+
+    def without(self, block_id: str) -> 'Feeder':
+        return Feeder(self.station, tuple(b for b in self.blocks if b != block_id), self.yaw, self.order,
+                      self.window)
+
+    def to_dict(self) -> dict:
+        doc = {'station': list(self.station), 'yaw': self.yaw, 'order': self.order, 'blocks': list(self.blocks)}
+        if self.order == 'queue':
+            doc['window'] = self.window
+        return doc
+
+
+def station_position(btype: BlockType, station, yaw: int, unit: float) -> tuple[float, float, float]:
+    """Anchor position of a block presented at a station: its footprint centred on `station`
+    (x, y), its lowest units on the table."""
+    offs = btype.rotated(yaw)
+    lo, hi = offs.min(axis=0), offs.max(axis=0)
+    centre = (lo + hi) / 2
+    return (round(float(station[0] - centre[0] * unit), 6), round(float(station[1] - centre[1] * unit), 6),
+            round(float(unit / 2 - lo[2] * unit), 6))
+
+
 @dataclass(frozen=True)
 class TargetRegion:
     name: str
@@ -132,6 +183,8 @@ class Scene:
     for one lying on the table turned off the 90-degree yaws (module docstring)."""
     obstacles: tuple[Obstacle, ...] = field(default=(), compare=False)
     """Blocks set aside by registration, where they lie (module docstring)."""
+    feeder: Feeder | None = None
+    """Blocks that arrive at a pick station instead of lying on the table (module docstring)."""
     _by_id: dict = field(default=None, repr=False, compare=False)
 
     def __post_init__(self):
@@ -165,6 +218,9 @@ class Scene:
         values = self.measured_offsets.get(block_id, ())
         return float(values[2]) if len(values) > 2 else 0.0
 
+    def in_feeder(self, block_id: str) -> bool:
+        return self.feeder is not None and block_id in self.feeder.blocks
+
     def with_clearance(self, clearance: float) -> 'Scene':
         """This scene with another clearance, validated as a document would be."""
         return Scene.from_dict({**self.to_dict(), 'clearance': clearance})
@@ -194,6 +250,8 @@ class Scene:
             doc['measured_offsets'] = {k: list(v) for k, v in self.measured_offsets.items()}
         if self.obstacles:
             doc['obstacles'] = [o.to_dict() for o in self.obstacles]
+        if self.feeder is not None:
+            doc['feeder'] = self.feeder.to_dict()
         return doc
 
     def dumps(self) -> str:
@@ -299,19 +357,57 @@ def _parse_block_types(doc: Any) -> dict[str, BlockType]:
     return types
 
 
-def _parse_block(doc: Any, i: int, types: Mapping[str, BlockType]) -> Block:
+def _yaw(yaw: Any, where: str) -> int:
+    _expect(isinstance(yaw, (int, float)) and not isinstance(yaw, bool) and math.isfinite(yaw), where,
+            f'expected degrees as a number, got {_show(yaw)}')
+    _expect(float(yaw) % 90 == 0, where, f'{yaw} is not a multiple of 90 degrees')
+    return int(yaw) % 360
+
+
+def _parse_block(doc: Any, i: int, types: Mapping[str, BlockType], feeder: dict | None, unit: float) -> Block:
+    """A block; one in the feeder (`feeder`: its station, yaw and ids) gets its pose at the station."""
     where = f'blocks[{i}]'
     _expect(isinstance(doc, dict), where, 'expected an object')
-    _check_keys(doc, where, {'id', 'type', 'position', 'yaw'})
-    bid = _name(doc['id'], f'{where}.id')
+    bid = _name(doc.get('id'), f'{where}.id') if 'id' in doc else None
+    fed = feeder is not None and bid in feeder['ids']
+    _check_keys(doc, where, {'id', 'type'} if fed else {'id', 'type', 'position', 'yaw'}, {'position', 'yaw'})
     btype = _name(doc['type'], f'{where}.type')
     _expect(btype in types, f'{where}.type', f'unknown block type {btype!r} (not in block_types)')
-    pos = _vec3(doc['position'], f'{where}.position', _number)
-    yaw = doc['yaw']
-    _expect(isinstance(yaw, (int, float)) and not isinstance(yaw, bool) and math.isfinite(yaw), f'{where}.yaw',
-            f'expected degrees as a number, got {_show(yaw)}')
-    _expect(float(yaw) % 90 == 0, f'{where}.yaw', f'{yaw} is not a multiple of 90 degrees')
-    return Block(bid, btype, pos, int(yaw) % 360)
+    if not fed:
+        return Block(bid, btype, _vec3(doc['position'], f'{where}.position', _number), _yaw(doc['yaw'], f'{where}.yaw'))
+    yaw = feeder['yaw']
+    _expect(_yaw(doc.get('yaw', yaw), f'{where}.yaw') == yaw, f'{where}.yaw',
+            f'block {bid!r} is in the feeder, which presents it at yaw {yaw}, not {doc.get("yaw")}')
+    pos = station_position(types[btype], feeder['station'], yaw, unit)
+    if 'position' in doc:
+        given = _vec3(doc['position'], f'{where}.position', _number)
+        _expect(max(abs(a - b) for a, b in zip(given, pos)) <= 1e-4, f'{where}.position',
+                f'block {bid!r} is in the feeder: its pose is the station\'s, {list(pos)}, not {list(given)} '
+                f'(leave position out)')
+    return Block(bid, btype, pos, yaw)
+
+
+def _parse_feeder(doc: Any) -> dict:
+    """The feeder's fields, checked; its ids are checked against the blocks later."""
+    _expect(isinstance(doc, dict), 'feeder', 'expected an object {station, blocks, yaw?, order?, window?}')
+    _check_keys(doc, 'feeder', {'station', 'blocks'}, {'yaw', 'order', 'window'})
+    st = doc['station']
+    _expect(isinstance(st, (list, tuple)) and len(st) == 2, 'feeder.station',
+            f'expected [x, y] (m) on the table, got {_show(st)}')
+    station = tuple(_number(v, f'feeder.station[{i}]') for i, v in enumerate(st))
+    ids = doc['blocks']
+    _expect(isinstance(ids, list), 'feeder.blocks', 'expected a list of block ids')
+    for k, b in enumerate(ids):
+        _name(b, f'feeder.blocks[{k}]')
+    _expect(len(set(ids)) == len(ids), 'feeder.blocks', 'lists the same block twice')
+    order = doc.get('order', 'request')
+    _expect(order in FEEDER_ORDERS, 'feeder.order', f'expected one of {list(FEEDER_ORDERS)}, got {_show(order)}')
+    window = _integer(doc.get('window', 1), 'feeder.window')
+    _expect(window >= 1, 'feeder.window', f'the robot must be able to take at least one block, got {window}')
+    _expect(order == 'queue' or 'window' not in doc, 'feeder.window',
+            'only a queue feeder has a window (a request feeder presents any block)')
+    return {'station': station, 'ids': tuple(ids), 'yaw': _yaw(doc.get('yaw', 0), 'feeder.yaw'), 'order': order,
+            'window': window}
 
 
 def _parse_target(doc: Any, i: int) -> TargetRegion:
@@ -339,7 +435,7 @@ def _parse_target(doc: Any, i: int) -> TargetRegion:
 def _parse_scene(doc: Any) -> Scene:
     _expect(isinstance(doc, dict), '', 'a scene must be a JSON object')
     _check_keys(doc, '', {'format', 'unit', 'block_types', 'blocks', 'targets'},
-                {'clearance', 'measured_offsets', 'obstacles'})
+                {'clearance', 'measured_offsets', 'obstacles', 'feeder'})
     _expect(doc['format'] == FORMAT, 'format', f'expected {FORMAT!r}, got {_show(doc["format"])}')
     unit = _number(doc['unit'], 'unit')
     _expect(UNIT_RANGE[0] <= unit <= UNIT_RANGE[1], 'unit', f'{unit} m is outside {UNIT_RANGE[0]}..{UNIT_RANGE[1]} m')
@@ -349,11 +445,16 @@ def _parse_scene(doc: Any) -> Scene:
     blocks_doc = doc['blocks']
     _expect(isinstance(blocks_doc, list), 'blocks', 'expected a list')
     _expect(len(blocks_doc) <= MAX_BLOCKS, 'blocks', f'{len(blocks_doc)} blocks exceed the limit of {MAX_BLOCKS}')
-    blocks = tuple(_parse_block(b, i, types) for i, b in enumerate(blocks_doc))
+    feeder = _parse_feeder(doc['feeder']) if 'feeder' in doc else None
+    blocks = tuple(_parse_block(b, i, types, feeder, unit) for i, b in enumerate(blocks_doc))
     seen = {}
     for i, b in enumerate(blocks):
         _expect(b.id not in seen, f'blocks[{i}].id', f'duplicate id {b.id!r} (also blocks[{seen.get(b.id)}])')
         seen[b.id] = i
+    if feeder is not None:
+        unknown = [b for b in feeder['ids'] if b not in seen]
+        _expect(not unknown, 'feeder.blocks', f'unknown block id {unknown[0]!r}' if unknown else '')
+        feeder = Feeder(feeder['station'], feeder['ids'], feeder['yaw'], feeder['order'], feeder['window'])
 
     targets_doc = doc['targets']
     _expect(isinstance(targets_doc, list) and len(targets_doc) > 0, 'targets', 'expected a non-empty list of regions')
@@ -367,7 +468,10 @@ def _parse_scene(doc: Any) -> Scene:
 
     offsets = _parse_offsets(doc.get('measured_offsets', {}), seen, unit)
     obstacles = _parse_obstacles(doc.get('obstacles', []), seen, types)
-    scene = Scene(unit, types, blocks, targets, clearance, offsets, obstacles)
+    if feeder is not None:
+        _expect(not any(b in offsets for b in feeder.blocks), 'measured_offsets',
+                'a block in the feeder has no measured offset (it is not on the table)')
+    scene = Scene(unit, types, blocks, targets, clearance, offsets, obstacles, feeder)
     _check_geometry(scene)
     return scene
 
@@ -426,9 +530,19 @@ def _check_geometry(scene: Scene) -> None:
             _expect(not overlap, f'targets[{b}]', f'region {scene.targets[b].name!r} overlaps region '
                     f'{scene.targets[a].name!r}')
 
-    centres, owner = [], []
+    centres, owner, fed = [], [], []
     for i, block in enumerate(scene.blocks):
         pts = scene.unit_positions(block)
+        if scene.in_feeder(block.id):
+            # At the station only when presented, one at a time: checked against the regions and
+            # the table's blocks below, not against each other.
+            for t in scene.targets:
+                lo, hi = t.bounds(u)
+                _expect(not np.any(np.all((pts + u / 2 > lo + 0.01 * u) & (pts - u / 2 < hi - 0.01 * u), axis=1)),
+                        'feeder.station', f'block {block.id!r} presented at the station would stick into target '
+                                          f'region {t.name!r}')
+            fed.append((i, pts))
+            continue
         low = pts[:, 2].min()
         _expect(low >= u / 2 - 0.25 * u, f'blocks[{i}].position',
                 f'block {block.id!r} reaches below the table top (lowest unit centre z={low:.4f} m, '
@@ -440,10 +554,15 @@ def _check_geometry(scene: Scene) -> None:
         return
     pts = np.concatenate(centres)
     owner = np.asarray(owner)
-    # Axis-aligned unit cubes (yaw is a multiple of 90) overlap iff their centres
-    # are closer than one unit on every axis; units of two blocks face each other
-    # with outer faces, so with a clearance they may come that much closer sideways.
     reach = 0.99 * u * np.array([1.0 - scene.clearance, 1.0 - scene.clearance, 1.0])
+    for i, units in fed:
+        close = np.all(np.abs(pts[None, :, :] - units[:, None, :]) < reach, axis=2).any(axis=0)
+        if close.any():
+            raise SceneError('feeder.station', f'block {scene.blocks[owner[np.argmax(close)]].id!r} lies on the '
+                             f'feeder\'s station, where block {scene.blocks[i].id!r} would be presented')
+    # Axis-aligned unit cubes (yaw is a multiple of 90) overlap iff their centres
+    # are closer than one unit on every axis (`reach`); units of two blocks face each other
+    # with outer faces, so with a clearance they may come that much closer sideways.
     for k in range(len(pts)):
         close = np.all(np.abs(pts[k + 1:] - pts[k]) < reach, axis=1) & (owner[k + 1:] != owner[k])
         if close.any():

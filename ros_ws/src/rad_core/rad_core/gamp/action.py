@@ -225,8 +225,9 @@ def table_neighbours(scene: Scene, block_id: str, reach: float = 0.08) -> list[s
     boxes = [t.bounds(unit) for t in scene.targets]
     found = []
     for other in scene.blocks:
-        if other.id == block_id or any(np.all((np.asarray(other.position) > lo) & (np.asarray(other.position) < hi))
-                                       for lo, hi in boxes):
+        if other.id == block_id or scene.in_feeder(other.id):
+            continue
+        if any(np.all((np.asarray(other.position) > lo) & (np.asarray(other.position) < hi)) for lo, hi in boxes):
             continue
         theirs = footprint(other, types, unit)
         gap = float(np.abs(ours[:, None, :] - theirs[None, :, :]).max(axis=-1).min()) - unit

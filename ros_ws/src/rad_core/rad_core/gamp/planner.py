@@ -173,6 +173,7 @@ def plan_action(world: World, block_id: str, position, yaw_deg: float, start=Non
     closed_f = max(0.0, width / 2 - config.grip_squeeze)
     pick_failures, place_failures = [], []
     with world.preserved():
+        world.present(block_id)     # a block in the feeder is picked where the feeder presents it
         start = world.joint_positions() if start is None else _full(start)
         block_pos, block_quat = world.block_pose(block_id)
         block_yaw = math.radians(yaw_of_quaternion(block_quat))

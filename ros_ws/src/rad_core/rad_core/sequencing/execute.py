@@ -168,7 +168,8 @@ def execute_assembly(scene: Scene, plan: Plan, move_arm: MoveArm, move_gripper: 
                      config: ExecuteConfig = ExecuteConfig(), joints: Callable[[], 'np.ndarray | None'] | None = None,
                      cancelled: Callable[[], bool] = lambda: False, report: Report | None = None,
                      settle: Callable[[float], None] = time.sleep,
-                     plan_motion: PlanMotion | None = None) -> ExecutionResult:
+                     plan_motion: PlanMotion | None = None,
+                     present: Callable[[str], object] | None = None) -> ExecutionResult:
     """Build `scene` on the plant; never raises RadError (it becomes the result's reason).
 
     joints: the robot's joints now (arm and fingers), for each plan's start (None: home); without
@@ -176,6 +177,8 @@ def execute_assembly(scene: Scene, plan: Plan, move_arm: MoveArm, move_gripper: 
     settle(seconds): let the plant come to rest (a real plant: wait; a twin: step it).
     plan_motion: the planner's motion planner (scene, action, start joints), to plan a step's motion
     again from the measured world when registration saw blocks off their cells (None: never).
+    present(block id): the scene's feeder puts that block at its station (None: the plant has no
+    feeder; a scene with one then fails at its first block from it, with that reason).
     Phases reported: planning, executing, verifying, replanning, done.
     """
     config.validate()
@@ -229,6 +232,11 @@ def execute_assembly(scene: Scene, plan: Plan, move_arm: MoveArm, move_gripper: 
                         break
                     step = replace(step, motion=fresh.motion, grasp=tuple(fresh.grasp),
                                    moved_aside=list(fresh.moved_aside))
+                if current.in_feeder(step.block):
+                    if present is None:
+                        raise RadError(f'block {step.block} is in the feeder, and this plant has no feeder '
+                                       f'to present it')
+                    present(step.block)
                 motion = Motion.from_dict(step.motion)
                 failed = _run_step(motion, move_arm, move_gripper, step_start, joints, config)
                 # A failed grasp, or a trajectory the controller aborted (something held the arm back), has

@@ -153,7 +153,8 @@ def moved(scene: Scene, block_id: str, position, yaw: int) -> Scene:
     blocks = tuple(Block(b.id, b.type, tuple(round(float(v), 6) for v in position), int(yaw) % 360)
                    if b.id == block_id else b for b in scene.blocks)
     offsets = {k: v for k, v in scene.measured_offsets.items() if k != block_id}
-    return Scene.from_dict(replace(scene, blocks=blocks, measured_offsets=offsets).to_dict())
+    feeder = scene.feeder.without(block_id) if scene.in_feeder(block_id) else scene.feeder
+    return Scene.from_dict(replace(scene, blocks=blocks, measured_offsets=offsets, feeder=feeder).to_dict())
 
 
 def plan_assembly(scene: Scene, allocate: Allocate, plan_motion: PlanMotion, sequencer: Policy | Rank,

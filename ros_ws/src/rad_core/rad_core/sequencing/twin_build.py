@@ -43,6 +43,7 @@ def build_teleported(scene: Scene, steps, settle_s: float = 0.5):
         for step in steps:
             for d in getattr(step, 'moved_aside', ()):
                 world.set_block_pose(d['block'], d['position'], yaw_quaternion(d['yaw']))
+            world.present(step.block)       # from the feeder, if the scene has one and it is there
             world.set_block_pose(step.block, step.position, yaw_quaternion(step.yaw))
             twin.settle(settle_s)
         return twin.registration()
@@ -73,6 +74,6 @@ def build_simulated(scene: Scene, plan, plan_motion, twin_config=None, execute_c
         result = execute_assembly(scene, plan, move_arm, twin.execute_gripper, twin.registration,
                                   execute_config or ExecuteConfig(settle_s=0.5),
                                   joints=lambda: twin.world.joint_positions(), settle=twin.settle,
-                                  plan_motion=plan_motion)
+                                  plan_motion=plan_motion, present=twin.present)
         injected = Counter(e.get('fault', e.get('action', '?')) for e in twin.fault_events)
         return SimulatedBuild(result, twin.time - sim0, dict(injected))

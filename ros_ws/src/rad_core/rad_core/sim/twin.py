@@ -288,6 +288,21 @@ class Twin:
             self.attached = None
         self._apply()
 
+    def present(self, block_id: str) -> bool:
+        """The scene's feeder presents a block at its station (`World.present`); whether it moved one.
+        RadError for an unknown block, one not in the feeder (or taken from it already) or one the hand holds."""
+        scene = self.world.scene
+        if scene is None or scene.feeder is None:
+            raise RadError('this scene has no feeder')
+        if block_id not in self.world.blocks:
+            raise RadError(f'unknown block id {block_id!r}')
+        if self.attached is not None and self.attached[0] == block_id:
+            raise RadError(f'block {block_id} is in the hand')
+        if block_id not in self.world.parked and not self.world.at_station(block_id):
+            raise RadError(f'block {block_id} is not in the feeder (left in it: '
+                           f'{", ".join(sorted(self.world.parked)) or "none"})')
+        return self.world.present(block_id)
+
     def load_scene(self, scene: Scene) -> None:
         """Replace the blocks (robot back at HOME); a running trajectory is dropped."""
         self._release()
@@ -322,6 +337,8 @@ class Twin:
         f = self.config.faults
         out = []
         for bid, (pos, q) in self.block_poses().items():
+            if bid in self.world.parked:
+                continue        # inside the feeder: no camera sees it
             name = names.get(bid, bid)
             if not exact and f.drop_body > 0 and self._rng['drop_body'].random() < f.drop_body \
                     and name in self._reported:

@@ -1,0 +1,207 @@
+"""A scene's feeder: blocks that arrive at a pick station instead of lying on the table.
+
+Real parts throughout: the scene parser, PyBullet worlds, GAMP, CP-SAT and the twin."""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import pytest
+
+from scenes import U, doc
+
+from rad_core.errors import RadError, SceneError
+from rad_core.scene import Scene, station_position
+from rad_core.sequencing.plan import moved
+
+STATION = [0.45, -0.25]
+
+
+def feeder_doc(order: str = 'request', **feeder) -> dict:
+    """The core tests' default scene with every block in a feeder (positions left out)."""
+    d = doc()
+    for b in d['blocks']:
+        b.pop('position')
+        b.pop('yaw')
+    d['feeder'] = {'station': STATION, 'blocks': [b['id'] for b in d['blocks']], 'order': order, **feeder}
+    return d
+
+
+@pytest.fixture(scope='module')
+def fed() -> Scene:
+    return Scene.from_dict(feeder_doc())
+
+
+# ---- the scene format ------------------------------------------------------------------------
+
+def test_a_block_in_the_feeder_has_its_pose_at_the_station(fed):
+    i2 = fed.block('i0')
+    assert i2.yaw == 0
+    # An I2 at yaw 0 spans +x from its anchor: centred on the station, on the table.
+    assert i2.position == pytest.approx((STATION[0] - U / 2, STATION[1], U / 2))
+    assert fed.block('c0').position == pytest.approx((*STATION, U / 2))
+    assert fed.feeder.available() == ('c0', 'c1', 'i0')
+    again = Scene.loads(fed.dumps())
+    assert again == fed and again.feeder == fed.feeder
+
+
+@pytest.mark.parametrize('change, where, words', [
+    (lambda d: d['feeder']['blocks'].append('nope'), 'feeder.blocks', "unknown block id 'nope'"),
+    (lambda d: d['feeder']['blocks'].append('c0'), 'feeder.blocks', 'same block twice'),
+    (lambda d: d['feeder'].update(order='fifo'), 'feeder.order', "'request', 'queue'"),
+    (lambda d: d['feeder'].update(window=2), 'feeder.window', 'only a queue feeder'),
+    (lambda d: d['feeder'].update(station=[0.4]), 'feeder.station', 'expected [x, y]'),
+    (lambda d: d['blocks'][0].update(position=[0.1, 0.1, U / 2]), 'blocks[0].position', 'leave position out'),
+    (lambda d: d['blocks'][2].update(yaw=90), 'blocks[2].yaw', 'presents it at yaw 0'),
+    (lambda d: d['feeder'].update(station=[0.5, 0.1]), 'feeder.station', "stick into target region 'front'"),
+])
+def test_a_bad_feeder_is_refused_with_the_field_that_is_wrong(change, where, words):
+    d = feeder_doc()
+    change(d)
+    with pytest.raises(SceneError) as e:
+        Scene.from_dict(d)
+    assert e.value.field == where and words in str(e.value), str(e.value)
+
+
+def test_the_station_must_be_clear_of_the_blocks_on_the_table():
+    d = doc()
+    d['feeder'] = {'station': [0.4, -0.2], 'blocks': ['c1']}       # c0 lies there
+    d['blocks'][1].pop('position')
+    d['blocks'][1].pop('yaw')
+    with pytest.raises(SceneError, match="block 'c0' lies on the feeder's station"):
+        Scene.from_dict(d)
+
+
+def test_a_block_placed_leaves_the_feeder(fed):
+    after = moved(fed, 'c1', (0.45, 0.1, U / 2), 0)
+    assert after.feeder.blocks == ('c0', 'i0') and after.block('c1').position == (0.45, 0.1, U / 2)
+
+
+def test_a_queue_feeder_offers_its_first_blocks_only():
+    q = Scene.from_dict(feeder_doc('queue', window=2))
+    assert q.feeder.available() == ('c0', 'c1')
+    assert moved(q, 'c0', (0.45, 0.1, U / 2), 0).feeder.available() == ('c1', 'i0')
+
+
+# ---- the physics world and the twin -------------------------------------------------------------
+
+def test_the_world_parks_feeder_blocks_and_presents_one_at_a_time(fed):
+    from rad_core.sim.world import PARK_Z, World
+    with World(fed) as world:
+        assert world.parked == {'c0', 'c1', 'i0'}
+        assert all(world.block_pose(b)[0][2] == pytest.approx(PARK_Z) for b in world.parked)
+        saved = world.save()
+        assert world.present('c0') and not world.present('c0')
+        assert world.block_pose('c0')[0] == pytest.approx(fed.block('c0').position)
+        world.step(240)                                   # presented: a body like any other, at rest
+        assert world.block_pose('c0')[0] == pytest.approx(fed.block('c0').position, abs=1e-3)
+        world.present('i0')                               # c0 was not taken: it goes back
+        assert world.parked == {'c0', 'c1'} and world.presented == 'i0'
+        world.restore(saved)
+        assert world.parked == {'c0', 'c1', 'i0'} and world.presented is None
+        world.step(240)                                   # parked blocks stay where they wait
+        assert world.block_pose('i0')[0][2] == pytest.approx(PARK_Z)
+
+
+def test_motion_capture_does_not_see_into_the_feeder_and_registration_keeps_its_blocks(fed):
+    from rad_core.sim.twin import Twin
+    from rad_core.sim.world import World
+    with World(fed) as world:
+        twin = Twin(world)
+        assert twin.bodies() == []
+        assert twin.current_scene() == fed                 # all still in the feeder
+        twin.present('c1')
+        assert [b.name for b in twin.bodies()] == ['c1']
+        assert twin.current_scene().feeder.blocks == ('c0', 'c1', 'i0')   # presented, not taken
+        world.set_block_pose('c1', (0.45, 0.1, U / 2))                    # taken and placed
+        twin.settle(0.2)
+        now = twin.current_scene()
+        assert now.feeder.blocks == ('c0', 'i0') and now.block('c1').position == pytest.approx((0.45, 0.1, U / 2))
+        with pytest.raises(RadError, match='not in the feeder'):
+            twin.present('c1')
+        with pytest.raises(RadError, match='unknown block'):
+            twin.present('zz')
+
+
+# ---- the generator -----------------------------------------------------------------------------
+
+def test_the_generator_uses_a_feeder_where_the_table_cannot_hold_the_blocks():
+    from rad_core.generator import GeneratorConfig, generate_scene
+    with pytest.raises(RadError, match='do not fit on the table'):
+        generate_scene(GeneratorConfig(grid=8, supply='table'), 0)
+    big = generate_scene(GeneratorConfig(grid=8), 0)
+    assert big.feeder is not None and set(big.feeder.blocks) == {b.id for b in big.blocks}
+    small = generate_scene(GeneratorConfig(grid=4), 3)
+    assert small.feeder is None
+    fed = generate_scene(GeneratorConfig(grid=4, supply='feeder'), 3)
+    assert fed.targets == small.targets and [b.type for b in fed.blocks] == [b.type for b in small.blocks]
+    queue = generate_scene(GeneratorConfig(grid=4, supply='feeder', feeder_order='queue', feeder_window=2), 3)
+    assert queue.feeder.available() == fed.feeder.blocks[:2]
+
+
+# ---- planning and building from the feeder ------------------------------------------------------
+
+def test_the_arm_aware_allocation_judges_a_feeder_block_where_it_is_presented(fed):
+    from rad_core.allocation.arm import arm_filter
+    from rad_core.allocation.placements import enumerate_candidates
+    from rad_core.grid import Grid
+    grid = Grid(fed)
+    _, counts, report = arm_filter(fed, grid, enumerate_candidates(fed, grid))
+    assert counts == {'cube': 2, 'I2': 1, 'L3_up': 0} and not report.blocks
+    far = Scene.from_dict({**feeder_doc(), 'feeder': {**feeder_doc()['feeder'], 'station': [0.95, -0.3]}})
+    _, counts, report = arm_filter(far, Grid(far), enumerate_candidates(far, Grid(far)))
+    assert sum(counts.values()) == 0 and 'cannot be picked where it lies' in report.blocks['c0']
+
+
+def test_a_plan_picks_every_block_at_the_station_and_the_twin_builds_it(fed):
+    from rad_core.coverage import measured_coverage
+    from rad_core.sequencing.agent_plan import AgentPlanner
+    from rad_core.sequencing.twin_build import build_teleported
+    planner = AgentPlanner('greedy')
+    from rad_core.sim.world import World
+    plan = planner(fed, None, 0)
+    assert plan.success and plan.predicted_coverage == 1.0, plan.reason
+    with World() as world:
+        for step in plan.steps:
+            # The first trajectory ends where the hand closes: over one of the block's units at the station.
+            world.set_joint_positions(step.motion['trajectories'][0]['points'][-1]['positions'][:7])
+            grasp = world.link_pose()[0]
+            units = fed.unit_positions(fed.block(step.block))
+            assert np.min(np.linalg.norm(units[:, :2] - grasp[:2], axis=1)) < 0.01, (step.block, grasp)
+    registered = build_teleported(fed, plan.steps)
+    assert measured_coverage(registered.scene) == 1.0 and not registered.set_aside
+    assert set(registered.scene.feeder.blocks) == {'c0', 'c1', 'i0'} - {s.block for s in plan.steps}
+
+
+def test_the_robot_mdp_takes_blocks_from_the_feeder(fed):
+    from rad_core.robot_env import RobotAssemblyEnv, RobotEnvConfig
+    from rad_core.mdp import Action
+    with RobotAssemblyEnv(fed, RobotEnvConfig()) as env:
+        env.reset()
+        target = env.env.grid
+        cell = int(np.flatnonzero(target.is_target)[0])
+        result = env.step(Action(0, 0, cell, 0))              # c0 onto the first target cell
+        assert not result.outcome.is_invalid, result.reason
+        assert env.world.parked == {'c1', 'i0'}
+        assert env.world.block_pose('c0')[0] == pytest.approx(target.centres[cell], abs=2e-3)
+
+
+def test_execution_without_a_feeder_says_so():
+    from rad_core.sequencing.agent_plan import AgentPlanner
+    from rad_core.sequencing.execute import execute_assembly
+    scene = Scene.from_dict(feeder_doc())
+    planner = AgentPlanner('greedy')
+    result = execute_assembly(scene, lambda s, q: planner(s, q, 0), lambda t: None, lambda c: None, lambda: scene)
+    assert not result.success and 'has no feeder' in result.reason, result.reason
+
+
+def test_the_feeder_doc_is_not_changed_by_parsing():
+    d = feeder_doc()
+    before = copy.deepcopy(d)
+    Scene.from_dict(d)
+    assert d == before
+    # A generator writing positions gets the parser's own: the document with them parses the same.
+    for b in d['blocks']:
+        b['position'] = list(station_position(Scene.from_dict(before).block_types[b['type']], STATION, 0, U))
+    assert Scene.from_dict(d) == Scene.from_dict(before)
