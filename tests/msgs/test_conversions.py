@@ -70,3 +70,16 @@ def test_scene_clearance_travels_in_the_message():
     bad.clearance = 0.7
     with pytest.raises(RadError, match='clearance'):
         scene_from_msg(bad)
+
+
+@pytest.mark.parametrize('order', ['request', 'queue'])
+def test_a_feeder_travels_in_the_scene_message(order):
+    s = generate_scene(GeneratorConfig(grid=3, supply='feeder', feeder_order=order, feeder_window=2), 2)
+    msg = scene_to_msg(s)
+    assert len(msg.feeder) == 1 and list(msg.feeder[0].blocks) == list(s.feeder.blocks)
+    back = scene_from_msg(msg)
+    assert back == s and back.feeder == s.feeder
+    assert list(scene_to_msg(generate_scene(GeneratorConfig(grid=3), 2)).feeder) == []
+    msg.feeder[0].blocks = ['nope']
+    with pytest.raises(RadError, match="feeder.blocks: unknown block id 'nope'"):
+        scene_from_msg(msg)

@@ -21,6 +21,7 @@ from rad_core.scene import Scene
 
 DEMO_SCENE = generate_scene(GeneratorConfig(grid=4), 8)      # the demo's default: builds completely
 SMALL = Scene.from_dict(doc())                                 # one region, a few cubes
+FEEDER_DEMO = generate_scene(GeneratorConfig(grid=4, supply='feeder'), 8)   # the demo's target, its blocks in a feeder
 # The network without search: deterministic, and it builds DEMO_SCENE completely.
 SEQUENCER = {'policy': 'milp-dqn'}
 
@@ -205,6 +206,18 @@ def test_bad_input_gets_a_reason_and_the_graph_serves_the_next_request(graph, ca
     assert not r.success and expected in r.reason, r.reason
     assert graph.plan(scene_json=SMALL.dumps()).success
     assert all(p.is_running() for p in graph.procs.values())
+
+
+def test_execute_takes_every_block_from_the_twins_feeder(node_process, ros_node, tmp_path):
+    """No block on the table: the node registers the task from motion capture (the feeder's blocks unseen,
+    not lost), asks the twin's feeder/present for each block before its pick, and builds it all."""
+    from rad_msgs.action import ExecuteAssembly
+    g = start_graph(node_process, ros_node, tmp_path, scene=FEEDER_DEMO)
+    result = execute(g, ExecuteAssembly.Goal(replan=True))
+    assert result.success, result.reason
+    assert result.steps_executed == 4 and result.coverage == 1.0
+    assert json.loads(result.result_json)['execution']['faults'] == []
+    stop_graph(g)
 
 
 def test_execute_builds_the_scene_and_reports_each_step(graph):

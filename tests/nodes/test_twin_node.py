@@ -452,3 +452,25 @@ def test_bad_fault_and_frame_parameters_stop_the_twin_with_the_reason(node_proce
     proc = node_process('rad_sim', 'twin_node', *ros_args(params))
     assert proc.wait(timeout=20.0) == 1
     assert 'cannot start' in proc.stderr() and reason in proc.stderr()
+
+
+def test_the_feeder_presents_a_block_motion_capture_then_sees(twin, ros_node):
+    from rad_msgs.srv import LoadScene, PresentBlock
+    fed = generate_scene(GeneratorConfig(grid=3, supply='feeder'), 5)
+    assert twin.load(LoadScene.Request(scene_json=fed.dumps())).success
+    client = wait_for_service(ros_node, PresentBlock, 'feeder/present', timeout=10.0)
+
+    def present(block_id):
+        return call_service(ros_node, client, PresentBlock.Request(block_id=block_id), timeout=10.0)
+
+    assert fresh_messages(twin, 'bodies')[-1].rigidbodies == []       # no camera sees into the feeder
+    assert Scene.loads(twin.state().scene_json) == fed
+    assert "unknown block id 'nope'" in present('nope').reason
+    first = fed.feeder.blocks[0]
+    assert present(first).success
+    seen = fresh_messages(twin, 'bodies')[-1].rigidbodies
+    assert [b.rigid_body_name for b in seen] == [first]
+    assert seen[0].pose.position.x == pytest.approx(fed.block(first).position[0], abs=0.005)
+    assert Scene.loads(twin.state().scene_json).feeder.blocks == fed.feeder.blocks   # presented, not taken
+    assert twin.load(LoadScene.Request(scene_json=twin.scene.dumps())).success
+    assert 'has no feeder' in present(twin.scene.blocks[0].id).reason

@@ -431,9 +431,10 @@ class MocapTracker:
             out.append(f'motion capture reports more than {MAX_BODIES} rigid bodies: the rest are not tracked')
         return out
 
-    def snapshot(self, resolved: ResolvedBodies, now: float | None = None) -> Snapshot:
+    def snapshot(self, resolved: ResolvedBodies, now: float | None = None, optional=frozenset()) -> Snapshot:
         """The task's blocks as motion capture sees them now; RadError naming each block whose body has
-        not been seen for longer than lost_timeout_s (and why, when the input was refused)."""
+        not been seen for longer than lost_timeout_s (and why, when the input was refused). optional:
+        blocks that may never be seen (in a feeder: no camera sees into it), left out until they are."""
         now = self.clock() if now is None else now
         with self.lock:
             warnings = self._warnings(resolved)
@@ -450,6 +451,8 @@ class MocapTracker:
                     bodies.append(self._anchor(body, entry, track))
                     continue
                 since = track.last_valid if track is not None and track.last_valid is not None else None
+                if since is None and entry.block in optional:
+                    continue
                 age = now - (self.start if since is None else since)
                 if age > self.lost_timeout_s:
                     lost.append(f'{resolved.describe(body)} ' + (f'not seen for {age:.1f} s' if since is not None
@@ -482,19 +485,20 @@ class MocapTracker:
 
 def wait_for_bodies(tracker: MocapTracker, resolved: ResolvedBodies, timeout_s: float | None = None,
                     poll_s: float = 0.02, sleep: Callable[[float], None] = time.sleep,
-                    warn: Callable[[str], None] | None = None) -> list[RigidBodyPose]:
+                    warn: Callable[[str], None] | None = None, optional=frozenset()) -> list[RigidBodyPose]:
     """The task's bodies for register_scene, once every block is seen.
 
     Waits up to timeout_s (default: the tracker's lost_timeout_s) for blocks that
     are momentarily not seen. A block whose body stays lost longer than
     lost_timeout_s fails the wait with a RadError naming it; a block seen within
     that bound but never all at once with the others registers at its last valid
-    pose; a block never seen at all fails naming it.
+    pose; a block never seen at all fails naming it, unless it is `optional` (in the task's
+    feeder: seen only once presented).
     """
     timeout_s = tracker.lost_timeout_s if timeout_s is None else timeout_s
     deadline = tracker.clock() + timeout_s
     while True:
-        snap = tracker.snapshot(resolved)
+        snap = tracker.snapshot(resolved, optional=optional)
         for message in snap.warnings:
             if warn is not None:
                 warn(message)

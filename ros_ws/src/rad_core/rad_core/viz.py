@@ -97,13 +97,31 @@ def block_shape(scene: Scene, type_name: str) -> BoxSet:
     return BoxSet(boxes.centers + shift, halves, boxes.colors)
 
 
+FEEDER_COLUMNS = 8
+"""A feeder's waiting blocks are drawn in rows of this many beside its station (its magazine)."""
+
+
+def shown_pose(scene: Scene, block) -> tuple[tuple, tuple]:
+    """Where a block is drawn before motion capture says otherwise: its scene pose, or for the k-th
+    block waiting in a feeder (all of which share the station pose) a place in rows beside the
+    station, away from the robot (-y), the first (k = 0) at the station itself."""
+    if not scene.in_feeder(block.id):
+        return tuple(block.position), yaw_quaternion(block.yaw)
+    k = scene.feeder.blocks.index(block.id)
+    x, y, z = block.position
+    if k:
+        pitch, j = 4 * scene.unit, k - 1
+        x, y = x + pitch * (j % FEEDER_COLUMNS), y - pitch * (1 + j // FEEDER_COLUMNS)
+    return (x, y, z), yaw_quaternion(block.yaw)
+
+
 def block_boxes(scene: Scene, poses: Mapping[str, tuple] | None = None) -> dict[str, BoxSet]:
     """World-frame unit cubes of every block: at `poses[id]` = (position, quaternion xyzw) where given,
     else at the scene's own pose. Boxes stay axis-aligned, so this is exact for yaws of
     multiples of 90 degrees (what the scene and registration allow)."""
     out = {}
     for block in scene.blocks:
-        position, quaternion = (poses or {}).get(block.id, (block.position, yaw_quaternion(block.yaw)))
+        position, quaternion = (poses or {}).get(block.id) or shown_pose(scene, block)
         local = block_shape(scene, block.type)
         turn = matrix_from_quaternion(quaternion)
         centers = np.asarray(position, dtype=float) + local.centers @ turn.T
@@ -353,7 +371,8 @@ def log_scene(rec, scene: Scene, previous: Scene | None = None) -> None:
     for block in scene.blocks:
         path = f'{WORLD}/blocks/{entity_part(block.id)}'
         rec.log(path, _boxes(block_shape(scene, block.type)))
-        rec.log(path, rr.Transform3D(translation=block.position, quaternion=yaw_quaternion(block.yaw)))
+        position, quaternion = shown_pose(scene, block)
+        rec.log(path, rr.Transform3D(translation=position, quaternion=quaternion))
     for name, (target, other) in cell_boxes(scene).items():
         base = f'{WORLD}/targets/{entity_part(name)}'
         rec.log(f'{base}/target_cells', _boxes(target))

@@ -30,6 +30,8 @@ request with a reason naming it.
   pub  plan_json         std_msgs/String (latched): the latest plan, for the visualizer
   pub  /tf_static        tf2_msgs/TFMessage (latched): the calibration frame_id -> mocap_frame, when
                          motion capture reports in a frame of its own
+  cli  <feeder_service>  rad_msgs/PresentBlock (default feeder/present, the twin's): before each pick of a
+                         block from the scene's feeder, the feeder presents it at its station
   sub  <mocap_topic>     rad_msgs/RigidBodies (mocap_input 'rad', the twin's) or mocap4r2_msgs/RigidBodies
                          ('mocap4r2'); 'pose_stamped': one geometry_msgs/PoseStamped per body on
                          <pose_topic> with {body} replaced (natnet_ros2, vrpn_mocap)
@@ -85,7 +87,7 @@ from rad_core.mocap_input import BodyMap, MocapFrames, MocapTracker, wait_for_bo
 from rad_core.sim.mocap import Registration, RegistrationConfig, register_scene, register_world
 from rad_msgs.action import ExecuteAssembly
 from rad_msgs.msg import Scene as SceneMsg
-from rad_msgs.srv import Allocate, PlanAction, PlanAssembly, Sequence
+from rad_msgs.srv import Allocate, PlanAction, PlanAssembly, PresentBlock, Sequence
 from rad_ros.conversions import (allocation_from_response, placement_to_msg, scene_from_msg, scene_from_request,
                                  scene_msg_is_empty)
 from rad_ros.node_main import run_node
@@ -112,7 +114,7 @@ class AssemblyNode(Node):
                             ('require_joint_states', True), ('mocap_input', 'rad'), ('mocap_topic', 'rigid_bodies'),
                             ('pose_topic', 'mocap/{body}/pose'), ('mocap_frame', ''), ('body_map_file', ''),
                             ('table_z', 0.0), ('lost_timeout_s', 2.0), ('mocap_noise', 0.0),
-                            ('mocap_yaw_noise_deg', 0.0)):
+                            ('mocap_yaw_noise_deg', 0.0), ('feeder_service', 'feeder/present')):
             self.declare_parameter(name, value)
         # Lists typed by what the user writes ([0, 0, 1] is an integer array): checked below instead.
         anything = ParameterDescriptor(dynamic_typing=True)
@@ -155,6 +157,7 @@ class AssemblyNode(Node):
         self.io = rclpy.create_node('assembly_io', namespace=self.get_namespace(), context=self.context)
         self.allocate_client = self.io.create_client(Allocate, 'allocate')
         self.plan_client = self.io.create_client(PlanAction, 'plan_action')
+        self.feeder_client = self.io.create_client(PresentBlock, str(self.param('feeder_service')))
         self.sequence_client = self.io.create_client(Sequence, 'sequence')
         self.io.create_subscription(JointState, 'joint_states', self.joint_states_callback, 10)
         self.mocap = MocapInput(self.io, self.tracker, str(self.param('mocap_input')), str(self.param('mocap_topic')),
@@ -267,7 +270,8 @@ class AssemblyNode(Node):
                            'or publish the task on /scene')
         task = self.task
         resolved = self.watch_bodies(task)
-        bodies = wait_for_bodies(self.tracker, resolved, warn=self.get_logger().warning)
+        bodies = wait_for_bodies(self.tracker, resolved, warn=self.get_logger().warning,
+                                 optional=frozenset(task.feeder.blocks) if task.feeder is not None else frozenset())
         config = RegistrationConfig.for_noise(*self.noise, task.unit, **{
             **dataclasses.asdict(self.registration), 'body_map': resolved.registration_map})
         return bodies, task, config
@@ -291,6 +295,13 @@ class AssemblyNode(Node):
             client.remove_pending_request(future)
             raise RadError(f'{what} did not answer within {timeout:g} s')
         return future.result()
+
+    def present_block(self, block_id: str) -> None:
+        """The cell's feeder presents a block at its station (`feeder_service`); RadError with its reason."""
+        response = self.call(self.feeder_client, PresentBlock.Request(block_id=block_id),
+                             what=f'the feeder (service {self.feeder_client.srv_name})')
+        if not response.success:
+            raise RadError(f'the feeder did not present block {block_id}: {response.reason}')
 
     def rank(self, scene: Scene, placements, start, scorer_only: bool = False) -> Ranking:
         timeout = float(self.param('sequencer_timeout_s'))
@@ -432,7 +443,7 @@ class AssemblyNode(Node):
                                    plant.move_arm, plant.move_gripper,
                                    self.registered_world, config, joints=lambda: self.start_joints([]),
                                    cancelled=lambda: goal_handle.is_cancel_requested, report=report,
-                                   plan_motion=self.plan_motion)
+                                   plan_motion=self.plan_motion, present=self.present_block)
         except RadError as e:
             result.success, result.reason = False, str(e)
             report(0, 0, '', 'done', result.reason)

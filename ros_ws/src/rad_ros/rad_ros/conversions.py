@@ -10,7 +10,7 @@ field (0 = flush, as in a scene document without the key).
 from __future__ import annotations
 
 from geometry_msgs.msg import Point
-from rad_msgs.msg import Block, BlockType, Cell, Placement, Scene as SceneMsg, TargetRegion
+from rad_msgs.msg import Block, BlockType, Cell, Feeder as FeederMsg, Placement, Scene as SceneMsg, TargetRegion
 
 from rad_core.allocation import AllocationResult
 from rad_core.allocation.placements import Placement as CorePlacement
@@ -39,6 +39,10 @@ def scene_to_msg(scene: Scene, frame_id: str = 'world') -> SceneMsg:
                         yaw_deg=int(b.yaw)) for b in scene.blocks]
     msg.targets = [TargetRegion(name=t.name, origin=Point(x=t.origin[0], y=t.origin[1], z=t.origin[2]),
                                 size=[int(v) for v in t.size], filled=cells_msg(t.filled)) for t in scene.targets]
+    if scene.feeder is not None:
+        f = scene.feeder
+        msg.feeder = [FeederMsg(station_x=float(f.station[0]), station_y=float(f.station[1]), yaw_deg=int(f.yaw),
+                                order=f.order, window=int(f.window), blocks=list(f.blocks))]
     return msg
 
 
@@ -53,6 +57,9 @@ def scene_msg_to_dict(msg: SceneMsg) -> dict:
                     'yaw': b.yaw_deg} for b in msg.blocks],
         'targets': [{'name': t.name, 'origin': [t.origin.x, t.origin.y, t.origin.z],
                      'size': [int(v) for v in t.size], 'filled': _ijk(t.filled)} for t in msg.targets],
+        **{'feeder': {'station': [f.station_x, f.station_y], 'yaw': f.yaw_deg, 'order': f.order,
+                      **({'window': int(f.window)} if f.order == 'queue' else {}), 'blocks': list(f.blocks)}
+           for f in msg.feeder[:1]},
     }
 
 

@@ -23,6 +23,9 @@ Endpoints (relative names, so namespaces and remaps work); <arm_controller> and
   srv  reset                           std_srvs/Trigger: back to the scene last loaded
   srv  get_scene_state                 rad_msgs/GetSceneState: the scene as it is now
   srv  set_block_pose                  rad_msgs/SetBlockPose: move one block (a disturbance)
+  srv  feeder/present                  rad_msgs/PresentBlock: the scene's feeder presents a block at its
+                                       station (a block it presented and the robot did not take goes
+                                       back); motion capture sees a feeder's blocks only when presented
 
 Motion capture is published as a motion-capture system would: in `mocap_frame`
 (stamped so; '' = frame_id, poses already in the robot base frame), the twin's
@@ -71,7 +74,7 @@ from rad_core.trajectory import TrajectoryRejected
 from rad_core.sim.workspace import Workspace
 from rad_core.sim.world import World
 from rad_msgs.msg import RigidBodies, Scene as SceneMsg
-from rad_msgs.srv import GetSceneState, LoadScene, SetBlockPose
+from rad_msgs.srv import GetSceneState, LoadScene, PresentBlock, SetBlockPose
 from rad_ros.conversions import scene_from_request, scene_to_msg
 from rad_ros.motion import duration_to_s, pose_from_msg, pose_stamped, rigid_bodies_msg, trajectory_from_msg
 from rad_ros.node_main import main_for
@@ -141,6 +144,7 @@ class TwinNode(Node):
         self.create_service(Trigger, 'reset', self.reset_callback)
         self.create_service(GetSceneState, 'get_scene_state', self.get_scene_state_callback)
         self.create_service(SetBlockPose, 'set_block_pose', self.set_block_pose_callback)
+        self.create_service(PresentBlock, 'feeder/present', self.present_block_callback)
 
         path = self.get_parameter('scene_file').value
         if path:
@@ -319,6 +323,19 @@ class TwinNode(Node):
         return response
 
 
+    def present_block_callback(self, request, response):
+        response.success = False
+        if self.scene is None:
+            response.reason = 'no scene loaded: call load_scene first'
+            return response
+        try:
+            self.twin.present(request.block_id)
+        except RadError as e:
+            response.reason = str(e)
+            return response
+        response.success = True
+        return response
+
     def set_block_pose_callback(self, request, response):
         response.success = False
         if self.scene is None:
@@ -337,6 +354,8 @@ class TwinNode(Node):
         except RadError as e:
             response.reason = str(e)
             return response
+        if request.block_id in self.world.parked:
+            self.world.unpark(request.block_id)       # taken out of the feeder by hand
         self.world.set_block_pose(request.block_id, position, quaternion)
         response.success = True
         return response

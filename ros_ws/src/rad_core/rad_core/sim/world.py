@@ -237,7 +237,8 @@ class World:
         self.set_block_pose(block_id, (float(body), 0.0, PARK_Z))
         self.parked.add(block_id)
 
-    def _unpark(self, block_id: str) -> None:
+    def unpark(self, block_id: str) -> None:
+        """A parked feeder block becomes a body like any other (where it is; move it next)."""
         body = self.blocks[block_id]
         self._p.changeDynamics(body, -1, mass=self._mass[body], physicsClientId=self.client)
         self.parked.discard(block_id)
@@ -267,7 +268,7 @@ class World:
         back = self.presented
         if back is not None and self.at_station(back):
             self._park(back)
-        self._unpark(block_id)
+        self.unpark(block_id)
         block = scene.block(block_id)
         self.set_block_pose(block_id, block.position, yaw_quaternion(block.yaw))
         self.presented = block_id
@@ -359,7 +360,7 @@ class World:
         joints, bodies, constraints, parked, self.presented = snap
         if parked != self.parked:
             for block_id in self.parked - parked:
-                self._unpark(block_id)
+                self.unpark(block_id)
             for block_id in parked - self.parked:
                 p.changeDynamics(self.blocks[block_id], -1, mass=0.0, physicsClientId=cid)
                 self.parked.add(block_id)
