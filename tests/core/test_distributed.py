@@ -1,7 +1,8 @@
 """`rad eval --workers N` (rad_core.distributed): the serial run's rows from Dask workers on loopback.
 
-One cluster of two worker processes, started by rad's own `dask_client` on 127.0.0.1, serves the
-whole module; the kill test leaves it whole again (the nanny restarts the worker it kills).
+One cluster of two worker processes, started by rad's own `dask_client` on 127.0.0.1 the way
+`rad eval --workers 2` starts it (forked from this process, `START_METHOD`), serves the whole
+module; the kill test leaves it whole again (the nanny restarts the worker it kills).
 """
 
 import ipaddress
@@ -17,7 +18,7 @@ import time
 import psutil
 import pytest
 
-from rad_core.distributed import AgentArgs, dask_client, evaluate_distributed
+from rad_core.distributed import START_METHOD, AgentArgs, WarmUp, dask_client, evaluate_distributed, scene_cost
 from rad_core.errors import RadError
 from rad_core.evaluation import evaluate
 from rad_core.scene_sources import generated_scenes
@@ -34,7 +35,7 @@ def rad(*args, timeout=120):
 
 @pytest.fixture(scope='module')
 def client():
-    with dask_client(workers=2) as c:
+    with dask_client(workers=2, start_method=START_METHOD) as c:
         yield c
 
 
@@ -52,6 +53,74 @@ def test_two_workers_give_exactly_the_serial_rows_and_metrics(client, serial, ag
     assert result == serial[agent]
     assert [r['name'] for r in result['scenes']] == [name for name, _ in SCENES]
     assert sorted(r['name'] for r in seen) == sorted(name for name, _ in SCENES)
+
+
+def built_here(agent: str, robot: bool):
+    """What this worker thread has built for the agent: (agents, planners, stability check)."""
+    from rad_core import distributed
+    state = getattr(distributed._local, 'state', None) or {}
+    return ([a.agent for a in state.get('agents', {})], [k[0].agent for k in state.get('planners', {})],
+            state.get('stability') is not None)
+
+
+def test_every_worker_is_warm_before_the_first_scene_and_workers_that_join_later_too(client):
+    """warm_up builds the agent, its network and the planner's worlds on every worker, the one
+    that gets no scene included; a plugin, so a replacement worker is warmed as it joins."""
+    from rad_core.distributed import warm_up
+    name = warm_up(client, AgentArgs('heur'), True)
+    assert name == WarmUp(AgentArgs('heur'), True).name   # by settings: a second run finds it
+    try:
+        workers = list(client.scheduler_info(n_workers=-1)['workers'])
+        assert len(workers) == 2
+        for w in workers:
+            agents, planners, _ = client.submit(built_here, 'heur', True, workers=[w], pure=False).result()
+            assert 'heur' in agents and 'heur' in planners, (w, agents, planners)
+        assert client.run(lambda dask_worker: sorted(dask_worker.plugins), nanny=False)[workers[0]].count(name) == 1
+    finally:
+        client.unregister_worker_plugin(name)
+
+
+def test_scenes_go_out_longest_first():
+    """The scenes run by scene_cost, the largest first (so two workers finish together); the rows
+    stay in scene order. One worker, so the order they start in is the order they went out in."""
+    from distributed import get_task_stream
+    costs = [scene_cost(s) for _, s in SCENES]
+    assert costs != sorted(costs, reverse=True), 'the scenes are in cost order already: nothing tested'
+    with dask_client(workers=1, start_method=START_METHOD) as client, get_task_stream(client=client) as stream:
+        result = evaluate_distributed(AgentArgs('heur-norobot'), SCENES, False, SEED, client=client)
+    assert [r['name'] for r in result['scenes']] == [name for name, _ in SCENES]
+    started = sorted((min(s['start'] for s in t['startstops'] if s['action'] == 'compute'), int(t['key'][-6:]))
+                     for t in stream.data if str(t['key']).startswith('rad-scene-'))
+    assert sorted(i for _, i in started) == list(range(len(SCENES)))
+    in_start_order = [costs[i] for _, i in started]
+    assert in_start_order == sorted(costs, reverse=True), in_start_order
+
+
+def torch_in_worker():
+    """A matrix product big enough for torch to go parallel, and the thread count it ran on."""
+    import torch
+    a = torch.ones(400, 400)
+    return float((a @ a).sum()), torch.get_num_threads()
+
+
+def test_workers_forked_after_torch_ran_on_threads_run_torch_on_one_and_start_warm():
+    """A worker forked from a process whose torch already ran OpenMP threads hangs in its first
+    parallel product unless torch is back on one thread first (dask_setup); and it starts with
+    what this process imported (torch here) instead of importing it again."""
+    import torch
+    if START_METHOD != 'fork':
+        pytest.skip('workers are spawned on this platform')
+    threads = torch.get_num_threads()
+    torch.set_num_threads(2)
+    try:
+        a = torch.ones(400, 400)
+        assert float((a @ a).sum()) == 400.0 ** 3
+        with dask_client(workers=1, start_method='fork') as c:
+            assert all(c.run(lambda: 'torch' in sys.modules).values())
+            total, n = c.submit(torch_in_worker, pure=False).result(timeout=60)
+        assert (total, n) == (400.0 ** 3, 1)
+    finally:
+        torch.set_num_threads(threads)
 
 
 def is_loopback(ip: str) -> bool:

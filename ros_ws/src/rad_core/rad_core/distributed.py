@@ -4,7 +4,12 @@ Each scene is one task, and its row is the one `evaluation.evaluate` would repor
 scene i runs `scene_episode` with seed + i whichever worker gets it, and the rows are put
 back in scene order before `summarize`, so a distributed run gives the serial run's rows
 and metrics (only wall-clock fields such as `reallocation_s` differ, as between two serial
-runs).
+runs). Two things outside this module can make rows differ between any two runs, serial or
+not: anytime planning (verified agents with a search, the `default` preset among them) improves
+its first plan within a wall-clock budget (`agent_plan.IMPROVE_TIME_S`), so on a busier machine
+a search can be cut where it finished before; and a network's scores can differ in the last bits
+with torch's thread count (the workers run one thread, a serial run torch's default, the cores),
+enough to flip a near tie. Agents without both (heur, heur-norobot, unverified ones) are exact.
 
 Tasks carry arguments, not objects: the agent as `AgentArgs` (what `get_agent` needs),
 the scene as its `Scene.to_dict()` document, the CP-SAT and re-allocation settings as
@@ -34,7 +39,7 @@ scene index, so none is lost or counted twice.
 
 The cluster rad starts binds its scheduler, nannies and workers to 127.0.0.1 only and has
 no dashboard unless asked for, then on 127.0.0.1 too. Code that starts one must sit under
-`if __name__ == '__main__':` (workers are spawned processes that import the main module).
+`if __name__ == '__main__':` (where workers are spawned, they import the main module).
 """
 
 from __future__ import annotations
@@ -107,7 +112,8 @@ def _worker_state() -> dict:
     """This worker thread's built agents and policies ({AgentArgs: (agent, policy)}) and its
     no-robot stability check. Per thread, not per process: a PyBullet client is not
     thread-safe, and a scheduler elsewhere may run several threads per worker (rad's own
-    cluster runs one, so this is once per worker process)."""
+    cluster runs one, so this is once per worker process). Its first call puts torch on one
+    thread, as a Dask worker's OMP_NUM_THREADS=1 does."""
     state = getattr(_local, 'state', None)
     if state is None:
         dask_setup()   # this thread too: torch's thread count is per thread under OpenMP
@@ -390,12 +396,15 @@ def _run(client, agent_args, scenes, robot, seed, progress, execution, alloc_doc
         raise RadError(f'warming the workers up: {e}') from None
     run = uuid.uuid4().hex[:12]   # explicit keys: unique per run, one per scene index
     index = {}
-    for i, (name, scene) in enumerate(scenes):
-        # Higher priority runs first: longest first, so the workers finish together; the
-        # index breaks ties in scene order. A row does not depend on where or when it runs.
+    costs = [scene_cost(scene) for _, scene in scenes]
+    # Longest first, so the workers finish together: submitted in that order (the first go out
+    # as they arrive) and with that priority (the scheduler's queue hands out the highest first,
+    # equal ones in submission order). A row does not depend on where or when it runs.
+    for i in sorted(range(len(scenes)), key=lambda i: (-costs[i], i)):
+        name, scene = scenes[i]
         future = client.submit(run_scene, name, scene.to_dict(), agent_args, robot, seed + i, execution,
                                alloc_doc, realloc_doc, key=f'rad-scene-{run}-{i:06d}', retries=retries,
-                               priority=scene_cost(scene))
+                               priority=costs[i])
         index[future] = i
     rows: dict[int, dict] = {}
     try:
