@@ -205,3 +205,66 @@ def test_the_feeder_doc_is_not_changed_by_parsing():
     for b in d['blocks']:
         b['position'] = list(station_position(Scene.from_dict(before).block_types[b['type']], STATION, 0, U))
     assert Scene.from_dict(d) == Scene.from_dict(before)
+
+
+# ---- the sequencer's actions ---------------------------------------------------------------------
+
+def _two_cubes_feeder(order: str, **feeder) -> Scene:
+    d = feeder_doc(order, **feeder)
+    d['blocks'].append({'id': 'c2', 'type': 'cube'})
+    d['feeder']['blocks'] = ['i0', 'c2', 'c0', 'c1']
+    return Scene.from_dict(d)
+
+
+def test_a_request_feeder_offers_one_block_of_each_type_its_blocks_being_alike():
+    from rad_core.allocation.cpsat import solve
+    from rad_core.allocation.guide import AllocationGuide
+    from rad_core.mdp import AssemblyEnv
+    scene = _two_cubes_feeder('request')
+    result = solve(scene)
+    env = AssemblyEnv(scene)
+    guide = AllocationGuide(scene, result.placements, env.grid)
+    offered = {scene.blocks[a.block].id for a in guide.allowed_actions(env.state)}
+    assert offered == {'i0', 'c2'}                # the first cube waiting stands for the three
+    cube = next(a for a in guide.allowed_actions(env.state)
+                if scene.blocks[a.block].id == 'c2' and env.evaluate(a)[0] is None)
+    assert not env.step(cube).outcome.is_invalid
+    assert {scene.blocks[a.block].id for a in guide.allowed_actions(env.state)} == {'i0', 'c0'}
+
+
+def test_a_queue_feeder_offers_its_window_and_the_mdp_refuses_a_block_behind_it():
+    from rad_core.allocation.cpsat import solve
+    from rad_core.allocation.guide import AllocationGuide
+    from rad_core.mdp import Action, AssemblyEnv, Outcome
+    scene = _two_cubes_feeder('queue', window=1)
+    env = AssemblyEnv(scene)
+    guide = AllocationGuide(scene, solve(scene).placements, env.grid)
+    assert {scene.blocks[a.block].id for a in guide.allowed_actions(env.state)} == {'i0'}
+    c0 = [b.id for b in scene.blocks].index('c0')
+    cell = int(np.flatnonzero(env.grid.is_target)[0])
+    outcome, reason, _, _ = env.evaluate(Action(c0, 0, cell, 0))
+    assert outcome is Outcome.INVALID_BLOCK and "still in the feeder's queue (it offers i0 now)" in reason
+
+
+# ---- large targets -------------------------------------------------------------------------------
+
+def test_the_large_targets_have_50_to_100_blocks_in_a_feeder_enough_to_cover_them():
+    from rad_core.large_shapes import LARGE_SPECS, large_scene
+    for name, spec in LARGE_SPECS.items():
+        scene = large_scene(name)
+        assert 45 <= len(scene.blocks) <= 100 and set(scene.feeder.blocks) == {b.id for b in scene.blocks}, name
+        units = sum(scene.block_types[b.type].size for b in scene.blocks)
+        spares = sum(scene.block_types[t].size for t in [b.type for b in scene.blocks][-spec.n_spare:])
+        assert units - spares == scene.num_target_cells, name       # an exact tiling plus the spares
+
+
+def test_a_coursed_tiling_spans_a_two_cell_opening_with_a_lintel_resting_on_both_sides():
+    from rad_core.large_shapes import coursed_tiling
+    from rad_core.shapes import face
+    _, cells = face('######',
+                    '#..###',
+                    '#..###')
+    kinds = coursed_tiling(cells)
+    assert kinds.count('bar4') == 1
+    sizes = {'cube': 1, 'I2': 2, 'I3': 3, 'bar4': 4}
+    assert sum(sizes[k] for k in kinds) == len(cells)

@@ -116,6 +116,20 @@ class StepResult:
     info: dict = field(default_factory=dict)
 
 
+def feeder_blocks(scene: Scene, placed, order: str | None = None) -> tuple[list[int], list[int]]:
+    """(block indices in the scene's feeder that can be taken next, those that cannot), given the
+    placed blocks: a queue feeder offers the first `window` of its unplaced blocks; a request feeder
+    all of them. Blocks on the table are in neither list."""
+    feeder = scene.feeder
+    if feeder is None:
+        return [], []
+    index = {b.id: i for i, b in enumerate(scene.blocks)}
+    waiting = [index[bid] for bid in feeder.blocks if index[bid] not in placed]
+    if (order or feeder.order) == 'request':
+        return waiting, []
+    return waiting[:feeder.window], waiting[feeder.window:]
+
+
 class AssemblyEnv:
     def __init__(self, scene: Scene, config: EnvConfig = EnvConfig(),
                  stability: StabilityCheck | None = None):
@@ -233,6 +247,12 @@ class AssemblyEnv:
         b = action.block
         if b in self.state.placed:
             return Outcome.INVALID_BLOCK, f'block {self.scene.blocks[b].id!r} is already placed', None, 0
+        if self.scene.feeder is not None and self.scene.feeder.order == 'queue':
+            takeable, later = feeder_blocks(self.scene, self.state.placed)
+            if b in later:
+                front = ', '.join(self.scene.blocks[k].id for k in takeable)
+                return (Outcome.INVALID_BLOCK, f'block {self.scene.blocks[b].id!r} is still in the feeder\'s queue '
+                        f'(it offers {front} now)', None, 0)
         cells, yaw = self.resulting_cells(action)
         if cells is None:
             return Outcome.INVALID_OFF_GRID, 'a unit would land outside the target regions', None, yaw

@@ -7,6 +7,11 @@ are offered. A pose whose cells are no longer all free (it was filled, or anothe
 block took one of its cells) offers nothing: after a placement, the actions that
 would fill the same pose are gone.
 
+Blocks in a feeder (`rad_core.scene.Feeder`): a queue feeder offers only the blocks it
+presents next; a request feeder presents every block of a type at the same pose, so
+they are interchangeable and only the first of each type waiting is offered (the
+others would repeat its actions; for 40 blocks in a feeder, ten times fewer).
+
 The guide is built once per (scene, allocation) and is stateless: every query
 takes the `AssemblyState` it is about, so one guide serves any number of env
 clones, snapshots and search branches.
@@ -20,7 +25,7 @@ from rad_core.allocation.placements import Placement
 from rad_core.blocks import canonical_shape
 from rad_core.errors import RadError
 from rad_core.grid import Grid
-from rad_core.mdp import Action, AssemblyState
+from rad_core.mdp import Action, AssemblyState, feeder_blocks
 from rad_core.scene import Scene
 
 
@@ -69,9 +74,22 @@ class AllocationGuide:
         occ = state.occupancy
         return [k for k, cells in enumerate(self.pose_cells) if np.all(occ[cells] < 0)]
 
-    def pose_actions(self, k: int, state: AssemblyState) -> list[Action]:
-        """The actions that fill pose k with a block still on the table in `state`."""
-        return [a for b, actions in self._actions[k] if b not in state.placed for a in actions]
+    def _left_out(self, state: AssemblyState) -> set[int]:
+        """Feeder blocks not offered in `state` (module docstring)."""
+        if self.scene.feeder is None:
+            return set()
+        takeable, later = feeder_blocks(self.scene, state.placed)
+        if self.scene.feeder.order == 'queue':
+            return set(later)
+        first = {}
+        for b in takeable:
+            first.setdefault(self.scene.blocks[b].type, b)
+        return set(takeable) - set(first.values())
+
+    def pose_actions(self, k: int, state: AssemblyState, left_out: set[int] | None = None) -> list[Action]:
+        """The actions that fill pose k with a block still on the table (or offered by the feeder) in `state`."""
+        skip = self._left_out(state) if left_out is None else left_out
+        return [a for b, actions in self._actions[k] if b not in state.placed and b not in skip for a in actions]
 
     def allowed_actions(self, state: AssemblyState) -> list[Action]:
         """Allocation actions available in `state` (the termination action is not included).
@@ -79,4 +97,5 @@ class AllocationGuide:
         A block placed in an earlier step keeps its yaw; the actions are computed
         from the scene's initial yaws, so they are only offered for unplaced blocks.
         """
-        return [a for k in self.open_poses(state) for a in self.pose_actions(k, state)]
+        skip = self._left_out(state)
+        return [a for k in self.open_poses(state) for a in self.pose_actions(k, state, skip)]

@@ -1,0 +1,136 @@
+"""Large hand-made targets, 50 to 100 blocks, with every block in a feeder.
+
+Structures this size do not fit on the table within the arm's reach (a g = 5 scene's
+ten blocks already fill much of it), so their blocks arrive from a feeder at a pick
+station (`rad_core.scene.Feeder`, order `request`). The targets are drawn as the other
+hand-made shapes are (`rad_core.shapes.face`, `layers`) at a 4 cm unit, so the largest
+stays within the reach of a top-down hand (the far cells at 0.72 m from the base):
+
+- `wall_openings`: a two-deep wall, 12 x 8, with a door and two windows under lintels;
+- `tower`: a hollow square tower, 4 x 4 in plan, 10 layers high;
+- `viaduct`: a two-deep bridge, 12 x 6, on four piers with three openings, its deck on lintels;
+- `stepped_wall`: a two-deep wall that steps down from 8 layers to 2, a staircase.
+
+Their block multisets are exact stable tilings by small types plus a few spares: for the
+faces a bond drawn course by course (`coursed_tiling`: bars of three and two, joints staggered
+between courses, a four-bar over each two-cell opening, resting on both sides), for the
+tower `shapes.tile_exact` (a backtracking search, too slow on the faces' 96 cells with
+openings). None is used in training: they are for measuring how planning scales with the
+structure's size.
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+from rad_core.errors import RadError
+from rad_core.scene import Block, Feeder, Scene, station_position
+from rad_core.shapes import ShapeSpec, block_multiset, face, layers, one_sided, target_regions, two_sided
+
+UNIT = 0.04
+STATION = (0.42, -0.32)
+"""Where the feeder presents blocks: right of the structures, within reach."""
+
+_WALL = face(
+    '############',
+    '############',
+    '##..####..##',
+    '##..####..##',
+    '#####..#####',
+    '#####..#####',
+    '#####..#####',
+    '#####..#####')
+_VIADUCT = face(
+    '############',
+    '############',
+    '#..##..##..#',
+    '#..##..##..#',
+    '#..##..##..#',
+    '#..##..##..#')
+_STEPS = face(
+    '##..........',
+    '####........',
+    '######......',
+    '########....',
+    '##########..',
+    '############',
+    '############',
+    '############')
+_RING = ('####', '#..#', '#..#', '####')
+SMALL_TYPES = ('cube', 'I2', 'I3', 'bar4')
+
+LARGE_SPECS = {
+    spec.name: spec for spec in (
+        ShapeSpec('wall_openings', 'wall', two_sided(_WALL, _WALL), SMALL_TYPES, ('cube', 'I2'), n_spare=6,
+                  why='a wall with a door and two windows, each under a lintel'),
+        ShapeSpec('tower', 'tower', one_sided(layers(*[_RING] * 10)), ('cube', 'I2', 'I3', 'L3'),
+                  ('cube', 'I2'), n_spare=5, why='a hollow tower: each layer a closed ring, the last piece '
+                                                  'of a ring taken by its free sides'),
+        ShapeSpec('viaduct', 'bridge', two_sided(_VIADUCT, _VIADUCT), SMALL_TYPES, ('cube', 'I2'), n_spare=5,
+                  why='three openings bridged by four-bars, two deep'),
+        ShapeSpec('stepped_wall', 'stairs', two_sided(_STEPS, _STEPS), ('cube', 'I2', 'I3'), ('cube', 'I2'),
+                  n_spare=5, why='a staircase wall, tall at the far end'),
+    )
+}
+
+
+def coursed_tiling(cells) -> list[str]:
+    """The types of a bond tiling a one-cell-deep face (cells (i, 0, k)) course by course: where a
+    course spans a two-cell opening in the course below, a four-bar lintel rests on both sides of
+    it; the rest of each run is bars of three (of two and cubes at its end), odd courses starting
+    with a bar of two so the joints are staggered."""
+    cells = {(int(i), int(k)) for i, _, k in cells}
+    kinds = []
+    for k in sorted({k for _, k in cells}):
+        row = sorted(i for i, kk in cells if kk == k)
+        taken = set()
+        if k > 0:
+            for i in row:        # a two-cell gap below, walls on both sides of it: a lintel
+                gap = [(i + d, k - 1) not in cells for d in (1, 2)]
+                sides = (i, k - 1) in cells and (i + 3, k - 1) in cells
+                span = {i, i + 1, i + 2, i + 3}
+                if all(gap) and sides and span <= set(row) and not span & taken:
+                    taken |= span
+                    kinds.append('bar4')
+        runs, run = [], []
+        for i in row:
+            if i in taken:
+                continue
+            if run and i != run[-1] + 1:
+                runs.append(run)
+                run = []
+            run.append(i)
+        if run:
+            runs.append(run)
+        for run in runs:
+            n, first = len(run), k % 2 == 1 and len(run) > 3
+            if first:
+                kinds.append('I2')
+                n -= 2
+            kinds += ['I3'] * (n // 3) + [{0: None, 1: 'cube', 2: 'I2'}[n % 3]] * (n % 3 > 0)
+    return kinds
+
+
+def _multiset(spec: ShapeSpec) -> list[str]:
+    if spec.name == 'tower':
+        return block_multiset(spec)
+    kinds = [kind for region in spec.regions for kind in coursed_tiling(region.cells)]
+    spares = spec.spare_types
+    return kinds + [spares[n % len(spares)] for n in range(spec.n_spare)]
+
+
+@lru_cache(maxsize=None)
+def large_scene(name: str) -> Scene:
+    """The target with every block of its multiset in a feeder at `STATION` (one scene per shape: a
+    feeder has no layout to vary)."""
+    try:
+        spec = LARGE_SPECS[name]
+    except KeyError:
+        raise RadError(f'unknown large shape {name!r} (known: {", ".join(LARGE_SPECS)})') from None
+    kinds = _multiset(spec)
+    blocks = [Block(f'b{n}', kind, station_position(spec.types[kind], STATION, 0, UNIT), 0)
+              for n, kind in enumerate(kinds)]
+    used = [n for n in spec.types if n in set(kinds)]
+    scene = Scene(UNIT, {n: spec.types[n] for n in used}, tuple(blocks), target_regions(spec, UNIT),
+                  feeder=Feeder(STATION, tuple(b.id for b in blocks)))
+    return Scene.from_dict(scene.to_dict())
