@@ -100,7 +100,9 @@ def test_scenes_within_reach_keep_their_layout():
 
 def test_too_many_blocks_for_the_reach():
     with pytest.raises(RadError, match=r'blocks of a g=4 scene do not fit .* reach of 0.77 m.*smaller extra_fraction'):
-        generate_scene(GeneratorConfig(grid=4, extra_fraction=20.0), 0)
+        generate_scene(GeneratorConfig(grid=4, extra_fraction=20.0, supply='table'), 0)
+    # By default (supply 'auto') such a scene gets a feeder instead.
+    assert generate_scene(GeneratorConfig(grid=4, extra_fraction=20.0), 0).feeder is not None
 
 
 def test_point_in_polygon():
@@ -110,7 +112,8 @@ def test_point_in_polygon():
 
 
 @pytest.mark.parametrize('kw', [{'grid': 0}, {'grid': 40}, {'sides': 3}, {'unit': 5.0},
-                                {'reach': 0}, {'reach': -1.0}, {'reach': math.nan}, {'reach': '0.8'}])
+                                {'reach': 0}, {'reach': -1.0}, {'reach': math.nan}, {'reach': '0.8'},
+                                {'supply': 'shelf'}, {'feeder_order': 'fifo'}, {'feeder_window': 0}])
 def test_bad_generator_settings(kw):
     with pytest.raises(RadError):
         generate_scene(GeneratorConfig(**kw))

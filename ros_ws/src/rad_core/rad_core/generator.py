@@ -250,7 +250,8 @@ def _lay_out(kinds: list[str], config: GeneratorConfig, rng: np.random.Generator
                 raise RadError(
                     f'the {len(kinds)} blocks of a g={config.grid} scene do not fit on the table within '
                     f'the reach of {config.reach} m (block {n}, a {kind}, fits in no row on either side); '
-                    f'use a smaller extra_fraction (now {config.extra_fraction})')
+                    f'use a smaller extra_fraction (now {config.extra_fraction}) or a feeder (supply \'feeder\' or '
+                    f'\'auto\')')
             left.advance(offs)
         blocks.append(Block(f'b{n}', kind, pos, yaw))
     return blocks

@@ -231,6 +231,8 @@ def plan_assembly(scene: Scene, allocate: Allocate, plan_motion: PlanMotion, seq
         ranked = rank(env, allowed, rng)
         if isinstance(ranked, str):
             return stop(ranked)
+        if verify and PIT_LAYERS:
+            ranked = pits_last(env, allowed_actions.guide, ranked)
         found = _first_feasible(env, world['scene'], ranked if verify else ranked[:1], planned_motion, world['q'],
                                 timings, book=not verify)
         if isinstance(found, str):
@@ -296,6 +298,47 @@ class _SharedStability:
 
 
 _STABILITY = _SharedStability()
+
+
+PIT_LAYERS = 1
+"""`pits_last`: how many layers above the top of an open allocated pose beside it a block may reach
+before its action is tried after the others (0: never reordered)."""
+PIT_REACH = 2.0
+"""`pits_last`: 'beside', in units between cell centres horizontally (the palm reaches 10 cm, two
+5 cm units, to either side of the fingers)."""
+
+
+def pits_last(env: AssemblyEnv, guide, ranked: list) -> list:
+    """The ranking with the actions that would dig a pit tried last (in their ranked order).
+
+    A top-down hand carries its palm a unit or so above the top of the block it places, reaching
+    two units to either side, and its wrist (link6, link7) above that. So a block whose top rises
+    PIT_LAYERS layers or more above the top of an allocated pose still open beside it (a cell
+    centre within PIT_REACH units horizontally: the next columns, or the other face of a two-deep
+    wall) leaves that pose in a pit the hand cannot reach into; GAMP then refuses it ('hand hits
+    block ...', 'link6 hits block ...'). Ranked as they are otherwise, such actions come after
+    every other the ranking holds: lower poses first where the ranking allows it."""
+    state, grid, u = env.state, env.grid, env.scene.unit
+    open_cells = [guide.pose_cells[k] for k in guide.open_poses(state)]
+    if not open_cells or len(ranked) < 2:
+        return ranked
+    tops = np.array([grid.centres[c][:, 2].max() for c in open_cells])
+    xy = np.concatenate([grid.centres[c][:, :2] for c in open_cells])
+    owner = np.concatenate([np.full(len(c), k) for k, c in enumerate(open_cells)])
+    keep, later = [], []
+    for action in ranked:
+        cells, _ = env.resulting_cells(action)
+        if cells is None:
+            keep.append(action)
+            continue
+        pts = grid.centres[cells]
+        close = np.min(np.linalg.norm(xy[None, :, :] - pts[:, None, :2], axis=2), axis=0) <= PIT_REACH * u + 1e-9
+        near = np.zeros(len(open_cells), dtype=bool)
+        near[owner[close]] = True
+        deep = (pts[:, 2].max() - tops) >= PIT_LAYERS * u - 1e-9
+        mine = np.array([np.isin(c, cells).any() for c in open_cells])
+        (later if np.any(near & deep & ~mine) else keep).append(action)
+    return keep + later
 
 
 def _first_feasible(env: AssemblyEnv, scene: Scene, ranked, plan_motion: PlanMotion, q, timings,
