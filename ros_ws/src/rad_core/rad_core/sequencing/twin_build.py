@@ -32,9 +32,9 @@ class SimulatedBuild:
 
 def build_teleported(scene: Scene, steps, settle_s: float = 0.5):
     """Put each step's block (`PlanStep`: block, position, yaw; first the blocks it moves out of
-    the way, `moved_aside`) where the plan says, settle `settle_s` simulated seconds after each, and
-    register the world: a `sim.mocap.Registration` (its scene: where every block is; set_aside:
-    blocks no scene can express, with why)."""
+    the way, `moved_aside`) where the plan says and the arm where its motion ends, settle
+    `settle_s` simulated seconds after each, and register the world: a `sim.mocap.Registration`
+    (its scene: where every block is; set_aside: blocks no scene can express, with why)."""
     from rad_core.sim.twin import Twin, twin_world_config
     from rad_core.sim.world import World
     from rad_core.transforms import yaw_quaternion
@@ -45,6 +45,11 @@ def build_teleported(scene: Scene, steps, settle_s: float = 0.5):
                 world.set_block_pose(d['block'], d['position'], yaw_quaternion(d['yaw']))
             world.present(step.block)       # from the feeder, if the scene has one and it is there
             world.set_block_pose(step.block, step.position, yaw_quaternion(step.yaw))
+            if step.motion:
+                # The arm where the step's motion leaves it (retreated above the block), as after a real
+                # step: left at home, a tall structure would grow into the hand.
+                world.set_joint_positions(step.final_joints())
+            twin.sync()
             twin.settle(settle_s)
         return twin.registration()
 
