@@ -116,7 +116,7 @@ def main() -> int:
           f'{1.0:8.2f} {1.0:13.2f} {load0:4.2f}>{others.load:4.2f} {others.cores:6.2f}  -', flush=True)
     _append(args.rows, {**meta, 'run': 'serial', 'torch_threads': torch.get_num_threads(), 'total_s': serial_s,
                         'load_before': load0, 'load_after': others.load, 'others_cores': others.cores,
-                        'waited_s': waited, 'scene_s': [round(d, 3) for d in durations]})
+                        'cpu_s': others.own_s, 'waited_s': waited, 'scene_s': [round(d, 3) for d in durations]})
 
     for n in args.workers:
         waited = wait_until_quiet(args.wait_quiet) if args.wait_quiet else 0.0
@@ -130,6 +130,7 @@ def main() -> int:
                 t1 = time.perf_counter()
                 result = evaluate_distributed(agent_args, scenes, robot, args.seed, client=client)
                 run_s = time.perf_counter() - t1
+                worker_cpu = sorted(client.run(time.process_time).values())   # each since its fork
                 t2 = time.perf_counter()
             close_s = time.perf_counter() - t2
             total_s = time.perf_counter() - t0
@@ -137,12 +138,14 @@ def main() -> int:
         same = 'identical' if not differ else f'{len(differ)} differ: {", ".join(differ)}'
         print(f'{f"{n} worker" + "s" * (n > 1):<10} {startup_s:10.2f} {startup_s - cluster_s:8.2f} {run_s:8.2f} '
               f'{close_s:7.2f} {total_s:8.2f} {args.scenes / total_s:9.3f} {serial_s / run_s:8.2f} '
-              f'{serial_s / total_s:13.2f} {load0:4.2f}>{others.load:4.2f} {others.cores:6.2f}  {same}', flush=True)
+              f'{serial_s / total_s:13.2f} {load0:4.2f}>{others.load:4.2f} {others.cores:6.2f}  {same}; '
+              f'CPU s per worker {" ".join(f"{c:.1f}" for c in worker_cpu)}', flush=True)
         _append(args.rows, {**meta, 'run': f'{n} workers', 'start_method': args.start_method, 'cluster_s': cluster_s,
                             'startup_s': startup_s, 'run_s': run_s, 'close_s': close_s, 'total_s': total_s,
                             'speedup': serial_s / run_s, 'speedup_with_startup': serial_s / total_s,
                             'load_before': load0, 'load_after': others.load, 'others_cores': others.cores,
-                            'waited_s': waited, 'rows_differ': differ})
+                            'cpu_s': others.own_s, 'worker_cpu_s': worker_cpu, 'waited_s': waited,
+                            'rows_differ': differ})
     if 2 in args.workers:
         costs = [scene_cost(s) for _, s in scenes]
         print(f'2 workers, from the serial scene times ({sum(durations):.1f} s of scenes): ideal makespan '
@@ -176,7 +179,8 @@ class Others:
 
     def __exit__(self, *exc):
         wall = time.perf_counter() - self.t
-        self.cores = max(0.0, (machine_busy_s() - self.busy) - (own_cpu_s() - self.own)) / max(wall, 1e-9)
+        self.own_s = own_cpu_s() - self.own   # this run's CPU seconds, its workers' included
+        self.cores = max(0.0, (machine_busy_s() - self.busy) - self.own_s) / max(wall, 1e-9)
         self.load = os.getloadavg()[0]
 
 

@@ -65,19 +65,29 @@ def built_here(agent: str, robot: bool):
 
 def test_every_worker_is_warm_before_the_first_scene_and_workers_that_join_later_too(client):
     """warm_up builds the agent, its network and the planner's worlds on every worker, the one
-    that gets no scene included; a plugin, so a replacement worker is warmed as it joins."""
+    that gets no scene included; a worker plugin, so one that joins later is warm as it joins."""
     from rad_core.distributed import warm_up
     name = warm_up(client, AgentArgs('heur'), True)
     assert name == WarmUp(AgentArgs('heur'), True).name   # by settings: a second run finds it
-    try:
+
+    def assert_all_warm(n):
         workers = list(client.scheduler_info(n_workers=-1)['workers'])
-        assert len(workers) == 2
+        assert len(workers) == n
         for w in workers:
             agents, planners, _ = client.submit(built_here, 'heur', True, workers=[w], pure=False).result()
             assert 'heur' in agents and 'heur' in planners, (w, agents, planners)
-        assert client.run(lambda dask_worker: sorted(dask_worker.plugins), nanny=False)[workers[0]].count(name) == 1
+    try:
+        assert_all_warm(2)
+        client.cluster.scale(3)
+        client.wait_for_workers(3, timeout=60)
+        assert_all_warm(3)
     finally:
         client.unregister_worker_plugin(name)
+        client.cluster.scale(2)
+        deadline = time.monotonic() + 60
+        while len(client.scheduler_info(n_workers=-1)['workers']) != 2 and time.monotonic() < deadline:
+            time.sleep(0.1)
+    assert len(client.scheduler_info(n_workers=-1)['workers']) == 2
 
 
 def test_scenes_go_out_longest_first():
