@@ -19,10 +19,12 @@ Q-network; the PyBullet client of the no-robot stability check; with the robot, 
 planner with its GAMP and planning-twin worlds) each worker thread builds once and keeps for
 the scenes it gets (`_worker_state`).
 
-Workers warm once, at start-up, not per task. The cluster rad starts (`dask_client(workers=N)`,
-`rad eval --workers N`) forks its workers from this process on Linux (`START_METHOD`), so they
+Workers warm once, at start-up, not per task. The cluster `rad eval --workers N` starts
+(`evaluate_distributed`: `dask_client(workers=N, start_method=START_METHOD)`; other callers
+of `dask_client`, such as `rad train --actors`, keep Dask's spawn) forks its workers from this
+process on Linux, so they
 begin with what it has imported (torch, OR-Tools, PyBullet, rad) instead of importing it all
-again (about 5 s of one core each, most of what made a small run slow); each sets torch to one
+again (4-5 s of one core each: docs/results/distributed.md); each sets torch to one
 thread before anything runs (`dask_setup`: a process forked after torch ran on several threads
 would hang in OpenMP otherwise). `evaluate_distributed` then registers `WarmUp`, a worker plugin
 that builds the agent, its policy and the planner's worlds (or the stability check) on every
