@@ -39,6 +39,7 @@ from rclpy.action import ActionClient
 from rad_core.errors import RadError
 from rad_core.generator import GeneratorConfig, generate_scene
 from rad_core.scene import Scene
+from rad_core.sequencing.result import final_scene
 from rad_planner.graph import default_params, start_graph
 
 DEFAULT_SCENE = (GeneratorConfig(grid=4, sides=2), 8)
@@ -181,9 +182,7 @@ def run(scene: Scene, out: Path, rtf: float, time_limit: float, faults: str = 'n
     if cycles is not None:
         doc['cycles'] = rows
     (out / 'result.json').write_text(json.dumps(doc, indent=1) + '\n')
-    final = None
-    if doc.get('final_blocks'):
-        final = Scene.from_dict(dict(scene.to_dict(), blocks=doc['final_blocks']))
+    final = final_scene({**doc, 'scene': scene.to_dict()})
     # The last build's own start: with --cycles, the heap as motion capture saw it after a take-apart.
     start = Scene.from_dict(doc['scene']) if doc.get('scene') else scene
     from rad_core.render import save_build_pictures

@@ -54,6 +54,20 @@ def result_document(scene: Scene, allocation: AllocationResult | None, steps: li
         'timings': timings,
         'reallocations': list(reallocations),
     }
+    if final is not None and final.feeder is not None:
+        doc['final_feeder'] = final.feeder.to_dict()     # the blocks still in it (placed ones have left)
     if execution is not None:
         doc['execution'] = execution
     return doc
+
+
+def final_scene(doc: dict) -> Scene | None:
+    """The scene a rad-result/1 document ends with: its scene with the final blocks (and what is
+    left in a feeder); None when it has no final blocks."""
+    if not doc.get('final_blocks'):
+        return None
+    final = {**doc['scene'], 'blocks': doc['final_blocks']}
+    final.pop('feeder', None)
+    if doc.get('final_feeder'):
+        final['feeder'] = doc['final_feeder']
+    return Scene.from_dict(final)
