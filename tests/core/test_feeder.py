@@ -273,8 +273,8 @@ def test_a_coursed_tiling_spans_a_two_cell_opening_with_a_lintel_resting_on_both
 def test_a_result_document_keeps_what_is_left_in_the_feeder(fed):
     from rad_core.sequencing.result import final_scene, result_document
     after = moved(fed, 'c1', (0.45, 0.1, U / 2), 0)
-    doc = result_document(fed, None, [], after, {})
-    assert doc['final_feeder']['blocks'] == ['c0', 'i0']
-    assert final_scene(doc) == after and final_scene(doc).feeder == after.feeder
+    result = result_document(fed, None, [], after, {})
+    assert result['final_feeder']['blocks'] == ['c0', 'i0']
+    assert final_scene(result) == after and final_scene(result).feeder == after.feeder
     table = Scene.from_dict(doc())
     assert 'final_feeder' not in result_document(table, None, [], table, {})
