@@ -14,7 +14,7 @@ on the termination action and when no block is left.
 from __future__ import annotations
 
 import enum
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import NamedTuple, Protocol
 
 import numpy as np
@@ -116,7 +116,7 @@ class StepResult:
     info: dict = field(default_factory=dict)
 
 
-def feeder_blocks(scene: Scene, placed, order: str | None = None) -> tuple[list[int], list[int]]:
+def feeder_blocks(scene: Scene, placed) -> tuple[list[int], list[int]]:
     """(block indices in the scene's feeder that can be taken next, those that cannot), given the
     placed blocks: a queue feeder offers the first `window` of its unplaced blocks; a request feeder
     all of them. Blocks on the table are in neither list."""
@@ -124,10 +124,9 @@ def feeder_blocks(scene: Scene, placed, order: str | None = None) -> tuple[list[
     if feeder is None:
         return [], []
     index = {b.id: i for i, b in enumerate(scene.blocks)}
-    waiting = [index[bid] for bid in feeder.blocks if index[bid] not in placed]
-    if (order or feeder.order) == 'request':
-        return waiting, []
-    return waiting[:feeder.window], waiting[feeder.window:]
+    waiting = replace(feeder, blocks=tuple(bid for bid in feeder.blocks if index[bid] not in placed))
+    takeable = [index[bid] for bid in waiting.available()]
+    return takeable, [index[bid] for bid in waiting.blocks if index[bid] not in takeable]
 
 
 class AssemblyEnv:

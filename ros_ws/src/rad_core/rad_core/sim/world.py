@@ -260,7 +260,7 @@ class World:
     def present(self, block_id: str) -> bool:
         """The feeder puts a block at its station (its scene pose); a block it presented before that
         still lies there goes back. Returns whether anything moved (False: already presented, or a
-        block on the table). RadError for an unknown block, or when the station is not clear."""
+        block on the table). RadError for an unknown block."""
         self._body(block_id)
         if block_id not in self.parked:
             return False
