@@ -221,6 +221,13 @@ class Scene:
     def in_feeder(self, block_id: str) -> bool:
         return self.feeder is not None and block_id in self.feeder.blocks
 
+    def at_station(self, block_id: str, position) -> bool:
+        """Whether a block in the feeder at `position` (anchor, m) lies where the feeder presents it:
+        within half a unit of its station pose, so not taken."""
+        return self.in_feeder(block_id) and bool(
+            np.linalg.norm(np.asarray(position, dtype=float) - np.asarray(self.block(block_id).position))
+            < 0.5 * self.unit)
+
     def with_clearance(self, clearance: float) -> 'Scene':
         """This scene with another clearance, validated as a document would be."""
         return Scene.from_dict({**self.to_dict(), 'clearance': clearance})

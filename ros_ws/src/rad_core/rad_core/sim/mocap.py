@@ -255,7 +255,8 @@ def _register(bodies: list[RigidBodyPose], template: Scene, config: Registration
         if not body.tracking_valid:
             raise RadError(f'rigid body {name!r} (block {block_id!r}) is not tracked (tracking_valid is '
                            f'false): its pose is unknown')
-        if template.in_feeder(block_id) and _at_station(body, template.block(block_id), template, config):
+        if template.in_feeder(block_id) and template.at_station(
+                block_id, np.asarray(body.position, dtype=float) - [0.0, 0.0, config.table_z]):
             continue        # presented by the feeder and not taken: still the feeder's (kept below)
         try:
             position, yaw, offset = _snap(body, template, template.block_types[block_type], config, lenient)
@@ -301,12 +302,6 @@ def _register(bodies: list[RigidBodyPose], template: Scene, config: Registration
         blocked = _blocked_cells([by_block[b] for b in set_aside], [config.body_map[by_block[b].name][1]
                                                                     for b in set_aside], scene)
         return Registration(scene, set_aside, frozenset(in_regions), blocked)
-
-
-def _at_station(body: RigidBodyPose, block, template: Scene, config: RegistrationConfig) -> bool:
-    """Whether a feeder block is seen where the feeder presents it (within half a unit)."""
-    pos = np.asarray(body.position, dtype=float) - np.array([0.0, 0.0, config.table_z])
-    return bool(np.linalg.norm(pos - np.asarray(block.position)) < 0.5 * template.unit)
 
 
 def _obstacle(block_id: str, body: RigidBodyPose, config: RegistrationConfig) -> dict:

@@ -230,12 +230,14 @@ class World:
         self.set_joint_positions(panda.HOME)
 
     # ---- the feeder --------------------------------------------------------
-    def _park(self, block_id: str) -> None:
-        p, cid = self._p, self.client
-        body = self.blocks[block_id]
-        p.changeDynamics(body, -1, mass=0.0, physicsClientId=cid)
-        self.set_block_pose(block_id, (float(body), 0.0, PARK_Z))
+    def _static(self, block_id: str) -> None:
+        """Mark a feeder block parked and make it static (mass 0); its pose is the caller's business."""
+        self._p.changeDynamics(self.blocks[block_id], -1, mass=0.0, physicsClientId=self.client)
         self.parked.add(block_id)
+
+    def _park(self, block_id: str) -> None:
+        self._static(block_id)
+        self.set_block_pose(block_id, (float(self.blocks[block_id]), 0.0, PARK_Z))
 
     def unpark(self, block_id: str) -> None:
         """A parked feeder block becomes a body like any other (where it is; move it next)."""
@@ -245,10 +247,9 @@ class World:
 
     def at_station(self, block_id: str) -> bool:
         """Whether a feeder block lies presented at the station, not taken (within half a unit)."""
-        if block_id in self.parked or self.scene is None or not self.scene.in_feeder(block_id):
+        if block_id in self.parked or self.scene is None:
             return False
-        pos, _ = self.block_pose(block_id)
-        return bool(np.linalg.norm(pos - np.asarray(self.scene.block(block_id).position)) < 0.5 * self.scene.unit)
+        return self.scene.at_station(block_id, self.block_pose(block_id)[0])
 
     def return_to_feeder(self, block_id: str) -> None:
         """Park a feeder block again (a presented block the robot did not take)."""
@@ -362,8 +363,7 @@ class World:
             for block_id in self.parked - parked:
                 self.unpark(block_id)
             for block_id in parked - self.parked:
-                p.changeDynamics(self.blocks[block_id], -1, mass=0.0, physicsClientId=cid)
-                self.parked.add(block_id)
+                self._static(block_id)          # its pose is restored below
         # The movable joints in one reset command; fixed joints have no state to restore.
         p.resetJointStatesMultiDof(self.robot, self._movable, [[joints[j][0]] for j in self._movable],
                                    [[joints[j][1]] for j in self._movable], physicsClientId=cid)
