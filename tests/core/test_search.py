@@ -249,3 +249,21 @@ def test_lookahead_skips_a_move_into_a_dead_end_but_takes_it_when_nothing_else_w
     assert r.action.block != 1
     r = SEARCHES['lookahead'](DeadEnd(n=3, bad=(0, 2), trap=-1), np.random.default_rng(0), budget=10)
     assert r.action.block == 1     # a dead end, but the only block that can be placed at all
+
+
+def test_a_verified_callers_fallbacks_go_on_below_stopping_but_never_to_a_failed_child():
+    """proposals() ends at termination; with fallbacks it goes on with the actions not simulated,
+    valued below stopping, and still never offers a child whose simulated step failed."""
+    class Shy(ToyModel):
+        def q_values(self, actions):
+            q = super().q_values(actions)
+            q[-1] = 0.7      # stopping is worth more than most actions
+            return q
+    model = Shy(bad=(0, 1, 2, 3), trap=-1)
+    r = SEARCHES['lookahead'](model, np.random.default_rng(0), budget=3, epsilon=0.0)
+    failed = {c.action for c in r.children if c.invalid}
+    short, long = [a for a, _ in r.proposals()], [a for a, _ in r.proposals(fallbacks=True)]
+    assert long[:len(short)] == short and len(long) > len(short)
+    assert failed and not failed & set(long) and TERMINATE not in long
+    q = dict(zip(model.actions() + [TERMINATE], model.q_values(model.actions())))
+    assert any(q[a] <= q[TERMINATE] for a in long[len(short):])

@@ -123,6 +123,41 @@ class _Highest:
         return np.array(heights + [-1.0])
 
 
+class _Shy:
+    """A policy that values stopping above every action (a network can learn that where it could
+    not check what it does)."""
+    name = 'shy'
+    why_none = 'it values stopping more'
+
+    def scores(self, env, actions, rng):
+        return np.array([-float(n) for n in range(len(actions))] + [1.0])
+
+
+def test_ranked_indices_puts_the_fallbacks_below_stopping_after_the_rest_and_never_a_ruled_out_one():
+    from rad_core.sequencing.policy import ranked_indices
+    scores = np.array([0.2, 0.9, -np.inf, 0.5, 0.1, 0.4])   # the last one: stopping
+    assert ranked_indices(scores) == [1, 3]
+    assert ranked_indices(scores, fallbacks=True) == [1, 3, 0, 4]
+
+
+def test_a_verified_plan_goes_on_below_the_value_of_stopping_and_an_unverified_one_stops(motion):
+    """Stopping while allocated poses remain is the agent's choice only where it cannot check: a
+    verified plan tries what its scorer values below stopping, best first, and builds it."""
+    scene = generate_scene(GeneratorConfig(grid=3), 1)
+    blind = plan_assembly(scene, solve, motion, _Shy(), seed=1, verify=False)
+    assert blind.steps == [] and blind.predicted_coverage == 0.0
+    checked = plan_assembly(scene, solve, motion, _Shy(), seed=1)
+    assert checked.success and checked.predicted_coverage == 1.0, checked.reason
+    # The sequencer (what the node serves) answers the same way: stopping is its choice, and the
+    # actions below it are there for a verified caller.
+    from rad_core.sequencing.sequencer import Sequencer, SequencerConfig
+    ranking = Sequencer(SequencerConfig(policy='heur'), policy=_Shy()).rank(scene, solve(scene).placements)
+    assert ranking.terminate and 'it values stopping more' in ranking.reason
+    assert ranking.actions and ranking.values == sorted(ranking.values, reverse=True)
+    through_node = plan_assembly(scene, solve, motion, lambda *_: ranking, seed=1)
+    assert through_node.steps, through_node.reason
+
+
 def test_a_block_that_would_rest_on_nothing_is_never_planned(motion):
     scene = generate_scene(GeneratorConfig(grid=4), 0)
     plan = plan_assembly(scene, solve, motion, _Highest(), seed=1)

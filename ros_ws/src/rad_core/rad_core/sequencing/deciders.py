@@ -14,6 +14,7 @@ import numpy as np
 from rad_core.mdp import AssemblyEnv, Outcome
 from rad_core.sequencing.actions import ActionSpace
 from rad_core.sequencing.episode import Decide, Decision, stop
+from rad_core.sequencing import policy as ranking_rules
 from rad_core.sequencing.policy import Policy, first_feasible, ranked_actions
 
 
@@ -38,7 +39,8 @@ def policy_decider(policy: Policy, actions: ActionSpace, verify=None) -> Decide:
     (a GAMP check, `RobotAssemblyEnv.plan`) the best one it finds feasible,
     carrying its motion plan; nothing ranked (or feasible) means terminate."""
     def decide(env: AssemblyEnv, rng: np.random.Generator) -> Decision:
-        ranked = ranked_actions(policy, env, actions(env), rng)
+        fallbacks = verify is not None and ranking_rules.FALLBACKS
+        ranked = ranked_actions(policy, env, actions(env), rng, fallbacks=fallbacks)
         if verify is None:
             return Decision(ranked[0]) if ranked else stop()
         action, plan, _ = first_feasible(env, ranked, verify)
@@ -75,7 +77,8 @@ def search_decider(policy: Policy, actions: ActionSpace, stepper, search_name: s
 
         def known_or_simulated(action) -> Check:
             return Check(True, '', plans.get(action)) if action in worked else check(action)
-        action, ok, _ = first_feasible(env, [a for a, _ in result.proposals()], known_or_simulated)
+        proposed = [a for a, _ in result.proposals(ranking_rules.FALLBACKS)]
+        action, ok, _ = first_feasible(env, proposed, known_or_simulated)
         return Decision(action, ok.plan) if action is not None else stop()
     return decide
 

@@ -40,6 +40,7 @@ from rad_core.motion import Motion
 from rad_core.scene import Block, Scene
 from rad_core.sequencing.actions import AllocationActions, mdp_actions, scene_action
 from rad_core.sequencing.episode import Decision, Episode, run_episode, stop
+from rad_core.sequencing import policy as ranking_rules
 from rad_core.sequencing.policy import Policy, first_feasible, ranked_actions
 
 
@@ -188,7 +189,7 @@ def plan_assembly(scene: Scene, allocate: Allocate, plan_motion: PlanMotion, seq
 
     def rank_by_policy(env: AssemblyEnv, allowed, rng) -> list | str:
         ts = time.perf_counter()
-        ranked = ranked_actions(sequencer, env, allowed, rng)
+        ranked = ranked_actions(sequencer, env, allowed, rng, fallbacks=verify and ranking_rules.FALLBACKS)
         timings['sequencing'] += time.perf_counter() - ts
         if not ranked:
             left = len(allowed_actions.guide.open_poses(env.state))

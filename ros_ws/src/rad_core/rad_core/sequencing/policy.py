@@ -61,22 +61,36 @@ class HeurPolicy:
 
 
 def ranked_actions(policy: Policy, env: AssemblyEnv, actions: list[Action],
-                   rng: np.random.Generator) -> list[Action]:
-    """Actions the policy values above terminating, best first (ties keep the given order)."""
+                   rng: np.random.Generator, fallbacks: bool = False) -> list[Action]:
+    """Actions the policy values above terminating, best first (ties keep the given order);
+    with fallbacks, then the ones it values at or below terminating (`ranked_indices`)."""
     if not actions:
         return []
     scores = np.asarray(policy.scores(env, actions, rng), dtype=float)
     if scores.shape != (len(actions) + 1,):
         raise ValueError(f'{policy.name}: {scores.shape[0]} scores for {len(actions)} actions + terminate')
-    return [actions[i] for i in ranked_indices(scores)]
+    return [actions[i] for i in ranked_indices(scores, fallbacks)]
 
 
-def ranked_indices(scores: np.ndarray) -> list[int]:
+def ranked_indices(scores: np.ndarray, fallbacks: bool = False) -> list[int]:
     """Indices of the actions scoring above termination (the last score), best first
-    (ties keep the given order)."""
+    (ties keep the given order). fallbacks: then those scoring at or below termination, best
+    first, for a verified caller (`FALLBACKS`); an action scoring -inf is never among them."""
     stop, scores = scores[-1], scores[:-1]
     order = np.argsort(-scores, kind='stable')
-    return [int(i) for i in order if np.isfinite(scores[i]) and scores[i] > stop]
+    above = [int(i) for i in order if np.isfinite(scores[i]) and scores[i] > stop]
+    if not fallbacks:
+        return above
+    return above + [int(i) for i in order if np.isfinite(scores[i]) and not scores[i] > stop]
+
+
+FALLBACKS = True
+"""Whether a verified agent goes on below its scorer's termination value: when every action it
+values above stopping fails (or there is none) while allocated poses remain, it tries the others,
+best first, and stops only when none is feasible. Its check (GAMP and the stability check with
+the robot, the stability check without) makes trying an action safe, and every allocated pose
+filled is target covered; the value of stopping was learned by agents that could not check.
+Measured in docs/evaluation.md ('Verified agents go on below stopping')."""
 
 
 def first_feasible(env: AssemblyEnv, ranked: list[Action], check):

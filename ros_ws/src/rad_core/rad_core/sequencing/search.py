@@ -131,14 +131,19 @@ class SearchResult:
         failed = [(c.action, c.value) for c in self.children if c.invalid]
         return [(c.action, c.value) for c in good] + rest + failed
 
-    def proposals(self) -> list[tuple[Action, float]]:
+    def proposals(self, fallbacks: bool = False) -> list[tuple[Action, float]]:
         """The ranking down to termination: what a verified caller may try, best first
-        (failed children rank after termination, so they are never among them)."""
-        out = []
+        (failed children rank after termination, so they are never among them). fallbacks:
+        then the actions after termination that were not simulated (`policy.FALLBACKS`)."""
+        out, failed = [], {c.action for c in self.children if c.invalid}
+        past = False
         for action, value in self.ranking():
             if action.is_terminate:
-                break
-            if value > -math.inf:          # -inf rules an action out (HEUR: it would not rest supported)
+                if not fallbacks:
+                    break
+                past = True
+                continue
+            if value > -math.inf and not (past and action in failed):   # -inf: ruled out (HEUR: unsupported)
                 out.append((action, value))
         return out
 

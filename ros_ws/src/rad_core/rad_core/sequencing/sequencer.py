@@ -35,6 +35,7 @@ from rad_core.gamp.action import SceneAction, start_joints
 from rad_core.mdp import AssemblyEnv, EnvConfig
 from rad_core.scene import Scene
 from rad_core.sequencing.actions import AllocationActions, mdp_actions, scene_action
+from rad_core.sequencing import policy as ranking_rules
 from rad_core.sequencing.policy import ranked_indices
 from rad_core.sequencing.search import SEARCHES, EnvModel, line_result
 
@@ -105,8 +106,10 @@ class SequencerConfig:
 @dataclass
 class Ranking:
     """What to try next, best first: the agent's own choice first. terminate: the agent's
-    choice is to stop (reason says why); actions is then empty, or, after a search whose
-    move is to stop, lists what a verified caller may still try."""
+    choice is to stop (reason says why); actions is then empty, or lists what a verified
+    caller may still try. After the actions the agent values above stopping come those it
+    values below, for a verified caller (`sequencing.policy.FALLBACKS`); an unverified one
+    takes the first action, or stops on terminate."""
 
     actions: list[SceneAction] = field(default_factory=list)
     values: list[float] = field(default_factory=list)
@@ -179,11 +182,12 @@ class Sequencer:
         else:
             ts = time.perf_counter()
             scores = np.asarray(self.policy.scores(env, allowed, rng), dtype=float)
-            ranked = ranked_indices(scores)
+            above = ranked_indices(scores)
+            ranked = ranked_indices(scores, ranking_rules.FALLBACKS)    # then a verified caller's fallbacks
             ranking.actions = [scene_action(env, allowed[i]) for i in ranked]
             ranking.values = [float(scores[i]) for i in ranked]
             ranking.timings['policy'] = time.perf_counter() - ts
-            if not ranked:
+            if not above:
                 ranking.terminate = True
                 why = getattr(self.policy, 'why_none', f'{self.agent} values stopping more')
                 ranking.reason = f'{left} allocated poses left, none of them can be built next ({why})'
@@ -217,7 +221,7 @@ class Sequencer:
                     self._lines.clear()
                 self._remember_line(scene, space, result.line, float(result.info.get('coverage', 0.0)))
         ranking.search = result.to_dict()
-        for action, value in result.proposals():
+        for action, value in result.proposals(ranking_rules.FALLBACKS):
             ranking.actions.append(scene_action(env, action))
             ranking.values.append(float(value))
         move = result.action
