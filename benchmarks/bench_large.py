@@ -6,7 +6,8 @@
 For each generated two-sided scene (g in --grids, seeds --seed.., unseen by training; from
 g = 7 or 8 on the generator puts the blocks in a feeder, the table within reach being too
 small) and each large hand-made target (`rad_core.large_shapes`, 45 to 72 blocks, all in a
-feeder), the agent plans with the robot in the loop in process (`AgentPlanner`: CP-SAT, the
+feeder; the two-deep flush walls, which a parallel gripper cannot fill (`large_shapes.FLUSH_LIMIT`),
+as a group of their own), the agent plans with the robot in the loop in process (`AgentPlanner`: CP-SAT, the
 sequencer, GAMP on the planning twin, re-allocation), then the twin builds the plan
 (teleporting execution, physics settling after each block) and motion capture registers it.
 Per structure it records the blocks in the scene, the blocks placed, the planning time and
@@ -34,12 +35,12 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def cases(grids, seeds: int, seed0: int, large: list[str]):
     from rad_core.generator import GeneratorConfig, generate_scene
-    from rad_core.large_shapes import large_scene
+    from rad_core.large_shapes import FLUSH, large_scene
     for g in grids:
         for s in range(seed0, seed0 + seeds):
             yield f'g{g}-s{s}', f'generated g={g}', generate_scene(GeneratorConfig(grid=g, sides=2), s)
     for name in large:
-        yield name, 'large hand-made', large_scene(name)
+        yield name, 'large two-deep flush' if name in FLUSH else 'large hand-made', large_scene(name)
 
 
 def measure(planner, name: str, kind: str, scene) -> dict:
@@ -63,7 +64,7 @@ def plot(rows: list[dict], out: Path, agent: str) -> None:
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
     fig, axes = plt.subplots(1, 2, figsize=(10, 4))
-    for kind, marker in (('generated', 'o'), ('large hand-made', 's')):
+    for kind, marker in (('generated', 'o'), ('large hand-made', 's'), ('large two-deep flush', 'x')):
         sel = [r for r in rows if r['kind'].startswith(kind)]
         if not sel:
             continue

@@ -258,6 +258,17 @@ def test_the_large_targets_have_50_to_100_blocks_in_a_feeder_enough_to_cover_the
         assert units - spares == scene.num_target_cells, name       # an exact tiling plus the spares
 
 
+def test_a_cavity_wall_has_two_leaves_a_finger_apart_each_tiled_on_its_own():
+    from rad_core.large_shapes import CAVITY, FLUSH, LARGE_SPECS, large_scene
+    scene = large_scene('cavity_wall')
+    (region,) = scene.targets
+    depths = sorted({int(c[1]) for c in region.filled})
+    assert depths == [0, CAVITY + 1] and CAVITY * scene.unit >= 0.08 - 1e-9     # room for a finger
+    leaf = sorted((int(i), int(k)) for i, j, k in region.filled if j == 0)
+    assert leaf == sorted((int(i), int(k)) for i, j, k in region.filled if j == CAVITY + 1)
+    assert set(FLUSH) < set(LARGE_SPECS) and all(len(large_scene(n).targets) == 2 for n in FLUSH)
+
+
 def test_a_coursed_tiling_spans_a_two_cell_opening_with_a_lintel_resting_on_both_sides():
     from rad_core.large_shapes import coursed_tiling
     from rad_core.shapes import face

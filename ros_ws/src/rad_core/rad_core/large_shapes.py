@@ -6,10 +6,16 @@ station (`rad_core.scene.Feeder`, order `request`). The targets are drawn as the
 hand-made shapes are (`rad_core.shapes.face`, `layers`) at a 4 cm unit, so the largest
 stays within the reach of a top-down hand (the far cells at 0.72 m from the base):
 
-- `wall_openings`: a two-deep wall, 12 x 8, with a door and two windows under lintels;
+- `cavity_wall`: a cavity wall, two leaves 12 x 8 with a two-cell cavity between them, with a
+  door and two windows under lintels;
 - `tower`: a hollow square tower, 4 x 4 in plan, 10 layers high;
-- `viaduct`: a two-deep bridge, 12 x 6, on four piers with three openings, its deck on lintels;
-- `stepped_wall`: a two-deep wall that steps down from 8 layers to 2, a staircase.
+- `cavity_viaduct`: a bridge, two leaves 12 x 6 around a cavity, on four piers with three
+  openings, its deck on lintels;
+- `cavity_steps`: a cavity wall that steps down from 8 layers to 2, a staircase.
+
+And three with the two leaves flush, back to back (the generator's two-sided layout, filled):
+`wall_openings`, `viaduct` and `stepped_wall`. A parallel gripper taking blocks from above cannot
+fill such a wall, whatever the order (`FLUSH_LIMIT`); they show how far rad gets there.
 
 Their block multisets are exact stable tilings by small types plus a few spares: for the
 faces a bond drawn course by course (`coursed_tiling`: bars of three and two, joints staggered
@@ -25,11 +31,22 @@ from functools import lru_cache
 
 from rad_core.errors import RadError
 from rad_core.scene import Block, Feeder, Scene, station_position
-from rad_core.shapes import ShapeSpec, block_multiset, face, layers, one_sided, target_regions, two_sided
+from rad_core.shapes import RegionSpec, ShapeSpec, block_multiset, face, layers, one_sided, target_regions, two_sided
 
 UNIT = 0.04
 STATION = (0.42, -0.32)
 """Where the feeder presents blocks: right of the structures, within reach."""
+CAVITY = 2
+"""The cavity between the two leaves of a cavity wall, in cells: 8 cm at a 4 cm unit, room for a
+finger (the hand closes across a bar of a leaf, one finger outside, one in the cavity)."""
+
+FLUSH_LIMIT = """Why a two-deep flush wall cannot be filled by top-down parallel-jaw grasps. Take any course
+and the block placed last in it. The hand closes either across the wall, with one finger where
+the other leaf's block of this course lies, or along the wall, with a finger where the block
+beside it in its own leaf lies (and a bar of two or more cells, 8 cm and up, does not fit the
+8 cm opening that way anyway). When the course is otherwise full, both are filled: no course
+of such a wall can be completed (unless an opening leaves its last cell free on two opposite
+sides). A cavity wall's leaves have a free side each, the cavity."""
 
 _WALL = face(
     '############',
@@ -59,6 +76,13 @@ _STEPS = face(
 _RING = ('####', '#..#', '#..#', '####')
 SMALL_TYPES = ('cube', 'I2', 'I3', 'bar4')
 
+
+def cavity(drawn, gap: int = CAVITY) -> tuple[RegionSpec, ...]:
+    """A face drawn with `face` as a cavity wall: one region, its two leaves the face at depth 0 and
+    at depth gap + 1, the cavity between them empty."""
+    (w, _, h), cells = drawn
+    return one_sided(((w, gap + 2, h), [(i, j, k) for i, _, k in cells for j in (0, gap + 1)]))
+
 LARGE_SPECS = {
     spec.name: spec for spec in (
         ShapeSpec('wall_openings', 'wall', two_sided(_WALL, _WALL), SMALL_TYPES, ('cube', 'I2'), n_spare=6,
@@ -70,8 +94,16 @@ LARGE_SPECS = {
                   why='three openings bridged by four-bars, two deep'),
         ShapeSpec('stepped_wall', 'stairs', two_sided(_STEPS, _STEPS), ('cube', 'I2', 'I3'), ('cube', 'I2'),
                   n_spare=5, why='a staircase wall, tall at the far end'),
+        ShapeSpec('cavity_wall', 'wall', cavity(_WALL), SMALL_TYPES, ('cube', 'I2'), n_spare=6,
+                  why='a cavity wall with a door and two windows, each under a lintel'),
+        ShapeSpec('cavity_viaduct', 'bridge', cavity(_VIADUCT), SMALL_TYPES, ('cube', 'I2'), n_spare=5,
+                  why='three openings bridged by four-bars, in two leaves around a cavity'),
+        ShapeSpec('cavity_steps', 'stairs', cavity(_STEPS), ('cube', 'I2', 'I3'), ('cube', 'I2'),
+                  n_spare=5, why='a staircase cavity wall, tall at the far end'),
     )
 }
+FLUSH = ('wall_openings', 'viaduct', 'stepped_wall')
+"""The two-deep flush ones (`FLUSH_LIMIT`)."""
 
 
 def coursed_tiling(cells) -> list[str]:
@@ -114,7 +146,8 @@ def coursed_tiling(cells) -> list[str]:
 def _multiset(spec: ShapeSpec) -> list[str]:
     if spec.name == 'tower':
         return block_multiset(spec)
-    kinds = [kind for region in spec.regions for kind in coursed_tiling(region.cells)]
+    kinds = [kind for region in spec.regions for j in sorted({c[1] for c in region.cells})    # leaf by leaf
+             for kind in coursed_tiling([c for c in region.cells if c[1] == j])]
     spares = spec.spare_types
     return kinds + [spares[n % len(spares)] for n in range(spec.n_spare)]
 
