@@ -192,3 +192,20 @@ def test_an_unverified_plan_stops_where_its_best_ranked_action_fails_and_a_verif
     assert blind.reason == f'grasp: {first} is glued down' and blind.episode.outcome.value == 'invalid_grasp'
     checked = plan_for_agent(parse('heur+verify'), scene, allocate, glued_first, HeurPolicy(), seed=1)
     assert checked.steps and first not in [s.block for s in checked.steps]   # it built around the glued block
+
+
+def test_a_search_plan_the_improvement_budget_ends_before_its_first_step_is_not_an_error(motion):
+    """Anytime planning: the first plan stops early, the search's gets almost no time (its episode
+    has no outcome then); the answer is the first plan, not a crash."""
+    from rad_core.agents import parse
+    from rad_core.sequencing.agent_plan import plan_for_agent
+    from rad_core.sequencing.sequencer import Ranking
+    scene = generate_scene(GeneratorConfig(grid=3), 1)
+
+    def quick(*_):
+        return Ranking([], [], True, 'nothing, on purpose', {})
+    plan = plan_for_agent(parse('heur+lookahead:1+verify'), scene, lambda s, support: solve(s), motion,
+                          HeurPolicy(), quick_rank=quick, improve_time_s=1e-9)
+    assert plan.steps == [] and plan.reason == 'nothing, on purpose'
+    assert [a['plan'] for a in plan.anytime] == ['scorer', 'scorer']
+

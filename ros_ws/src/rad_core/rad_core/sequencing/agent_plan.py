@@ -60,7 +60,9 @@ def plan_for_agent(spec: AgentSpec, scene: Scene, allocate, plan_motion, rank, r
     left = min(improve_time_s, time_limit_s - (time.perf_counter() - t0))
     if best.predicted_coverage < 1.0 - 1e-9 and left > 0:
         searched = plan_with(rank, left)
-        invalid = searched.episode is not None and searched.episode.outcome.is_invalid
+        # (a plan the time limit ended before its first step has no outcome)
+        invalid = searched.episode is not None and searched.episode.outcome is not None \
+            and searched.episode.outcome.is_invalid
         if searched.predicted_coverage > best.predicted_coverage + 1e-9 and not invalid:
             best = searched
         anytime.append({'t': time.perf_counter() - t0, 'coverage': best.predicted_coverage,
