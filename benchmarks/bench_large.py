@@ -14,7 +14,8 @@ Per structure it records the blocks in the scene, the blocks placed, the plannin
 its stages, the predicted and the built coverage and the failures (blocks the build lost);
 it writes <out>/large.md, <out>/large.rows.jsonl and <out>/large.png (planning time per
 placed block against the blocks in the scene: the issue asks that it grow no faster than
-linearly, i.e. that the time per block stay flat or grow at most linearly).
+linearly, i.e. that the time per block stay flat or grow at most linearly). While it runs,
+<out>/large.partial.jsonl holds the rows measured so far (removed once the results are written).
 
 Measured on the 2-core machine; the command and the date are written into the results file.
 """
@@ -124,13 +125,19 @@ def main(argv=None) -> int:
     large = list(LARGE_SPECS) if args.large == 'all' else [n for n in args.large.split(',') if n and n != 'none']
     planner = AgentPlanner(args.agent, time_limit_s=args.time_limit)
     rows = []
+    partial = Path(args.out) / 'large.partial.jsonl'     # each row as soon as it is measured
+    partial.parent.mkdir(parents=True, exist_ok=True)
+    partial.write_text('')
     for name, kind, scene in cases(grids, args.seeds, args.seed, large):
         row = measure(planner, name, kind, scene)
         rows.append(row)
+        with partial.open('a') as f:
+            f.write(json.dumps(row) + '\n')
         print(f"{name:16s} blocks {row['blocks']:3d} placed {row['placed']:3d} planning {row['planning_s']:7.1f} s "
               f"({row['s_per_block']:.2f} s/block) built {row['built']:.3f} lost {len(row['lost'])}", flush=True)
     command = 'python benchmarks/bench_large.py ' + ' '.join(sys.argv[1:] if argv is None else argv)
     write(rows, Path(args.out), command.strip(), args.agent)
+    partial.unlink()
     print(f'wrote {Path(args.out) / "large.md"}')
     return 0
 

@@ -10,7 +10,7 @@ from rad_core.gamp.action import MotionPlanner
 from rad_core.generator import GeneratorConfig, generate_scene
 from rad_core.mdp import AssemblyEnv, EnvConfig
 from rad_core import support
-from rad_core.sequencing import HeurPolicy, ranked_actions
+from rad_core.sequencing import HeurPolicy, ranked_actions, supported_actions
 from rad_core.sequencing.plan import MotionPlan, plan_assembly, local_motion_planner
 
 
@@ -154,6 +154,14 @@ def test_a_verified_plan_goes_on_below_the_value_of_stopping_and_an_unverified_o
     ranking = Sequencer(SequencerConfig(policy='heur'), policy=_Shy()).rank(scene, solve(scene).placements)
     assert ranking.terminate and 'it values stopping more' in ranking.reason
     assert ranking.actions and ranking.values == sorted(ranking.values, reverse=True)
+    # Fallbacks are only blocks that would rest fully supported (a cantilever valued below stopping
+    # can pass the check at exact cells and still bring the built structure down).
+    env = AssemblyEnv(scene, EnvConfig(stability='none'))
+    every = AllocationGuide(scene, solve(scene).placements).allowed_actions(env.state)
+    from rad_core.sequencing.actions import mdp_actions
+    ranked = mdp_actions(env, ranking.actions, every)
+    assert len(ranked) == len(ranking.actions)
+    assert set(ranked) <= set(supported_actions(env, every)) and len(supported_actions(env, every)) < len(every)
     through_node = plan_assembly(scene, solve, motion, lambda *_: ranking, seed=1)
     assert through_node.steps, through_node.reason
 

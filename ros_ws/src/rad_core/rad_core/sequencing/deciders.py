@@ -15,7 +15,7 @@ from rad_core.mdp import AssemblyEnv, Outcome
 from rad_core.sequencing.actions import ActionSpace
 from rad_core.sequencing.episode import Decide, Decision, stop
 from rad_core.sequencing import policy as ranking_rules
-from rad_core.sequencing.policy import Policy, first_feasible, ranked_actions
+from rad_core.sequencing.policy import Policy, first_feasible, ranked_actions, supported_fallbacks
 
 
 class Check(NamedTuple):
@@ -77,7 +77,8 @@ def search_decider(policy: Policy, actions: ActionSpace, stepper, search_name: s
 
         def known_or_simulated(action) -> Check:
             return Check(True, '', plans.get(action)) if action in worked else check(action)
-        proposed = [a for a, _ in result.proposals(ranking_rules.FALLBACKS)]
+        proposed = supported_fallbacks(env, [a for a, _ in result.proposals(ranking_rules.FALLBACKS)],
+                                       len(result.proposals()))
         action, ok, _ = first_feasible(env, proposed, known_or_simulated)
         return Decision(action, ok.plan) if action is not None else stop()
     return decide

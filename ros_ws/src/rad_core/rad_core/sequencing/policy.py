@@ -69,7 +69,17 @@ def ranked_actions(policy: Policy, env: AssemblyEnv, actions: list[Action],
     scores = np.asarray(policy.scores(env, actions, rng), dtype=float)
     if scores.shape != (len(actions) + 1,):
         raise ValueError(f'{policy.name}: {scores.shape[0]} scores for {len(actions)} actions + terminate')
-    return [actions[i] for i in ranked_indices(scores, fallbacks)]
+    ranked = [actions[i] for i in ranked_indices(scores, fallbacks)]
+    return supported_fallbacks(env, ranked, len(ranked_indices(scores))) if fallbacks else ranked
+
+
+def supported_fallbacks(env: AssemblyEnv, ranked: list, above: int) -> list:
+    """ranked[:above] (what the agent values above stopping), then those of the rest (its
+    fallbacks, `FALLBACKS`) whose block would rest fully supported, in their order."""
+    if len(ranked) <= above:
+        return list(ranked)
+    keep = set(supported_actions(env, ranked[above:]))
+    return list(ranked[:above]) + [a for a in ranked[above:] if a in keep]
 
 
 def ranked_indices(scores: np.ndarray, fallbacks: bool = False) -> list[int]:
@@ -86,11 +96,14 @@ def ranked_indices(scores: np.ndarray, fallbacks: bool = False) -> list[int]:
 
 FALLBACKS = True
 """Whether a verified agent goes on below its scorer's termination value: when every action it
-values above stopping fails (or there is none) while allocated poses remain, it tries the others,
-best first, and stops only when none is feasible. Its check (GAMP and the stability check with
-the robot, the stability check without) makes trying an action safe, and every allocated pose
-filled is target covered; the value of stopping was learned by agents that could not check.
-Measured in docs/evaluation.md ('Verified agents go on below stopping')."""
+values above stopping fails (or there is none) while allocated poses remain, it tries the others
+whose block would rest fully supported (every unit on the table or a placed block), best first,
+and stops only when none is feasible. Its check (GAMP and the stability check with the robot, the
+stability check without) makes trying an action safe, and every allocated pose filled is target
+covered. Only fully supported ones: the stability check judges blocks at their exact cells, and a
+cantilever the network values below stopping can stand there and still bring down the built
+structure, whose blocks lie a little off their cells (measured: `overhang_edge`, 0.84 -> 0.37
+built with every fallback). docs/search.md has the figures."""
 
 
 def first_feasible(env: AssemblyEnv, ranked: list[Action], check):

@@ -36,7 +36,7 @@ from rad_core.mdp import AssemblyEnv, EnvConfig
 from rad_core.scene import Scene
 from rad_core.sequencing.actions import AllocationActions, mdp_actions, scene_action
 from rad_core.sequencing import policy as ranking_rules
-from rad_core.sequencing.policy import ranked_indices
+from rad_core.sequencing.policy import ranked_indices, supported_fallbacks
 from rad_core.sequencing.search import SEARCHES, EnvModel, line_result
 
 # The sequencer node's older policy names (a search over the shipped mixed network, or HEUR).
@@ -184,6 +184,8 @@ class Sequencer:
             scores = np.asarray(self.policy.scores(env, allowed, rng), dtype=float)
             above = ranked_indices(scores)
             ranked = ranked_indices(scores, ranking_rules.FALLBACKS)    # then a verified caller's fallbacks
+            kept = set(supported_fallbacks(env, [allowed[i] for i in ranked], len(above)))
+            ranked = [i for i in ranked if allowed[i] in kept]
             ranking.actions = [scene_action(env, allowed[i]) for i in ranked]
             ranking.values = [float(scores[i]) for i in ranked]
             ranking.timings['policy'] = time.perf_counter() - ts
@@ -221,7 +223,11 @@ class Sequencer:
                     self._lines.clear()
                 self._remember_line(scene, space, result.line, float(result.info.get('coverage', 0.0)))
         ranking.search = result.to_dict()
-        for action, value in result.proposals(ranking_rules.FALLBACKS):
+        proposals = result.proposals(ranking_rules.FALLBACKS)
+        kept = set(supported_fallbacks(env, [a for a, _ in proposals], len(result.proposals())))
+        for action, value in proposals:
+            if action not in kept:
+                continue
             ranking.actions.append(scene_action(env, action))
             ranking.values.append(float(value))
         move = result.action
