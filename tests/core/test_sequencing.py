@@ -10,7 +10,7 @@ from rad_core.gamp.action import MotionPlanner
 from rad_core.generator import GeneratorConfig, generate_scene
 from rad_core.mdp import AssemblyEnv, EnvConfig
 from rad_core import support
-from rad_core.sequencing import HeurPolicy, ranked_actions, supported_actions
+from rad_core.sequencing import HeurPolicy, ranked_actions
 from rad_core.sequencing.plan import MotionPlan, plan_assembly, local_motion_planner
 
 
@@ -154,16 +154,44 @@ def test_a_verified_plan_goes_on_below_the_value_of_stopping_and_an_unverified_o
     ranking = Sequencer(SequencerConfig(policy='heur'), policy=_Shy()).rank(scene, solve(scene).placements)
     assert ranking.terminate and 'it values stopping more' in ranking.reason
     assert ranking.actions and ranking.values == sorted(ranking.values, reverse=True)
-    # Fallbacks are only blocks that would rest fully supported (a cantilever valued below stopping
-    # can pass the check at exact cells and still bring the built structure down).
+    # Fallbacks are only blocks that would stand on their supports alone, well inside them (a
+    # cantilever valued below stopping can pass the check at exact cells and still bring the built
+    # structure down).
     env = AssemblyEnv(scene, EnvConfig(stability='none'))
     every = AllocationGuide(scene, solve(scene).placements).allowed_actions(env.state)
     from rad_core.sequencing.actions import mdp_actions
     ranked = mdp_actions(env, ranking.actions, every)
     assert len(ranked) == len(ranking.actions)
-    assert set(ranked) <= set(supported_actions(env, every)) and len(supported_actions(env, every)) < len(every)
+    from rad_core.sequencing.policy import FIRM_MARGIN
+    firm = [a for a in every if support.rests_on_its_own(env.grid, env.state.occupancy, env.resulting_cells(a)[0],
+                                                         FIRM_MARGIN)]
+    assert set(ranked) == set(firm) and len(firm) < len(every)
     through_node = plan_assembly(scene, solve, motion, lambda *_: ranking, seed=1)
     assert through_node.steps, through_node.reason
+
+
+def test_a_lintel_on_two_piers_stands_on_its_own_a_cantilever_or_a_balanced_block_does_not():
+    """support.rests_on_its_own, what fallbacks below stopping are held to, and `firm`."""
+    from rad_core.sequencing.policy import FIRM_MARGIN, firm
+    scene = generate_scene(GeneratorConfig(grid=4), 0)
+    env = AssemblyEnv(scene, EnvConfig(stability='none'))
+    grid, occ = env.grid, env.state.occupancy.copy()
+    r = 0
+    cell = lambda i, k: grid.index(r, (i, 0, k))     # noqa: E731
+    occ[[cell(0, 0), cell(3, 0)]] = 0                # two piers one layer high, two cells apart
+    lintel = np.array([cell(i, 1) for i in range(4)])
+    cantilever = np.array([cell(i, 1) for i in range(3, 0, -1)])       # on the right pier only
+    assert support.rests_on_its_own(grid, occ, lintel, FIRM_MARGIN)
+    assert not support.rests_on_its_own(grid, occ, cantilever)
+    balanced = np.array([cell(3, 1), cell(2, 1)])                        # half on a pier: on the edge
+    assert not support.rests_on_its_own(grid, occ, balanced, FIRM_MARGIN)
+    assert support.rests_on_its_own(grid, occ, np.array([cell(0, 1)]), FIRM_MARGIN)
+    env.state.occupancy[:] = occ
+    env.state.placed = {0: (np.array([cell(0, 0)]), 0), 1: (np.array([cell(3, 0)]), 0)}
+    assert firm(env)
+    env.state.occupancy[balanced] = 2
+    env.state.placed[2] = (balanced, 0)
+    assert not firm(env)
 
 
 def test_a_block_that_would_rest_on_nothing_is_never_planned(motion):

@@ -36,6 +36,18 @@ def fully_supported(grid: Grid, occupancy: np.ndarray, cells: np.ndarray) -> boo
     return bool(np.all(supported | own))
 
 
+def rests_on_its_own(grid: Grid, occupancy: np.ndarray, cells: np.ndarray, margin: float = 0.05) -> bool:
+    """Whether the block would stand on its supported units alone (those on the table or on a
+    placed block): its centre of mass over their footprint, `margin` units inside (`com_inside`).
+    True for a fully supported block and a lintel resting on both ends; False for a cantilever
+    that needs something on it, or a counterweight, to stay up."""
+    supported, _ = _supported_units(grid, occupancy, cells)
+    if not supported.any():
+        return False
+    xy = grid.centres[cells][:, :2] / grid.unit
+    return com_inside(xy[supported], xy.mean(axis=0), margin)
+
+
 def com_inside(squares: np.ndarray, com: np.ndarray, margin: float = 0.05) -> bool:
     """Whether a block's centre of mass (xy, in cell units) lies inside the convex hull
     of the unit squares centred at `squares` (xy), at least `margin` from its edge:

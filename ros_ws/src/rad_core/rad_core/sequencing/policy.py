@@ -75,11 +75,32 @@ def ranked_actions(policy: Policy, env: AssemblyEnv, actions: list[Action],
 
 def supported_fallbacks(env: AssemblyEnv, ranked: list, above: int) -> list:
     """ranked[:above] (what the agent values above stopping), then those of the rest (its
-    fallbacks, `FALLBACKS`) whose block would rest fully supported, in their order."""
-    if len(ranked) <= above:
-        return list(ranked)
-    keep = set(supported_actions(env, ranked[above:]))
-    return list(ranked[:above]) + [a for a in ranked[above:] if a in keep]
+    fallbacks, `FALLBACKS`) whose block would stand on its supports alone, its centre of mass
+    FIRM_MARGIN units inside their footprint (`support.rests_on_its_own`), in their order; none
+    while the structure is only balanced somewhere (`firm`). So a fallback never leaves the
+    structure less firm than it found it."""
+    if len(ranked) <= above or not firm(env):
+        return list(ranked[:above])
+    out = list(ranked[:above])
+    for action in ranked[above:]:
+        cells, _ = env.resulting_cells(action)
+        if cells is not None and support.rests_on_its_own(env.grid, env.state.occupancy, cells, FIRM_MARGIN):
+            out.append(action)
+    return out
+
+
+FIRM_MARGIN = 0.25
+"""`firm`: how far (in units) inside its supports' footprint every placed block's centre of mass
+must lie."""
+
+
+def firm(env: AssemblyEnv) -> bool:
+    """Whether every placed block would stand on its supports alone with its centre of mass
+    FIRM_MARGIN units inside their footprint (`support.rests_on_its_own`): a structure that is
+    not only balanced, wedged or hooked."""
+    grid, state = env.grid, env.state
+    return all(support.rests_on_its_own(grid, state.occupancy, np.asarray(cells), FIRM_MARGIN)
+               for cells, _ in state.placed.values())
 
 
 def ranked_indices(scores: np.ndarray, fallbacks: bool = False) -> list[int]:
@@ -97,13 +118,17 @@ def ranked_indices(scores: np.ndarray, fallbacks: bool = False) -> list[int]:
 FALLBACKS = True
 """Whether a verified agent goes on below its scorer's termination value: when every action it
 values above stopping fails (or there is none) while allocated poses remain, it tries the others
-whose block would rest fully supported (every unit on the table or a placed block), best first,
-and stops only when none is feasible. Its check (GAMP and the stability check with the robot, the
-stability check without) makes trying an action safe, and every allocated pose filled is target
-covered. Only fully supported ones: the stability check judges blocks at their exact cells, and a
-cantilever the network values below stopping can stand there and still bring down the built
-structure, whose blocks lie a little off their cells (measured: `overhang_edge`, 0.84 -> 0.37
-built with every fallback). docs/search.md has the figures."""
+whose block would stand on its supports alone (`support.rests_on_its_own`: its centre of mass
+well inside the footprint of its units resting on the table or a placed block, as a lintel on
+both ends has it and a cantilever does not), best first, and stops only when none is feasible; unless the structure is
+only balanced somewhere (`firm`), where it stops as its scorer says. Its check (GAMP and the stability check
+with the robot, the stability check without) makes trying an action safe, and every allocated pose
+filled is target covered. Not cantilevers: the stability check judges blocks at their exact
+cells, and a block the network values below stopping can stand there and still bring down the
+built structure, whose blocks lie a little off their cells; and the network's value of stopping
+knows something of fragile structures (measured: `overhang_edge`, 0.84 -> 0.37 built with a
+cube more on a structure where a P5 balances on one cube: the build lost three blocks).
+docs/search.md has the figures."""
 
 
 def first_feasible(env: AssemblyEnv, ranked: list[Action], check):
