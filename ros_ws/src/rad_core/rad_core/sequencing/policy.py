@@ -120,15 +120,14 @@ FALLBACKS = True
 values above stopping fails (or there is none) while allocated poses remain, it tries the others
 whose block would stand on its supports alone (`support.rests_on_its_own`: its centre of mass
 well inside the footprint of its units resting on the table or a placed block, as a lintel on
-both ends has it and a cantilever does not), best first, and stops only when none is feasible; unless the structure is
-only balanced somewhere (`firm`), where it stops as its scorer says. Its check (GAMP and the stability check
-with the robot, the stability check without) makes trying an action safe, and every allocated pose
-filled is target covered. Not cantilevers: the stability check judges blocks at their exact
-cells, and a block the network values below stopping can stand there and still bring down the
-built structure, whose blocks lie a little off their cells; and the network's value of stopping
-knows something of fragile structures (measured: `overhang_edge`, 0.84 -> 0.37 built with a
-cube more on a structure where a P5 balances on one cube: the build lost three blocks).
-docs/search.md has the figures."""
+both ends has it and a cantilever does not), best first, and stops only when none is feasible;
+unless the structure is only balanced somewhere (`firm`), where it stops as its scorer says. Its
+check (GAMP and the stability check with the robot, the stability check without) makes trying an
+action safe, and every allocated pose filled is target covered. Not cantilevers or balanced
+blocks: the stability check judges blocks at their exact cells, and a block the network values
+below stopping can stand there and still bring down the built structure, whose blocks lie a
+little off their cells (measured: `overhang_edge`, 0.84 -> 0.37 built when a P5 balanced on one
+cube was taken as a fallback: the build lost three blocks). docs/search.md has the figures."""
 
 
 def first_feasible(env: AssemblyEnv, ranked: list[Action], check):
