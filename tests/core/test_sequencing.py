@@ -133,6 +133,38 @@ class _Shy:
         return np.array([-float(n) for n in range(len(actions))] + [1.0])
 
 
+def test_fallbacks_are_a_last_resort_after_re_allocating(motion):
+    """A verified plan re-allocates where nothing above stopping can be built, and goes below
+    stopping only when that offers nothing new: a fallback taken first would change what the
+    re-allocations propose."""
+    scene = generate_scene(GeneratorConfig(grid=3), 1)
+    calls = []
+
+    def reallocate(state, exclude, limit):
+        calls.append(len(state.blocks))
+        return solve(state)
+    plan = plan_assembly(scene, solve, motion, _Shy(), seed=1, reallocate=reallocate)
+    assert plan.success and plan.predicted_coverage == 1.0, plan.reason
+    assert plan.reallocations and plan.reallocations[0].step == 0 and not plan.reallocations[0].changed
+    assert 'values stopping more' in plan.reallocations[0].reason and calls
+
+
+def test_with_fallbacks_asks_for_them_only_where_the_first_answer_is_to_stop():
+    from rad_core.mdp import Action
+    from rad_core.sequencing.deciders import with_fallbacks
+    from rad_core.sequencing.episode import Decision, stop
+    build, asked = Decision(Action(0, 0, 0, 0)), []
+
+    def decide(env, rng, fallbacks=False):
+        asked.append(fallbacks)
+        return build if fallbacks else stop('nothing above stopping')
+    assert with_fallbacks(decide)(None, None) is build and asked == [False, True]
+    asked.clear()
+    assert with_fallbacks(decide, lambda env, rng: build)(None, None) is build and asked == []
+    none = with_fallbacks(lambda env, rng, fallbacks=False: stop('no fallback' if fallbacks else 'why it stopped'))
+    assert none(None, None).reason == 'why it stopped'      # the first answer's reason stands
+
+
 def test_ranked_indices_puts_the_fallbacks_below_stopping_after_the_rest_and_never_a_ruled_out_one():
     from rad_core.sequencing.policy import ranked_indices
     scores = np.array([0.2, 0.9, -np.inf, 0.5, 0.1, 0.4])   # the last one: stopping
@@ -153,6 +185,7 @@ def test_a_verified_plan_goes_on_below_the_value_of_stopping_and_an_unverified_o
     from rad_core.sequencing.sequencer import Sequencer, SequencerConfig
     ranking = Sequencer(SequencerConfig(policy='heur'), policy=_Shy()).rank(scene, solve(scene).placements)
     assert ranking.terminate and 'it values stopping more' in ranking.reason
+    assert ranking.fallbacks == len(ranking.actions)      # every one of them is valued below stopping
     assert ranking.actions and ranking.values == sorted(ranking.values, reverse=True)
     # Fallbacks are only blocks that would stand on their supports alone, well inside them (a
     # cantilever valued below stopping can pass the check at exact cells and still bring the built

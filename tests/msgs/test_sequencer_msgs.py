@@ -58,5 +58,13 @@ def test_termination_infinite_values_and_failures():
                                   'milp-dqn')
     back = ranking_from_response(stop)
     assert back.terminate and back.actions == [] and back.reason == 'every allocated pose is built'
+    # How many of the actions, at the end, are valued below stopping (a verified caller's last resort).
+    actions = [SceneAction('c0', 0, 'front', (0, 0, 0), 0), SceneAction('c1', 0, 'front', (1, 0, 0), 0)]
+    shy = fill_sequence_response(Sequence.Response(), Ranking(actions, [-1.0, -2.0], True, 'shy', {}, fallbacks=2),
+                                 'milp-dqn')
+    assert shy.fallbacks == 2 and ranking_from_response(shy).fallbacks == 2
+    shy.fallbacks = 3
+    with pytest.raises(RadError, match='3 fallbacks among 2 actions'):
+        ranking_from_response(shy)
     with pytest.raises(RadError, match='sequencer: allocation names unknown target region'):
         ranking_from_response(Sequence.Response(success=False, reason="allocation names unknown target region 'x'"))

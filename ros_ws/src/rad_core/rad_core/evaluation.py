@@ -38,7 +38,7 @@ from rad_core.errors import RadError
 from rad_core.mdp import AssemblyEnv, EnvConfig, Outcome
 from rad_core.scene import Scene
 from rad_core.sequencing.actions import action_space
-from rad_core.sequencing.deciders import policy_decider, search_decider, stability_check
+from rad_core.sequencing.deciders import policy_decider, search_decider, stability_check, with_fallbacks
 from rad_core.sequencing.episode import Episode, run_episode
 from rad_core.sequencing.policy import Policy
 
@@ -177,12 +177,14 @@ def scene_episode(agent: str | Agent, scene: Scene, robot: bool, seed: int, exec
             decide = search_decider(policy, space, env, agent.search, int(agent.budget), agent.epsilon, check)
         else:
             decide = policy_decider(policy, space, check)
-        reallocator = None
+        reallocator, decided = None, decide
         if agent.reallocate:
             from rad_core.sequencing.reallocation import ReallocationConfig, Reallocator, with_reallocation
             reallocator = Reallocator(space, stability_check(env), reallocation or ReallocationConfig())
-            decide = with_reallocation(decide, reallocator)
-        episode = run_episode(env, decide, np.random.default_rng(seed))
+            decided = with_reallocation(decide, reallocator)
+        if check is not None:
+            decided = with_fallbacks(decide, decided)   # below stopping only where nothing else is left
+        episode = run_episode(env, decided, np.random.default_rng(seed))
     finally:
         if own_stability is not None:
             own_stability.close()

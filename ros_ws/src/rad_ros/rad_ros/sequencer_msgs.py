@@ -53,6 +53,7 @@ def fill_sequence_response(response, ranking: Ranking, policy: str):
     # The message carries float64: a value of +-inf (HEUR's "never") goes as is, NaN would not compare.
     response.values = [float(v) if not math.isnan(v) else -math.inf for v in ranking.values]
     response.terminate = bool(ranking.terminate)
+    response.fallbacks = int(ranking.fallbacks)
     response.policy = policy
     response.timings = [StageTiming(stage=k, seconds=float(v)) for k, v in ranking.timings.items()]
     return response
@@ -64,5 +65,8 @@ def ranking_from_response(response) -> Ranking:
         raise RadError(f'sequencer: {response.reason}')
     if len(response.values) != len(response.actions):
         raise RadError(f'sequencer: {len(response.values)} values for {len(response.actions)} actions')
+    if response.fallbacks > len(response.actions):
+        raise RadError(f'sequencer: {response.fallbacks} fallbacks among {len(response.actions)} actions')
     return Ranking([action_from_msg(a) for a in response.actions], [float(v) for v in response.values],
-                   bool(response.terminate), response.reason, {t.stage: float(t.seconds) for t in response.timings})
+                   bool(response.terminate), response.reason, {t.stage: float(t.seconds) for t in response.timings},
+                   fallbacks=int(response.fallbacks))

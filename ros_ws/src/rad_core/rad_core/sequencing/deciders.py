@@ -15,7 +15,7 @@ from rad_core.mdp import AssemblyEnv, Outcome
 from rad_core.sequencing.actions import ActionSpace
 from rad_core.sequencing.episode import Decide, Decision, stop
 from rad_core.sequencing import policy as ranking_rules
-from rad_core.sequencing.policy import Policy, first_feasible, ranked_actions, supported_fallbacks
+from rad_core.sequencing.policy import Policy, first_feasible, ranked_actions, standing_fallbacks
 
 
 class Check(NamedTuple):
@@ -37,12 +37,12 @@ def stability_check(env: AssemblyEnv):
 def policy_decider(policy: Policy, actions: ActionSpace, verify=None) -> Decide:
     """decide() for the episode loop: the best-ranked action, or with verify
     (a GAMP check, `RobotAssemblyEnv.plan`) the best one it finds feasible,
-    carrying its motion plan; nothing ranked (or feasible) means terminate."""
-    def decide(env: AssemblyEnv, rng: np.random.Generator) -> Decision:
-        fallbacks = verify is not None and ranking_rules.FALLBACKS
-        ranked = ranked_actions(policy, env, actions(env), rng, fallbacks=fallbacks)
+    carrying its motion plan; nothing ranked (or feasible) means terminate.
+    decide(env, rng, fallbacks=True): among the policy's fallbacks instead (`with_fallbacks`)."""
+    def decide(env: AssemblyEnv, rng: np.random.Generator, fallbacks: bool = False) -> Decision:
+        ranked = ranked_actions(policy, env, actions(env), rng, fallbacks=fallbacks and verify is not None)
         if verify is None:
-            return Decision(ranked[0]) if ranked else stop()
+            return Decision(ranked[0]) if ranked and not fallbacks else stop()
         action, plan, _ = first_feasible(env, ranked, verify)
         return Decision(action, plan) if action is not None else stop()
     return decide
@@ -57,18 +57,26 @@ def search_decider(policy: Policy, actions: ActionSpace, stepper, search_name: s
     search's ranking that is known to work: a searched child whose simulated step
     succeeded needs no further check (it was a real step of the planning copy, GAMP
     and physics included; its motion plan is reused), an unsearched one is checked by
-    simulating it (`simulated_check`); failed children are never taken."""
+    simulating it (`simulated_check`); failed children are never taken.
+    decide(env, rng, fallbacks=True): among the search's fallbacks instead (`with_fallbacks`),
+    from the search already run in this state with these actions."""
     from rad_core.sequencing.search import SEARCHES, EnvModel
     search = SEARCHES[search_name]
     kwargs = {} if epsilon is None else {'epsilon': epsilon}
     check = simulated_check(stepper) if verify is not None else None
+    last: dict = {}     # the last search: its state and actions, result and motion plans
 
-    def decide(env: AssemblyEnv, rng: np.random.Generator) -> Decision:
-        if not actions(env):
+    def decide(env: AssemblyEnv, rng: np.random.Generator, fallbacks: bool = False) -> Decision:
+        allowed = actions(env)
+        if not allowed or (fallbacks and verify is None):
             return stop()
-        model = EnvModel(stepper, policy, actions)
-        result = search(model, rng, budget=budget, **kwargs)
-        plans = {a: plan for (steps, a), plan in model.plans.items() if steps == env.state.steps}
+        key = (env.state.steps, tuple(sorted(env.state.placed)), tuple(allowed))
+        if last.get('key') != key:
+            model = EnvModel(stepper, policy, actions)
+            result = search(model, rng, budget=budget, **kwargs)
+            plans = {a: plan for (steps, a), plan in model.plans.items() if steps == env.state.steps}
+            last.update(key=key, result=result, plans=plans)
+        result, plans = last['result'], last['plans']
         if verify is None:
             if result.action.is_terminate:
                 return stop()
@@ -77,11 +85,29 @@ def search_decider(policy: Policy, actions: ActionSpace, stepper, search_name: s
 
         def known_or_simulated(action) -> Check:
             return Check(True, '', plans.get(action)) if action in worked else check(action)
-        proposed = supported_fallbacks(env, [a for a, _ in result.proposals(ranking_rules.FALLBACKS)],
-                                       len(result.proposals()))
+        above = [a for a, _ in result.proposals()]
+        proposed = standing_fallbacks(env, [a for a, _ in result.proposals(True)][len(above):]) if fallbacks \
+            else above
         action, ok, _ = first_feasible(env, proposed, known_or_simulated)
         return Decision(action, ok.plan) if action is not None else stop()
     return decide
+
+
+def with_fallbacks(decide: Decide, first: Decide | None = None) -> Decide:
+    """A verified agent's fallbacks as a last resort (`policy.FALLBACKS`): first(env, rng) (default:
+    decide itself; with re-allocation, decide wrapped in it), and where that stops,
+    decide(env, rng, fallbacks=True), the best feasible of what the agent values below stopping.
+    When that stops too, the first answer stands (its reason says why the plan ended)."""
+    first = first or decide
+
+    def wrapped(env: AssemblyEnv, rng: np.random.Generator) -> Decision:
+        decision = first(env, rng)
+        if decision.action.is_terminate and ranking_rules.FALLBACKS:
+            late = decide(env, rng, fallbacks=True)
+            if not late.action.is_terminate:
+                return late
+        return decision
+    return wrapped
 
 
 def simulated_check(stepper):

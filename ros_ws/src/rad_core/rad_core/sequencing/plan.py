@@ -39,8 +39,8 @@ from rad_core.mdp import AssemblyEnv, EnvConfig
 from rad_core.motion import Motion
 from rad_core.scene import Block, Scene
 from rad_core.sequencing.actions import AllocationActions, mdp_actions, scene_action
+from rad_core.sequencing.deciders import with_fallbacks
 from rad_core.sequencing.episode import Decision, Episode, run_episode, stop
-from rad_core.sequencing import policy as ranking_rules
 from rad_core.sequencing.policy import Policy, first_feasible, ranked_actions
 
 
@@ -187,25 +187,36 @@ def plan_assembly(scene: Scene, allocate: Allocate, plan_motion: PlanMotion, seq
     allowed_actions = AllocationActions(env, allocation.placements)   # its guide changes on re-allocation
     world = {'scene': scene, 'q': start}   # the planning copy: scene and arm joints
 
-    def rank_by_policy(env: AssemblyEnv, allowed, rng) -> list | str:
+    def rank_by_policy(env: AssemblyEnv, allowed, rng, fallbacks: bool) -> list | str:
         ts = time.perf_counter()
-        ranked = ranked_actions(sequencer, env, allowed, rng, fallbacks=verify and ranking_rules.FALLBACKS)
+        ranked = ranked_actions(sequencer, env, allowed, rng, fallbacks=fallbacks)
         timings['sequencing'] += time.perf_counter() - ts
+        if fallbacks:
+            return ranked or 'no fallback'
         if not ranked:
             left = len(allowed_actions.guide.open_poses(env.state))
             return (f'{left} allocated poses left, none of them can be built next '
                     f'({getattr(sequencer, "why_none", sequencer.name + " values stopping more")})')
         return ranked
 
-    def rank_by_sequencer(env: AssemblyEnv, allowed, rng) -> list | str:
-        ts = time.perf_counter()
-        ranking = sequencer(world['scene'], list(allowed_actions.guide.placements), world['q'])
-        timings['sequencer_call'] = timings.get('sequencer_call', 0.0) + time.perf_counter() - ts
-        timings['sequencing'] += float(ranking.timings.get('sequencing', 0.0))
-        if not ranking.actions or (ranking.terminate and not verify):
+    asked: dict = {}    # the sequencer's last answer, and the step and allocation it answered for
+
+    def rank_by_sequencer(env: AssemblyEnv, allowed, rng, fallbacks: bool) -> list | str:
+        if asked.get('steps') != len(plan.steps) or asked.get('guide') is not allowed_actions.guide:
+            # (the fallbacks come from the answer the plan just had)
+            ts = time.perf_counter()
+            ranking = sequencer(world['scene'], list(allowed_actions.guide.placements), world['q'])
+            timings['sequencer_call'] = timings.get('sequencer_call', 0.0) + time.perf_counter() - ts
+            timings['sequencing'] += float(ranking.timings.get('sequencing', 0.0))
+            asked.update(steps=len(plan.steps), guide=allowed_actions.guide, ranking=ranking)
+        ranking = asked['ranking']
+        preferred = len(ranking.actions) - ranking.fallbacks
+        if fallbacks:
+            return mdp_actions(env, ranking.actions[preferred:], allowed) or 'no fallback'
+        if not preferred or (ranking.terminate and not verify):
             return ranking.reason or 'the sequencer proposes to stop'
-        ranked = mdp_actions(env, ranking.actions, allowed)
-        return ranked or (f'the sequencer proposed {len(ranking.actions)} actions, none of them among the '
+        ranked = mdp_actions(env, ranking.actions[:preferred], allowed)
+        return ranked or (f'the sequencer proposed {preferred} actions, none of them among the '
                           f'{len(allowed)} the allocation allows now')
 
     rank = rank_by_policy if hasattr(sequencer, 'scores') else rank_by_sequencer
@@ -225,11 +236,13 @@ def plan_assembly(scene: Scene, allocate: Allocate, plan_motion: PlanMotion, seq
             memo[key] = plan_motion(scene_now, action, q, **aside)
         return memo[key]
 
-    def decide(env: AssemblyEnv, rng) -> Decision:
+    def decide(env: AssemblyEnv, rng, fallbacks: bool = False) -> Decision:
+        """The best feasible action the sequencer ranks above stopping; fallbacks: of those it
+        ranks below (a verified plan's last resort, `deciders.with_fallbacks`)."""
         allowed = allowed_actions(env)
         if not allowed:
             return stop()
-        ranked = rank(env, allowed, rng)
+        ranked = rank(env, allowed, rng, fallbacks)
         if isinstance(ranked, str):
             return stop(ranked)
         if verify and PIT_LAYERS:
@@ -264,8 +277,12 @@ def plan_assembly(scene: Scene, allocate: Allocate, plan_motion: PlanMotion, seq
         reallocator = Reallocator(allowed_actions, gamp_check, reallocation or ReallocationConfig(),
                                   scene_of=lambda _: world['scene'], allocate=reallocate,
                                   deadline=t0 + time_limit_s)
-        decide = with_reallocation(decide, reallocator)
-    episode = run_episode(env, decide, np.random.default_rng(seed), act, deadline=t0 + time_limit_s)
+        decided = with_reallocation(decide, reallocator)
+    else:
+        decided = decide
+    if verify:
+        decided = with_fallbacks(decide, decided)   # below stopping only where nothing else is left
+    episode = run_episode(env, decided, np.random.default_rng(seed), act, deadline=t0 + time_limit_s)
     plan.episode = episode
     if reallocator is not None:
         plan.reallocations = reallocator.events

@@ -36,7 +36,7 @@ from rad_core.mdp import AssemblyEnv, EnvConfig
 from rad_core.scene import Scene
 from rad_core.sequencing.actions import AllocationActions, mdp_actions, scene_action
 from rad_core.sequencing import policy as ranking_rules
-from rad_core.sequencing.policy import ranked_indices, supported_fallbacks
+from rad_core.sequencing.policy import ranked_indices, standing_fallbacks
 from rad_core.sequencing.search import SEARCHES, EnvModel, line_result
 
 # The sequencer node's older policy names (a search over the shipped mixed network, or HEUR).
@@ -107,9 +107,10 @@ class SequencerConfig:
 class Ranking:
     """What to try next, best first: the agent's own choice first. terminate: the agent's
     choice is to stop (reason says why); actions is then empty, or lists what a verified
-    caller may still try. After the actions the agent values above stopping come those it
-    values below, for a verified caller (`sequencing.policy.FALLBACKS`); an unverified one
-    takes the first action, or stops on terminate."""
+    caller may still try. The last `fallbacks` actions are those the agent values below
+    stopping, for a verified caller to try where nothing else is left
+    (`sequencing.policy.FALLBACKS`); an unverified one takes the first action, or stops on
+    terminate."""
 
     actions: list[SceneAction] = field(default_factory=list)
     values: list[float] = field(default_factory=list)
@@ -117,6 +118,7 @@ class Ranking:
     reason: str = ''
     timings: dict = field(default_factory=dict)
     search: dict | None = None     # the search tree (SearchResult.to_dict), when one ran
+    fallbacks: int = 0             # how many of the actions, at the end, are valued below stopping
 
 
 class Sequencer:
@@ -184,8 +186,9 @@ class Sequencer:
             scores = np.asarray(self.policy.scores(env, allowed, rng), dtype=float)
             above = ranked_indices(scores)
             ranked = ranked_indices(scores, ranking_rules.FALLBACKS)    # then a verified caller's fallbacks
-            kept = set(supported_fallbacks(env, [allowed[i] for i in ranked], len(above)))
-            ranked = [i for i in ranked if allowed[i] in kept]
+            kept = set(standing_fallbacks(env, [allowed[i] for i in ranked[len(above):]]))
+            ranked = above + [i for i in ranked[len(above):] if allowed[i] in kept]
+            ranking.fallbacks = len(ranked) - len(above)
             ranking.actions = [scene_action(env, allowed[i]) for i in ranked]
             ranking.values = [float(scores[i]) for i in ranked]
             ranking.timings['policy'] = time.perf_counter() - ts
@@ -194,7 +197,9 @@ class Sequencer:
                 why = getattr(self.policy, 'why_none', f'{self.agent} values stopping more')
                 ranking.reason = f'{left} allocated poses left, none of them can be built next ({why})'
         if max_actions:
+            preferred = len(ranking.actions) - ranking.fallbacks
             ranking.actions, ranking.values = ranking.actions[:max_actions], ranking.values[:max_actions]
+            ranking.fallbacks = max(0, len(ranking.actions) - preferred)
         ranking.timings['sequencing'] = time.perf_counter() - t0
         return ranking
 
@@ -223,11 +228,12 @@ class Sequencer:
                     self._lines.clear()
                 self._remember_line(scene, space, result.line, float(result.info.get('coverage', 0.0)))
         ranking.search = result.to_dict()
-        proposals = result.proposals(ranking_rules.FALLBACKS)
-        kept = set(supported_fallbacks(env, [a for a, _ in proposals], len(result.proposals())))
-        for action, value in proposals:
-            if action not in kept:
-                continue
+        above = result.proposals()
+        below = result.proposals(ranking_rules.FALLBACKS)[len(above):]
+        kept = set(standing_fallbacks(env, [a for a, _ in below]))
+        below = [(a, v) for a, v in below if a in kept]
+        ranking.fallbacks = len(below)
+        for action, value in above + below:
             ranking.actions.append(scene_action(env, action))
             ranking.values.append(float(value))
         move = result.action
@@ -239,7 +245,7 @@ class Sequencer:
             ranking.actions.insert(0, scene_action(env, move))
             ranking.values.insert(0, float(value))
         if move.is_terminate and ranking.actions:
-            ranking.terminate = True      # the agent would stop; the actions are a verified caller's fallbacks
+            ranking.terminate = True      # the agent would stop; the actions are what a verified caller may try
             ranking.reason = f'{left} allocated poses left; the search values stopping above building them'
         if not ranking.actions:
             ranking.terminate = True
