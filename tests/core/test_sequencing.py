@@ -149,6 +149,25 @@ def test_fallbacks_are_a_last_resort_after_re_allocating(motion):
     assert 'values stopping more' in plan.reallocations[0].reason and calls
 
 
+def test_a_pose_whose_block_would_tip_the_structure_is_a_no_good_of_the_robots_re_allocation(motion, monkeypatch):
+    """Re-allocation checks the open poses as the plan's own steps are checked: stability first,
+    then GAMP. A pose the arm can reach but whose block would bring the structure down is
+    excluded like one the arm cannot reach (it was not: GAMP alone said it could be built, so
+    the re-solve proposed it again and the plan ended)."""
+    import rad_core.sequencing.plan as plan_module
+    scene = generate_scene(GeneratorConfig(grid=3), 1)
+    floor = float(AssemblyEnv(scene).grid.centres[:, 2].min())
+
+    def upper_layers_tip(unit, placed, new, clearance=0.0):      # a fault physics will not make on demand
+        high = float(np.asarray(new).reshape(-1, 3)[:, 2].min()) > floor + 1e-9
+        return (False, 'placed block 0 tipped 9.9 deg (on purpose)') if high else (True, '')
+    monkeypatch.setattr(plan_module, '_STABILITY', upper_layers_tip)
+    plan = plan_assembly(scene, solve, motion, HeurPolicy(), seed=1, reallocate=lambda s, ex, t: solve(s, exclude=ex))
+    no_goods = [n for e in plan.reallocations for n in e.no_goods]
+    assert no_goods and all('on purpose' in n['reason'] for n in no_goods), plan.reallocations
+    assert all(min(c[2] for c in n['cells']) > 0 for n in no_goods)
+
+
 def test_with_fallbacks_asks_for_them_only_where_the_first_answer_is_to_stop():
     from rad_core.mdp import Action
     from rad_core.sequencing.deciders import with_fallbacks

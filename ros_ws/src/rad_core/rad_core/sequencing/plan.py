@@ -269,12 +269,17 @@ def plan_assembly(scene: Scene, allocate: Allocate, plan_motion: PlanMotion, seq
     if reallocate is not None:
         from rad_core.sequencing.reallocation import ReallocationConfig, Reallocator, with_reallocation
 
-        def gamp_check(action) -> MotionPlan:
+        def pose_check(action) -> MotionPlan:
+            """What the plan's own steps are held to: the stability check, then GAMP. A pose whose
+            block would tip the structure is as much a no-good as one the arm cannot reach."""
+            outcome, why, _, _ = env.evaluate(action)
+            if outcome is not None:
+                return MotionPlan(False, 'stability', why)
             ts = time.perf_counter()
             motion = planned_motion(world['scene'], scene_action(env, action), world['q'])
             timings['motion'] += time.perf_counter() - ts
             return motion
-        reallocator = Reallocator(allowed_actions, gamp_check, reallocation or ReallocationConfig(),
+        reallocator = Reallocator(allowed_actions, pose_check, reallocation or ReallocationConfig(),
                                   scene_of=lambda _: world['scene'], allocate=reallocate,
                                   deadline=t0 + time_limit_s)
         decided = with_reallocation(decide, reallocator)
