@@ -97,6 +97,7 @@ def write(rows, args) -> None:
     for line in lines:
         print(line)
     out = Path(args.results)
+    out.mkdir(parents=True, exist_ok=True)
     doc = [f'# /plan_assembly over DDS, g = {args.grid}', '',
            f'Made by `{command_line()}` ({time.strftime("%Y-%m-%d")}). The allocation, gamp, sequencer and '
            f'assembly nodes as real processes on loopback DDS, agent `{args.agent}` in both nodes, '

@@ -44,8 +44,7 @@ class Grid:
         self.on_table = np.abs(self.centres[:, 2] - self.unit / 2) < GRID_SNAP_TOL * self.unit
         # The grid cell directly under each cell, -1 where there is none.
         down = np.array([0.0, 0.0, self.unit])
-        self.below_idx = np.array([self._or_minus_one(self.cell_at(c - down)) for c in self.centres],
-                                  dtype=np.int64)
+        self.below_idx = self._lookup(self.centres - down)
 
     @cached_property
     def face_neighbours(self) -> np.ndarray:
@@ -80,6 +79,11 @@ class Grid:
 
     def cells_at(self, points: np.ndarray) -> np.ndarray | None:
         """Global indices for each point, or None if any point is off the grid."""
+        out = self._lookup(points)
+        return None if (out < 0).any() else out
+
+    def _lookup(self, points: np.ndarray) -> np.ndarray:
+        """Global index of the cell at each point, -1 where it is off the grid."""
         points = np.asarray(points, dtype=float).reshape(-1, 3)
         out = np.full(len(points), -1, dtype=np.int64)
         for r, t in enumerate(self.regions):
@@ -91,7 +95,7 @@ class Grid:
             if hit.any():
                 ijk = rounded[hit].astype(np.int64)
                 out[hit] = self.offsets[r] + ijk[:, 0] + ijk[:, 1] * size[0] + ijk[:, 2] * size[0] * size[1]
-        return None if (out < 0).any() else out
+        return out
 
     def region_cells(self, cell_ids) -> tuple[int, list[list[int]]]:
         """Region index and region-local [i, j, k] of cells that share one region."""
