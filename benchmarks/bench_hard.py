@@ -32,7 +32,7 @@ from rad_core.agents import parse
 
 from common import RESULTS, cache_path, cached_evaluation, command_line, fmt, write_rows
 
-DEFAULT_AGENTS = ('default', 'milp-dqn-mixed+lookahead:5+verify+realloc+support:stable', 'greedy', 'heur-verified')
+DEFAULT_AGENTS = ('default', 'milp-dqn-mixed+verify+realloc+support:stable', 'greedy', 'heur-verified')
 ROW_KEYS = ('name', 'return', 'outcome', 'coverage', 'coverage_opt', 'steps', 'stop_reason')
 
 

@@ -14,10 +14,14 @@ def steps_of(plan):
     return [(s.block, s.target, tuple(map(tuple, s.cells))) for s in plan.steps]
 
 
+LOOKAHEAD = 'milp-dqn-mixed+lookahead:5+verify+realloc+support:arm'   # the default preset until 2026-12-03
+
+
 @pytest.fixture(scope='module')
 def planners():
     made = {name: AgentPlanner(name) for name in ('default', 'greedy')}
-    made['no-improving'] = AgentPlanner('default', improve_time_s=0.0, policy=made['default'].sequencer.policy)
+    made['lookahead'] = AgentPlanner(LOOKAHEAD, policy=made['default'].sequencer.policy)
+    made['no-improving'] = AgentPlanner(LOOKAHEAD, improve_time_s=0.0, policy=made['default'].sequencer.policy)
     yield made
     for p in made.values():
         p.close()
@@ -33,7 +37,7 @@ def test_the_first_plan_is_the_scorers_and_the_search_runs_only_when_cells_are_l
         # The first plan is the scorer's alone: what the greedy agent (the same scorer, verified) plans.
         assert steps_of(quick) == steps_of(greedy) and quick.predicted_coverage == greedy.predicted_coverage
         assert [a['plan'] for a in quick.anytime] == ['scorer']
-        best = planners['default'](scene)
+        best = planners['lookahead'](scene)
         times = [a['t'] for a in best.anytime]
         assert times == sorted(times) and best.anytime[0]['coverage'] == quick.predicted_coverage
         assert best.predicted_coverage >= quick.predicted_coverage
@@ -50,8 +54,10 @@ def test_the_first_plan_is_the_scorers_and_the_search_runs_only_when_cells_are_l
 
 def test_agents_without_a_search_plan_once_and_a_bad_budget_is_refused(planners):
     scene = generate_scene(GeneratorConfig(grid=4), 3)
-    assert planners['greedy'](scene).anytime == []
-    p = planners['default']
+    once = planners['greedy'](scene)
+    assert [a['plan'] for a in once.anytime] == ['scorer'] and once.anytime[0]['coverage'] == once.predicted_coverage
+    assert planners['default'].spec == planners['greedy'].spec      # the default agent plans once
+    p = planners['lookahead']
     with pytest.raises(RadError, match='improve_time_s'):
         plan_for_agent(p.spec, scene, p.allocate, p.motion, p.sequencer.rank, quick_rank=p.quick_rank,
                        improve_time_s=-1.0)

@@ -22,7 +22,9 @@ DEMO_SCENE = generate_scene(GeneratorConfig(grid=4), 8)
 def test_serves_a_ranking_and_a_bad_request_gets_a_reason_then_the_next_is_served(node_process, ros_node):
     from rad_msgs.srv import Sequence
     from rad_ros.sequencer_msgs import ranking_from_response, sequence_request
-    proc = node_process('rad_planner', 'sequencer_node')   # the default: milp-dqn-lookahead, shipped network
+    # An agent that searches (the default agent is the greedy network, which does not), shipped network.
+    proc = node_process('rad_planner', 'sequencer_node',
+                        *ros_args({'agent': 'milp-dqn-mixed+lookahead:5+verify+realloc+support:arm'}))
     client = wait_for_service(ros_node, Sequence, 'sequence', timeout=60.0)
     placements = solve(DEMO_SCENE).placements
 
@@ -31,7 +33,7 @@ def test_serves_a_ranking_and_a_bad_request_gets_a_reason_then_the_next_is_serve
     good = sequence_request(DEMO_SCENE, placements, max_actions=3)
     r = ask(good)
     assert r.success, r.reason
-    assert r.policy.startswith('milp-dqn-mixed+lookahead:5') and not r.terminate   # the default agent
+    assert r.policy.startswith('milp-dqn-mixed+lookahead:5') and not r.terminate
     ranking = ranking_from_response(r)
     assert 1 <= len(ranking.actions) <= 3 and len(ranking.values) == len(ranking.actions)
     assert {a.block_id for a in ranking.actions} <= {b.id for b in DEMO_SCENE.blocks}

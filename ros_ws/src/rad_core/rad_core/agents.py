@@ -126,8 +126,12 @@ def label(spec: AgentSpec) -> str:
 
 PRESETS = {
     # What the sequencer node and /plan_assembly run by default (the node graph always verifies
-    # with GAMP, re-allocates and allocates with support).
-    'default': 'milp-dqn-mixed+lookahead:5+verify+realloc+support:arm',
+    # with GAMP, re-allocates and allocates with support): the greedy network. Until 2026-12-03 it
+    # was the same with a look-ahead search (lookahead:5), whose plan, tried after the network's
+    # wherever that left cells open, changed no plan's coverage in 111 measured (rad eval g = 5 and
+    # 6, the hard set, /plan_assembly's benchmark twice) and cost up to improve_time_s each time
+    # (docs/search.md).
+    'default': 'milp-dqn-mixed+verify+realloc+support:arm',
     'greedy': 'milp-dqn-mixed+verify+realloc+support:arm',
     'paper': 'milp-dqn+mcts:5+support:none',         # the paper's MILP-DQN-MCTS
     'heur': 'heur',                                   # the paper's HEUR

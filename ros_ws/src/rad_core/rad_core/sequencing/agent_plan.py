@@ -36,7 +36,8 @@ def plan_for_agent(spec: AgentSpec, scene: Scene, allocate, plan_motion, rank, r
     `Sequencer.rank(..., scorer_only=True)`): a first complete plan ranked by the scorer (about a
     second at the paper's sizes); when it leaves target cells unfilled, the agent's own plan (with
     its search) within `improve_time_s` more (and the time limit), kept only where it fills more.
-    `AssemblyPlan.anytime` records each plan's time and coverage. Otherwise one plan, as before."""
+    `AssemblyPlan.anytime` records each plan's time and coverage. Otherwise one plan, the agent's
+    own (its one entry in `anytime`: 'scorer', or 'search' for an agent that searches)."""
     from rad_core.sequencing.reallocation import ReallocationConfig
     support = support or spec.resolved_support()
     if spec.realloc:
@@ -52,9 +53,12 @@ def plan_for_agent(spec: AgentSpec, scene: Scene, allocate, plan_motion, rank, r
                              start=start, time_limit_s=limit, reallocate=reallocate if spec.realloc else None,
                              reallocation=reallocation, verify=spec.verify)
 
-    if quick_rank is None or not spec.search or not spec.verify:
-        return plan_with(rank, time_limit_s)
     t0 = time.perf_counter()
+    if quick_rank is None or not spec.search or not spec.verify:
+        plan = plan_with(rank, time_limit_s)
+        plan.anytime = [{'t': time.perf_counter() - t0, 'coverage': plan.predicted_coverage,
+                         'plan': 'search' if spec.search else 'scorer'}]
+        return plan
     best = plan_with(quick_rank, time_limit_s)
     anytime = [{'t': time.perf_counter() - t0, 'coverage': best.predicted_coverage, 'plan': 'scorer'}]
     left = min(improve_time_s, time_limit_s - (time.perf_counter() - t0))

@@ -139,7 +139,8 @@ class AssemblyPlan:
     anytime: list = field(default_factory=list)
     """Anytime planning (`agent_plan.plan_for_agent`): after each plan, {'t': seconds since the
     start, 'coverage': the best predicted coverage so far, 'plan': 'scorer' | 'search' (which
-    plan is the best so far)}; empty for a single plan."""
+    plan is the best so far)}; one entry for an agent that plans once, none from `plan_assembly`
+    called directly."""
 
 
 Allocate = Callable[[Scene], AllocationResult]

@@ -10,7 +10,7 @@ the policy, nothing is commanded that fails there.
 
 The agent (`rad_core.agents`, text form): the sequencer uses its scorer (a network or
 HEUR), its search and the search's budget. `default` is what the node runs: the mixed
-network with the look-ahead search. Verification, re-allocation and the allocation's
+network, no search (`agents.PRESETS`). Verification, re-allocation and the allocation's
 support are the caller's (/plan_assembly always takes the first action GAMP finds
 feasible). Every search is one of `sequencing.search.SEARCHES`; one that plans whole
 lines (the branch and bound, `bnb`) has its line kept, so later requests along it
