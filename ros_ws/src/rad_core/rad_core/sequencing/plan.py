@@ -271,15 +271,9 @@ def plan_assembly(scene: Scene, allocate: Allocate, plan_motion: PlanMotion, seq
         from rad_core.sequencing.reallocation import ReallocationConfig, Reallocator, with_reallocation
 
         def pose_check(action) -> MotionPlan:
-            """What the plan's own steps are held to: the stability check, then GAMP. A pose whose
-            block would tip the structure is as much a no-good as one the arm cannot reach."""
-            outcome, why, _, _ = env.evaluate(action)
-            if outcome is not None:
-                return MotionPlan(False, 'stability', why)
-            ts = time.perf_counter()
-            motion = planned_motion(world['scene'], scene_action(env, action), world['q'])
-            timings['motion'] += time.perf_counter() - ts
-            return motion
+            """What the plan's own steps are held to (`_checked_motion`): a pose whose block would
+            tip the structure is as much a no-good as one the arm cannot reach."""
+            return _checked_motion(env, world['scene'], action, planned_motion, world['q'], timings)
         reallocator = Reallocator(allowed_actions, pose_check, reallocation or ReallocationConfig(),
                                   scene_of=lambda _: world['scene'], allocate=reallocate,
                                   deadline=t0 + time_limit_s)
@@ -365,19 +359,25 @@ def pits_last(env: AssemblyEnv, guide, ranked: list) -> list:
     return keep + later
 
 
+def _checked_motion(env: AssemblyEnv, scene: Scene, action, plan_motion: PlanMotion, q, timings) -> MotionPlan:
+    """An action checked as a plan's step is: the stability check first (no motion for a block
+    that falls), then GAMP's motion (its time added to timings['motion'])."""
+    outcome, why, _, _ = env.evaluate(action)
+    if outcome is not None:
+        return MotionPlan(False, 'stability', why)
+    ts = time.perf_counter()
+    motion = plan_motion(scene, scene_action(env, action), q)
+    timings['motion'] += time.perf_counter() - ts
+    return motion
+
+
 def _first_feasible(env: AssemblyEnv, scene: Scene, ranked, plan_motion: PlanMotion, q, timings,
                     book: bool = False):
     """(action, PlanStep) of the best-ranked action GAMP can execute, or why none. book (an
     unverified agent, given its one best-ranked action): a failure comes back as (action,
     its failed MotionPlan), for the episode to book it."""
     def check(action) -> MotionPlan:
-        outcome, why, _, _ = env.evaluate(action)      # stability first: no motion for a block that falls
-        if outcome is not None:
-            return MotionPlan(False, 'stability', why)
-        ts = time.perf_counter()
-        motion = plan_motion(scene, scene_action(env, action), q)
-        timings['motion'] += time.perf_counter() - ts
-        return motion
+        return _checked_motion(env, scene, action, plan_motion, q, timings)
 
     action, motion, failed = first_feasible(env, ranked, check)
     if action is None and book and failed:
