@@ -1,7 +1,7 @@
 """/plan_assembly end to end over DDS on the live node graph: latency and predicted coverage.
 
     python benchmarks/bench_plan_assembly.py [--scenes 20] [--grid 5] [--seed 9000] [--agent default]
-                                             [--improve-time-s 2.0]
+                                             [--improve-time-s 2.0] [--torch-threads 1]
 
 Starts the allocation, gamp, sequencer and assembly nodes (real processes, loopback DDS, the
 agent given to both the sequencer and the assembly node), calls /plan_assembly on generated
@@ -35,9 +35,10 @@ def main():
     p.add_argument('--seed', type=int, default=9000, help='first scene seed (unseen: training draws its own)')
     p.add_argument('--agent', default='default')
     p.add_argument('--improve-time-s', type=float, default=2.0, help="the assembly node's improve_time_s")
+    p.add_argument('--torch-threads', type=int, default=1, help="the sequencer node's torch_threads")
     p.add_argument('--results', default=str(RESULTS))
     args = p.parse_args()
-    params = {'sequencer_node': {'agent': args.agent},
+    params = {'sequencer_node': {'agent': args.agent, 'torch_threads': args.torch_threads},
               'assembly_node': {'agent': args.agent, 'improve_time_s': args.improve_time_s}}
     procs = []
     for pkg, exe in (('rad_planner', 'allocation_node'), ('rad_gamp', 'gamp_node'),
@@ -68,8 +69,7 @@ def main():
                          'coverage': r.predicted_coverage, 'success': r.success, 'steps': len(r.steps),
                          'blocks': len(scene.blocks), 'plans': list(r.anytime_plans),
                          'anytime_coverages': list(r.anytime_coverages),
-                         'stages': {s: timing[s] for s in ('allocation', 'sequencing', 'motion', 'reallocation')
-                                    if s in timing}})
+                         'stages': timing})
             print(f'seed {seed}: {seconds:6.2f} s, coverage {r.predicted_coverage:.3f}, {len(r.steps)} steps, '
                   f'plans {list(r.anytime_plans)}', flush=True)
     finally:
@@ -79,6 +79,28 @@ def main():
             proc.terminate()
             proc.wait()
     write(rows, args)
+
+
+def stage_lines(rows) -> list[str]:
+    """Where a request's time goes, summed over the scenes: the planner's stages (GAMP's motion as the
+    assembly node waits for it, the sequencer as it reports its own time and as the assembly node waits
+    for the answer, GAMP as the gamp node reports its own time, the allocation, re-allocation, whose GAMP
+    calls count in motion too), what the assembly
+    node spends outside them (its stability checks, building states, the response) and what the client
+    waits beyond the node's total."""
+    total = sum(r['seconds'] for r in rows)
+    sums = {}
+    for r in rows:
+        for stage, seconds in r['stages'].items():
+            sums[stage] = sums.get(stage, 0.0) + seconds
+    node = sums.get('total', 0.0)
+    waited = sum(sums.get(s, 0.0) for s in ('allocation', 'motion', 'reallocation', 'registration'))
+    waited += sums.get('sequencer_call', sums.get('sequencing', 0.0))
+    parts = [(s, sums[s]) for s in ('allocation', 'sequencer_call', 'sequencing', 'motion', 'gamp', 'reallocation')
+             if s in sums]
+    parts += [('in the assembly node besides', node - waited), ('client beyond the node', total - node)]
+    return [f'| time, all {len(rows)} requests (s) | {total:.2f} | | |',
+            *(f'| {name} | {seconds:.2f} | {100 * seconds / total:.0f} % | |' for name, seconds in parts)]
 
 
 def write(rows, args) -> None:
@@ -93,7 +115,8 @@ def write(rows, args) -> None:
              f'| max {first.max():.2f} |',
              f'| predicted coverage | mean {cov.mean():.3f} '
              f'| complete {int((cov >= 1 - 1e-9).sum())} of {len(rows)} | |',
-             f'| searched after the first plan | {searched} of {len(rows)} | the search plan kept {replaced} | |']
+             f'| searched after the first plan | {searched} of {len(rows)} | the search plan kept {replaced} | |',
+             *stage_lines(rows)]
     for line in lines:
         print(line)
     out = Path(args.results)
@@ -101,7 +124,8 @@ def write(rows, args) -> None:
     doc = [f'# /plan_assembly over DDS, g = {args.grid}', '',
            f'Made by `{command_line()}` ({time.strftime("%Y-%m-%d")}). The allocation, gamp, sequencer and '
            f'assembly nodes as real processes on loopback DDS, agent `{args.agent}` in both nodes, '
-           f'improve_time_s {args.improve_time_s:g}; {len(rows)} generated two-sided g = {args.grid} scenes, seeds '
+           f'improve_time_s {args.improve_time_s:g}, the sequencer on {args.torch_threads} torch thread(s); '
+           f'{len(rows)} generated two-sided g = {args.grid} scenes, seeds '
            f'{args.seed}..{args.seed + len(rows) - 1} (never used in training); plans start at home. Times are the '
            f"client's wall clock on the shared 2-core machine. Per-scene rows: "
            f'[plan_assembly.rows.jsonl](plan_assembly.rows.jsonl).', '',

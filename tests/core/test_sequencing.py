@@ -49,6 +49,8 @@ def test_a_complete_plan_puts_every_allocated_pose_in_order(motion):
         assert before.block != after.block
     for stage in ('allocation', 'sequencing', 'motion', 'total'):
         assert plan.timings[stage] >= 0
+    # GAMP's own time (what the gamp node reports as planning_time_s) lies within the time waited for it.
+    assert 0 < plan.timings['gamp'] <= plan.timings['motion']
     moved = {b.id: b for b in plan.final_scene.blocks}
     for s in plan.steps:
         assert np.allclose(moved[s.block].position, s.position) and moved[s.block].yaw == s.yaw

@@ -107,8 +107,9 @@ def test_plans_from_json_and_from_motion_capture(graph):
         # Anytime planning: the first plan (the scorer's) fills the target, so no search follows.
         assert list(r.anytime_plans) == ['scorer'] and list(r.anytime_coverages) == [1.0]
         assert 0 < r.anytime_times_s[0] <= next(t.seconds for t in r.timings if t.stage == 'total')
-        stages = {t.stage for t in r.timings}
-        assert {'allocation', 'sequencing', 'motion', 'registration', 'total'} <= stages
+        stages = {t.stage: t.seconds for t in r.timings}
+        assert {'allocation', 'sequencing', 'motion', 'gamp', 'registration', 'total'} <= set(stages)
+        assert 0 < stages['gamp'] < stages['motion']    # the gamp node's own time, within the round trips
         for step in r.steps:
             assert step.trajectories and all(t.joint_names and t.points for t in step.trajectories)
             assert [g.action for g in step.gripper][-2:] == ['grasp', 'release']

@@ -68,6 +68,7 @@ SMALL_BUILT = Scene.from_dict(json.loads(SMALL.dumps().replace('[0.4, -0.2,', '[
 @pytest.mark.parametrize('params,expected', [
     ({'policy': 'milp-dqn', 'checkpoint': 'BAD'}, 'is corrupt or not a rad model file'),
     ({'policy': 'mcts'}, 'policy must be one of milp-dqn-mcts'),
+    ({'torch_threads': 0}, 'torch_threads must be at least 1, got 0'),
 ])
 def test_a_bad_checkpoint_or_policy_stops_the_node_with_one_line_naming_it(node_process, tmp_path, params,
                                                                            expected):

@@ -304,27 +304,33 @@ def _check_keys(obj: Mapping, where: str, required: set[str], optional: set[str]
 
 
 def _number(v: Any, where: str) -> float:
-    _expect(isinstance(v, (int, float)) and not isinstance(v, bool), where,
-            f'expected a number, got {_show(v)}')
-    _expect(math.isfinite(v), where, f'must be finite, got {v}')
-    _expect(abs(v) <= MAX_COORD, where, f'{v} is out of range (|value| <= {MAX_COORD} m)')
+    # (the messages are made only for a value that fails: these run for every number of a scene)
+    if not (isinstance(v, (int, float)) and not isinstance(v, bool)):
+        raise SceneError(where, f'expected a number, got {_show(v)}')
+    if not math.isfinite(v):
+        raise SceneError(where, f'must be finite, got {v}')
+    if not abs(v) <= MAX_COORD:
+        raise SceneError(where, f'{v} is out of range (|value| <= {MAX_COORD} m)')
     return float(v)
 
 
 def _integer(v: Any, where: str) -> int:
     if isinstance(v, float) and math.isfinite(v) and v.is_integer():
         v = int(v)
-    _expect(isinstance(v, int) and not isinstance(v, bool), where, f'expected an integer, got {_show(v)}')
+    if not (isinstance(v, int) and not isinstance(v, bool)):
+        raise SceneError(where, f'expected an integer, got {_show(v)}')
     return v
 
 
 def _vec3(v: Any, where: str, conv) -> tuple:
-    _expect(isinstance(v, (list, tuple)) and len(v) == 3, where, f'expected a list of 3 numbers, got {_show(v)}')
+    if not (isinstance(v, (list, tuple)) and len(v) == 3):
+        raise SceneError(where, f'expected a list of 3 numbers, got {_show(v)}')
     return tuple(conv(x, f'{where}[{i}]') for i, x in enumerate(v))
 
 
 def _name(v: Any, where: str) -> str:
-    _expect(isinstance(v, str) and v.strip() != '', where, f'expected a non-empty string, got {_show(v)}')
+    if not (isinstance(v, str) and v.strip() != ''):
+        raise SceneError(where, f'expected a non-empty string, got {_show(v)}')
     _expect(len(v) <= 128, where, 'longer than 128 characters')
     return v
 

@@ -158,6 +158,9 @@ def parse_trajectory(doc: Trajectory | dict, model: RobotModel = PANDA, limit_to
     k = len(names)
     order = [list(names).index(n) for n in expected]
     lower, upper = np.asarray(model.q_min), np.asarray(model.q_max)
+    fast = _parse_regular(points, k, order, lower, upper, limit_tol)
+    if fast is not None:
+        return Trajectory(expected, fast)
     out = []
     for i, p in enumerate(points):
         where = f'trajectory point {i}'
@@ -293,6 +296,48 @@ class Spline:
                 q[after], dq[after], ddq[after] = self.pos[-1], 0.0, 0.0
             out = (q, dq, ddq)
         return out
+
+
+def _parse_regular(points, k: int, order: list[int], lower: np.ndarray, upper: np.ndarray,
+                   limit_tol: float) -> list[TrajectoryPoint] | None:
+    """`parse_trajectory`'s points checked all at once, for the trajectories planners send: every
+    point the same kind (`TrajectoryPoint` or dict) with k positions, velocities and accelerations
+    each given at every point or at none, all finite and valid. None for anything else, and for
+    any point the checks would refuse: the point-by-point parse then says which and why (the
+    same points come out either way; tests/core/test_trajectory.py)."""
+    try:
+        if all(type(p) is TrajectoryPoint for p in points):
+            fields = [(p.positions, p.velocities, p.accelerations, p.time_from_start) for p in points]
+        elif all(type(p) is dict for p in points):
+            fields = [(p.get('positions'), p.get('velocities') or [], p.get('accelerations') or [],
+                       p.get('time_from_start')) for p in points]
+        else:
+            return None
+        qs, vs, as_, ts = zip(*fields)
+        if not all(isinstance(t, (int, float)) and not isinstance(t, bool) for t in ts):
+            return None
+        t = np.array(ts, dtype=float)
+        q = np.array(qs, dtype=float)
+        v = np.array(vs, dtype=float)
+        a = np.array(as_, dtype=float)
+    except (TypeError, ValueError):
+        return None
+    n = len(points)
+    if q.shape != (n, k) or v.shape not in ((n, k), (n, 0)) or a.shape not in ((n, k), (n, 0)):
+        return None
+    if a.shape[1] and not v.shape[1]:
+        return None
+    if not (np.isfinite(q).all() and np.isfinite(v).all() and np.isfinite(a).all() and np.isfinite(t).all()):
+        return None
+    q = q[:, order]
+    if ((q < lower - limit_tol) | (q > upper + limit_tol)).any():
+        return None
+    if t[0] < 0 or (n > 1 and not (np.diff(t) > 0).all()) or t[-1] > MAX_DURATION:
+        return None
+    q = np.clip(q, lower, upper).tolist()
+    v = v[:, order].tolist() if v.shape[1] else [[]] * n
+    a = a[:, order].tolist() if a.shape[1] else [[]] * n
+    return [TrajectoryPoint(q[i], list(v[i]), float(ts[i]), list(a[i])) for i in range(n)]
 
 
 def limit_violation(traj: Trajectory | dict, start, model: RobotModel = PANDA, slack: float = 1.0,

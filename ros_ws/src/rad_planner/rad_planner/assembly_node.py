@@ -350,7 +350,7 @@ class AssemblyNode(Node):
         if response.failure in ('invalid_request', 'error'):
             raise RadError(f'plan_action: {response.reason}')
         if not response.success:
-            return MotionPlan(False, response.failure, response.reason)
+            return MotionPlan(False, response.failure, response.reason, seconds=response.planning_time_s)
         motion = motion_from_msgs(response.trajectories, response.gripper)
         start_q = panda.HOME if start is None else np.asarray(start, dtype=float)
         for k, traj in enumerate(motion['trajectories']):
@@ -360,7 +360,8 @@ class AssemblyNode(Node):
                                f'(trajectory {k}): {why}')
             start_q = np.asarray(traj['points'][-1]['positions'])
         return MotionPlan(True, '', '', (response.grasp.unit, response.grasp.yaw_deg), motion,
-                          moved_aside_from_msgs(response.moved_aside_blocks, response.moved_aside_poses))
+                          moved_aside_from_msgs(response.moved_aside_blocks, response.moved_aside_poses),
+                          seconds=response.planning_time_s)
 
     def plan(self, scene: Scene, time_limit: float, start):
         plan = plan_for_agent(self.agent, scene, self.allocate, self.plan_motion, self.rank, self.reallocate,

@@ -54,6 +54,7 @@ class MotionPlan:
     grasp: tuple[int, int] = (0, 0)   # unit, yaw
     motion: dict | None = None        # rad_core.motion.Motion.to_dict(): {"trajectories", "gripper"}
     moved_aside: list = field(default_factory=list)   # blocks moved out of the way first (GampResult.moved_aside)
+    seconds: float = 0.0              # the planner's own time (the gamp node's planning_time_s), transport left out
 
 
 @dataclass
@@ -235,6 +236,7 @@ def plan_assembly(scene: Scene, allocate: Allocate, plan_motion: PlanMotion, seq
             if len(memo) > 4096:
                 memo.clear()
             memo[key] = plan_motion(scene_now, action, q, **aside)
+            timings['gamp'] = timings.get('gamp', 0.0) + memo[key].seconds
         return memo[key]
 
     def decide(env: AssemblyEnv, rng, fallbacks: bool = False) -> Decision:
@@ -414,9 +416,10 @@ def _done(plan: AssemblyPlan, t0: float) -> AssemblyPlan:
 def local_motion_planner(planner) -> PlanMotion:
     """Adapt an in-process `gamp.action.MotionPlanner` to the PlanMotion signature."""
     def plan_motion(scene: Scene, action: SceneAction, start, move_aside: bool = False) -> MotionPlan:
+        t0 = time.perf_counter()
         result, _, _ = planner(scene, action, start=start, move_aside=move_aside)
         if not result.success:
-            return MotionPlan(False, result.failure, result.reason)
+            return MotionPlan(False, result.failure, result.reason, seconds=time.perf_counter() - t0)
         return MotionPlan(True, '', '', (int(result.grasp.unit), int(result.grasp.yaw)),
-                          result.motion.to_dict(), list(result.moved_aside))
+                          result.motion.to_dict(), list(result.moved_aside), seconds=time.perf_counter() - t0)
     return plan_motion
