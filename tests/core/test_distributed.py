@@ -90,6 +90,24 @@ def test_every_worker_is_warm_before_the_first_scene_and_workers_that_join_later
     assert len(client.scheduler_info(n_workers=-1)['workers']) == 2
 
 
+def worker_upkeep(dask_worker) -> dict:
+    import dask
+    worker = dask_worker
+    return {'tick': dask.config.get('distributed.admin.tick.interval'),
+            'profile': dask.config.get('distributed.worker.profile.enabled'),
+            'profiler_running': worker.periodic_callbacks.get('profile') is not None
+            and worker.periodic_callbacks['profile'].is_running()}
+
+
+def test_workers_keep_their_own_upkeep_rare(client):
+    """Each local worker runs with `QUIET_WORKER`: the event loop's health check every second and
+    no statistical profiler sampling the thread that plans the scenes."""
+    upkeep = client.run(worker_upkeep)
+    assert len(upkeep) == 2
+    for found in upkeep.values():
+        assert found == {'tick': '1s', 'profile': False, 'profiler_running': False}, found
+
+
 def test_scenes_go_out_longest_first():
     """The scenes run by scene_cost, the largest first (so two workers finish together); the rows
     stay in scene order. One worker, so the order they start in is the order they went out in."""
