@@ -483,3 +483,24 @@ def test_a_grasp_whose_lift_fails_leaves_the_block_where_it_lies_for_the_next_on
         r = plan_action(world, 'b', [0.45, 0.2, U / 2], 0)
     assert r.success and refused
     assert len(seen) >= 2 and all(p == before for p in seen)
+
+
+def test_the_body_a_reason_names_does_not_depend_on_what_the_world_loaded_before():
+    """A world that loaded other scenes hands out freed body ids again, in another order; where
+    the hand meets several blocks at once, the one GAMP names ('hand hits block ...', which moving
+    neighbours aside acts on) is the one a fresh world names, the first in the scene's order."""
+    dest = np.array([0.5, 0.15, U / 2])
+    # Stacks around the destination (x, y offsets in units: height), two of them two high beside
+    # the hand: it meets both at the placement.
+    heights = {(-1, 0): 2, (0, 1): 1, (0, -1): 2, (1, 1): 1, (-1, -1): 1, (1, -1): 2, (-1, 1): 2}
+    blocks = [('free', 'cube', (0.45, -0.2, U / 2))] + [
+        (f'n{dx}{dy}_{k}', 'cube', (dest[0] + dx * U, dest[1] + dy * U, U / 2 + k * U))
+        for (dx, dy), h in heights.items() for k in range(h)]
+    scene = _scene(blocks)
+    with World(scene) as fresh:
+        want = plan_action(fresh, 'free', dest, 0).reason
+    assert 'at the placement: hand hits block n-10_1' in want, want
+    with World(generate_scene(GeneratorConfig(grid=6, sides=2), 3)) as used:   # more blocks than this scene
+        used.load_scene(scene)
+        assert sorted(used.blocks.values()) != list(used.blocks.values())       # ids out of scene order
+        assert plan_action(used, 'free', dest, 0).reason == want

@@ -285,7 +285,9 @@ def dask_client(workers: int | None = None, scheduler: str | None = None, dashbo
             try:
                 client.wait_for_workers(need, timeout=wait_workers_s)
             except TimeoutError:
-                have = len(client.scheduler_info(n_workers=-1)['workers'])
+                # (nthreads asks the scheduler; scheduler_info's answer can be overwritten by the client's
+                # periodic update, which carries no workers, before it is returned: distributed 2026.8)
+                have = len(client.nthreads())
                 raise RadError(f'the Dask scheduler at {scheduler!r} has {have} worker(s); waited '
                                f'{wait_workers_s:g} s for {need}') from None
             yield client

@@ -169,6 +169,12 @@ def _make_probe(world: World, exclude, attached: Attachment | None, config: Coll
     names[world.table] = 'the table'
     obstacles = ({body for bid, body in world.blocks.items() if bid not in exclude} | {world.table}
                  | set(world.obstacles.values()))
+    # Bodies are looked at in a fixed order, the table, then the scene's blocks and set-aside blocks
+    # in scene order, so the body a reason names ('hand hits block b4'), which moving neighbours
+    # aside acts on, does not depend on the ids Bullet gave them: a world that loaded other scenes
+    # before hands out freed ids again, in another order (seen: the same scene planned after nine
+    # others named b5 where a fresh world named b4).
+    rank = {body: k for k, body in enumerate([world.table, *world.blocks.values(), *world.obstacles.values()])}
     link_name = {v: _LINK_LABEL.get(k, k.replace('panda_', '')) for k, v in world.link_index.items()}
     link_name[-1] = 'base'
     links = robot_links(world)
@@ -189,7 +195,7 @@ def _make_probe(world: World, exclude, attached: Attachment | None, config: Coll
             place_attached(world, attached)
             lo, hi = p.getAABB(carried, -1, physicsClientId=cid)
             near = p.getOverlappingObjects(lo, hi, physicsClientId=cid) or ()
-            for body in sorted({b for b, _ in near if b in carried_obstacles}):
+            for body in sorted({b for b, _ in near if b in carried_obstacles}, key=rank.__getitem__):
                 pts = p.getClosestPoints(carried, body, 0.0, physicsClientId=cid)
                 if any(pt[8] < -config.block_penetration for pt in pts):
                     return f'carried block hits {names[body]}'
@@ -204,7 +210,7 @@ def _make_probe(world: World, exclude, attached: Attachment | None, config: Coll
             for link in links:
                 lo, hi = boxes[link]
                 near = p.getOverlappingObjects([v - m for v in lo], [v + m for v in hi], physicsClientId=cid) or ()
-                for body in {b for b, _ in near if b in obstacles}:
+                for body in sorted({b for b, _ in near if b in obstacles}, key=rank.__getitem__):
                     pts = p.getClosestPoints(robot, body, m, linkIndexA=link, physicsClientId=cid)
                     if any(pt[8] < m for pt in pts):
                         return f'{link_name[link]} hits {names[body]}'
