@@ -304,7 +304,7 @@ def _parse_regular(points, k: int, order: list[int], lower: np.ndarray, upper: n
     point the same kind (`TrajectoryPoint` or dict) with k positions, velocities and accelerations
     each given at every point or at none, all finite and valid. None for anything else, and for
     any point the checks would refuse: the point-by-point parse then says which and why (the
-    same points come out either way; tests/core/test_trajectory.py)."""
+    same points come out either way; tests/core/test_trajectory_parse.py)."""
     try:
         if all(type(p) is TrajectoryPoint for p in points):
             fields = [(p.positions, p.velocities, p.accelerations, p.time_from_start) for p in points]

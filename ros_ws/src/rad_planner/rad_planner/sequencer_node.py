@@ -13,10 +13,10 @@ top of it, checkpoint (a model file replacing the agent's network, '' = none), b
 (search simulations per decision, 0 = the agent's), search_time_s (bnb seconds per search,
 0 = the agent's). policy: one of the older names (milp-dqn-lookahead, milp-dqn-halving,
 milp-dqn-mcts, milp-dqn-dfs, milp-dqn, heur) instead of agent ('' = use agent).
-torch_threads (1): the threads torch runs the network on. One is the fastest here: the
-graphs are small, and a second thread waits on the same two cores the gamp and assembly
-nodes use (measured: a g = 5 ranking in 16.5 ms on one thread, 73 ms on two while another
-job ran; rad eval's Dask workers use one thread too, so the node ranks as they do).
+torch_threads (1): the threads torch runs the network on. One is no slower on an idle
+machine (the graphs are small) and far faster when the cores are shared, as here with the
+gamp and assembly nodes (measured: a g = 5 ranking in 16.5 ms on one thread, 73 ms on two
+while another job ran); rad eval's Dask workers use one thread too, so the node ranks as they do.
 A bad agent, policy, checkpoint or torch_threads: the node does not start (one line on
 stderr, exit 1).
 """
