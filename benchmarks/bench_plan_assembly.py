@@ -85,9 +85,8 @@ def stage_lines(rows) -> list[str]:
     """Where a request's time goes, summed over the scenes: the planner's stages (GAMP's motion as the
     assembly node waits for it, the sequencer as it reports its own time and as the assembly node waits
     for the answer, GAMP as the gamp node reports its own time, the allocation, re-allocation, whose GAMP
-    calls count in motion too), what the assembly
-    node spends outside them (its stability checks, building states, the response) and what the client
-    waits beyond the node's total."""
+    calls count in motion too), what the assembly node spends outside them (its stability checks,
+    building states, the response) and what the client waits beyond the node's total."""
     total = sum(r['seconds'] for r in rows)
     sums = {}
     for r in rows:
