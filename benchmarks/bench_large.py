@@ -117,13 +117,17 @@ def main(argv=None) -> int:
     ap.add_argument('--seed', type=int, default=7000, help='first seed of the generated scenes')
     ap.add_argument('--large', default='all', help="comma-separated large shapes, 'all' or 'none'")
     ap.add_argument('--time-limit', type=float, default=300.0, help='planning time limit per structure (s)')
+    ap.add_argument('--improve-time-s', type=float, default=None,
+                    help="anytime planning's budget after the first plan (default: the assembly node's, "
+                         "agent_plan.IMPROVE_TIME_S)")
     ap.add_argument('--out', default=str(ROOT / 'docs' / 'results'))
     args = ap.parse_args(argv)
     from rad_core.large_shapes import LARGE_SPECS
-    from rad_core.sequencing.agent_plan import AgentPlanner
+    from rad_core.sequencing.agent_plan import IMPROVE_TIME_S, AgentPlanner
     grids = [int(g) for g in args.grids.split(',') if g]
     large = list(LARGE_SPECS) if args.large == 'all' else [n for n in args.large.split(',') if n and n != 'none']
-    planner = AgentPlanner(args.agent, time_limit_s=args.time_limit)
+    improve = IMPROVE_TIME_S if args.improve_time_s is None else args.improve_time_s
+    planner = AgentPlanner(args.agent, time_limit_s=args.time_limit, improve_time_s=improve)
     rows = []
     partial = Path(args.out) / 'large.partial.jsonl'     # each row as soon as it is measured
     partial.parent.mkdir(parents=True, exist_ok=True)

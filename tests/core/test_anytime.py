@@ -3,6 +3,8 @@ agent's own (searched) plan only while time remains and only where it fills more
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import pytest
 
 from rad_core.errors import RadError
@@ -56,7 +58,8 @@ def test_agents_without_a_search_plan_once_and_a_bad_budget_is_refused(planners)
     scene = generate_scene(GeneratorConfig(grid=4), 3)
     once = planners['greedy'](scene)
     assert [a['plan'] for a in once.anytime] == ['scorer'] and once.anytime[0]['coverage'] == once.predicted_coverage
-    assert planners['default'].spec == planners['greedy'].spec      # the default agent plans once
+    # The default agent is the greedy one with order repair (tests/core/test_repair.py).
+    assert planners['default'].spec == replace(planners['greedy'].spec, repair=True)
     p = planners['lookahead']
     with pytest.raises(RadError, match='improve_time_s'):
         plan_for_agent(p.spec, scene, p.allocate, p.motion, p.sequencer.rank, quick_rank=p.quick_rank,

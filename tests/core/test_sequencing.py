@@ -1,5 +1,7 @@
 """The sequencer interface, HEUR, and whole-assembly planning in-process."""
 
+import time
+
 import numpy as np
 import pytest
 
@@ -294,8 +296,16 @@ def test_a_search_plan_the_improvement_budget_ends_before_its_first_step_is_not_
 
     def quick(*_):
         return Ranking([], [], True, 'nothing, on purpose', {})
-    plan = plan_for_agent(parse('heur+lookahead:1+verify'), scene, lambda s, support: solve(s), motion,
-                          HeurPolicy(), quick_rank=quick, improve_time_s=1e-9)
+    calls = []
+
+    def slow_allocate(s, support):
+        calls.append(1)
+        if len(calls) > 1:    # the search plan's: longer than its budget, it ends before its first step
+            time.sleep(0.2)
+        return solve(s)
+    plan = plan_for_agent(parse('heur+lookahead:1+verify'), scene, slow_allocate, motion,
+                          HeurPolicy(), quick_rank=quick, improve_time_s=5e-3)
+    assert len(calls) == 2 and plan.anytime[0]['t'] < 0.2
     assert plan.steps == [] and plan.reason == 'nothing, on purpose'
     assert [a['plan'] for a in plan.anytime] == ['scorer', 'scorer']
 

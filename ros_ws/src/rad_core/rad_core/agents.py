@@ -1,6 +1,6 @@
 """An agent: what decides the next step of an assembly, as one value made of parts.
 
-    scorer [+ search[:budget]] [+ verify] [+ realloc] [+ support:S]
+    scorer [+ search[:budget]] [+ verify] [+ realloc] [+ repair] [+ support:S]
 
 - scorer: what ranks the allocation's actions. `heur` (the paper's heuristic), a
   shipped network by name (`milp-dqn-mixed`, `milp-dqn`, `dqn`, `dqn-rel`,
@@ -14,6 +14,12 @@
   the stability check), not the best-ranked one blindly (the paper's agents fail then).
 - realloc: when nothing can be built next while allocated poses remain, exclude the
   poses that fail (no-goods) and solve the allocation again over the free cells.
+- repair: order repair (needs verify). A plan that leaves cells unfilled because
+  the arm hit a block the plan had placed earlier ('hand hits block b3') is planned
+  again, trying last the actions that would place such a block while the cells it
+  kept the arm from are still open (`sequencing.plan.Precedence`); the better plan
+  is kept (`sequencing.agent_plan.plan_for_agent`). It learns from GAMP, so it acts
+  only with the robot in the loop; without it the agent plans as it would without repair.
 - support: the allocation's support rule, `none` (the paper's MILP), `stable`
   (every allocated block can rest on something) or `arm` (stable, and nothing the
   arm can never do: no type the hand cannot take, no block it cannot pick, no pose
@@ -55,6 +61,7 @@ class AgentSpec:
     verify: bool = False
     realloc: bool = False
     support: str | None = None
+    repair: bool = False
 
     def __post_init__(self):
         if not isinstance(self.scorer, str) or not self.scorer or any(c in self.scorer for c in '+ \t\n'):
@@ -85,6 +92,8 @@ class AgentSpec:
             raise RadError(f'unknown allocation support {self.support!r}; one of {", ".join(SUPPORTS)}')
         if self.search == 'bnb' and not self.verify:
             raise RadError('the bnb search plays only lines it verified: add +verify')
+        if self.repair and not self.verify:
+            raise RadError('order repair learns from the verified plan\'s refusals: add +verify')
 
     # ---- what the parts imply -------------------------------------------------
     @property
@@ -119,6 +128,8 @@ def label(spec: AgentSpec) -> str:
         parts.append('verify')
     if spec.realloc:
         parts.append('realloc')
+    if spec.repair:
+        parts.append('repair')
     if spec.support is not None:
         parts.append(f'support:{spec.support}')
     return '+'.join(parts)
@@ -126,13 +137,14 @@ def label(spec: AgentSpec) -> str:
 
 PRESETS = {
     # What the sequencer node and /plan_assembly run by default (the node graph always verifies
-    # with GAMP, re-allocates and allocates with support): the greedy network. Until 2026-12-03 it
-    # was the same with a look-ahead search (lookahead:5), whose plan, tried after the network's
-    # wherever that left cells open, changed no plan's coverage in 111 measured (rad eval g = 5 and
-    # 6, the hard set, /plan_assembly's benchmark twice) and cost up to improve_time_s each time
-    # (docs/search.md).
-    'default': 'milp-dqn-mixed+verify+realloc+support:arm',
-    'greedy': 'milp-dqn-mixed+verify+realloc+support:arm',
+    # with GAMP, re-allocates and allocates with support): the greedy network, with order repair
+    # (2026-12-03: g = 5 0.949 -> 0.951, g = 6 0.932 -> 0.94, the hard set 0.942 -> 0.948 within
+    # the node's improve_time_s; docs/search.md). Until 2026-12-03 it was the greedy network with a
+    # look-ahead search (lookahead:5), whose plan, tried after the network's wherever that left
+    # cells open, changed no plan's coverage in 111 measured (rad eval g = 5 and 6, the hard set,
+    # /plan_assembly's benchmark twice) and cost up to improve_time_s each time.
+    'default': 'milp-dqn-mixed+verify+realloc+repair+support:arm',
+    'greedy': 'milp-dqn-mixed+verify+realloc+support:arm',   # the network alone, verified
     'paper': 'milp-dqn+mcts:5+support:none',         # the paper's MILP-DQN-MCTS
     'heur': 'heur',                                   # the paper's HEUR
     'heur-verified': 'heur+verify',
@@ -186,7 +198,8 @@ def parse_with_robot(text: str) -> tuple[AgentSpec, bool | None]:
         return _parse_parts(text, text), None
     spec = _apply(base, rest, text)
     if budget_override is not None:
-        spec = AgentSpec(spec.scorer, spec.search, budget_override, spec.verify, spec.realloc, spec.support)
+        spec = AgentSpec(spec.scorer, spec.search, budget_override, spec.verify, spec.realloc, spec.support,
+                         spec.repair)
     return spec, robot
 
 
@@ -202,7 +215,7 @@ def _parse_parts(text: str, whole: str) -> AgentSpec:
 
 def _apply(spec: AgentSpec, parts: list[str], whole: str) -> AgentSpec:
     fields = {'scorer': spec.scorer, 'search': spec.search, 'budget': spec.budget, 'verify': spec.verify,
-              'realloc': spec.realloc, 'support': spec.support}
+              'realloc': spec.realloc, 'support': spec.support, 'repair': spec.repair}
     for part in parts:
         name, _, value = part.partition(':')
         if name in SEARCHES:
@@ -216,7 +229,7 @@ def _apply(spec: AgentSpec, parts: list[str], whole: str) -> AgentSpec:
                     raise RadError(f'bad {name} budget {value!r} in agent {whole!r}') from None
             elif fields['budget'] is None:
                 fields['budget'] = None
-        elif part in ('verify', 'realloc'):
+        elif part in ('verify', 'realloc', 'repair'):
             fields[part] = True
         elif name == 'support' and value:
             fields['support'] = value
@@ -224,5 +237,5 @@ def _apply(spec: AgentSpec, parts: list[str], whole: str) -> AgentSpec:
             fields['support'] = 'stable'
         else:
             raise RadError(f'unknown part {part!r} in agent {whole!r}: a search ({", ".join(SEARCHES)}, '
-                           f'with :budget), verify, realloc or support:none|stable')
+                           f'with :budget), verify, realloc, repair or support:none|stable|arm')
     return AgentSpec(**fields)

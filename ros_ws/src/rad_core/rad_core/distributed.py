@@ -5,11 +5,12 @@ scene i runs `scene_episode` with seed + i whichever worker gets it, and the row
 back in scene order before `summarize`, so a distributed run gives the serial run's rows
 and metrics (only wall-clock fields such as `reallocation_s` differ, as between two serial
 runs). Two things outside this module can make rows differ between any two runs, serial or
-not: anytime planning (verified agents with a search, the `default` preset among them) improves
-its first plan within a wall-clock budget (`agent_plan.IMPROVE_TIME_S`), so on a busier machine
-a search can be cut where it finished before; and a network's scores can differ in the last bits
-with torch's thread count (the workers run one thread, a serial run torch's default, the cores),
-enough to flip a near tie. Agents without both (heur, heur-norobot, unverified ones) are exact.
+not: anytime planning (verified agents with a search or with order repair, the `default` preset
+among them) improves its first plan within a wall-clock budget (`agent_plan.IMPROVE_TIME_S`), so
+on a busier machine a search or a repair plan can be cut where it finished before; and a
+network's scores can differ in the last bits with torch's thread count (the workers run one
+thread, a serial run torch's default, the cores), enough to flip a near tie. Agents without both
+(heur, heur-norobot, unverified ones) are exact.
 
 Tasks carry arguments, not objects: the agent as `AgentArgs` (what `get_agent` needs),
 the scene as its `Scene.to_dict()` document, the CP-SAT and re-allocation settings as

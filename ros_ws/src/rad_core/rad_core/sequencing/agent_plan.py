@@ -10,8 +10,12 @@ so a figure measured with it is a statement about what the node graph does.
 
 from __future__ import annotations
 
+import inspect
 import math
 import time
+from dataclasses import is_dataclass, replace
+
+import numpy as np
 
 from rad_core.agents import AgentSpec, label, parse
 from rad_core.errors import RadError
@@ -20,7 +24,8 @@ from rad_core.sequencing.plan import AssemblyPlan, plan_assembly
 
 
 IMPROVE_TIME_S = 2.0
-"""Anytime planning's default budget (s) for improving on the first plan (see `plan_for_agent`)."""
+"""Anytime planning's least budget (s) for improving on the first plan (`plan_for_agent`: as long
+again as the first plan took, and at least this; 0: no improving)."""
 
 
 def plan_for_agent(spec: AgentSpec, scene: Scene, allocate, plan_motion, rank, reallocate=None, *,
@@ -35,9 +40,16 @@ def plan_for_agent(spec: AgentSpec, scene: Scene, allocate, plan_motion, rank, r
     Anytime planning, for a verified agent with a search and a `quick_rank` (its scorer alone,
     `Sequencer.rank(..., scorer_only=True)`): a first complete plan ranked by the scorer (about a
     second at the paper's sizes); when it leaves target cells unfilled, the agent's own plan (with
-    its search) within `improve_time_s` more (and the time limit), kept only where it fills more.
-    `AssemblyPlan.anytime` records each plan's time and coverage. Otherwise one plan, the agent's
-    own (its one entry in `anytime`: 'scorer', or 'search' for an agent that searches)."""
+    its search) within the improvement budget (and the time limit), kept only where it fills more.
+    The improvement budget: as long again as the first plan took, and at least `improve_time_s`;
+    none when `improve_time_s` is 0.
+    Order repair (`spec.repair`) comes first within the same budget: while the best plan
+    leaves cells unfilled and the latest plan's refusals taught precedences not known before
+    (`AssemblyPlan.conflicts`), at most `REPAIR_ROUNDS` more plans with the same allocation and
+    ranking that keep to all of them (`plan.precedences_last`), each kept only where it fills more.
+    `AssemblyPlan.anytime` records each plan's time and coverage, and the answer's `timings` the
+    stages of all of them. Otherwise one plan, the agent's own (its one entry in `anytime`:
+    'scorer', or 'search' for an agent that searches)."""
     from rad_core.sequencing.reallocation import ReallocationConfig
     support = support or spec.resolved_support()
     if spec.realloc:
@@ -48,32 +60,105 @@ def plan_for_agent(spec: AgentSpec, scene: Scene, allocate, plan_motion, rank, r
     if not (math.isfinite(improve_time_s) and improve_time_s >= 0):
         raise RadError(f'improve_time_s must be finite and >= 0, got {improve_time_s}')
 
-    def plan_with(ranker, limit: float) -> AssemblyPlan:
-        return plan_assembly(scene, lambda s: allocate(s, support=support), plan_motion, ranker, seed=seed,
-                             start=start, time_limit_s=limit, reallocate=reallocate if spec.realloc else None,
-                             reallocation=reallocation, verify=spec.verify)
+    def plan_with(ranker, limit: float, allocate_first=None, precedences=()) -> AssemblyPlan:
+        return plan_assembly(scene, allocate_first or (lambda s: allocate(s, support=support)), plan_motion,
+                             ranker, seed=seed, start=start, time_limit_s=limit,
+                             reallocate=reallocate if spec.realloc else None, reallocation=reallocation,
+                             verify=spec.verify, precedences=precedences)
 
     t0 = time.perf_counter()
-    if quick_rank is None or not spec.search or not spec.verify:
-        plan = plan_with(rank, time_limit_s)
-        plan.anytime = [{'t': time.perf_counter() - t0, 'coverage': plan.predicted_coverage,
-                         'plan': 'search' if spec.search else 'scorer'}]
-        return plan
-    best = plan_with(quick_rank, time_limit_s)
-    anytime = [{'t': time.perf_counter() - t0, 'coverage': best.predicted_coverage, 'plan': 'scorer'}]
-    left = min(improve_time_s, time_limit_s - (time.perf_counter() - t0))
-    if best.predicted_coverage < 1.0 - 1e-9 and left > 0:
+    anytime_search = quick_rank is not None and bool(spec.search) and spec.verify
+    first_rank = quick_rank if anytime_search else rank
+    if spec.repair and spec.verify:
+        # A repair plan follows the plan before it until a precedence first changes a choice: the
+        # motions and rankings of the worlds both plans pass through are asked for once.
+        plan_motion = remembered_motion(plan_motion)
+        if not hasattr(first_rank, 'scores'):      # (a Policy ranks in process, at no such cost)
+            first_rank = remembered_rank(first_rank)
+    best = plan_with(first_rank, time_limit_s)
+    plans = [best]
+    kind = 'search' if spec.search and not anytime_search else 'scorer'
+    anytime = [{'t': time.perf_counter() - t0, 'coverage': best.predicted_coverage, 'plan': kind}]
+    # Improving may take as long again as the first plan did, and at least improve_time_s (0: not at
+    # all): a large structure's first plan takes minutes, and a plan in another order about as long.
+    first_s = time.perf_counter() - t0
+    budget = max(improve_time_s, first_s) if improve_time_s > 0 else 0.0
+    improve_until = min(t0 + time_limit_s, time.perf_counter() + budget)
+    if spec.repair and spec.verify:
+        latest, known = best, {}
+        first_allocation = best.allocation
+        for _ in range(REPAIR_ROUNDS):
+            left = improve_until - time.perf_counter()
+            new = [p for p in latest.conflicts if p not in known]
+            if best.predicted_coverage >= 1.0 - 1e-9 or left <= 0 or not new or best.allocation is None:
+                break
+            known.update(dict.fromkeys(new))
+            latest = plan_with(first_rank, left, lambda s: first_allocation, tuple(known))
+            plans.append(latest)
+            if latest.predicted_coverage > best.predicted_coverage + 1e-9 and not _invalid(latest):
+                best, kind = latest, 'repair'
+            anytime.append({'t': time.perf_counter() - t0, 'coverage': best.predicted_coverage, 'plan': kind})
+    left = improve_until - time.perf_counter()
+    if anytime_search and best.predicted_coverage < 1.0 - 1e-9 and left > 0:
         searched = plan_with(rank, left)
-        # (a plan the time limit ended before its first step has no outcome)
-        invalid = searched.episode is not None and searched.episode.outcome is not None \
-            and searched.episode.outcome.is_invalid
-        if searched.predicted_coverage > best.predicted_coverage + 1e-9 and not invalid:
-            best = searched
-        anytime.append({'t': time.perf_counter() - t0, 'coverage': best.predicted_coverage,
-                        'plan': 'search' if best is searched else 'scorer'})
+        plans.append(searched)
+        if searched.predicted_coverage > best.predicted_coverage + 1e-9 and not _invalid(searched):
+            best, kind = searched, 'search'
+        anytime.append({'t': time.perf_counter() - t0, 'coverage': best.predicted_coverage, 'plan': kind})
     best.anytime = anytime
+    if len(plans) > 1:      # the stages of every plan made for it, so they add up to the total
+        summed: dict = {}
+        for plan in plans:
+            for stage, seconds in plan.timings.items():
+                summed[stage] = summed.get(stage, 0.0) + seconds
+        best.timings = summed
     best.timings['total'] = time.perf_counter() - t0
     return best
+
+
+def _world_key(scene: Scene, q) -> tuple:
+    return scene.dumps(), None if q is None else np.asarray(q, dtype=float).tobytes()
+
+
+def remembered_motion(plan_motion):
+    """plan_motion (scene, action, start[, move_aside]) answering a world, action and start it was
+    asked before from memory, as it answered then (with `seconds` 0: no planning time was spent).
+    GAMP's answer depends on nothing else (its IK restarts are seeded per call)."""
+    takes_aside = 'move_aside' in inspect.signature(plan_motion).parameters
+    memo: dict = {}
+
+    def remembered(scene: Scene, action, start, move_aside: bool = False):
+        key = (*_world_key(scene, start), action, move_aside and takes_aside)
+        if key in memo:
+            return replace(memo[key], seconds=0.0)
+        memo[key] = plan_motion(scene, action, start, **({'move_aside': move_aside} if takes_aside else {}))
+        return memo[key]
+    return remembered
+
+
+def remembered_rank(rank):
+    """rank (scene, placements, start) answering what it was asked before from memory (with no
+    timings: no time was spent)."""
+    memo: dict = {}
+
+    def remembered(scene: Scene, placements, start):
+        key = (*_world_key(scene, start), tuple(placements))
+        if key in memo:
+            hit = memo[key]
+            return replace(hit, timings={}) if is_dataclass(hit) else hit
+        memo[key] = rank(scene, placements, start)
+        return memo[key]
+    return remembered
+
+
+REPAIR_ROUNDS = 3
+"""Order repair's most plans after the first (`plan_for_agent`)."""
+
+
+def _invalid(plan: AssemblyPlan) -> bool:
+    """A plan whose episode ended on a refused action (a plan the time limit ended before its first
+    step has no outcome)."""
+    return plan.episode is not None and plan.episode.outcome is not None and plan.episode.outcome.is_invalid
 
 
 def reallocation_support(support: str) -> str:
@@ -90,8 +175,8 @@ class AgentPlanner:
     support); reallocation: a `ReallocationConfig` for re-allocating agents (default: the
     assembly node's, the stable allocation; its params set the re-solves' CP-SAT settings);
     policy: the agent's scorer when the caller has already loaded it; improve_time_s: anytime
-    planning's budget after the first plan (`plan_for_agent`; the assembly node's parameter of
-    the same name)."""
+    planning's least budget after the first plan (`plan_for_agent`; the assembly node's parameter
+    of the same name)."""
 
     def __init__(self, agent: str | AgentSpec = 'default', allocation_time_limit_s: float = 10.0,
                  time_limit_s: float = 120.0, allocation=None, reallocation=None, policy=None,

@@ -26,6 +26,7 @@ that fail become no-goods, the allocation is solved again over the free cells
 from __future__ import annotations
 
 import inspect
+import re
 import threading
 import time
 from dataclasses import dataclass, field, replace
@@ -139,9 +140,12 @@ class AssemblyPlan:
     first action that GAMP or the stability check refuses ends it invalid: f_g / f_p), steps."""
     anytime: list = field(default_factory=list)
     """Anytime planning (`agent_plan.plan_for_agent`): after each plan, {'t': seconds since the
-    start, 'coverage': the best predicted coverage so far, 'plan': 'scorer' | 'search' (which
-    plan is the best so far)}; one entry for an agent that plans once, none from `plan_assembly`
-    called directly."""
+    start, 'coverage': the best predicted coverage so far, 'plan': 'scorer' | 'repair' | 'search'
+    (which plan is the best so far)}; one entry for an agent that plans once, none from
+    `plan_assembly` called directly."""
+    conflicts: list = field(default_factory=list)
+    """`Precedence`s this plan's failures teach: an action GAMP refused because the arm hit a
+    block the plan had placed, on cells the plan left unfilled (order repair reads them)."""
 
 
 Allocate = Callable[[Scene], AllocationResult]
@@ -162,13 +166,15 @@ def moved(scene: Scene, block_id: str, position, yaw: int) -> Scene:
 
 def plan_assembly(scene: Scene, allocate: Allocate, plan_motion: PlanMotion, sequencer: Policy | Rank,
                   seed: int = 0, start=None, time_limit_s: float = 60.0, reallocate=None,
-                  reallocation=None, verify: bool = True) -> AssemblyPlan:
+                  reallocation=None, verify: bool = True, precedences=()) -> AssemblyPlan:
     """sequencer: a Policy (in-process scores of the MDP state) or a Rank callable.
     A Rank callable's RadError (say, the sequencer node is down) propagates.
     reallocate: (scene state, no-goods, time limit) -> AllocationResult, to re-allocate on
     stall (None: never); reallocation: its `ReallocationConfig` (default: the defaults).
     verify: take the best-ranked action GAMP finds feasible (the default); False: the
-    best-ranked one only, and the plan stops where it cannot be done (the paper's agents)."""
+    best-ranked one only, and the plan stops where it cannot be done (the paper's agents).
+    precedences: `Precedence`s a verified plan keeps to where the ranking allows
+    (`precedences_last`; order repair passes what an earlier plan's `conflicts` taught)."""
     t0 = time.perf_counter()
     timings = {'allocation': 0.0, 'sequencing': 0.0, 'motion': 0.0}
     allocation = allocate(scene)
@@ -239,6 +245,16 @@ def plan_assembly(scene: Scene, allocate: Allocate, plan_motion: PlanMotion, seq
             timings['gamp'] = timings.get('gamp', 0.0) + memo[key].seconds
         return memo[key]
 
+    seen: dict = {}     # Precedence -> None: what GAMP's refusals named, in order
+
+    def check_motion(env: AssemblyEnv, scene_now: Scene, action, q) -> MotionPlan:
+        """`_checked_motion`, noting the placed blocks a refusal names (`conflicts_of`)."""
+        motion = _checked_motion(env, scene_now, action, planned_motion, q, timings)
+        if not motion.success and motion.failure != 'stability':
+            for p in conflicts_of(env, action, motion.reason):
+                seen.setdefault(p, None)
+        return motion
+
     def decide(env: AssemblyEnv, rng, fallbacks: bool = False) -> Decision:
         """The best feasible action the sequencer ranks above stopping; fallbacks: of those it
         ranks below (a verified plan's last resort, `deciders.with_fallbacks`)."""
@@ -250,8 +266,10 @@ def plan_assembly(scene: Scene, allocate: Allocate, plan_motion: PlanMotion, seq
             return stop(ranked)
         if verify and PIT_LAYERS:
             ranked = pits_last(env, allowed_actions.guide, ranked)
-        found = _first_feasible(env, world['scene'], ranked if verify else ranked[:1], planned_motion, world['q'],
-                                timings, book=not verify)
+        if verify and precedences:
+            ranked = precedences_last(env, ranked, precedences)
+        found = _first_feasible(env, world['scene'], ranked if verify else ranked[:1], check_motion, world['q'],
+                                book=not verify)
         if isinstance(found, str):
             return stop(found)
         action, step = found
@@ -275,7 +293,7 @@ def plan_assembly(scene: Scene, allocate: Allocate, plan_motion: PlanMotion, seq
         def pose_check(action) -> MotionPlan:
             """What the plan's own steps are held to (`_checked_motion`): a pose whose block would
             tip the structure is as much a no-good as one the arm cannot reach."""
-            return _checked_motion(env, world['scene'], action, planned_motion, world['q'], timings)
+            return check_motion(env, world['scene'], action, world['q'])
         reallocator = Reallocator(allowed_actions, pose_check, reallocation or ReallocationConfig(),
                                   scene_of=lambda _: world['scene'], allocate=reallocate,
                                   deadline=t0 + time_limit_s)
@@ -295,6 +313,8 @@ def plan_assembly(scene: Scene, allocate: Allocate, plan_motion: PlanMotion, seq
         plan.reason = episode.reason
     plan.final_scene = world['scene']
     plan.predicted_coverage = env.coverage()
+    open_cells = env.state.occupancy < 0
+    plan.conflicts = [p for p in seen if open_cells[list(p.first)].any()]
     plan.success = not plan.reason and not allowed_actions.guide.open_poses(env.state)
     if not plan.success and not plan.reason:
         plan.reason = 'allocated poses remain unbuilt'
@@ -361,6 +381,57 @@ def pits_last(env: AssemblyEnv, guide, ranked: list) -> list:
     return keep + later
 
 
+@dataclass(frozen=True)
+class Precedence:
+    """Fill the grid cells `first` before putting a block on any of the cells `then`: a plan's
+    action on `first` was refused because the arm or the held block hit the block that plan had
+    placed on `then`, and `first` stayed unfilled."""
+
+    first: tuple[int, ...]
+    then: tuple[int, ...]
+    reason: str = field(default='', compare=False)
+
+
+_NAMED_BLOCK = re.compile(r'hits block (\S+?)(?=[;:,)]|\s|$)')
+
+
+def conflicts_of(env: AssemblyEnv, action, reason: str) -> list[Precedence]:
+    """The precedences a refusal of `action` (GAMP's `reason`) teaches: one per placed block it
+    names ('hand hits block b3', 'carried block hits block b5', ...)."""
+    names = set(_NAMED_BLOCK.findall(reason or ''))
+    if not names:
+        return []
+    cells, _ = env.resulting_cells(action)
+    if cells is None:
+        return []
+    first = tuple(sorted(int(c) for c in cells))
+    index = {b.id: k for k, b in enumerate(env.scene.blocks)}
+    found = []
+    for name in sorted(names):
+        k = index.get(name)
+        if k is not None and k in env.state.placed:
+            found.append(Precedence(first, tuple(sorted(int(c) for c in env.state.placed[k][0])), reason))
+    return found
+
+
+def precedences_last(env: AssemblyEnv, ranked: list, precedences) -> list:
+    """The ranking with the actions that would break a precedence tried last (in their ranked
+    order): an action that puts a block on a `then` cell while a `first` cell it does not fill
+    itself is still open. A soft order, as `pits_last`: such an action is still taken when nothing
+    ranked before it can be done."""
+    open_cells = env.state.occupancy < 0
+    active = [(frozenset(p.first), frozenset(p.then)) for p in precedences if open_cells[list(p.first)].any()]
+    if not active or len(ranked) < 2:
+        return ranked
+    keep, later = [], []
+    for action in ranked:
+        cells, _ = env.resulting_cells(action)
+        mine = frozenset() if cells is None else frozenset(int(c) for c in cells)
+        breaks = any(mine & then and any(open_cells[c] and c not in mine for c in first) for first, then in active)
+        (later if breaks else keep).append(action)
+    return keep + later
+
+
 def _checked_motion(env: AssemblyEnv, scene: Scene, action, plan_motion: PlanMotion, q, timings) -> MotionPlan:
     """An action checked as a plan's step is: the stability check first (no motion for a block
     that falls), then GAMP's motion (its time added to timings['motion'])."""
@@ -373,13 +444,13 @@ def _checked_motion(env: AssemblyEnv, scene: Scene, action, plan_motion: PlanMot
     return motion
 
 
-def _first_feasible(env: AssemblyEnv, scene: Scene, ranked, plan_motion: PlanMotion, q, timings,
-                    book: bool = False):
-    """(action, PlanStep) of the best-ranked action GAMP can execute, or why none. book (an
+def _first_feasible(env: AssemblyEnv, scene: Scene, ranked, check_motion, q, book: bool = False):
+    """(action, PlanStep) of the best-ranked action GAMP can execute, or why none.
+    check_motion(env, scene, action, q): `_checked_motion` with the plan's motion planner. book (an
     unverified agent, given its one best-ranked action): a failure comes back as (action,
     its failed MotionPlan), for the episode to book it."""
     def check(action) -> MotionPlan:
-        return _checked_motion(env, scene, action, plan_motion, q, timings)
+        return check_motion(env, scene, action, q)
 
     action, motion, failed = first_feasible(env, ranked, check)
     if action is None and book and failed:
