@@ -170,7 +170,7 @@ class MotionPlanner:
         blocks it, move that one too (at most `moves` in all). `blocked`, its reason saying what
         was tried, when no way works."""
         tried = []
-        named = set(re.findall(r'hits block (\S+?)(?=[;:,)]|\s|$)', blocked.reason))
+        named = blocks_named(blocked.reason)
         blockers = [b for b in table_neighbours(scene, block_id) if b in named]
         for other in blockers[:MOVE_ASIDE_TRIES]:
             spot = (move_aside_spot(scene, other, clear_of=[block_id])
@@ -207,6 +207,15 @@ class MotionPlanner:
         if tried:
             blocked.reason += '; moving a neighbour aside first: ' + '; '.join(tried)
         return blocked
+
+
+_NAMED_BLOCK = re.compile(r'hits block (\S+?)(?=[;:,)]|\s|$)')
+
+
+def blocks_named(reason: str) -> set[str]:
+    """The ids of the blocks a GAMP reason says something hits ('hand hits block b4', 'carried block
+    hits block b5; ...')."""
+    return set(_NAMED_BLOCK.findall(reason or ''))
 
 
 MOVE_ASIDE_TRIES = 3

@@ -26,7 +26,6 @@ that fail become no-goods, the allocation is solved again over the free cells
 from __future__ import annotations
 
 import inspect
-import re
 import threading
 import time
 from dataclasses import dataclass, field, replace
@@ -35,7 +34,7 @@ from typing import Any, Callable
 import numpy as np
 
 from rad_core.allocation.result import AllocationResult
-from rad_core.gamp.action import SceneAction
+from rad_core.gamp.action import SceneAction, blocks_named
 from rad_core.mdp import AssemblyEnv, EnvConfig
 from rad_core.motion import Motion
 from rad_core.scene import Block, Scene
@@ -392,13 +391,10 @@ class Precedence:
     reason: str = field(default='', compare=False)
 
 
-_NAMED_BLOCK = re.compile(r'hits block (\S+?)(?=[;:,)]|\s|$)')
-
-
 def conflicts_of(env: AssemblyEnv, action, reason: str) -> list[Precedence]:
     """The precedences a refusal of `action` (GAMP's `reason`) teaches: one per placed block it
     names ('hand hits block b3', 'carried block hits block b5', ...)."""
-    names = set(_NAMED_BLOCK.findall(reason or ''))
+    names = blocks_named(reason)
     if not names:
         return []
     cells, _ = env.resulting_cells(action)
