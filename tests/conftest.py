@@ -40,10 +40,16 @@ assert 'rclpy' not in sys.modules, 'rclpy was imported before the DDS settings w
 
 # Test runs side by side on one machine (CI beside a developer's run, two checkouts)
 # must not hear each other's nodes: unless RAD_ROS_DOMAIN_ID pins a domain, each
-# session takes its own (100-199, from the pid; the same after the re-exec above).
-# RAD_ROS_DOMAIN_ID is set too, so scripts that source env.sh (the demo) join it.
+# session takes its own, from the pid (the same after the re-exec above), among 1-101
+# without env.sh's default 42. Not above 101: a domain's DDS ports are 7400 + 250 * id
+# and up, and from 102 on they fall in Linux's ephemeral range (32768-60999), where the
+# kernel hands the same ports to any process's outgoing sockets (ROS 2's domain ID
+# guide). Domains 100-199 did that: a session on domain 171 found an ephemeral socket on
+# 0.0.0.0:50213 among its DDS ports. RAD_ROS_DOMAIN_ID is set too, so scripts that
+# source env.sh (the demo) join it.
+_SAFE_DOMAINS = [d for d in range(1, 102) if d != 42]
 if not os.environ.get('RAD_ROS_DOMAIN_ID'):
-    os.environ['RAD_ROS_DOMAIN_ID'] = os.environ['ROS_DOMAIN_ID'] = str(100 + os.getpid() % 100)
+    os.environ['RAD_ROS_DOMAIN_ID'] = os.environ['ROS_DOMAIN_ID'] = str(_SAFE_DOMAINS[os.getpid() % len(_SAFE_DOMAINS)])
 
 
 def pytest_configure(config):

@@ -127,9 +127,10 @@ def netns_available() -> bool:
 @pytest.mark.skipif(not netns_available(),
                     reason='needs unshare --net and ip (root): no private network namespace')
 def test_checks_fail_without_the_settings(process):
-    # A domain whose RTPS ports (7400 + 250 * domain ...) lie below Linux's ephemeral ports (32768 up):
-    # the session's domain (100-199) shares its range with them, and an ephemeral socket a library
-    # opened on 0.0.0.0 once landed in it and read as a DDS receive socket off loopback.
+    # A domain whose RTPS ports (7400 + 250 * domain ...) lie below Linux's ephemeral ports (32768 up),
+    # as the session's own does (tests/conftest.py): domains from 102 on share their range with them,
+    # and an ephemeral socket a library opened on 0.0.0.0 once landed in it and read as a DDS
+    # receive socket off loopback.
     domain = str(random.randrange(1, 97))
     project = dict(os.environ, ROS_DOMAIN_ID=domain, RAD_ROS_DOMAIN_ID=domain)
     no_profile = {k: v for k, v in project.items() if 'DEFAULT_PROFILES_FILE' not in k}
