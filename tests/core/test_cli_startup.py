@@ -95,3 +95,9 @@ def test_train_help_still_lists_the_config_flags(argv):
     r = rad(*argv)
     assert r.returncode == 0, r.stderr
     assert '--total-steps' in r.stdout and '--actors' in r.stdout
+
+
+def test_expert_help_lists_its_config_flags():
+    r = rad('expert', '--help')
+    assert r.returncode == 0, r.stderr
+    assert '--anchor-weight' in r.stdout and '--rounds' in r.stdout and '--resume' in r.stdout

@@ -8,19 +8,11 @@ import pytest
 from rad_core.allocation import solve
 from rad_core.allocation.guide import AllocationGuide
 from rad_core.allocation.result import AllocationResult
-from rad_core.gamp.action import MotionPlanner
 from rad_core.generator import GeneratorConfig, generate_scene
 from rad_core.mdp import AssemblyEnv, EnvConfig
 from rad_core import support
 from rad_core.sequencing import HeurPolicy, ranked_actions
-from rad_core.sequencing.plan import MotionPlan, plan_assembly, local_motion_planner
-
-
-@pytest.fixture(scope='module')
-def motion():
-    planner = MotionPlanner()
-    yield local_motion_planner(planner)
-    planner.close()
+from rad_core.sequencing.plan import MotionPlan, plan_assembly
 
 
 def test_heur_ranks_only_fully_supported_actions_and_is_seeded():

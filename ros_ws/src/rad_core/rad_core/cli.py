@@ -16,6 +16,7 @@
     rad dataset build --grids 3 --scenes 50000 -o data/train-g3.jsonl.gz [--shapes train]
     rad train --method milp-dqn|dqn|dqn-rel --out runs/NAME [--resume] [--<config field> VALUE ...]
               [--actors N [--chunk-steps S] [--refresh-every K] | --seeds S1,S2,...] [--scheduler ADDR]
+    rad expert --out runs/NAME [--resume] [--<expert config field> VALUE ...]
 
 Bad input ends with exit code 2 and one line on stderr naming the problem.
 """
@@ -392,6 +393,32 @@ def cmd_train(args) -> int:
     return 130 if result['interrupted'] else 0
 
 
+def cmd_expert(args) -> int:
+    from dataclasses import fields
+    from rad_core.learning.expert import ExpertConfig, ExpertIteration
+    given = {f.name: getattr(args, f.name) for f in fields(ExpertConfig) if getattr(args, f.name) is not None}
+    out = Path(args.out)
+    if args.resume and (out / 'config.json').exists():
+        config = ExpertConfig.from_dict({**json.loads((out / 'config.json').read_text()),
+                                         **{k: v for k, v in given.items() if k == 'rounds'}})
+        extra = sorted(set(given) - {'rounds'})
+        if extra:
+            raise RadError(f'--resume continues with the run\'s configuration; only --rounds may change, '
+                           f'not --{extra[0].replace("_", "-")}')
+    else:
+        config = ExpertConfig(**given)
+    out.mkdir(parents=True, exist_ok=True)
+    with open(out / 'expert.log', 'a') as logf:
+        def log(line: str) -> None:
+            stamped = f'{time.strftime("%H:%M:%S")} {line}'
+            print(stamped, flush=True)
+            logf.write(stamped + '\n')
+            logf.flush()
+        rows = ExpertIteration(config, out).run(resume=args.resume, log=log)
+    print(f'done: {len(rows)} rounds; model: {out / "model.pt"}')
+    return 0
+
+
 def _train_mode(args, given: dict) -> list[int] | None:
     """Check the --actors/--seeds/--scheduler combination; the seeds of --seeds, else None."""
     if args.actors is not None and args.actors < 1:
@@ -418,11 +445,12 @@ def _train_mode(args, given: dict) -> list[int] | None:
     return seeds
 
 
-def _add_train_args(p: argparse.ArgumentParser) -> None:
-    """Every TrainConfig field as --field-name (default: the dataclass's)."""
+def _add_train_args(p: argparse.ArgumentParser, config=None) -> None:
+    """Every field of a training config (default: TrainConfig) as --field-name (default: the dataclass's)."""
     from dataclasses import MISSING, fields
-    from rad_core.learning.dqn import TrainConfig
-    for f in fields(TrainConfig):
+    if config is None:
+        from rad_core.learning.dqn import TrainConfig as config
+    for f in fields(config):
         flag = '--' + f.name.replace('_', '-')
         default = f.default if f.default is not MISSING else None
         helptext = f'{f.metadata.get("help", "")} (default: {default})'
@@ -644,6 +672,15 @@ def build_parser(command: str | None = 'train') -> argparse.ArgumentParser:
     if command == 'train':
         _add_train_args(p)
     p.set_defaults(func=cmd_train)
+
+    p = sub.add_parser('expert', help='expert iteration: train the network on the lines the verified, repairing '
+                                      'planner keeps (robot in the loop)')
+    p.add_argument('--out', required=True, help='run folder: demos/, rR.pt, model.pt, progress.jsonl, expert.log')
+    p.add_argument('--resume', action='store_true', help='continue the run in --out (only --rounds may change)')
+    if command == 'expert':
+        from rad_core.learning.expert import ExpertConfig
+        _add_train_args(p, ExpertConfig)
+    p.set_defaults(func=cmd_expert)
     return parser
 
 
