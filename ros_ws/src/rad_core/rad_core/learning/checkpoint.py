@@ -36,13 +36,15 @@ class CheckpointError(RadError):
     pass
 
 
-def atomic_save(obj: Any, path: str | Path) -> None:
+def atomic_save(obj: Any, path: str | Path, save=None) -> None:
+    """Write obj to path atomically; save(obj, file): how (default torch.save)."""
+    save = save or torch.save
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=path.name + '.', suffix='.tmp', dir=path.parent)
     try:
         with os.fdopen(fd, 'wb') as f:
-            torch.save(obj, f)
+            save(obj, f)
             f.flush()
             os.fsync(f.fileno())
         os.chmod(tmp, 0o644)   # mkstemp's 0600 would hide shipped weights from other users

@@ -32,9 +32,8 @@ from __future__ import annotations
 import json
 import os
 import pickle
-import tempfile
 import time
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
 import numpy as np
@@ -43,6 +42,7 @@ import torch.nn.functional as F
 
 from rad_core.errors import RadError
 from rad_core.learning import checkpoint as ckpt
+from rad_core.learning.dqn import _f
 from rad_core.learning.network import NetConfig, QNetwork, collate, graph_max, pick
 from rad_core.learning.replay import Transition
 from rad_core.mdp import TERMINATE, AssemblyEnv, EnvConfig
@@ -50,10 +50,6 @@ from rad_core.mdp import TERMINATE, AssemblyEnv, EnvConfig
 TRAIN_SEED_BASE = 3_000_000
 """Generator seeds of the expert's generated scenes: neither evaluation (0..), validation (500000..)
 nor the DQN datasets' (1000000..)."""
-
-
-def _f(default, help: str):
-    return field(default=default, metadata={'help': help})
 
 
 @dataclass
@@ -146,6 +142,7 @@ def demonstrations(scene, plan, records: dict) -> list[Transition]:
     of the target. A world nobody scored (none, when the recorder ranked every step) ends the line
     there (its last transition then has neither a next observation nor done: no TD target)."""
     from rad_core.gamp.action import SceneAction
+    from rad_core.sequencing.actions import mdp_actions
     if plan.allocation is None:
         return []
     env = AssemblyEnv(scene, EnvConfig(stability='none'))   # the rewards (every step was judged by the plan)
@@ -166,7 +163,7 @@ def demonstrations(scene, plan, records: dict) -> list[Transition]:
 
     for step in plan.steps:
         want = SceneAction(step.block, step.unit, step.target, tuple(step.cell), step.rotation)
-        action = next(iter(env_actions(env, want)), None)
+        action = next(iter(mdp_actions(env, [want])), None)
         seen = observed(action) if action is not None else None
         if seen is None:
             return out
@@ -182,17 +179,6 @@ def demonstrations(scene, plan, records: dict) -> list[Transition]:
             result = env.step(TERMINATE)
             out.append(Transition(seen[0], -1, float(result.reward), True, None))
     return out
-
-
-def env_actions(env: AssemblyEnv, want) -> list:
-    """The one MDP action a scene action names in `env` (empty when it names none)."""
-    from rad_core.mdp import Action
-    index = {b.id: n for n, b in enumerate(env.scene.blocks)}
-    regions = {t.name: n for n, t in enumerate(env.scene.targets)}
-    if want.block_id not in index or want.target not in regions:
-        return []
-    cell = env.grid.index(regions[want.target], want.cell)
-    return [] if cell is None else [Action(index[want.block_id], int(want.unit), int(cell), int(want.rotation))]
 
 
 # ---- the worker side: planning one scene ----------------------------------------------
@@ -352,7 +338,7 @@ class ExpertIteration:
 
         def keep(result: dict, held: bool) -> None:
             result['held_out'] = held
-            _atomic_pickle(result, self.demo_path(r, result['name']))
+            ckpt.atomic_save(result, self.demo_path(r, result['name']), save=_pickle)
             log(f'  {result["name"]}: coverage {result["coverage"]:.3f}, {len(result["demos"])} demos, '
                 f'{result["seconds"]:.1f} s ({result["kept"]})')
 
@@ -468,18 +454,8 @@ def _first_layout(make, name: str, r: int, tries: int = 20) -> dict:
     raise RadError(f'shape {name!r}: none of {tries} layouts fits on the table')
 
 
-def _atomic_pickle(obj, path: Path) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=path.name + '.', suffix='.tmp', dir=path.parent)
-    try:
-        with os.fdopen(fd, 'wb') as f:
-            pickle.dump(obj, f, protocol=pickle.HIGHEST_PROTOCOL)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+def _pickle(obj, f) -> None:
+    pickle.dump(obj, f, protocol=pickle.HIGHEST_PROTOCOL)
 
 
 def _read_pickle(path: Path):

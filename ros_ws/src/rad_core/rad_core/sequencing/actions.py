@@ -84,16 +84,17 @@ def scene_action(env: AssemblyEnv, action: Action) -> SceneAction:
                        int(action.rotation))
 
 
-def mdp_actions(env: AssemblyEnv, ranked: list[SceneAction], allowed) -> list:
-    """The MDP actions of ranked scene actions, in order, keeping only those in `allowed`."""
+def mdp_actions(env: AssemblyEnv, ranked: list[SceneAction], allowed=None) -> list:
+    """The MDP actions of ranked scene actions, in order, keeping only those in `allowed` (None:
+    every one that names a block, region and cell of the env)."""
     index = {b.id: n for n, b in enumerate(env.scene.blocks)}
     regions = {t.name: n for n, t in enumerate(env.scene.targets)}
-    allowed, out = set(allowed), []
+    allowed, out = None if allowed is None else set(allowed), []
     for a in ranked:
         if a.block_id not in index or a.target not in regions:
             continue
         cell = env.grid.index(regions[a.target], a.cell)
         action = Action(index[a.block_id], int(a.unit), -1 if cell is None else cell, int(a.rotation))
-        if action in allowed:
+        if (cell is not None) if allowed is None else (action in allowed):
             out.append(action)
     return out
