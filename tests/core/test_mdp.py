@@ -143,6 +143,24 @@ def test_guide_offers_exactly_the_allocated_poses_and_drops_filled_ones():
         assert a.block != first.block
 
 
+def test_guide_turns_each_block_from_its_own_yaw_into_the_pose():
+    # Three L3_up blocks, two at yaw 0 and one at yaw 90, and one allocated L3_up pose along +x:
+    # the blocks at yaw 0 fill it unturned, the one at yaw 90 after three quarter turns (the
+    # guide works the actions out once per type and yaw; the yaws must not be mixed up).
+    from rad_core.allocation.placements import Placement
+    blocks = [{'id': f'l{k}', 'type': 'L3_up', 'position': [0.4 + 0.1 * k, -0.2, U / 2], 'yaw': yaw}
+              for k, yaw in enumerate((0, 90, 0))]
+    s = scene(blocks=blocks)
+    env = AssemblyEnv(s, GEOM)
+    pose = Placement('L3_up', 'front', 0, ((0, 0, 0), (1, 0, 0), (0, 0, 1)))
+    actions = AllocationGuide(s, [pose]).allowed_actions(env.state)
+    assert {(a.block, a.rotation) for a in actions} == {(0, 0), (1, 3), (2, 0)}
+    for a in actions:
+        cells, _ = env.resulting_cells(a)
+        assert sorted(int(c) for c in cells) == sorted(cell(env, c) for c in pose.cells)
+    assert [a for a in actions if a.block == 0] == [Action(0, u, cell(env, c), 0) for u, c in enumerate(pose.cells)]
+
+
 def test_guided_episode_with_allocation_reaches_completion():
     s = scene()
     env = AssemblyEnv(s, SUPPORT)

@@ -19,10 +19,12 @@ clones, snapshots and search branches.
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 
 from rad_core.allocation.placements import Placement
-from rad_core.blocks import canonical_shape
+from rad_core.blocks import BlockType, canonical_shape
 from rad_core.errors import RadError
 from rad_core.grid import Grid
 from rad_core.mdp import Action, AssemblyState, feeder_blocks
@@ -37,8 +39,9 @@ class AllocationGuide:
         self.placements = tuple(placements)
         names = [t.name for t in scene.targets]
         self.pose_cells: list[np.ndarray] = []
-        # Per pose: list of (block index, [actions]).
-        self._actions: list[list[tuple[int, list[Action]]]] = []
+        # Per pose: list of (block index, [(unit, cell, rotation)]); blocks of one type lying at
+        # the same yaw share one list.
+        self._fills: list[list[tuple[int, list[tuple[int, int, int]]]]] = []
         for p in self.placements:
             if p.target not in names:
                 raise RadError(f'allocation names unknown target region {p.target!r}')
@@ -47,27 +50,19 @@ class AllocationGuide:
             if any(i is None for i in ids):
                 raise RadError(f'allocated pose of {p.type} has a cell outside region {p.target!r}')
             self.pose_cells.append(np.asarray(ids, dtype=np.int64))
+            # Blocks of one type lying at the same yaw fill the pose with the same (unit, cell,
+            # rotation) triples: worked out once per (type, yaw), in the blocks' order as before.
+            pose = tuple(tuple(int(v) for v in c) for c in np.asarray(p.cells).tolist())
+            same: dict[tuple[str, int], list[tuple[int, int, int]]] = {}
             per_block = []
             for b, block in enumerate(scene.blocks):
                 if block.type == p.type:
-                    per_block.append((b, self._actions_for(b, np.asarray(p.cells), r)))
-            self._actions.append(per_block)
-
-    def _actions_for(self, b: int, pose: np.ndarray, region: int) -> list[Action]:
-        block = self.scene.blocks[b]
-        btype, yaw0 = self.scene.block_types[block.type], block.yaw
-        want = canonical_shape(pose)
-        pose_sorted = sorted(map(tuple, pose))
-        out = []
-        for rot in range(4):
-            offs = btype.rotated((yaw0 + 90 * rot) % 360)
-            if canonical_shape(offs) != want:
-                continue
-            shift = np.asarray(pose_sorted[0]) - np.asarray(sorted(map(tuple, offs))[0])
-            cells = offs + shift
-            for u in range(btype.size):
-                out.append(Action(b, u, self.grid.index(region, cells[u]), rot))
-        return out
+                    key = (block.type, int(block.yaw) % 360)
+                    if key not in same:
+                        same[key] = [(u, self.grid.index(r, cell), rot) for rot, cells in _matching_rotations(
+                            scene.block_types[block.type].offsets, key[1], pose) for u, cell in enumerate(cells)]
+                    per_block.append((b, same[key]))
+            self._fills.append(per_block)
 
     def open_poses(self, state: AssemblyState) -> list[int]:
         """Indices of allocated poses whose cells are all still free in `state`."""
@@ -89,7 +84,8 @@ class AllocationGuide:
     def pose_actions(self, k: int, state: AssemblyState, left_out: set[int] | None = None) -> list[Action]:
         """The actions that fill pose k with a block still on the table (or offered by the feeder) in `state`."""
         skip = self._left_out(state) if left_out is None else left_out
-        return [a for b, actions in self._actions[k] if b not in state.placed and b not in skip for a in actions]
+        return [Action(b, u, cell, rot) for b, fills in self._fills[k] if b not in state.placed and b not in skip
+                for u, cell, rot in fills]
 
     def allowed_actions(self, state: AssemblyState) -> list[Action]:
         """Allocation actions available in `state` (the termination action is not included).
@@ -99,3 +95,21 @@ class AllocationGuide:
         """
         skip = self._left_out(state)
         return [a for k in self.open_poses(state) for a in self.pose_actions(k, state, skip)]
+
+
+@lru_cache(maxsize=65536)
+def _matching_rotations(offsets: tuple, yaw0: int, pose: tuple) -> tuple:
+    """The quarter turns (0..3, added to yaw0) that make a block with these unit offsets fill
+    the pose's cells, each with the cell every unit lands on (in unit order). Pure geometry,
+    asked again for every guide built on the same allocation, so it is remembered."""
+    btype = BlockType('', offsets)
+    want = canonical_shape(pose)
+    first = np.asarray(min(pose))
+    out = []
+    for rot in range(4):
+        offs = btype.rotated((yaw0 + 90 * rot) % 360)
+        if canonical_shape(offs) != want:
+            continue
+        cells = offs + (first - np.asarray(min(map(tuple, offs.tolist()))))
+        out.append((rot, tuple(tuple(int(v) for v in c) for c in cells.tolist())))
+    return tuple(out)

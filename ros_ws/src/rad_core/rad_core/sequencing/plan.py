@@ -364,6 +364,7 @@ def pits_last(env: AssemblyEnv, guide, ranked: list) -> list:
     tops = np.array([grid.centres[c][:, 2].max() for c in open_cells])
     xy = np.concatenate([grid.centres[c][:, :2] for c in open_cells])
     owner = np.concatenate([np.full(len(c), k) for k, c in enumerate(open_cells)])
+    flat_open = np.concatenate(open_cells)
     keep, later = [], []
     for action in ranked:
         cells, _ = env.resulting_cells(action)
@@ -375,7 +376,8 @@ def pits_last(env: AssemblyEnv, guide, ranked: list) -> list:
         near = np.zeros(len(open_cells), dtype=bool)
         near[owner[close]] = True
         deep = (pts[:, 2].max() - tops) >= PIT_LAYERS * u - 1e-9
-        mine = np.array([np.isin(c, cells).any() for c in open_cells])
+        mine = np.zeros(len(open_cells), dtype=bool)      # open poses the action itself fills part of
+        mine[owner[np.isin(flat_open, cells)]] = True
         (later if np.any(near & deep & ~mine) else keep).append(action)
     return keep + later
 
