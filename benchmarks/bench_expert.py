@@ -6,10 +6,11 @@
 
 Each setting (lr, margin, td_weight, anchor_weight) trains the shipped mixed network (`--init`) on
 the run's training demonstrations of `--round` (every round up to it) with `expert.dqfd_loss`, as
-one round of `rad expert` does, and prints every 100 steps how often the network's own choice is
+a round 0 of `rad expert` with those fields does (`ExpertIteration.train`, the run's other fields at
+their defaults, `--seed` its seed), and prints every 100 steps how often the network's own choice is
 the expert's: on the training demonstrations and on the held-out scenes' ones. `--save DIR` keeps
-each setting's network after the last step (for `rad eval --checkpoint`). One torch thread;
-seconds in the table are wall-clock on whatever else runs.
+each setting's network after the last step (for `rad eval --checkpoint`). One torch thread (the
+config's default); seconds in the table are wall-clock on whatever else runs.
 """
 
 from __future__ import annotations
@@ -17,15 +18,12 @@ from __future__ import annotations
 import argparse
 import glob
 import pickle
+import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
-import torch
-
 from rad_core.learning import checkpoint as ckpt
-from rad_core.learning.expert import agreement, dqfd_loss
-from rad_core.learning.network import NetConfig, QNetwork
+from rad_core.learning.expert import ExpertConfig, ExpertIteration, agreement
 
 
 def demos(run: Path, last_round: int) -> tuple[list, list]:
@@ -39,36 +37,28 @@ def demos(run: Path, last_round: int) -> tuple[list, list]:
 
 
 def one(setting: str, init: str, train: list, held: list, steps: int, seed: int, save: Path | None) -> list[dict]:
+    """One setting trained exactly as a round 0 of `rad expert` with these fields would train it;
+    the agreements every 100 steps."""
     lr, margin, td_weight, anchor_weight = (float(v) for v in setting.split(','))
-    doc = ckpt.read(ckpt.resolve(init), ckpt.MODEL_FORMAT)
-    q = QNetwork(NetConfig(**doc['net']))
-    q.load_state_dict(doc['weights'])
-    target, anchor = QNetwork(q.cfg), QNetwork(q.cfg).eval()
-    target.load_state_dict(q.state_dict())
-    anchor.load_state_dict(q.state_dict())
-    opt = torch.optim.Adam(q.parameters(), lr=lr, weight_decay=1e-5)
-    rng = np.random.default_rng(seed)
-    torch.manual_seed(seed)
-    rows = [{'step': 0, 'train': agreement(q, train, 'cpu'), 'held': agreement(q, held, 'cpu'), 's': 0.0}]
-    t0 = time.perf_counter()
-    for step in range(1, steps + 1):
-        batch = [train[i] for i in rng.integers(0, len(train), 32)]
-        loss, _ = dqfd_loss(q, target, batch, 0.999, margin, 1.0, 'cpu', td_weight=td_weight, anchor=anchor,
-                            anchor_weight=anchor_weight)
-        opt.zero_grad()
-        loss.backward()
-        torch.nn.utils.clip_grad_norm_(q.parameters(), 10.0)
-        opt.step()
-        if step % 500 == 0:
-            target.load_state_dict(q.state_dict())
-        if step % 100 == 0 or step == steps:
+    cfg = ExpertConfig(init=init, lr=lr, margin=margin, td_weight=td_weight, anchor_weight=anchor_weight,
+                       steps=steps, seed=seed)
+    with tempfile.TemporaryDirectory() as out:
+        expert = ExpertIteration(cfg, out)
+        q = expert.q
+
+        def measure(step: int) -> None:
+            if step % 100 and step != steps:
+                return
             rows.append({'step': step, 'train': agreement(q, train, 'cpu'), 'held': agreement(q, held, 'cpu'),
                          's': time.perf_counter() - t0})
             print(f'  {setting} step {step}: agreement {rows[-1]["train"]:.3f} / held out {rows[-1]["held"]:.3f}',
                   flush=True)
+        rows = [{'step': 0, 'train': agreement(q, train, 'cpu'), 'held': agreement(q, held, 'cpu'), 's': 0.0}]
+        t0 = time.perf_counter()
+        expert.train(train, held, 0, lambda _: None, after_step=measure)
     if save is not None:
         save.mkdir(parents=True, exist_ok=True)
-        ckpt.atomic_save({**doc, 'weights': q.state_dict()}, save / f'{setting.replace(",", "_")}.pt')
+        ckpt.atomic_save({**expert.init_doc, 'weights': q.state_dict()}, save / f'{setting.replace(",", "_")}.pt')
     return rows
 
 
@@ -83,7 +73,6 @@ def main() -> None:
                                                       '3e-5,0.02,1,10'], help='lr,margin,td_weight,anchor_weight')
     ap.add_argument('--save', type=Path, help="keep each setting's network here")
     args = ap.parse_args()
-    torch.set_num_threads(1)
     train, held = demos(args.run, args.round)
     print(f'{len(train)} training and {len(held)} held-out demonstrations from {args.run} rounds 0..{args.round}')
     table = []

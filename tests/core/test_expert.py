@@ -129,7 +129,7 @@ def test_a_run_resumes_with_the_next_round_planned_by_the_last_rounds_network(tm
     assert [r['round'] for r in first] == [0] and (tmp_path / 'r0.pt').is_file()
     with pytest.raises(RadError, match='--resume'):
         ExpertIteration(cfg, tmp_path).run(log=lambda _: None)
-    with pytest.raises(RadError, match='only --rounds'):
+    with pytest.raises(RadError, match='only --rounds may change, not --lr'):
         ExpertIteration(ExpertConfig(**{**cfg.__dict__, 'rounds': 2, 'lr': 1e-3}), tmp_path).run(
             resume=True, log=lambda _: None)
     rows = ExpertIteration(ExpertConfig(**{**cfg.__dict__, 'rounds': 2}), tmp_path).run(resume=True,

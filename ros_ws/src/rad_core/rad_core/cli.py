@@ -399,12 +399,8 @@ def cmd_expert(args) -> int:
     given = {f.name: getattr(args, f.name) for f in fields(ExpertConfig) if getattr(args, f.name) is not None}
     out = Path(args.out)
     if args.resume and (out / 'config.json').exists():
-        config = ExpertConfig.from_dict({**json.loads((out / 'config.json').read_text()),
-                                         **{k: v for k, v in given.items() if k == 'rounds'}})
-        extra = sorted(set(given) - {'rounds'})
-        if extra:
-            raise RadError(f'--resume continues with the run\'s configuration; only --rounds may change, '
-                           f'not --{extra[0].replace("_", "-")}')
+        # The run's own configuration with the flags given on top: the run refuses any but --rounds.
+        config = ExpertConfig.from_dict({**json.loads((out / 'config.json').read_text()), **given})
     else:
         config = ExpertConfig(**given)
     out.mkdir(parents=True, exist_ok=True)

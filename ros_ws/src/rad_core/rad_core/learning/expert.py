@@ -290,11 +290,17 @@ class ExpertIteration:
                            f'this network was trained on {self.init_doc.get("actions")!r}')
         self.q = QNetwork(NetConfig(**self.init_doc['net']))
         ckpt.load_weights(self.q, self.init_doc['weights'], path)
+        self._scenes: dict[int, list[tuple[str, dict, bool]]] = {}
 
     # ---- scenes -------------------------------------------------------------------------
     def scenes(self, r: int) -> list[tuple[str, dict, bool]]:
         """Round r's (name, scene document, held out): generated scenes of every grid size at seeds
-        no other use has, and one layout of each training shape."""
+        no other use has, and one layout of each training shape (made once per round)."""
+        if r not in self._scenes:
+            self._scenes[r] = self._make_scenes(r)
+        return self._scenes[r]
+
+    def _make_scenes(self, r: int) -> list[tuple[str, dict, bool]]:
         from rad_core.generator import GeneratorConfig, generate_scene
         c = self.cfg
         out = []
@@ -358,7 +364,9 @@ class ExpertIteration:
                     keep(fut.result(), futures[fut])
         return [_read_pickle(self.demo_path(r, n)) for n, _, _ in self.scenes(r)]
 
-    def train(self, demos: list[Transition], held: list[Transition], r: int, log) -> dict:
+    def train(self, demos: list[Transition], held: list[Transition], r: int, log, after_step=None) -> dict:
+        """Round r's gradient steps on the training demonstrations; after_step(step), when given, is
+        called after each (`benchmarks/bench_expert.py` measures agreement there)."""
         c = self.cfg
         torch.manual_seed(c.seed * 1000 + r)
         rng = np.random.default_rng([c.seed, r, 1])
@@ -390,6 +398,8 @@ class ExpertIteration:
                 target.load_state_dict(self.q.state_dict())
             if step % 500 == 0 or step == c.steps:
                 log(f'  step {step}: ' + ', '.join(f'{k} {np.mean(v[-500:]):.4f}' for k, v in parts.items() if v))
+            if after_step is not None:
+                after_step(step)
         self.q.eval()
         return {**{f'{k}_before': v for k, v in before.items()},
                 **agree(),
@@ -406,9 +416,10 @@ class ExpertIteration:
         if resume and config_path.exists():
             saved = json.loads(config_path.read_text())
             mine = asdict(c)
-            if any(saved.get(k) != v for k, v in mine.items() if k != 'rounds') or set(saved) != set(mine):
+            changed = sorted(k for k in set(saved) | set(mine) if k != 'rounds' and saved.get(k) != mine.get(k))
+            if changed:
                 raise RadError(f'--resume continues {str(self.out)!r} with its own configuration ({config_path}); '
-                               f'only --rounds may change')
+                               f'only --rounds may change, not --{changed[0].replace("_", "-")}')
         config_path.write_text(json.dumps(asdict(c), indent=1))
         if done:
             path = self.model_path(done[-1]['round'])
