@@ -24,8 +24,9 @@ from rad_core.sequencing.plan import AssemblyPlan, plan_assembly
 
 
 IMPROVE_TIME_S = 2.0
-"""Anytime planning's least budget (s) for improving on the first plan (`plan_for_agent`: as long
-again as the first plan took, and at least this; 0: no improving)."""
+"""Anytime planning's least budget (s) for improving on the first plan with the search (`plan_for_agent`:
+as long again as the first plan took, and at least this; order repair has the time limit; 0: no
+improving at all)."""
 
 
 def plan_for_agent(spec: AgentSpec, scene: Scene, allocate, plan_motion, rank, reallocate=None, *,
@@ -43,10 +44,11 @@ def plan_for_agent(spec: AgentSpec, scene: Scene, allocate, plan_motion, rank, r
     its search) within the improvement budget (and the time limit), kept only where it fills more.
     The improvement budget: as long again as the first plan took, and at least `improve_time_s`;
     none when `improve_time_s` is 0.
-    Order repair (`spec.repair`) comes first within the same budget: while the best plan
-    leaves cells unfilled and the latest plan's refusals taught precedences not known before
-    (`AssemblyPlan.conflicts`), at most `REPAIR_ROUNDS` more plans with the same allocation and
-    ranking that keep to all of them (`plan.precedences_last`), each kept only where it fills more.
+    Order repair (`spec.repair`) comes first, within the time limit (its rounds bound it, not the
+    budget): while the best plan leaves cells unfilled and the latest plan's refusals taught
+    precedences not known before (`AssemblyPlan.conflicts`), at most `REPAIR_ROUNDS` more plans
+    with the same allocation and ranking that keep to all of them (`plan.precedences_last`), each
+    kept only where it fills more. The search then gets what is left of the budget.
     `AssemblyPlan.anytime` records each plan's time and coverage, and the answer's `timings` the
     stages of all of them. Otherwise one plan, the agent's own (its one entry in `anytime`:
     'scorer', or 'search' for an agent that searches)."""
@@ -85,10 +87,13 @@ def plan_for_agent(spec: AgentSpec, scene: Scene, allocate, plan_motion, rank, r
     budget = max(improve_time_s, first_s) if improve_time_s > 0 else 0.0
     improve_until = min(t0 + time_limit_s, time.perf_counter() + budget)
     if spec.repair and spec.verify:
+        # Repair is bounded by its rounds, not by the budget: each round may take the time left
+        # before the time limit (a large structure's third repair plan is often the one that fills it).
+        repair_until = t0 + time_limit_s if improve_time_s > 0 else t0
         latest, known = best, {}
         first_allocation = best.allocation
         for _ in range(REPAIR_ROUNDS):
-            left = improve_until - time.perf_counter()
+            left = repair_until - time.perf_counter()
             new = [p for p in latest.conflicts if p not in known]
             if best.predicted_coverage >= 1.0 - 1e-9 or left <= 0 or not new or best.allocation is None:
                 break
