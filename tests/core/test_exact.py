@@ -85,6 +85,22 @@ def test_a_pose_only_an_unreachable_block_can_fill_gives_a_proven_lower_coverage
         assert not renv.env.state.placed
 
 
+def test_an_incumbent_prunes_and_an_incumbent_at_the_bound_ends_the_search_at_once():
+    # Two of the three cells at best (the third cube out of reach), 13 states without an incumbent.
+    with robot_env(row_scene(2, far=True)) as renv:
+        below = exact_search(model(renv, stable_space(renv)), time_limit_s=60, incumbent=1 / 3)
+        assert below.complete and below.coverage == pytest.approx(2 / 3) and len(below.actions) == 2
+        known = exact_search(model(renv, stable_space(renv)), time_limit_s=60, incumbent=2 / 3)
+        # Nothing beats the plan known to reach 2/3: the answer is its coverage, with no line of its own.
+        assert known.complete and known.coverage == pytest.approx(2 / 3) and known.actions == []
+        with pytest.raises(RadError, match='incumbent'):
+            exact_search(model(renv, stable_space(renv)), incumbent=1.5)
+        assert not renv.env.state.placed
+    with robot_env(default_scene()) as renv:
+        at_bound = exact_search(model(renv, stable_space(renv)), time_limit_s=60, incumbent=1.0)
+        assert at_bound.complete and at_bound.coverage == 1.0 and at_bound.states == 1 and at_bound.actions == []
+
+
 def test_a_cut_search_answers_a_lower_bound_and_says_why():
     with robot_env(default_scene()) as renv:
         result = exact_search(model(renv, stable_space(renv)), time_limit_s=1e-6)

@@ -27,6 +27,12 @@ the table.
 
 Anytime: when the time or state limit cuts the search, the best line found so
 far comes back with complete=False and its coverage is a lower bound only.
+
+Incumbent: a coverage some plan is known to reach from here (e.g. an agent's plan built
+in the twin) starts the search as the best found, as a branch and bound's incumbent does:
+states that cannot beat it are pruned from the start, and one equal to the bound ends the
+search at once. The answer is then the better of the two; `actions` is empty where the
+search found nothing better than the incumbent.
 """
 
 from __future__ import annotations
@@ -50,8 +56,9 @@ OnDeadEnd = Callable[[object, AllocationActions], 'AllocationActions | None']   
 class ExactResult:
     """What `exact_search` found.
 
-    coverage: the best target coverage any searched order reached.
-    actions: the line that reaches it, from the given state (MDP actions).
+    coverage: the best target coverage any searched order reached (the incumbent where none beat it).
+    actions: the line that reaches it, from the given state (MDP actions); empty where no line
+        the search found beats the `incumbent` it was given.
     complete: the search was exhausted or reached the bound, so no order of the
         allocation's poses (and, with on_dead_end, of its re-allocations) does better;
         False when a limit cut it (then coverage is a lower bound only, and `reason`
@@ -92,7 +99,7 @@ def by_gain_then_height(env: AssemblyEnv, actions: list[Action]) -> list[Action]
 
 def exact_search(model, time_limit_s: float = 60.0, max_states: int = 100_000,
                  order: Order | None = None, on_dead_end: OnDeadEnd | None = None,
-                 bound_of: Callable[[object], float] | None = None) -> ExactResult:
+                 bound_of: Callable[[object], float] | None = None, incumbent: float = 0.0) -> ExactResult:
     """Branch and bound over the orders of the allocation's poses with the robot in
     the loop (module docstring), from the model's current state.
 
@@ -109,6 +116,7 @@ def exact_search(model, time_limit_s: float = 60.0, max_states: int = 100_000,
         searches that re-allocate (a re-allocation can cover cells the first allocation
         does not: its open poses are no bound then); e.g. `allocation.cpsat.coverage_bound`
         of the state. Default: the allocation's own, coverage plus its open target cells.
+    incumbent: a coverage known to be reachable from this state (module docstring); 0: none.
     """
     if not (isinstance(time_limit_s, (int, float)) and time_limit_s > 0):
         raise RadError(f'exact_search: time_limit_s must be a positive number of seconds, got {time_limit_s!r}')
@@ -117,12 +125,14 @@ def exact_search(model, time_limit_s: float = 60.0, max_states: int = 100_000,
     env, space = model.env, model.space
     if env.state.done:
         raise RadError('exact_search: the episode is over; give it an env between steps')
+    if not (isinstance(incumbent, (int, float)) and 0.0 <= incumbent <= 1.0):
+        raise RadError(f'exact_search: incumbent must be a coverage in [0, 1], got {incumbent!r}')
     order = order or by_gain_then_height
     start_time = time.monotonic()
     deadline = start_time + time_limit_s
     root = model.snapshot()
     bound = optimum_coverage(env, space.guide) if bound_of is None else bound_of(model)
-    best, best_line = env.coverage(), []
+    best, best_line = max(env.coverage(), float(incumbent)), []
     seen: set[frozenset] = set()
 
     def placed_key() -> frozenset:
@@ -221,7 +231,7 @@ def exact_search(model, time_limit_s: float = 60.0, max_states: int = 100_000,
 
 
 def robot_ceiling(scene, time_limit_s: float = 60.0, support: str = 'arm', reallocation=None,
-                  max_states: int = 100_000) -> ExactResult:
+                  max_states: int = 100_000, incumbent: float = 0.0) -> ExactResult:
     """What the best order of the scene's allocation, and of its re-allocations at dead ends,
     builds with the robot: the branch and bound from the empty scene in a planning twin
     (teleporting execution), children most target cells first, re-allocating where no move
@@ -230,7 +240,9 @@ def robot_ceiling(scene, time_limit_s: float = 60.0, support: str = 'arm', reall
     ceiling every agent is compared with; a cut one is a lower bound (its `reason` says so).
 
     support: the first allocation's support rule; reallocation: a `ReallocationConfig`
-    (default: its defaults with the re-solves' support `agent_plan.reallocation_support(support)`)."""
+    (default: its defaults with the re-solves' support `agent_plan.reallocation_support(support)`).
+    incumbent: a coverage the robot is known to build on the scene (an agent's plan, built in the
+    twin): the search starts from it (`exact_search`), and the answer is the better of the two."""
     from rad_core.allocation import AllocationParams, solve
     from rad_core.allocation.cpsat import coverage_bound
     from rad_core.robot_env import RobotAssemblyEnv, RobotEnvConfig
@@ -258,4 +270,4 @@ def robot_ceiling(scene, time_limit_s: float = 60.0, support: str = 'arm', reall
             return coverage_bound(placed_scene(env))
 
         return exact_search(EnvModel(renv, None, space), time_limit_s, max_states=max_states,
-                            on_dead_end=on_dead_end, bound_of=bound_of)
+                            on_dead_end=on_dead_end, bound_of=bound_of, incumbent=incumbent)
