@@ -193,15 +193,15 @@ def _support_sets(grid: Grid, ids: list[int], occupied):
     below = [int(grid.below_idx[c]) for c in ids]
     bottom = [i for i, b in enumerate(below) if b not in own]
     trivial = {i for i in bottom if grid.on_table[ids[i]] or (below[i] >= 0 and occupied[below[i]])}
-    ijk = np.ascontiguousarray(grid.ijk[ids])
-    return below, _sufficient_supports(ijk.tobytes(), ijk.dtype.str, tuple(bottom)), trivial
+    return below, _sufficient_supports(grid.ijk[ids].tobytes(), tuple(bottom)), trivial
 
 
 @lru_cache(maxsize=65536)
-def _sufficient_supports(ijk: bytes, dtype: str, bottom: tuple[int, ...]) -> tuple[tuple[int, ...], ...]:
-    """`support.sufficient_supports` of the pose with these cells (ijk, bytes of a [k, 3] array):
-    the same candidate poses come back in every re-allocation of a scene, so it is remembered."""
-    cells = np.frombuffer(ijk, dtype=np.dtype(dtype)).reshape(-1, 3)
+def _sufficient_supports(ijk: bytes, bottom: tuple[int, ...]) -> tuple[tuple[int, ...], ...]:
+    """`support.sufficient_supports` of the pose with these cells (ijk, bytes of a [k, 3] int64
+    array, as `Grid.ijk` holds them): the same candidate poses come back in every re-allocation of
+    a scene, so it is remembered."""
+    cells = np.frombuffer(ijk, dtype=np.int64).reshape(-1, 3)
     return tuple(support.sufficient_supports(cells, list(bottom)))
 
 

@@ -362,9 +362,9 @@ def pits_last(env: AssemblyEnv, guide, ranked: list) -> list:
     if not open_cells or len(ranked) < 2:
         return ranked
     tops = np.array([grid.centres[c][:, 2].max() for c in open_cells])
-    xy = np.concatenate([grid.centres[c][:, :2] for c in open_cells])
+    flat_open = np.concatenate(open_cells)                 # every open pose's cells, pose by pose
     owner = np.concatenate([np.full(len(c), k) for k, c in enumerate(open_cells)])
-    flat_open = np.concatenate(open_cells)
+    xy = grid.centres[flat_open][:, :2]
     keep, later = [], []
     for action in ranked:
         cells, _ = env.resulting_cells(action)
