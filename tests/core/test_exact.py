@@ -197,3 +197,39 @@ def test_the_robot_ceiling_searches_orders_and_reallocations_to_a_proven_answer(
     # A cube out of reach, an I2 within it: only re-allocating around the far cube fills the row.
     found = robot_ceiling(row_scene(1, far=True, extra=[i2]), time_limit_s=60)
     assert found.complete and found.coverage == 1.0
+
+
+def test_the_ceilings_twin_plans_a_failed_move_once_per_state_and_answers_it_again_as_before():
+    from rad_core.mdp import Outcome
+    from rad_core.sequencing.exact import _FailedMoves
+    with robot_env(row_scene(2, far=True)) as renv:
+        planned, plan = [], renv.plan
+
+        def counting_plan(action):
+            planned.append(action)
+            return plan(action)
+        renv.plan = counting_plan
+        memo = _FailedMoves(renv)
+        actions = list(stable_space(renv)(renv.env))
+        far = next(a for a in actions if a.block == 2)       # the cube out of reach
+        near = next(a for a in actions if a.block == 0 and a.cell != far.cell)
+        root = memo.snapshot()
+        first = memo.step(far)
+        assert first.outcome is Outcome.INVALID_GRASP and len(planned) == 1
+        memo.restore(root)
+        poses = world_poses(renv)
+        again = memo.step(far)
+        # Booked as the first time, without planning, the world left as it was.
+        assert (again.outcome, again.reason, again.reward, again.done) == (first.outcome, first.reason,
+                                                                           first.reward, first.done)
+        assert len(planned) == 1 and memo.hits == 1 and np.array_equal(world_poses(renv), poses)
+        memo.restore(root)
+        check = memo.check()(far)
+        assert (check.success, check.reason, check.failure) == (False, first.reason, 'grasp')
+        assert len(planned) == 1 and memo.hits == 2
+        # From another state (a cube placed) the move is planned again.
+        assert not memo.step(near).outcome.is_invalid
+        assert memo.step(far).outcome is Outcome.INVALID_GRASP and len(planned) == 3 and memo.hits == 2
+        memo.restore(root)
+        # What the MDP itself refuses is not remembered: the block is placed already.
+        assert memo.key(far) is not None and memo.step(near) and memo.key(near) is None

@@ -154,3 +154,97 @@ def finger_costs(scene: Scene, grid: Grid, candidates: list[Candidate]) -> list[
             best = min(best, sides)
         out.append(best)
     return out
+
+
+class HandBlocked:
+    """Which poses a top-down hand can no longer place once some cells are built.
+
+    A pose's grasp puts the hand, at one of two hand yaws, on its unit's cell
+    (`gamp.planner.plan_action`: the yaw at the placement follows from the pose's yaw and the
+    grasp, whichever block is held). `gamp.hand_cells.blocking_offsets` gives the cells around
+    that unit whose built block the hand, its open fingers or panda_link7 would enter. A pose is
+    blocked when, for each of its grasps and both hand yaws, one of those cells is built: the
+    planner then refuses it from every arm configuration. Built cells stay built, so a pose
+    blocked in a state is blocked in every state after it. Cells off the grid are never built.
+
+    finger_clearance: the planner's (`GampConfig.finger_clearance`), which sets how far the
+    fingers open."""
+
+    def __init__(self, scene: Scene, grid: Grid, finger_clearance: float):
+        from rad_core.gamp.grasps import grasp_width
+        from rad_core.gamp.hand_cells import blocking_offsets
+        from rad_core.sim import panda
+        self.grid = grid
+        self.grasps = type_grasps(scene)
+        width = grasp_width(scene.unit, scene.clearance)
+        opening = min(panda.FINGER_OPEN, width / 2 + finger_clearance)
+        self.offsets = {yaw: np.array(sorted(blocking_offsets(scene.unit, scene.clearance, opening, yaw)),
+                                      dtype=float).reshape(-1, 3) for yaw in (0, 90, 180, 270)}
+        self._cells: dict[tuple, list] = {}
+
+    def cells(self, type_name: str, yaw: int, cell_ids) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Per grasp of the pose (its cells in unit order), the grid cells that block it at each
+        of its two hand yaws."""
+        key = (type_name, int(yaw) % 360, tuple(int(c) for c in cell_ids))
+        found = self._cells.get(key)
+        if found is None:
+            grid = self.grid
+            found = []
+            for g in self.grasps.get(type_name, ()):
+                centre = grid.centres[key[2][g.unit]]
+                # The hand yaw at the placement: the fingers close along the pose's yaw plus the
+                # grasp's, the hand 90 deg off that, or the half turn of it.
+                yaws = [(key[1] + g.yaw + 90 + half) % 360 for half in (0, 180)]
+                found.append(tuple(self._on_grid(centre + self.offsets[y] * grid.unit) for y in yaws))
+            self._cells[key] = found
+        return found
+
+    def _on_grid(self, points: np.ndarray) -> np.ndarray:
+        ids = self.grid._lookup(points)
+        return ids[ids >= 0]
+
+    def blocked(self, type_name: str, yaw: int, cell_ids, occupied: np.ndarray) -> bool:
+        """Whether every grasp of the pose, at both hand yaws, has a built cell in its way."""
+        grasps = self.cells(type_name, yaw, cell_ids)
+        return bool(grasps) and all(occupied[a].any() and occupied[b].any() for a, b in grasps)
+
+    def __call__(self, cand: Candidate, occupied: np.ndarray) -> bool:
+        """`blocked` for an allocation candidate."""
+        return self.blocked(cand.placement.type, cand.placement.yaw, cand.cell_ids, occupied)
+
+
+class ArmCoverageBound:
+    """`cpsat.coverage_bound` of the states of one scene, without what the arm can never do.
+
+    A bound over what any continuation can still cover, for the robot ceiling: the most target
+    cells disjoint free poses of the blocks left can cover, where the poses and blocks are only
+    those the arm might still build. Left out, as `arm_filter` leaves them out whatever the order:
+    types with no top-down grasp, blocks on the table it cannot pick where they lie (blocks are
+    not moved there), poses whose every grasp is out of reach; and, of the state, poses the hand
+    can no longer place (`HandBlocked`). Each is conservative, so it stays a bound; it is tighter
+    than `coverage_bound` where built cells hem poses in.
+
+    Call it with an env (`AssemblyEnv`) of the scene between steps."""
+
+    def __init__(self, scene: Scene, grid: Grid, finger_clearance: float, time_limit_s: float = 2.0):
+        from rad_core.allocation.placements import enumerate_candidates
+        everything = enumerate_candidates(scene, grid, positive_only=False)
+        self.candidates, _, self.report = arm_filter(scene, grid, [c for c in everything
+                                                                   if grid.is_target[list(c.cell_ids)].any()])
+        self.unpickable = {b for b, block in enumerate(scene.blocks) if block.id in self.report.blocks}
+        self.hand = HandBlocked(scene, grid, finger_clearance)
+        self.grid, self.scene, self.time_limit_s = grid, scene, time_limit_s
+        self.hand_blocked = 0     # poses the last call left out as hand-blocked
+
+    def __call__(self, env) -> float:
+        from rad_core.allocation.cpsat import max_coverage
+        occupied = env.state.occupancy >= 0
+        counts: dict[str, int] = {}
+        for b in env.unplaced():
+            if b not in self.unpickable:
+                name = self.scene.blocks[b].type
+                counts[name] = counts.get(name, 0) + 1
+        free = [c for c in self.candidates if not occupied[list(c.cell_ids)].any()]
+        kept = [c for c in free if not self.hand(c, occupied)]
+        self.hand_blocked = len(free) - len(kept)
+        return max_coverage(self.grid, occupied, kept, counts, self.time_limit_s)

@@ -321,19 +321,25 @@ def coverage_bound(scene: Scene, time_limit_s: float = 2.0, occupied=None, count
         for cells in blocks_on_grid(scene, grid).values():
             occupied[cells] = True
     counts = counts if counts is not None else available_counts(scene, grid)
+    candidates = [c for c in enumerate_candidates(scene, grid, positive_only=False)
+                  if not occupied[list(c.cell_ids)].any()]
+    return max_coverage(grid, occupied, candidates, counts, time_limit_s)
+
+
+def max_coverage(grid: Grid, occupied, candidates: list[Candidate], counts: dict[str, int],
+                 time_limit_s: float = 2.0) -> float:
+    """What `coverage_bound` proves, over given free candidate poses and blocks per type: the
+    cells filled (occupied) plus the most target cells disjoint poses cover, over all target cells."""
     total = int(grid.is_target.sum())
     filled = int((grid.is_target & occupied).sum())
-    candidates = []
-    for c in enumerate_candidates(scene, grid, positive_only=False):
-        ids = list(c.cell_ids)
-        if occupied[ids].any():
-            continue
-        k = int(grid.is_target[ids].sum())
+    scored = []
+    for c in candidates:
+        k = int(grid.is_target[list(c.cell_ids)].sum())
         if k:
-            candidates.append(Candidate(c.placement, c.cell_ids, k))
-    if not candidates or total == 0:
+            scored.append(Candidate(c.placement, c.cell_ids, k))
+    if not scored or total == 0:
         return filled / total if total else 1.0
-    model, _, _ = build_model(candidates, counts)
+    model, _, _ = build_model(scored, counts)
     solver = cp_model.CpSolver()
     solver.parameters.max_time_in_seconds = float(time_limit_s)
     solver.parameters.num_workers = 1

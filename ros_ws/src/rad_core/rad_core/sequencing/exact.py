@@ -43,7 +43,7 @@ from typing import Callable
 
 from rad_core.errors import RadError
 from rad_core.coverage import optimum_coverage
-from rad_core.mdp import Action, AssemblyEnv
+from rad_core.mdp import Action, AssemblyEnv, Outcome
 from rad_core.sequencing.actions import AllocationActions
 
 _EPS = 1e-9   # coverages are ratios of cell counts computed two ways
@@ -230,24 +230,121 @@ def exact_search(model, time_limit_s: float = 60.0, max_states: int = 100_000,
                        time.monotonic() - start_time, reason)
 
 
+class _FailedMoves:
+    """The planning twin of one `robot_ceiling` search, remembering why each move failed from
+    each state, so that a move is planned from a state once.
+
+    The branch and bound expands each set of placements once (`seen`) and steps every move from
+    a restore of that one world. At a dead end the same moves are stepped again from it: by the
+    re-allocation's checks of the open poses, and by each new space, which keeps most poses. A
+    move met again there meets the same world and gets the same verdict, so it is booked as the
+    first time (`AssemblyEnv.fail`, the world left as it is) instead of being planned again. A
+    move is (block, cells, yaw), as the search dedupes them; only failures that reached GAMP or
+    physics are remembered (the MDP's own checks are cheaper than a look-up). Stepping a world
+    Bullet has probed fewer times leaves settled poses different by at most micrometres
+    (docs/results/planning_step.md), far inside the verdicts' millimetre tolerances.
+
+    hand: an `allocation.arm.HandBlocked` of the scene: a move whose every grasp puts the hand
+    into a built cell is refused without planning, as GAMP would refuse it at the placement. It
+    is booked as a placement failure: its pick is not planned, so where the block could not have
+    been picked either, the re-allocation learns that at another pose."""
+
+    def __init__(self, renv, hand=None):
+        self.renv, self.env = renv, renv.env
+        self.hand = hand
+        self.failed: dict[tuple, tuple] = {}    # (placements, block, cells, yaw) -> (outcome, reason, plan)
+        self.last_plan = None
+        self.hits = self.hand_refused = 0
+
+    def key(self, action: Action) -> tuple | None:
+        """The move from this state, as remembered; None where the MDP's own checks decide it."""
+        env = self.env
+        if action.is_terminate or env.state.done or env.evaluate(action)[0] is not None:
+            return None
+        cells, yaw = env.resulting_cells(action)
+        placed = frozenset((b, tuple(sorted(int(c) for c in c_))) for b, (c_, _) in env.state.placed.items())
+        return placed, action.block, tuple(sorted(int(c) for c in cells)), yaw
+
+    def step(self, action: Action):
+        key = self.key(action)
+        known = self.failed.get(key) if key is not None else None
+        if known is not None:
+            self.hits += 1
+            outcome, reason, self.last_plan = known
+            return self.env.fail(outcome, reason, self.env.resulting_cells(action)[0])
+        if key is not None and self._refused_by_hand(action, key):
+            outcome, reason, self.last_plan = self.failed[key]
+            return self.env.fail(outcome, reason, self.env.resulting_cells(action)[0])
+        self.renv.last_plan = None
+        result = self.renv.step(action)
+        self.last_plan = self.renv.last_plan
+        if key is not None and result.outcome.is_invalid:
+            self.failed[key] = (result.outcome, result.reason, self.last_plan)
+        return result
+
+    def _refused_by_hand(self, action: Action, key: tuple) -> bool:
+        """Whether the hand test refuses the move (remembered as a failure then): every grasp
+        of its pose puts the hand into a built cell, which GAMP refuses whatever the arm does
+        (`allocation.arm.HandBlocked`), so it is not planned."""
+        if self.hand is None:
+            return False
+        env = self.env
+        cells, yaw = env.resulting_cells(action)
+        if not self.hand.blocked(env.scene.blocks[action.block].type, yaw, cells, env.state.occupancy >= 0):
+            return False
+        self.hand_refused += 1
+        self.failed[key] = (Outcome.INVALID_PLACEMENT, 'placement: at the placement: every grasp puts the hand, '
+                            'its fingers or link7 into a built cell (allocation.arm.HandBlocked)', None)
+        return True
+
+    def snapshot(self):
+        return self.renv.snapshot()
+
+    def restore(self, snapshot) -> None:
+        self.renv.restore(snapshot)
+        self.last_plan = self.renv.last_plan
+
+    def check(self):
+        """The re-allocation's check (`deciders.simulated_check` through this memo): a remembered
+        failure answers at once, without a snapshot of the world."""
+        from rad_core.sequencing.deciders import Check, simulated_check
+        stepped = simulated_check(self)
+
+        def check(action) -> Check:
+            key = self.key(action)
+            known = self.failed.get(key) if key is not None else None
+            if known is None:
+                if key is None or not self._refused_by_hand(action, key):
+                    return stepped(action)
+                known = self.failed[key]
+            else:
+                self.hits += 1
+            outcome, reason, plan = known
+            return Check(False, reason, plan, 'grasp' if outcome is Outcome.INVALID_GRASP else '')
+        return check
+
+
 def robot_ceiling(scene, time_limit_s: float = 60.0, support: str = 'arm', reallocation=None,
                   max_states: int = 100_000, incumbent: float = 0.0) -> ExactResult:
     """What the best order of the scene's allocation, and of its re-allocations at dead ends,
     builds with the robot: the branch and bound from the empty scene in a planning twin
     (teleporting execution), children most target cells first, re-allocating where no move
     succeeds (the no-goods found there excluded) and bounded by what the blocks left could
-    cover at most (`allocation.cpsat.coverage_bound`). A complete answer is the robot-feasible
-    ceiling every agent is compared with; a cut one is a lower bound (its `reason` says so).
+    cover at most with poses the arm might still build (`allocation.arm.ArmCoverageBound`:
+    `allocation.cpsat.coverage_bound` without blocks it cannot pick, poses out of reach and
+    poses the hand can no longer enter between built cells). Each move is planned once per state,
+    and moves the hand test refuses are not planned (`_FailedMoves`). A complete answer is the
+    robot-feasible ceiling every agent is compared with; a cut one is a lower bound (its
+    `reason` says so).
 
     support: the first allocation's support rule; reallocation: a `ReallocationConfig`
     (default: its defaults with the re-solves' support `agent_plan.reallocation_support(support)`).
     incumbent: a coverage the robot is known to build on the scene (an agent's plan, built in the
     twin): the search starts from it (`exact_search`), and the answer is the better of the two."""
     from rad_core.allocation import AllocationParams, solve
-    from rad_core.allocation.cpsat import coverage_bound
+    from rad_core.allocation.arm import ArmCoverageBound
     from rad_core.robot_env import RobotAssemblyEnv, RobotEnvConfig
-    from rad_core.sequencing.deciders import simulated_check
-    from rad_core.sequencing.reallocation import ReallocationConfig, Reallocator, placed_scene
+    from rad_core.sequencing.reallocation import ReallocationConfig, Reallocator
     from rad_core.sequencing.search import EnvModel
     from rad_core.sequencing.agent_plan import reallocation_support
     config = reallocation or ReallocationConfig(params=AllocationParams(support=reallocation_support(support)))
@@ -255,11 +352,14 @@ def robot_ceiling(scene, time_limit_s: float = 60.0, support: str = 'arm', reall
         renv.reset()
         env = renv.env
         space = AllocationActions(env, solve(scene, AllocationParams(support=support)).placements)
+        arm_bound = ArmCoverageBound(scene, env.grid, renv.config.gamp.finger_clearance)
+        memo = _FailedMoves(renv, arm_bound.hand)
+        check = memo.check()
 
         def on_dead_end(_model, current):
             # A copy of the line's space (its parent keeps its own), with the no-goods found on the line.
             sub = AllocationActions(env, current.guide.placements)
-            reallocator = Reallocator(sub, simulated_check(renv), config)
+            reallocator = Reallocator(sub, check, config)
             reallocator.no_goods = dict(getattr(current, 'no_goods', {}))
             reallocator.blocked = dict(getattr(current, 'blocked', {}))
             event = reallocator.stalled(env, 'exact search: dead end')
@@ -267,7 +367,7 @@ def robot_ceiling(scene, time_limit_s: float = 60.0, support: str = 'arm', reall
             return sub if event.changed else None
 
         def bound_of(_model) -> float:   # re-allocating: what any allocation of the free cells could cover
-            return coverage_bound(placed_scene(env))
+            return arm_bound(env)
 
-        return exact_search(EnvModel(renv, None, space), time_limit_s, max_states=max_states,
+        return exact_search(EnvModel(memo, None, space), time_limit_s, max_states=max_states,
                             on_dead_end=on_dead_end, bound_of=bound_of, incumbent=incumbent)

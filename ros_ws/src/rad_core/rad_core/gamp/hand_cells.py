@@ -1,0 +1,90 @@
+"""The cells a top-down hand fills when it holds a unit: a built one there refuses every plan.
+
+At a placement the planner puts the grasp target on the held unit's centre, the hand pointing
+straight down at one of two hand yaws per grasp, the fingers open (`planner.plan_action`). The
+hand, the fingers and panda_link7 are rigid with the grasp target there (joint 7 turns them
+together; the links above depend on the IK solution), so whether they run into a neighbouring
+cell's block does not depend on the arm, the order or the start: only on the cell's offset from
+the held unit, the hand yaw, the unit and the finger opening.
+
+`blocking_offsets` measures that once per (unit, clearance, opening, hand yaw), in a Bullet world
+of its own: a unit cube put at each offset around the grasp target, turned into the hand's frame. An
+offset blocks when the cube sinks more than `DEPTH` into one of those links. The planner refuses
+a contact closer than its margin (2 mm); `DEPTH` asks for more, so that a block resting a few
+millimetres off its cell, or an IK answer within its 2 mm tolerance, cannot turn a blocking
+offset into a free one. The cube is the smallest box a block's unit can have (its side faces set
+back by the scene's clearance, no overlap). So a blocking offset is one the planner always
+refuses; others may be refused too (the links above, the descent, the carried block), which
+this test leaves to the planner.
+
+Used by the robot ceiling's bound (`allocation.arm.hand_blocked`): a pose all of whose grasps,
+at either hand yaw, have a built cell at a blocking offset can never be placed once those cells
+are built, and cells are never unbuilt.
+"""
+
+from __future__ import annotations
+
+import math
+from functools import lru_cache
+
+import numpy as np
+
+from rad_core.sim import panda
+
+DEPTH = 0.004
+"""How far (m) a neighbour's cube must sink into the hand for the offset to count as blocking."""
+
+REACH = (4, 4, 4)
+"""Offsets measured: |di|, |dj| up to 4 units (the palm is 0.21 m across), dk from -1 to 4."""
+
+_RIGID = ('panda_link7', 'panda_link8', 'panda_hand', 'panda_leftfinger', 'panda_rightfinger')
+
+
+@lru_cache(maxsize=64)
+def blocking_offsets(unit: float, clearance: float, finger_open: float, hand_yaw_deg: int) -> frozenset:
+    """The integer cell offsets (di, dj, dk) from a held unit whose built cube the hand, its fingers
+    open `finger_open` each, or panda_link7 enters by more than `DEPTH`, the hand pointing down at
+    `hand_yaw_deg` (a multiple of 90) with its grasp target on the held unit's centre."""
+    import pybullet as p
+    from rad_core.errors import RadError
+    from rad_core.transforms import matrix_from_quaternion, quaternion_from_matrix
+    if hand_yaw_deg % 90:
+        raise RadError(f'blocking_offsets: hand yaw must be a multiple of 90 deg, got {hand_yaw_deg}')
+    cid = p.connect(p.DIRECT)
+    try:
+        robot = panda.load_panda(cid)
+        index = {p.getJointInfo(robot, i, physicsClientId=cid)[12].decode(): i
+                 for i in range(p.getNumJoints(robot, physicsClientId=cid))}
+        movable = [i for i in range(p.getNumJoints(robot, physicsClientId=cid))
+                   if p.getJointInfo(robot, i, physicsClientId=cid)[2] != p.JOINT_FIXED]
+        q = list(panda.HOME)
+        q[7:] = [finger_open, finger_open]
+        for j, v in zip(movable, q):
+            p.resetJointState(robot, j, v, physicsClientId=cid)
+        # The links are rigid with the grasp target: measure them wherever it is, with the cubes
+        # put where they would be, relative to it, for a hand exactly at the asked yaw.
+        got = p.getLinkState(robot, index[panda.GRASP_TARGET_LINK], computeForwardKinematics=1, physicsClientId=cid)
+        at, hand = np.asarray(got[4]), matrix_from_quaternion(np.asarray(got[5]))
+        asked = matrix_from_quaternion(panda.top_down_quaternion(math.radians(hand_yaw_deg)))
+        turn = hand @ asked.T                  # world offsets for the asked hand -> this hand's
+        side = unit / 2 - 0.002 * unit - clearance * unit / 2
+        box = p.createCollisionShape(p.GEOM_BOX, halfExtents=[side, side, unit / 2], physicsClientId=cid)
+        cube = p.createMultiBody(0.0, box, -1, at.tolist(), list(quaternion_from_matrix(turn)),
+                                 physicsClientId=cid)
+        links = [index[name] for name in _RIGID]
+        out = set()
+        ri, rj, rk = REACH
+        for di in range(-ri, ri + 1):
+            for dj in range(-rj, rj + 1):
+                for dk in range(-1, rk + 1):
+                    if (di, dj, dk) == (0, 0, 0):
+                        continue
+                    centre = at + turn @ (np.array([di, dj, dk], dtype=float) * unit)
+                    p.resetBasePositionAndOrientation(cube, centre.tolist(), list(quaternion_from_matrix(turn)),
+                                                      physicsClientId=cid)
+                    if any(pt[8] < -DEPTH for link in links
+                           for pt in p.getClosestPoints(cube, robot, 0.0, linkIndexB=link, physicsClientId=cid)):
+                        out.add((di, dj, dk))
+        return frozenset(out)
+    finally:
+        p.disconnect(cid)
