@@ -504,3 +504,37 @@ def test_the_body_a_reason_names_does_not_depend_on_what_the_world_loaded_before
         used.load_scene(scene)
         assert sorted(used.blocks.values()) != list(used.blocks.values())       # ids out of scene order
         assert plan_action(used, 'free', dest, 0).reason == want
+
+
+def test_a_pick_met_again_in_the_same_world_is_answered_from_memory_and_plans_the_same(monkeypatch):
+    from rad_core.gamp import planner
+    picked = []
+    plan_pick = planner._plan_pick
+
+    def counting(world, block_id, *args):
+        picked.append(block_id)
+        return plan_pick(world, block_id, *args)
+    monkeypatch.setattr(planner, '_plan_pick', counting)
+    c = (0.5, -0.2, U / 2)
+    around = [(c[0] + dx * U, c[1] + dy * U, U / 2) for dx, dy in ((1, 0), (-1, 0), (0, 1), (0, -1))]
+    scene = _scene([('free', 'cube', (0.45, -0.35, U / 2)), ('buried', 'cube', c)]
+                   + [(f'n{i}', 'cube', p) for i, p in enumerate(around)])
+    here, there = [0.45, 0.2, U / 2], [0.4, 0.25, U / 2]
+    with World(scene) as fresh:
+        alone = {b: plan_action(fresh, b, there, 90) for b in ('free', 'buried')}
+    with World(scene) as world:
+        for block in ('free', 'buried'):
+            plan_action(world, block, here, 0)            # the same picks, another placement
+            n = len(picked)
+            again = plan_action(world, block, there, 90)
+            assert len(picked) == n                      # no pick planned: all from memory
+            assert (again.success, again.failure, again.reason) == (alone[block].success, alone[block].failure,
+                                                                   alone[block].reason)
+            if again.success:
+                assert again.motion.to_dict() == alone[block].motion.to_dict()
+        assert alone['free'].success and alone['buried'].failure == 'grasp'
+        # Another world (the neighbours along x moved away): planned anew, and now it can be picked.
+        world.set_block_pose('n0', (0.7, -0.4, U / 2), _yaw_quat(0))
+        world.set_block_pose('n1', (0.6, -0.45, U / 2), _yaw_quat(0))
+        n = len(picked)
+        assert plan_action(world, 'buried', there, 90).success and len(picked) > n

@@ -137,6 +137,8 @@ class AssemblyEnv:
         self.grid = Grid(scene)
         self.types = [scene.block_types[b.type] for b in scene.blocks]
         self.yaws = [b.yaw for b in scene.blocks]
+        # (block type, yaw, unit, cell) -> the cells `resulting_cells` finds (read-only): pure geometry.
+        self._cells_of: dict[tuple, np.ndarray | None] = {}
         self.stability = stability if stability is not None else _default_stability(config.stability)
         self._stability_cache: dict = {}
         occupancy = np.full(self.grid.num_cells, -1, dtype=np.int64)
@@ -221,10 +223,15 @@ class AssemblyEnv:
         """
         b = action.block
         yaw = (self._current_yaw(b) + 90 * action.rotation) % 360
-        offsets = self.types[b].rotated(yaw)
-        rel = offsets - offsets[action.unit]
-        points = self.grid.centres[action.cell] + self.scene.unit * rel
-        return self.grid.cells_at(points), yaw
+        key = (self.scene.blocks[b].type, yaw, action.unit, action.cell)
+        if key not in self._cells_of:
+            offsets = self.types[b].rotated(yaw)
+            rel = offsets - offsets[action.unit]
+            cells = self.grid.cells_at(self.grid.centres[action.cell] + self.scene.unit * rel)
+            if cells is not None:
+                cells.flags.writeable = False
+            self._cells_of[key] = cells
+        return self._cells_of[key], yaw
 
     def _current_yaw(self, b: int) -> int:
         return self.state.placed[b][1] if b in self.state.placed else self.yaws[b]

@@ -101,7 +101,7 @@ def make_collision_fn(world: World, exclude: Iterable[str] = (), attached: Attac
     against every other block and the table.
 
     remember: answer a configuration probed before in the same world state (every block's
-    and obstacle's pose, the table, exclude, attachment, margins: `_world_key` when fn is
+    and obstacle's pose, the table, exclude, attachment, margins: `world_key` when fn is
     made) from memory (`_MEMO`), after posing the robot and the held block at q as the probe
     does. Only for callers that move nothing but the robot and the held block between
     probes of one fn (the planner: each fn is made where the world stays put).
@@ -109,7 +109,7 @@ def make_collision_fn(world: World, exclude: Iterable[str] = (), attached: Attac
     probe = _make_probe(world, exclude, attached, config)
     if not remember:
         return probe
-    memo = _memo_for(world, _world_key(world, exclude, attached, config))
+    memo = _memo_for(world, world_key(world, exclude, attached, config))
 
     def collision(q: np.ndarray) -> str:
         q = np.asarray(q, dtype=float)
@@ -141,7 +141,7 @@ def _memo_for(world: World, key: tuple) -> dict:
     return states.setdefault(key, {})
 
 
-def _world_key(world: World, exclude, attached: Attachment | None, config: CollisionConfig) -> tuple:
+def world_key(world: World, exclude, attached: Attachment | None, config: CollisionConfig) -> tuple:
     """What a probe's answer depends on besides q: the bodies (ids, names, types, unit), their
     poses as Bullet holds them (the held block's comes from q and the attachment), the table, the
     excluded blocks, the attachment and the margins."""

@@ -30,13 +30,14 @@ from __future__ import annotations
 
 import math
 import time
+import weakref
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from rad_core.errors import RadError
 from rad_core.gamp.collision import (CollisionConfig, attachment_from_world, check_path,
-                                     make_collision_fn)
+                                     make_collision_fn, world_key)
 from rad_core.gamp.grasps import Grasp, block_grasps, grasp_width, no_grasp_reason
 from rad_core.gamp.ik import IkConfig, hand_yaw_options, solve_top_down
 from rad_core.gamp.trajectory import TimingConfig, plan_motion
@@ -181,6 +182,7 @@ def plan_action(world: World, block_id: str, position, yaw_deg: float, start=Non
         turn = math.radians(yaw_deg) - block_yaw
         final_rot = yaw_matrix(yaw_deg)
         tops = _tops(world, exclude=block_id)
+        bodies = world_key(world, (), None, config.collision)
         for grasp in grasps:
             offset = np.asarray(btype.offsets[grasp.unit], dtype=float) * unit
             grasp_point = block_pos + rot @ offset
@@ -194,8 +196,8 @@ def plan_action(world: World, block_id: str, position, yaw_deg: float, start=Non
             pick_reason = place_reason = ''
             for hand_yaw in hand_yaw_options(grasp_point, closing):
                 try:
-                    pick = _plan_pick(world, block_id, grasp_point, hand_yaw, start, open_f, closed_f,
-                                      rise_pick, config, clock, rng)
+                    pick = _remembered_pick(bodies, world, block_id, grasp_point, hand_yaw, start, open_f,
+                                            closed_f, rise_pick, config, clock, rng)
                 except _Blocked as e:
                     pick_reason = pick_reason or str(e)
                     # A lift check that failed carried the block with the hand: put it back, so the
@@ -225,6 +227,44 @@ def plan_action(world: World, block_id: str, position, yaw_deg: float, start=Non
     reason = (f'placement: {n_ok} of {len(grasps)} grasps feasible, none places the block: '
               + '; '.join(place_failures))
     return _finish(result, 'placement', reason, clock, t0)
+
+
+# World -> {pick key -> (pick or the reason it was blocked, generator state after)}: picks planned
+# before. A pick reads the world's bodies and their poses (the held block's included: it lies where
+# it lies, put back after every try), the start, the grasp, the fingers, the rise, the config and the
+# generator's state (IK's random restarts), and not the robot's joints as a try leaves them (IK
+# sets its seeds, every probe its q). One plan tries several picks; the moves of one state from
+# one search pick the same block with the same grasps again, only their placements differ. So
+# a pick met again is answered from memory, with the generator put where the pick left it, and the
+# carried-block check made anew for this plan's clock. Bounded: cleared when it grows large.
+_PICK_MEMO: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+_PICK_MEMO_MAX = 2048
+
+
+def _remembered_pick(bodies, world, block_id, grasp_point, hand_yaw, start, open_f, closed_f, rise, config,
+                     clock, rng) -> dict:
+    memo = _PICK_MEMO.setdefault(world, {})
+    if len(memo) >= _PICK_MEMO_MAX:
+        memo.clear()
+    key = (bodies, block_id, np.asarray(grasp_point, dtype=float).tobytes(), float(hand_yaw), start.tobytes(),
+           float(open_f), float(closed_f), float(rise), config, repr(rng.bit_generator.state))
+    found = memo.get(key)
+    if found is not None:
+        answer, rng.bit_generator.state = found
+        if isinstance(answer, str):
+            raise _Blocked(answer)
+        attachment = answer['attachment']
+        carry = clock.timed(make_collision_fn(world, attached=attachment, config=config.collision, remember=True))
+        return {'waypoints': [q.copy() for q in answer['waypoints']], 'attachment': attachment, 'carry': carry,
+                'top': answer['top'].copy()}
+    try:
+        pick = _plan_pick(world, block_id, grasp_point, hand_yaw, start, open_f, closed_f, rise, config, clock, rng)
+    except _Blocked as e:
+        memo[key] = (str(e), rng.bit_generator.state)
+        raise
+    memo[key] = ({'waypoints': [q.copy() for q in pick['waypoints']], 'attachment': pick['attachment'],
+                  'top': pick['top'].copy()}, rng.bit_generator.state)
+    return pick
 
 
 def _plan_pick(world, block_id, grasp_point, hand_yaw, start, open_f, closed_f, rise, config, clock,
