@@ -86,6 +86,11 @@ class _AtBound(Exception):
     """The best coverage found equals the root's bound: nothing can beat it."""
 
 
+def _placements(env: AssemblyEnv) -> frozenset:
+    """A state of the search: which block fills which cells (the yaw follows, but for symmetric blocks)."""
+    return frozenset((b, tuple(sorted(int(c) for c in cells))) for b, (cells, _) in env.state.placed.items())
+
+
 def by_gain_then_height(env: AssemblyEnv, actions: list[Action]) -> list[Action]:
     """The default child order: most target cells filled first, then the lowest
     cells first (bottom-up), then the lowest cell ids (deterministic)."""
@@ -135,8 +140,6 @@ def exact_search(model, time_limit_s: float = 60.0, max_states: int = 100_000,
     best, best_line = max(env.coverage(), float(incumbent)), []
     seen: set[frozenset] = set()
 
-    def placed_key() -> frozenset:
-        return frozenset((b, tuple(sorted(int(c) for c in cells))) for b, (cells, _) in env.state.placed.items())
 
     def moves(space) -> list[tuple[Action, frozenset]]:
         """The distinct moves (deduped as first_feasible dedupes a ranking), in order,
@@ -150,7 +153,7 @@ def exact_search(model, time_limit_s: float = 60.0, max_states: int = 100_000,
         if len(ordered) != len(actions) or set(ordered) != set(actions):
             raise RadError('exact_search: order() must return the actions it was given, reordered '
                            f'(got {len(ordered)} for {len(actions)})')
-        key = placed_key()
+        key = _placements(env)
         child = {a: key | {(a.block, k[1])} for k, a in distinct.items()}
         return [(a, child[a]) for a in ordered]
 
@@ -185,7 +188,7 @@ def exact_search(model, time_limit_s: float = 60.0, max_states: int = 100_000,
 
     def search(space, line: list[Action]) -> None:
         nonlocal best, best_line
-        key = placed_key()
+        key = _placements(env)
         if key in seen:
             return
         if len(seen) >= max_states:
@@ -262,18 +265,24 @@ class _FailedMoves:
         if action.is_terminate or env.state.done or env.evaluate(action)[0] is not None:
             return None
         cells, yaw = env.resulting_cells(action)
-        placed = frozenset((b, tuple(sorted(int(c) for c in c_))) for b, (c_, _) in env.state.placed.items())
-        return placed, action.block, tuple(sorted(int(c) for c in cells)), yaw
+        return _placements(env), action.block, tuple(sorted(int(c) for c in cells)), yaw
+
+    def _known(self, action: Action, key: tuple | None) -> tuple | None:
+        """(outcome, reason, plan) of the move's remembered failure, or of the hand test's
+        refusal (remembered then); None: it is to be planned."""
+        if key is None:
+            return None
+        known = self.failed.get(key)
+        if known is not None:
+            self.hits += 1
+            return known
+        return self.failed[key] if self._refused_by_hand(action, key) else None
 
     def step(self, action: Action):
         key = self.key(action)
-        known = self.failed.get(key) if key is not None else None
+        known = self._known(action, key)
         if known is not None:
-            self.hits += 1
             outcome, reason, self.last_plan = known
-            return self.env.fail(outcome, reason, self.env.resulting_cells(action)[0])
-        if key is not None and self._refused_by_hand(action, key):
-            outcome, reason, self.last_plan = self.failed[key]
             return self.env.fail(outcome, reason, self.env.resulting_cells(action)[0])
         self.renv.last_plan = None
         result = self.renv.step(action)
@@ -311,14 +320,9 @@ class _FailedMoves:
         stepped = simulated_check(self)
 
         def check(action) -> Check:
-            key = self.key(action)
-            known = self.failed.get(key) if key is not None else None
+            known = self._known(action, self.key(action))
             if known is None:
-                if key is None or not self._refused_by_hand(action, key):
-                    return stepped(action)
-                known = self.failed[key]
-            else:
-                self.hits += 1
+                return stepped(action)
             outcome, reason, plan = known
             return Check(False, reason, plan, 'grasp' if outcome is Outcome.INVALID_GRASP else '')
         return check
