@@ -17,7 +17,7 @@ back by the scene's clearance, no overlap). So a blocking offset is one the plan
 refuses; others may be refused too (the links above, the descent, the carried block), which
 this test leaves to the planner.
 
-Used by the robot ceiling's bound (`allocation.arm.hand_blocked`): a pose all of whose grasps,
+Used by the robot ceiling's bound (`allocation.arm.HandBlocked`): a pose all of whose grasps,
 at either hand yaw, have a built cell at a blocking offset can never be placed once those cells
 are built, and cells are never unbuilt.
 """
@@ -47,6 +47,7 @@ def blocking_offsets(unit: float, clearance: float, finger_open: float, hand_yaw
     `hand_yaw_deg` (a multiple of 90) with its grasp target on the held unit's centre."""
     import pybullet as p
     from rad_core.errors import RadError
+    from rad_core.physics import PhysicsConfig
     from rad_core.transforms import matrix_from_quaternion, quaternion_from_matrix
     if hand_yaw_deg % 90:
         raise RadError(f'blocking_offsets: hand yaw must be a multiple of 90 deg, got {hand_yaw_deg}')
@@ -67,10 +68,12 @@ def blocking_offsets(unit: float, clearance: float, finger_open: float, hand_yaw
         at, hand = np.asarray(got[4]), matrix_from_quaternion(np.asarray(got[5]))
         asked = matrix_from_quaternion(panda.top_down_quaternion(math.radians(hand_yaw_deg)))
         turn = hand @ asked.T                  # world offsets for the asked hand -> this hand's
-        side = unit / 2 - 0.002 * unit - clearance * unit / 2
+        # A block's unit box as `physics.block_shape` makes it, its sides set back by the scene's
+        # clearance, without its overlap: the smallest it can be.
+        side = unit / 2 - PhysicsConfig().side_gap * unit - clearance * unit / 2
         box = p.createCollisionShape(p.GEOM_BOX, halfExtents=[side, side, unit / 2], physicsClientId=cid)
-        cube = p.createMultiBody(0.0, box, -1, at.tolist(), list(quaternion_from_matrix(turn)),
-                                 physicsClientId=cid)
+        turned = list(quaternion_from_matrix(turn))
+        cube = p.createMultiBody(0.0, box, -1, at.tolist(), turned, physicsClientId=cid)
         links = [index[name] for name in _RIGID]
         out = set()
         ri, rj, rk = REACH
@@ -80,8 +83,7 @@ def blocking_offsets(unit: float, clearance: float, finger_open: float, hand_yaw
                     if (di, dj, dk) == (0, 0, 0):
                         continue
                     centre = at + turn @ (np.array([di, dj, dk], dtype=float) * unit)
-                    p.resetBasePositionAndOrientation(cube, centre.tolist(), list(quaternion_from_matrix(turn)),
-                                                      physicsClientId=cid)
+                    p.resetBasePositionAndOrientation(cube, centre.tolist(), turned, physicsClientId=cid)
                     if any(pt[8] < -DEPTH for link in links
                            for pt in p.getClosestPoints(cube, robot, 0.0, linkIndexB=link, physicsClientId=cid)):
                         out.add((di, dj, dk))
