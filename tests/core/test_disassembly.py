@@ -17,7 +17,7 @@ from rad_core.sequencing.disassembly import (TableConfig, local_place_planner, p
 from rad_core.sequencing.execute import ExecuteConfig, execute_assembly
 from rad_core.sequencing.plan import MotionPlan, local_motion_planner, moved, plan_assembly
 from rad_core.coverage import measured_coverage
-from rad_core.sim.twin import Twin
+from rad_core.sim.twin import Twin, twin_world_config
 from rad_core.sim.world import World
 
 HEAP = generate_scene(GeneratorConfig(grid=3), 1)    # 4 blocks; the target takes 3, one stacked on another
@@ -116,7 +116,7 @@ def test_a_block_that_can_go_straight_home_goes_before_one_that_cannot(planner, 
 
 def test_builds_takes_apart_and_builds_again_with_nothing_touched(planner, built):
     """One cycle on the twin: build, take apart (every step verified), build again from what is seen."""
-    with World(HEAP) as world:
+    with World(HEAP, twin_world_config()) as world:
         twin = Twin(world)
         plant = Plant(twin)
 
@@ -151,7 +151,7 @@ def test_builds_takes_apart_and_builds_again_with_nothing_touched(planner, built
 
 def test_a_block_pushed_aside_mid_take_apart_is_replanned_from_what_is_seen(planner, built):
     scene, order = built
-    with World(scene) as world:
+    with World(scene, twin_world_config()) as world:
         twin = Twin(world)
         plant = Plant(twin)
         move_arm = plant.move_arm
@@ -175,7 +175,7 @@ def test_a_block_pushed_aside_mid_take_apart_is_replanned_from_what_is_seen(plan
 
 def test_a_block_missing_from_a_frame_is_looked_for_again_and_one_never_seen_is_lost(planner):
     """Nothing to take apart (the heap itself): no motion; the end's registration decides what is lost."""
-    with World(HEAP) as world:
+    with World(HEAP, twin_world_config()) as world:
         twin = Twin(world)
         plant = Plant(twin)
         frames = []

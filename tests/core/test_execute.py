@@ -17,7 +17,7 @@ from rad_core.sequencing import HeurPolicy
 from rad_core.sequencing.execute import ExecuteConfig, execute_assembly
 from rad_core.sequencing.plan import local_motion_planner, plan_assembly
 from rad_core.sim.panda import HOME
-from rad_core.sim.twin import Tolerances, Twin
+from rad_core.sim.twin import Tolerances, Twin, twin_world_config
 from rad_core.trajectory import PATH_TOLERANCE_VIOLATED, TrajectoryAborted
 from rad_core.sim.world import World
 
@@ -33,7 +33,9 @@ def motion():
 
 @pytest.fixture
 def twin():
-    with World(SCENE) as world:
+    # The twin as the twin node builds it: its blocks have a real block's play between neighbours
+    # (sim.twin.BLOCK_PLAY), not the planning worlds' hairline.
+    with World(SCENE, twin_world_config()) as world:
         yield Twin(world)
 
 

@@ -23,7 +23,7 @@ from rad_core.sequencing.execute import ExecuteConfig, execute_assembly
 from rad_core.sequencing.plan import local_motion_planner, plan_assembly
 from rad_core.sequencing.result import deviation
 from rad_core.sim.faults import KINDS, FaultConfig
-from rad_core.sim.twin import Twin, TwinConfig
+from rad_core.sim.twin import Twin, TwinConfig, twin_world_config
 from rad_core.sim.world import World
 from rad_core.transforms import yaw_of_quaternion
 
@@ -153,7 +153,7 @@ class Cell:
     """The twin with faults as the plant of execute_assembly, registering leniently (register_world)."""
 
     def __init__(self, motion, faults: FaultConfig, once: str | None = None):
-        self.world = World(SCENE)
+        self.world = World(SCENE, twin_world_config())     # the twin node's world (sim.twin.BLOCK_PLAY)
         self.twin = Twin(self.world, TwinConfig(faults=faults))
         self.motion, self.once, self.plans = motion, once, []
 
@@ -298,7 +298,7 @@ def test_a_block_left_2mm_into_its_neighbours_cell_is_built_against_not_onto(mot
     it onto its cell and keeps the offset; with plan_motion the second block's motion is planned again
     against it and set down flush beside it. Without, the plan's motion lowers the block onto its edge
     (in a free row it shoves the first back; in a structure it jams and the controller aborts)."""
-    from rad_core.sim.twin import Tolerances, twin_world_config
+    from rad_core.sim.twin import Tolerances
     from rad_core.trajectory import TrajectoryAborted
     world = World(ROW, twin_world_config())
     twin = Twin(world)
@@ -346,7 +346,7 @@ def test_a_block_left_2mm_into_its_neighbours_cell_is_built_against_not_onto(mot
 def test_a_block_found_turned_on_the_table_is_picked_where_it_lies_and_built_straight(motion):
     """A block that slipped lands anyhow: flat on the table, 30 degrees off the lattice. Registration
     keeps it (at the nearest yaw, the turn as its measured offset) and GAMP grasps it as it lies."""
-    from rad_core.sim.twin import Tolerances, twin_world_config
+    from rad_core.sim.twin import Tolerances
     from rad_core.trajectory import TrajectoryAborted
     from rad_core.transforms import yaw_quaternion
     world = World(ROW, twin_world_config())
