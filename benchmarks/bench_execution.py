@@ -1,6 +1,6 @@
 """Execution with the whole arm motion simulated, against teleporting execution, fault-free and under faults.
 
-    python benchmarks/bench_execution.py [--grids 4 5] [--scenes 5] [--shapes holdout]
+    python benchmarks/bench_execution.py [--grids 4 5] [--scenes 5] [--shapes holdout|train|tight ...]
         [--faults none mocap placement slip miss nudge drops realistic] [--agent default]
         [--runs out/cache/execution/runs.jsonl] [--out docs/results/execution]
 
@@ -57,7 +57,12 @@ def scenes(grids, count, seed, shapes):
     for g in grids:
         out += [(f'g{g}-s{seed + i}', generate_scene(GeneratorConfig(grid=g), seed + i)) for i in range(count)]
     for split in shapes:
-        out += [(f'{name}', shape_scene(name)) for name in SPLITS[split]]
+        if split == 'tight':        # the held-out shapes, their blocks packed at least 2 cm apart
+            from rad_core.shapes import SPECS, LayoutConfig, build_scene
+            out += [(f'{name}-tight', build_scene(SPECS[name], 0, config=LayoutConfig(gap=0.02)))
+                    for name in SPLITS['holdout']]
+        else:
+            out += [(f'{name}', shape_scene(name)) for name in SPLITS[split]]
     return out
 
 
@@ -161,7 +166,7 @@ def main() -> None:
     p.add_argument('--grids', type=int, nargs='*', default=[4, 5])
     p.add_argument('--scenes', type=int, default=5, help='generated scenes per grid size')
     p.add_argument('--seed', type=int, default=500, help='first generator seed (training uses >= 1e6)')
-    p.add_argument('--shapes', nargs='*', default=['holdout'], choices=['train', 'holdout'])
+    p.add_argument('--shapes', nargs='*', default=['holdout'], choices=['train', 'holdout', 'tight'])
     p.add_argument('--faults', nargs='*', default=list(FAULT_LEVELS), choices=list(FAULT_LEVELS))
     p.add_argument('--agent', default='default', help='the agent (rad_core.agents), as the node graph runs it')
     p.add_argument('--max-replans', type=int, default=10)

@@ -7,7 +7,8 @@ Every agent (a preset or an agent text, `rad_core.agents`) runs through
 `rad_core.evaluation.evaluate` with the robot, the code behind `rad eval --robot`: it plans
 each scene as /plan_assembly does and the plan is built in a fresh twin (teleporting
 execution). Scenes: generated two-sided scenes, seeds 0..N-1, and hand-made shape sets
-('train', 'holdout', or 'tight': the held-out shapes with their blocks packed 2 cm apart).
+('train', 'holdout', or 'tight': the held-out shapes with their blocks packed at least 2 cm apart,
+2.5 cm on the layout's lattice).
 The ceiling is `sequencing.exact.robot_ceiling` (the branch and bound over orders and
 re-allocations from the empty scene, --ceiling-s per scene): proven where its search
 completes, a lower bound elsewhere. Its search starts from the best coverage the agents'
@@ -49,7 +50,8 @@ ROW_KEYS = ('name', 'return', 'outcome', 'coverage', 'predicted_coverage', 'cove
 
 def shape_scenes(split: str):
     """Hand-made shapes (rad_core.shapes): 'train', 'holdout', or 'tight' (the held-out shapes
-    with their blocks packed 2 cm apart on the table instead of 5 cm: the fingers barely fit)."""
+    with their blocks packed at least 2 cm apart on the table instead of 5 cm: only the fingers'
+    rubber tips fit between them)."""
     from rad_core import shapes
     if split == 'tight':
         return [(f'{name}-tight', shapes.build_scene(shapes.SPECS[name], 0, config=shapes.LayoutConfig(gap=0.02)))

@@ -175,6 +175,52 @@ def test_buried_block_fails_on_grasp():
     assert r.reason.startswith('grasp: all 2 grasps blocked') and 'hits block n' in r.reason, r.reason
 
 
+def _target_height_at_the_grasp(world, motion) -> float:
+    """Where the approach ends, the fingers about to close: the grasp target's height."""
+    world.set_joint_positions(motion.trajectories[0].points[-1].positions, hold=False)
+    return float(world.link_pose()[0][2])
+
+
+@pytest.mark.parametrize('gap, picked', [(0.025, True), (0.015, False)])
+def test_a_block_packed_among_neighbours_is_taken_by_a_tight_grasp_only_where_the_tips_fit(gap, picked):
+    # Neighbours on all four sides, `gap` away. The fingers' rubber tips (15 mm thick) fit in 2.5 cm
+    # with the fingers 4 mm off the block and the grasp near its top, not 1 cm off at its centre;
+    # in 1.5 cm nothing fits.
+    c = np.array([0.5, -0.2, U / 2])
+    around = [c + (dx * (U + gap), dy * (U + gap), 0) for dx, dy in ((1, 0), (-1, 0), (0, 1), (0, -1))]
+    scene = _scene([('target', 'cube', c)] + [(f'n{i}', 'cube', p) for i, p in enumerate(around)])
+    with World(scene) as world:
+        r = plan_action(world, 'target', [0.45, 0.2, U / 2], 0)
+        assert r.success == picked, r.reason
+        if picked:
+            assert r.motion.opening == pytest.approx(U / 2 + 0.004)
+            assert _target_height_at_the_grasp(world, r.motion) == pytest.approx(U - 0.013, abs=2e-3)
+        else:
+            assert r.failure == 'grasp' and 'finger hits block n' in r.reason and 'tight grasp:' in r.reason, r.reason
+
+
+def test_a_block_with_room_around_it_is_grasped_at_its_centre_with_the_fingers_wide():
+    scene = _scene([('free', 'cube', (0.45, -0.2, U / 2))])
+    with World(scene) as world:
+        r = plan_action(world, 'free', [0.45, 0.2, U / 2], 0)
+        assert r.success
+        assert r.motion.opening == pytest.approx(U / 2 + 0.01)
+        assert _target_height_at_the_grasp(world, r.motion) == pytest.approx(U / 2, abs=2e-3)
+
+
+def test_the_fingers_collide_as_franka_models_them_and_the_hull_is_left_for_the_visuals():
+    import pybullet as p
+    with World(_scene([('free', 'cube', (0.45, -0.2, U / 2))])) as world:
+        for link in world.finger_links:
+            shapes = p.getCollisionShapeData(world.robot, link, physicsClientId=world.client)
+            assert len(shapes) == 4 and all(s[2] == p.GEOM_BOX for s in shapes)
+            # The rubber tip, the thinnest part across the closing axis.
+            assert min(round(s[3][1], 4) for s in shapes if round(s[3][2], 4) == 0.0185) == 0.0152
+    assert panda.source_urdf_path().name == 'panda.urdf' and panda.urdf_path() != panda.source_urdf_path()
+    assert 'finger.obj' in panda.source_urdf_path().read_text() and 'collision/finger.obj' not in \
+        panda.urdf_path().read_text()
+
+
 def test_block_under_another_fails_on_grasp():
     scene = _scene([('low', 'cube', (0.5, -0.2, U / 2)), ('top', 'cube', (0.5, -0.2, 1.5 * U))])
     with World(scene) as world:

@@ -49,7 +49,7 @@ def test_the_hand_fills_its_finger_columns_and_the_cells_under_its_palm_and_turn
 def test_a_pose_hemmed_in_on_both_closing_axes_is_blocked_and_the_planner_refuses_it():
     scene = corner_scene()
     grid = Grid(scene)
-    hand = HandBlocked(scene, grid, finger_clearance=0.01)
+    hand = HandBlocked(scene, grid)
     corner = next(c for c in enumerate_candidates(scene, grid) if c.placement.cells == ((0, 0, 0),)
                   and c.placement.yaw == 0)
     cell = {ijk: grid.index(0, ijk) for ijk in [(1, 0, 0), (0, 1, 0)]}
@@ -76,7 +76,7 @@ def test_the_arm_bound_drops_where_built_cells_hem_a_free_cell_in_and_the_plain_
     scene = corner_scene()
     env = AssemblyEnv(scene)
     env.reset()
-    bound = ArmCoverageBound(scene, env.grid, finger_clearance=0.01)
+    bound = ArmCoverageBound(scene, env.grid)
     assert bound(env) == 1.0 and bound.hand_blocked == 0
     for block, ijk in ((1, (1, 0, 0)), (2, (0, 1, 0))):
         assert not env.step(Action(block, 0, env.grid.index(0, ijk), 0)).outcome.is_invalid
@@ -97,7 +97,7 @@ def test_every_pose_the_hand_test_blocks_is_refused_by_the_planner_on_a_generate
                          (GeneratorConfig(grid=5, unit=0.04, gap=0.01), 12)):
         scene = generate_scene(config, seed)
         grid = Grid(scene)
-        hand = HandBlocked(scene, grid, finger_clearance=0.01)
+        hand = HandBlocked(scene, grid)
         placements = solve(scene, AllocationParams(support='stable')).placements
         candidates = enumerate_candidates(scene, grid, positive_only=False)
         occupied = np.zeros(grid.num_cells, dtype=bool)

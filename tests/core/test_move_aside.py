@@ -22,6 +22,18 @@ def hard(name: str) -> Scene:
     return Scene.loads((REPO / 'scenes' / 'hard' / f'{name}.json').read_text())
 
 
+def packed() -> Scene:
+    """A cube with neighbours 1 cm off along x (b1) and 1.5 cm off along y (b2): too close for the
+    fingers' tips on both closing axes. b1 is the nearest, and the hand can take it itself."""
+    u = 0.05
+    cubes = {'b4': (0.45, -0.25), 'b1': (0.45 + u + 0.01, -0.25), 'b2': (0.45, -0.25 + u + 0.015)}
+    return Scene.from_dict({
+        'format': 'rad-scene/1', 'unit': u, 'block_types': {'cube': [[0, 0, 0]]},
+        'blocks': [{'id': b, 'type': 'cube', 'position': [x, y, u / 2], 'yaw': 0} for b, (x, y) in cubes.items()],
+        'targets': [{'name': 't', 'origin': [0.4, 0.25, u / 2], 'size': [2, 1, 1], 'filled': [[0, 0, 0], [1, 0, 0]]}],
+    })
+
+
 def gap_between(scene: Scene, a: str, b: str) -> float:
     """Smallest face-to-face gap (m, Chebyshev) between two blocks' units on the table."""
     fa, fb = (footprint(scene.block(x), scene.block_types, scene.unit) for x in (a, b))
@@ -66,7 +78,7 @@ def test_table_neighbours_are_the_close_blocks_on_the_table_nearest_first():
 
 def test_a_blocked_pick_moves_the_neighbour_aside_first_and_plans_both_motions(planners):
     plain, moving = planners
-    scene = hard('pento_floor')
+    scene = packed()
     target = scene.targets[0]
     action = SceneAction('b4', 0, target.name, tuple(target.filled[-1]), 0)
     blocked, _, _ = plain(scene, action, move_aside=True)         # move_aside 0 in the config: never
@@ -91,7 +103,16 @@ def test_a_blocked_pick_moves_the_neighbour_aside_first_and_plans_both_motions(p
 
 def test_move_aside_off_says_why_and_a_block_nothing_frees_keeps_its_reason(planners):
     _, moving = planners
-    scene = hard('pyramid_box')      # b5's grasps hit b8, a 2x2 block the hand cannot take from above
+    # b5's grasps hit b8 and b9 (1 and 1.5 cm off), 2x2 blocks the hand cannot take from above at a 4 cm unit.
+    u = 0.04
+    o4 = [[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]]
+    blocks = {'b5': ('cube', 0.45, -0.25), 'b8': ('O4', 0.45 + u + 0.01, -0.25),
+              'b9': ('O4', 0.45 - u, -0.25 + u + 0.015)}
+    scene = Scene.from_dict({
+        'format': 'rad-scene/1', 'unit': u, 'block_types': {'cube': [[0, 0, 0]], 'O4': o4},
+        'blocks': [{'id': b, 'type': t, 'position': [x, y, u / 2], 'yaw': 0} for b, (t, x, y) in blocks.items()],
+        'targets': [{'name': 't', 'origin': [0.4, 0.25, u / 2], 'size': [2, 1, 1], 'filled': [[0, 0, 0]]}],
+    })
     target = scene.targets[0]
     result, _, _ = moving(scene, SceneAction('b5', 0, target.name, tuple(target.filled[0]), 0), move_aside=True)
     assert not result.success and result.failure == 'grasp'
@@ -100,7 +121,7 @@ def test_move_aside_off_says_why_and_a_block_nothing_frees_keeps_its_reason(plan
 
 def test_plan_steps_carry_the_moves_and_the_scene_after_follows_them(planners):
     _, moving = planners
-    scene = hard('pento_floor')
+    scene = packed()
     target = scene.targets[0]
     plan = local_motion_planner(moving)(scene, SceneAction('b4', 0, target.name, tuple(target.filled[-1]), 0), None,
                                         move_aside=True)

@@ -465,8 +465,8 @@ class PandaModel:
 
     def __init__(self, urdf: str | Path | None = None):
         import rerun.urdf as ru
-        from rad_core.sim.panda import urdf_path
-        path = Path(urdf) if urdf is not None else urdf_path()
+        from rad_core.sim.panda import source_urdf_path
+        path = Path(urdf) if urdf is not None else source_urdf_path()     # what is drawn: its visual meshes
         # panda.urdf names its meshes package://meshes/...: the package root is the URDF's folder.
         packages = os.environ.get('ROS_PACKAGE_PATH', '')
         if str(path.parent) not in packages.split(os.pathsep):

@@ -82,6 +82,11 @@ def _unreachable(points: np.ndarray) -> str:
     return first
 
 
+def _both_heights(points: np.ndarray, lift: float) -> np.ndarray:
+    """Grasp targets at units' centres and, for the planner's tight grasp, `lift` over them."""
+    return np.concatenate([points, points + (0.0, 0.0, lift)])
+
+
 def block_unit_centres(scene: Scene, b: int) -> np.ndarray:
     """World centres of a block's units where it lies (its position is unit 0's centre)."""
     block = scene.blocks[b]
@@ -93,7 +98,9 @@ def arm_filter(scene: Scene, grid: Grid, candidates: list[Candidate]) -> tuple[l
     """(the candidates the arm could build, blocks available per type, what was ruled out and why).
 
     Blocks already on the grid are not counted (as `cpsat.available_counts`)."""
+    from rad_core.gamp.grasps import grasp_lift
     grasps = type_grasps(scene)
+    lift = grasp_lift(scene.unit)      # a tight grasp's target, over the unit's centre
     report = ArmFilter()
     for name, gs in grasps.items():
         if not gs:
@@ -103,8 +110,8 @@ def arm_filter(scene: Scene, grid: Grid, candidates: list[Candidate]) -> tuple[l
     for b, block in enumerate(scene.blocks):
         if b in placed or block.type in report.types:
             continue
-        units = block_unit_centres(scene, b)
-        why = _unreachable(units[sorted({g.unit for g in grasps[block.type]})])
+        units = block_unit_centres(scene, b)[sorted({g.unit for g in grasps[block.type]})]
+        why = _unreachable(_both_heights(units, lift))
         if why:
             report.blocks[block.id] = f'cannot be picked where it lies: {why}'
             continue
@@ -114,8 +121,8 @@ def arm_filter(scene: Scene, grid: Grid, candidates: list[Candidate]) -> tuple[l
         name = cand.placement.type
         if name in report.types:
             continue
-        centres = grid.centres[list(cand.cell_ids)]
-        why = _unreachable(centres[sorted({g.unit for g in grasps[name]})])
+        centres = grid.centres[list(cand.cell_ids)][sorted({g.unit for g in grasps[name]})]
+        why = _unreachable(_both_heights(centres, lift))
         if why:
             report.poses += 1
             key = why.split(':')[0] + ': ' + ('target below the table' if 'below' in why else 'beyond the reach')
@@ -167,19 +174,21 @@ class HandBlocked:
     planner then refuses it from every arm configuration. Built cells stay built, so a pose
     blocked in a state is blocked in every state after it. Cells off the grid are never built.
 
-    finger_clearance: the planner's (`GampConfig.finger_clearance`), which sets how far the
-    fingers open."""
+    gamp: the planner's settings (`GampConfig`), which say how the fingers may take a unit
+    (`planner.grasp_styles`): an offset blocks only where it blocks in every way."""
 
-    def __init__(self, scene: Scene, grid: Grid, finger_clearance: float):
+    def __init__(self, scene: Scene, grid: Grid, gamp=None):
         from rad_core.gamp.grasps import grasp_width
         from rad_core.gamp.hand_cells import blocking_offsets
-        from rad_core.sim import panda
+        from rad_core.gamp.planner import GampConfig, grasp_styles
         self.grid = grid
         self.grasps = type_grasps(scene)
-        width = grasp_width(scene.unit, scene.clearance)
-        opening = min(panda.FINGER_OPEN, width / 2 + finger_clearance)
-        self.offsets = {yaw: np.array(sorted(blocking_offsets(scene.unit, scene.clearance, opening, yaw)),
-                                      dtype=float).reshape(-1, 3) for yaw in (0, 90, 180, 270)}
+        styles = grasp_styles(grasp_width(scene.unit, scene.clearance), scene.unit, gamp or GampConfig())
+        self.offsets = {}
+        for yaw in (0, 90, 180, 270):
+            common = frozenset.intersection(*(blocking_offsets(scene.unit, scene.clearance, f, yaw, lift)
+                                              for f, lift in styles))
+            self.offsets[yaw] = np.array(sorted(common), dtype=float).reshape(-1, 3)
         self._cells: dict[tuple, list] = {}
 
     def cells(self, type_name: str, yaw: int, cell_ids) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -226,13 +235,13 @@ class ArmCoverageBound:
 
     Call it with an env (`AssemblyEnv`) of the scene between steps."""
 
-    def __init__(self, scene: Scene, grid: Grid, finger_clearance: float, time_limit_s: float = 2.0):
+    def __init__(self, scene: Scene, grid: Grid, gamp=None, time_limit_s: float = 2.0):
         from rad_core.allocation.placements import enumerate_candidates
         everything = enumerate_candidates(scene, grid, positive_only=False)
         self.candidates, _, self.report = arm_filter(scene, grid, [c for c in everything
                                                                    if grid.is_target[list(c.cell_ids)].any()])
         self.unpickable = {b for b, block in enumerate(scene.blocks) if block.id in self.report.blocks}
-        self.hand = HandBlocked(scene, grid, finger_clearance)
+        self.hand = HandBlocked(scene, grid, gamp)
         self.grid, self.scene, self.time_limit_s = grid, scene, time_limit_s
         self.hand_blocked = 0     # poses the last call left out as hand-blocked
 

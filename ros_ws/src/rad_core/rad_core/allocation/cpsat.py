@@ -32,7 +32,7 @@ bound are c^T g's.
 equal in c^T g and coverage, 'fewer' takes the one with fewer poses (fewer
 placements for the robot to get right, larger blocks), 'flat' the one whose
 blocks span fewer levels (a top-down hand places a block beside lower or equal
-neighbours, not beside taller ones: its palm passes 10 mm above the block's top).
+neighbours, not beside taller ones: its palm passes 14 mm above the block's top).
 Ablated in docs/results/reallocation.md.
 
 `support='arm'` (rad's, stable as above) first rules out what the arm can never do,

@@ -1,15 +1,19 @@
 """The predefined top-down grasps of a block type (the paper's Sec. IV-C).
 
 A grasp is (unit, yaw): the hand points straight down, the grasp target (the
-point between the fingertips) sits at the centre of unit `unit`, and the
-fingers close along the block's own x axis (yaw 0) or y axis (yaw 90). 180 and
+point between the fingertips) sits at the centre of unit `unit` (or, in the planner's
+tight grasp, `GRASP_BELOW_TOP` under its top), and the fingers close along the block's own
+x axis (yaw 0) or y axis (yaw 90). 180 and
 270 are the same grasps: the Panda hand is symmetric under a half turn, and
 which of the two hand yaws is used is the IK's choice (joint 7's range).
 
-The rule, from the hand's geometry (pybullet_data's Panda, measured): the
-fingers open 0.08 m at most and their pads span from 11 mm below the grasp
-target to well above it, so they close on exactly one unit, 1 unit wide, around
-its centre height, and pass the levels above it on their way down. A grasp of
+Why a tight grasp holds the top: the rubber tips, 18.5 mm tall, are the fingers' thinnest
+part (15 mm); above them the finger widens to 26 mm (`sim.panda.FINGER_BOXES`). Held near its
+top, a unit has only the tips beside it, so a neighbour 2.5 cm away leaves room (the pads still
+cover 16 mm of the unit's side at a 5 cm unit). The rule, from the hand's geometry: the
+fingers open 0.08 m at most and their pads span from 8 mm below the grasp
+target to 10 mm above it, so they close on exactly one unit, 1 unit wide, at or above its
+centre, and pass the levels above it on their way down. A grasp of
 unit u closing along axis d is offered when
 
 1. no unit of the same block lies above u (u is the top of its column: the
@@ -18,8 +22,8 @@ unit u closing along axis d is offered when
    u's height or above (a finger would land on it or hit it on the way down).
 
 Units below u's level are never touched (the fingertips stay within u). What
-the rule cannot see (the hand's palm, 0.21 x 0.07 m, passing 10 mm above u's
-top, or neighbouring blocks) is left to the collision checks of the planner,
+the rule cannot see (the hand's palm, 0.21 x 0.06 m, passing 14 mm above u's
+top, 26 mm in a tight grasp, or neighbouring blocks) is left to the collision checks of the planner,
 which probe the real geometry. Only units up to `MAX_GRASP_WIDTH` wide can be
 taken: the open hand must clear the unit by a few millimetres on each side.
 """
@@ -37,6 +41,15 @@ MAX_GRASP_WIDTH = panda.MAX_OPENING - 2 * 0.005
 """Widest unit (m) the open hand can take: 0.08 m opening less 5 mm clearance per side."""
 
 GRASP_YAWS = (0, 90)
+
+GRASP_BELOW_TOP = 0.013
+"""A tight grasp's target sits this far (m) under the top of the held unit, never below its
+centre: the fingertips' pads then cover the unit's side from 2.4 mm under its top down to 21 mm."""
+
+
+def grasp_lift(unit: float) -> float:
+    """How far (m) a tight grasp's target sits above the held unit's centre, for a unit of this size."""
+    return max(0.0, unit / 2 - GRASP_BELOW_TOP)
 
 
 @dataclass(frozen=True)

@@ -1,15 +1,17 @@
 """The cells a top-down hand fills when it holds a unit: a built one there refuses every plan.
 
-At a placement the planner puts the grasp target on the held unit's centre, the hand pointing
-straight down at one of two hand yaws per grasp, the fingers open (`planner.plan_action`). The
+At a placement the planner puts the grasp target on the held unit's centre (or, in a tight
+grasp, over it: `planner.grasp_styles`), the hand pointing straight down at one of two hand yaws
+per grasp, the fingers open (`planner.plan_action`). The
 hand, the fingers and panda_link7 are rigid with the grasp target there (joint 7 turns them
 together; the links above depend on the IK solution), so whether they run into a neighbouring
 cell's block does not depend on the arm, the order or the start: only on the cell's offset from
-the held unit, the hand yaw, the unit and the finger opening.
+the held unit, the hand yaw, the unit, the finger opening and the grasp's height.
 
-`blocking_offsets` measures that once per (unit, clearance, opening, hand yaw), in a Bullet world
-of its own: a unit cube put at each offset around the grasp target, turned into the hand's frame. An
-offset blocks when the cube sinks more than `DEPTH` into one of those links. The planner refuses
+`blocking_offsets` measures that once per (unit, clearance, opening, hand yaw, height), in a Bullet world
+of its own: a unit cube put at each offset around the held unit, turned into the hand's frame. An
+offset blocks when the cube sinks more than `DEPTH` into one of those links. The planner may take
+a unit in one of two ways (`planner.grasp_styles`); each is measured apart. The planner refuses
 a contact closer than its margin (2 mm); `DEPTH` asks for more, so that a block resting a few
 millimetres off its cell, or an IK answer within its 2 mm tolerance, cannot turn a blocking
 offset into a free one. The cube is the smallest box a block's unit can have (its side faces set
@@ -41,10 +43,11 @@ _RIGID = ('panda_link7', 'panda_link8', 'panda_hand', 'panda_leftfinger', 'panda
 
 
 @lru_cache(maxsize=64)
-def blocking_offsets(unit: float, clearance: float, finger_open: float, hand_yaw_deg: int) -> frozenset:
+def blocking_offsets(unit: float, clearance: float, finger_open: float, hand_yaw_deg: int,
+                     lift: float = 0.0) -> frozenset:
     """The integer cell offsets (di, dj, dk) from a held unit whose built cube the hand, its fingers
     open `finger_open` each, or panda_link7 enters by more than `DEPTH`, the hand pointing down at
-    `hand_yaw_deg` (a multiple of 90) with its grasp target on the held unit's centre."""
+    `hand_yaw_deg` (a multiple of 90) with its grasp target `lift` (m) over the held unit's centre."""
     import pybullet as p
     from rad_core.errors import RadError
     from rad_core.physics import PhysicsConfig
@@ -65,9 +68,10 @@ def blocking_offsets(unit: float, clearance: float, finger_open: float, hand_yaw
         # The links are rigid with the grasp target: measure them wherever it is, with the cubes
         # put where they would be, relative to it, for a hand exactly at the asked yaw.
         got = p.getLinkState(robot, index[panda.GRASP_TARGET_LINK], computeForwardKinematics=1, physicsClientId=cid)
-        at, hand = np.asarray(got[4]), matrix_from_quaternion(np.asarray(got[5]))
+        hand = matrix_from_quaternion(np.asarray(got[5]))
         asked = matrix_from_quaternion(panda.top_down_quaternion(math.radians(hand_yaw_deg)))
         turn = hand @ asked.T                  # world offsets for the asked hand -> this hand's
+        at = np.asarray(got[4]) + turn @ (0.0, 0.0, -lift)     # the held unit's centre
         # A block's unit box as `physics.block_shape` makes it, its sides set back by the scene's
         # clearance, without its overlap: the smallest it can be.
         side = unit / 2 - PhysicsConfig().side_gap * unit - clearance * unit / 2

@@ -8,7 +8,10 @@ and placement configurations, then the motion between them:
           -> (down) place -> open -> (up) retreat
 
 For each predefined grasp (`grasps.block_grasps`, best first) and each of the
-two hand yaws of the symmetric hand, the pick half is checked first: IK at the
+two hand yaws of the symmetric hand, the pick half is checked first, the grasp target at
+the unit's centre and the fingers open 1 cm off its faces; where a finger hits a neighbour
+there, again with the tight grasp: the fingers 4 mm off, the target 13 mm under the unit's
+top, only the fingers' rubber tips beside it (`grasp_styles`). IK at the
 grasp and on every vertical waypoint up to the approach height, no collision of
 the robot (fingers open) with the table, any block (the grasped one included:
 the open fingers must clear it) or itself, at every waypoint and along every
@@ -38,7 +41,7 @@ import numpy as np
 from rad_core.errors import RadError
 from rad_core.gamp.collision import (CollisionConfig, attachment_from_world, check_path,
                                      make_collision_fn, world_key)
-from rad_core.gamp.grasps import Grasp, block_grasps, grasp_width, no_grasp_reason
+from rad_core.gamp.grasps import Grasp, block_grasps, grasp_lift, grasp_width, no_grasp_reason
 from rad_core.gamp.ik import IkConfig, hand_yaw_options, solve_top_down
 from rad_core.gamp.trajectory import TimingConfig, plan_motion
 from rad_core.motion import Motion
@@ -65,6 +68,12 @@ class GampConfig:
     """Open fingers stand this far off the unit's faces (not the full 0.08 m opening:
     neighbours on the table are only a few cm away). The faces are the block's own:
     with a scene clearance, the grasped unit is that much narrower."""
+    tight_finger_clearance: float = 0.004
+    """Where a finger at `finger_clearance` hits a neighbour, the grasp is tried again as a tight
+    grasp: the fingers this far off the unit's faces, the grasp target `grasps.GRASP_BELOW_TOP`
+    under the unit's top (blocks packed 2.5 cm apart on the table); 0 or no less than
+    `finger_clearance`: never. Not the first choice: the centre grasp holds a unit around its
+    middle, the way every result before it was measured."""
     grip_squeeze: float = 0.001
     """Closed fingers are commanded this far inside the unit's faces, so a position-
     controlled gripper presses on the block."""
@@ -170,7 +179,7 @@ def plan_action(world: World, block_id: str, position, yaw_deg: float, start=Non
         return _finish(result, 'grasp', f'grasp: block {block_id} has no top-down grasp: '
                                         f'{no_grasp_reason(btype, width)}', clock, t0)
 
-    open_f = min(panda.FINGER_OPEN, width / 2 + config.finger_clearance)
+    styles = grasp_styles(width, unit, config)
     closed_f = max(0.0, width / 2 - config.grip_squeeze)
     pick_failures, place_failures = [], []
     with world.preserved():
@@ -184,26 +193,35 @@ def plan_action(world: World, block_id: str, position, yaw_deg: float, start=Non
         tops = _tops(world, exclude=block_id)
         bodies = world_key(world, (), None, config.collision)
         for grasp in grasps:
-            offset = np.asarray(btype.offsets[grasp.unit], dtype=float) * unit
-            grasp_point = block_pos + rot @ offset
-            place_point = position + final_rot @ offset
-            # From the grasp point down to the held block's bottom.
-            hang = (offset[2] - min(o[2] for o in btype.offsets) * unit) + unit / 2
-            transit_z = tops + hang + config.transit_clearance
-            rise_pick = max(config.approach_height, transit_z - grasp_point[2])
-            rise_place = max(config.approach_height, transit_z - place_point[2])
+            centre = np.asarray(btype.offsets[grasp.unit], dtype=float) * unit
             closing = block_yaw + math.radians(grasp.yaw)
             pick_reason = place_reason = ''
-            for hand_yaw in hand_yaw_options(grasp_point, closing):
-                try:
-                    pick = _remembered_pick(bodies, world, block_id, grasp_point, hand_yaw, start, open_f,
-                                            closed_f, rise_pick, config, clock, rng)
-                except _Blocked as e:
-                    pick_reason = pick_reason or str(e)
-                    # A lift check that failed carried the block with the hand: put it back, so the
-                    # next grasp is planned against the world as it is (as after a failed placement).
-                    world.set_block_pose(block_id, block_pos, block_quat)
+            for hand_yaw in hand_yaw_options(block_pos + rot @ centre, closing):
+                pick, why = None, []
+                for open_f, lift in styles:
+                    offset = centre + (0.0, 0.0, lift)
+                    grasp_point = block_pos + rot @ offset
+                    # From the grasp point down to the held block's bottom.
+                    hang = (offset[2] - min(o[2] for o in btype.offsets) * unit) + unit / 2
+                    transit_z = tops + hang + config.transit_clearance
+                    rise_pick = max(config.approach_height, transit_z - grasp_point[2])
+                    try:
+                        pick = _remembered_pick(bodies, world, block_id, grasp_point, hand_yaw, start, open_f,
+                                                closed_f, rise_pick, config, clock, rng)
+                        break
+                    except _Blocked as e:
+                        why.append(str(e) if not why else f'tight grasp: {e}')
+                        # A lift check that failed carried the block with the hand: put it back, so
+                        # the next try is planned against the world as it is (as after a failed
+                        # placement).
+                        world.set_block_pose(block_id, block_pos, block_quat)
+                        if 'finger hits' not in str(e):
+                            break       # a tight grasp cannot help
+                if pick is None:
+                    pick_reason = pick_reason or '; '.join(why)
                     continue
+                place_point = position + final_rot @ offset
+                rise_place = max(config.approach_height, transit_z - place_point[2])
                 try:
                     place = _plan_place(world, block_id, pick, place_point, position, yaw_deg,
                                         hand_yaw + turn, open_f, rise_place, config, clock, rng)
@@ -239,6 +257,17 @@ def plan_action(world: World, block_id: str, position, yaw_deg: float, start=Non
 # carried-block check made anew for this plan's clock. Bounded: cleared when it grows large.
 _PICK_MEMO: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 _PICK_MEMO_MAX = 2048
+
+
+def grasp_styles(width: float, unit: float, config: GampConfig = GampConfig()) -> tuple[tuple[float, float], ...]:
+    """How the planner takes a unit `width` wide (of a block of `unit` cells), in the order it tries:
+    (each finger's travel when open (m), the grasp target's height over the unit's centre (m)).
+    First the fingers `finger_clearance` off its faces at its centre; then the tight grasp,
+    `tight_finger_clearance` off its faces near its top (`grasps.grasp_lift`)."""
+    out = [(min(panda.FINGER_OPEN, width / 2 + config.finger_clearance), 0.0)]
+    if 0 < config.tight_finger_clearance < config.finger_clearance:
+        out.append((min(panda.FINGER_OPEN, width / 2 + config.tight_finger_clearance), grasp_lift(unit)))
+    return tuple(out)
 
 
 def _remembered_pick(bodies, world, block_id, grasp_point, hand_yaw, start, open_f, closed_f, rise, config,

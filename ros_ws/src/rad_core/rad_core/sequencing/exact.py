@@ -356,7 +356,7 @@ def robot_ceiling(scene, time_limit_s: float = 60.0, support: str = 'arm', reall
         renv.reset()
         env = renv.env
         space = AllocationActions(env, solve(scene, AllocationParams(support=support)).placements)
-        arm_bound = ArmCoverageBound(scene, env.grid, renv.config.gamp.finger_clearance)
+        arm_bound = ArmCoverageBound(scene, env.grid, renv.config.gamp)
         memo = _FailedMoves(renv, arm_bound.hand)
         check = memo.check()
 

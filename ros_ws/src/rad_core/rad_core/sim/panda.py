@@ -1,5 +1,12 @@
 """The Franka Panda of pybullet_data (franka_panda/panda.urdf) as rad uses it.
 
+One change to that model: the fingers collide as Franka's own robot description models them
+(`FINGER_BOXES`), not as pybullet_data's convex hull of the finger mesh. The hull spans the
+whole finger, so at a block's height it is about 25 mm thick where the real finger (a 15 mm
+rubber tip under a thin slanted web) is not: it refuses grasps between blocks 2.5 cm apart
+that the real hand makes. `urdf_path` writes the changed URDF once (meshes by absolute path)
+into a per-user temporary folder; `source_urdf_path` is pybullet_data's own file.
+
 Fixed base at the world origin, standing on the table top (z = 0). Joint
 position limits: the arm's are Franka's published ranges, narrower than the
 URDF's by about 0.07 rad (`rad_core.robot_model.PLANNING_LOWER`/`UPPER`: valid on
@@ -20,7 +27,10 @@ Geometry worth knowing (measured in pybullet):
 
 from __future__ import annotations
 
+import hashlib
 import math
+import os
+import tempfile
 import xml.etree.ElementTree as ET
 from functools import lru_cache
 from pathlib import Path
@@ -55,14 +65,62 @@ HAND_YAW_AT_HOME_OFFSET = math.pi / 4
 used to predict joint 7 for a requested hand yaw."""
 
 
-def urdf_path() -> Path:
+FINGER_BOXES = (
+    # (centre x, y, z; roll about x (rad); size x, y, z) in the left finger's frame (m): the
+    # finger joint's frame, y the closing axis pointing away from the other finger, z down the
+    # finger. Franka's franka_description (end_effectors/common/franka_hand.xacro) models the
+    # finger's collision with these four boxes; the right finger mirrors them in y.
+    ((0.0, 0.0185, 0.011), 0.0, (0.022, 0.015, 0.020)),           # screw mount
+    ((0.0, 0.0068, 0.0022), 0.0, (0.022, 0.0088, 0.0038)),        # carriage sledge
+    ((0.0, 0.0159, 0.02835), math.pi / 6, (0.0175, 0.007, 0.0235)),  # slanted web
+    ((0.0, 0.00758, 0.04525), 0.0, (0.0175, 0.0152, 0.0185)),     # rubber tip, the grasping pad
+)
+
+
+def source_urdf_path() -> Path:
+    """pybullet_data's franka_panda/panda.urdf (finger collision: the hull of the finger mesh)."""
     import pybullet_data      # a plain data package: no banner, unlike pybullet itself
     return Path(pybullet_data.getDataPath()) / URDF_RELATIVE
 
 
 @lru_cache(maxsize=1)
+def urdf_path() -> Path:
+    """The URDF rad loads: pybullet_data's with the fingers' collision as `FINGER_BOXES`.
+
+    Written once per content into a per-user temporary folder (atomically, so processes
+    starting together are safe) and reused."""
+    source = source_urdf_path()
+    text = source.read_bytes()
+    digest = hashlib.sha256(text + repr(FINGER_BOXES).encode()).hexdigest()[:12]
+    folder = Path(tempfile.gettempdir()) / f'rad-{os.getuid()}'
+    path = folder / f'panda-{digest}.urdf'
+    if path.exists():
+        return path
+    root = ET.fromstring(text)
+    for mesh in root.iter('mesh'):
+        name = mesh.get('filename', '')
+        if name.startswith('package://'):
+            mesh.set('filename', str(source.parent / name[len('package://'):]))
+    for link in root.iter('link'):
+        side = {'panda_leftfinger': 1, 'panda_rightfinger': -1}.get(link.get('name'))
+        if side is None:
+            continue
+        for old in link.findall('collision'):
+            link.remove(old)
+        for (x, y, z), roll, size in FINGER_BOXES:
+            collision = ET.SubElement(link, 'collision')
+            ET.SubElement(collision, 'origin', xyz=f'{x} {side * y} {z}', rpy=f'{side * roll} 0 0')
+            ET.SubElement(ET.SubElement(collision, 'geometry'), 'box', size=' '.join(map(str, size)))
+    folder.mkdir(parents=True, exist_ok=True)
+    with tempfile.NamedTemporaryFile('wb', dir=folder, suffix='.tmp', delete=False) as f:
+        f.write(ET.tostring(root))
+    os.replace(f.name, path)
+    return path
+
+
+@lru_cache(maxsize=1)
 def _limits() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    root = ET.parse(urdf_path()).getroot()
+    root = ET.parse(source_urdf_path()).getroot()
     by_name = {j.get('name'): j for j in root.iter('joint')}
     lower, upper, velocity = [], [], []
     for name in JOINT_NAMES:
