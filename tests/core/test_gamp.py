@@ -1,6 +1,7 @@
 """GAMP: grasps, a real pick-and-place plan, and each failure class for the right reason."""
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -219,6 +220,10 @@ def test_the_fingers_collide_as_franka_models_them_and_the_hull_is_left_for_the_
     assert panda.source_urdf_path().name == 'panda.urdf' and panda.urdf_path() != panda.source_urdf_path()
     assert 'finger.obj' in panda.source_urdf_path().read_text() and 'collision/finger.obj' not in \
         panda.urdf_path().read_text()
+    # Its meshes are named by absolute path, in this environment's pybullet_data.
+    import xml.etree.ElementTree as ET
+    meshes = [m.get('filename') for m in ET.parse(panda.urdf_path()).getroot().iter('mesh')]
+    assert meshes and all(m.startswith(str(panda.source_urdf_path().parent)) and Path(m).is_file() for m in meshes)
 
 
 def test_block_under_another_fails_on_grasp():

@@ -87,11 +87,11 @@ def source_urdf_path() -> Path:
 def urdf_path() -> Path:
     """The URDF rad loads: pybullet_data's with the fingers' collision as `FINGER_BOXES`.
 
-    Written once per content into a per-user temporary folder (atomically, so processes
-    starting together are safe) and reused."""
+    Written once per content and pybullet_data folder (its meshes are named by absolute path)
+    into a per-user temporary folder, atomically, so processes starting together are safe."""
     source = source_urdf_path()
     text = source.read_bytes()
-    digest = hashlib.sha256(text + repr(FINGER_BOXES).encode()).hexdigest()[:12]
+    digest = hashlib.sha256(text + repr((FINGER_BOXES, str(source.parent))).encode()).hexdigest()[:12]
     folder = Path(tempfile.gettempdir()) / f'rad-{os.getuid()}'
     path = folder / f'panda-{digest}.urdf'
     if path.exists():
