@@ -209,7 +209,7 @@ def test_a_block_with_room_around_it_is_grasped_at_its_centre_with_the_fingers_w
         assert _target_height_at_the_grasp(world, r.motion) == pytest.approx(U / 2, abs=2e-3)
 
 
-def test_the_fingers_collide_as_franka_models_them_and_the_hull_is_left_for_the_visuals():
+def test_the_fingers_collide_as_franka_models_them_and_the_hull_is_left_for_the_visuals(monkeypatch, tmp_path):
     import pybullet as p
     with World(_scene([('free', 'cube', (0.45, -0.2, U / 2))])) as world:
         for link in world.finger_links:
@@ -224,6 +224,12 @@ def test_the_fingers_collide_as_franka_models_them_and_the_hull_is_left_for_the_
     import xml.etree.ElementTree as ET
     meshes = [m.get('filename') for m in ET.parse(panda.urdf_path()).getroot().iter('mesh')]
     assert meshes and all(m.startswith(str(panda.source_urdf_path().parent)) and Path(m).is_file() for m in meshes)
+    # Taken away (a temporary folder's cleaner), it is written again for the next world.
+    _, text = panda._urdf_name()
+    monkeypatch.setattr(panda, '_urdf_name', lambda: (tmp_path / 'panda.urdf', text))
+    first = panda.urdf_path().read_bytes()
+    panda.urdf_path().unlink()
+    assert panda.urdf_path().read_bytes() == first
 
 
 def test_block_under_another_fails_on_grasp():

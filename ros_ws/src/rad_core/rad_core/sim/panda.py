@@ -83,19 +83,28 @@ def source_urdf_path() -> Path:
     return Path(pybullet_data.getDataPath()) / URDF_RELATIVE
 
 
-@lru_cache(maxsize=1)
 def urdf_path() -> Path:
     """The URDF rad loads: pybullet_data's with the fingers' collision as `FINGER_BOXES`.
 
-    Written once per content and pybullet_data folder (its meshes are named by absolute path)
-    into a per-user temporary folder, atomically, so processes starting together are safe."""
+    Written per content and pybullet_data folder (its meshes are named by absolute path) into a
+    per-user temporary folder, atomically, so processes starting together are safe; written again
+    whenever it is gone (a temporary folder's cleaner may take it from a long-running node)."""
+    path, text = _urdf_name()
+    if not path.exists():
+        _write_urdf(path, text)
+    return path
+
+
+@lru_cache(maxsize=1)
+def _urdf_name() -> tuple[Path, bytes]:
     source = source_urdf_path()
     text = source.read_bytes()
     digest = hashlib.sha256(text + repr((FINGER_BOXES, str(source.parent))).encode()).hexdigest()[:12]
-    folder = Path(tempfile.gettempdir()) / f'rad-{os.getuid()}'
-    path = folder / f'panda-{digest}.urdf'
-    if path.exists():
-        return path
+    return Path(tempfile.gettempdir()) / f'rad-{os.getuid()}' / f'panda-{digest}.urdf', text
+
+
+def _write_urdf(path: Path, text: bytes) -> None:
+    source = source_urdf_path()
     root = ET.fromstring(text)
     for mesh in root.iter('mesh'):
         name = mesh.get('filename', '')
@@ -111,11 +120,10 @@ def urdf_path() -> Path:
             collision = ET.SubElement(link, 'collision')
             ET.SubElement(collision, 'origin', xyz=f'{x} {side * y} {z}', rpy=f'{side * roll} 0 0')
             ET.SubElement(ET.SubElement(collision, 'geometry'), 'box', size=' '.join(map(str, size)))
-    folder.mkdir(parents=True, exist_ok=True)
-    with tempfile.NamedTemporaryFile('wb', dir=folder, suffix='.tmp', delete=False) as f:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with tempfile.NamedTemporaryFile('wb', dir=path.parent, suffix='.tmp', delete=False) as f:
         f.write(ET.tostring(root))
     os.replace(f.name, path)
-    return path
 
 
 @lru_cache(maxsize=1)
