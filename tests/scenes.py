@@ -32,6 +32,17 @@ def scene(**kw) -> Scene:
     return Scene.from_dict(doc(**kw))
 
 
+def packed() -> Scene:
+    """A cube b4 with neighbours 1 cm off along x (b1) and 1.5 cm off along y (b2): too close for the
+    fingers' tips on both closing axes, so every grasp of b4 is blocked until b1 (the nearest, which
+    the hand can take itself) moves aside."""
+    cubes = {'b4': (0.45, -0.25), 'b1': (0.45 + U + 0.01, -0.25), 'b2': (0.45, -0.25 + U + 0.015)}
+    return scene(types={'cube': [[0, 0, 0]]},
+                 blocks=[{'id': b, 'type': 'cube', 'position': [x, y, U / 2], 'yaw': 0} for b, (x, y) in cubes.items()],
+                 targets=[{'name': 't', 'origin': [0.4, 0.25, U / 2], 'size': [2, 1, 1],
+                           'filled': [[0, 0, 0], [1, 0, 0]]}])
+
+
 def mutated(path: str, value) -> dict:
     """A copy of the default doc with one field (dotted path, [n] for lists) replaced."""
     d = copy.deepcopy(doc())

@@ -15,23 +15,13 @@ from rad_core.scene import Scene
 from rad_core.sequencing.plan import PlanStep, local_motion_planner
 from rad_core.shapes import LayoutConfig, footprint, move_aside_spot
 
+from scenes import packed
+
 REPO = Path(__file__).resolve().parents[2]
 
 
 def hard(name: str) -> Scene:
     return Scene.loads((REPO / 'scenes' / 'hard' / f'{name}.json').read_text())
-
-
-def packed() -> Scene:
-    """A cube with neighbours 1 cm off along x (b1) and 1.5 cm off along y (b2): too close for the
-    fingers' tips on both closing axes. b1 is the nearest, and the hand can take it itself."""
-    u = 0.05
-    cubes = {'b4': (0.45, -0.25), 'b1': (0.45 + u + 0.01, -0.25), 'b2': (0.45, -0.25 + u + 0.015)}
-    return Scene.from_dict({
-        'format': 'rad-scene/1', 'unit': u, 'block_types': {'cube': [[0, 0, 0]]},
-        'blocks': [{'id': b, 'type': 'cube', 'position': [x, y, u / 2], 'yaw': 0} for b, (x, y) in cubes.items()],
-        'targets': [{'name': 't', 'origin': [0.4, 0.25, u / 2], 'size': [2, 1, 1], 'filled': [[0, 0, 0], [1, 0, 0]]}],
-    })
 
 
 def gap_between(scene: Scene, a: str, b: str) -> float:

@@ -119,11 +119,10 @@ def test_a_place_pose_puts_the_anchor_there_and_a_pose_no_scene_holds_is_refused
 
 
 def test_a_pick_blocked_by_a_neighbour_moves_it_aside_first_and_says_where(gamp):
-    from pathlib import Path
-    from rad_core.scene import Scene
     from rad_ros.motion import moved_aside_from_msgs
+    from scenes import packed
     _, plan = gamp
-    scene = Scene.loads((Path(__file__).resolve().parents[2] / 'scenes' / 'hard' / 'pento_floor.json').read_text())
+    scene = packed()
     target = scene.targets[0]
     plain = plan(scene, 'b4', 0, target.name, tuple(target.filled[-1]), 0)    # b1 lies too close for the fingers
     assert not plain.success and plain.failure == 'grasp' and 'hits block b1' in plain.reason
