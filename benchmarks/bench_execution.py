@@ -35,7 +35,7 @@ from collections import Counter
 from pathlib import Path
 
 import numpy as np
-from common import RESULTS, cache_dir, command_line, write_rows
+from common import RESULTS, cache_dir, command_line, shape_scenes, write_rows
 
 FAULT_LEVELS = {
     # One fault at a realistic level each, then all together (FaultConfig.realistic()).
@@ -52,17 +52,11 @@ FAULT_LEVELS = {
 
 def scenes(grids, count, seed, shapes):
     from rad_core.generator import GeneratorConfig, generate_scene
-    from rad_core.shapes import SPLITS, shape_scene
     out = []
     for g in grids:
         out += [(f'g{g}-s{seed + i}', generate_scene(GeneratorConfig(grid=g), seed + i)) for i in range(count)]
     for split in shapes:
-        if split == 'tight':        # the held-out shapes, their blocks packed at least 2 cm apart
-            from rad_core.shapes import SPECS, LayoutConfig, build_scene
-            out += [(f'{name}-tight', build_scene(SPECS[name], 0, config=LayoutConfig(gap=0.02)))
-                    for name in SPLITS['holdout']]
-        else:
-            out += [(f'{name}', shape_scene(name)) for name in SPLITS[split]]
+        out += shape_scenes(split)
     return out
 
 

@@ -38,7 +38,7 @@ import numpy as np
 from rad_core.allocation import AllocationParams, solve
 
 from common import (RESULTS, agent_legend, cache_dir, cache_path, cached_evaluation, command_line, fmt, scenes,
-                    write_rows)
+                    shape_scenes, write_rows)
 
 DEFAULT_AGENTS = ('heur-verified', 'heur+verify+support:stable', 'heur+verify+realloc', 'milp-dqn+mcts:5+verify',
                   'milp-dqn+mcts:5+verify+realloc', 'milp-dqn-mixed+verify+support:stable', 'greedy',
@@ -46,17 +46,6 @@ DEFAULT_AGENTS = ('heur-verified', 'heur+verify+support:stable', 'heur+verify+re
                   'milp-dqn-mixed+bnb:10+verify+support:stable', 'milp-dqn-mixed+bnb:10+verify+realloc+support:stable',
                   'exact')
 ROW_KEYS = ('name', 'return', 'outcome', 'coverage', 'predicted_coverage', 'coverage_opt', 'steps', 'stop_reason')
-
-
-def shape_scenes(split: str):
-    """Hand-made shapes (rad_core.shapes): 'train', 'holdout', or 'tight' (the held-out shapes
-    with their blocks packed at least 2 cm apart on the table instead of 5 cm: only the fingers'
-    rubber tips fit between them)."""
-    from rad_core import shapes
-    if split == 'tight':
-        return [(f'{name}-tight', shapes.build_scene(shapes.SPECS[name], 0, config=shapes.LayoutConfig(gap=0.02)))
-                for name in shapes.SPLITS['holdout']]
-    return [(name, shapes.shape_scene(name)) for name in shapes.SPLITS[split]]
 
 
 def cell_scenes(grid, n: int, clearance: float):

@@ -1,5 +1,5 @@
-"""What more than one benchmark uses: the generated scenes of Table II, the number format of the
-tables, and where results go.
+"""What more than one benchmark uses: the generated scenes of Table II, the hand-made shape sets,
+the number format of the tables, and where results go.
 
 Every benchmark writes two committed files under docs/results/: `<name>.md`, the table with the
 command that made it, and `<name>.rows.jsonl`, one compact JSON line per measured row (per scene
@@ -26,6 +26,17 @@ def scenes(grid: int, n: int, clearance: float):
     config = GeneratorConfig(grid=grid, sides=2, **kw)
     for s in range(n):
         yield f'g{grid}-c{clearance:g}-seed{s}', generate_scene(config, s)
+
+
+def shape_scenes(split: str):
+    """Hand-made shapes (rad_core.shapes): 'train', 'holdout', or 'tight' (the held-out shapes
+    with their blocks packed at least 2 cm apart on the table instead of 5 cm: only the fingers'
+    rubber tips fit between them)."""
+    from rad_core import shapes
+    if split == 'tight':
+        return [(f'{name}-tight', shapes.build_scene(shapes.SPECS[name], 0, config=shapes.LayoutConfig(gap=0.02)))
+                for name in shapes.SPLITS['holdout']]
+    return [(name, shapes.shape_scene(name)) for name in shapes.SPLITS[split]]
 
 
 def fmt(v) -> str:

@@ -225,8 +225,8 @@ def test_the_fingers_collide_as_franka_models_them_and_the_hull_is_left_for_the_
     meshes = [m.get('filename') for m in ET.parse(panda.urdf_path()).getroot().iter('mesh')]
     assert meshes and all(m.startswith(str(panda.source_urdf_path().parent)) and Path(m).is_file() for m in meshes)
     # Taken away (a temporary folder's cleaner), it is written again for the next world.
-    _, text = panda._urdf_name()
-    monkeypatch.setattr(panda, '_urdf_name', lambda: (tmp_path / 'panda.urdf', text))
+    _, source, text = panda._urdf_name()
+    monkeypatch.setattr(panda, '_urdf_name', lambda: (tmp_path / 'panda.urdf', source, text))
     first = panda.urdf_path().read_bytes()
     panda.urdf_path().unlink()
     assert panda.urdf_path().read_bytes() == first

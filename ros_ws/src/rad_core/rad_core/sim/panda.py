@@ -89,22 +89,22 @@ def urdf_path() -> Path:
     Written per content and pybullet_data folder (its meshes are named by absolute path) into a
     per-user temporary folder, atomically, so processes starting together are safe; written again
     whenever it is gone (a temporary folder's cleaner may take it from a long-running node)."""
-    path, text = _urdf_name()
+    path, source, text = _urdf_name()
     if not path.exists():
-        _write_urdf(path, text)
+        _write_urdf(path, source, text)
     return path
 
 
 @lru_cache(maxsize=1)
-def _urdf_name() -> tuple[Path, bytes]:
+def _urdf_name() -> tuple[Path, Path, bytes]:
+    """(where the URDF goes, pybullet_data's URDF, its text)."""
     source = source_urdf_path()
     text = source.read_bytes()
     digest = hashlib.sha256(text + repr((FINGER_BOXES, str(source.parent))).encode()).hexdigest()[:12]
-    return Path(tempfile.gettempdir()) / f'rad-{os.getuid()}' / f'panda-{digest}.urdf', text
+    return Path(tempfile.gettempdir()) / f'rad-{os.getuid()}' / f'panda-{digest}.urdf', source, text
 
 
-def _write_urdf(path: Path, text: bytes) -> None:
-    source = source_urdf_path()
+def _write_urdf(path: Path, source: Path, text: bytes) -> None:
     root = ET.fromstring(text)
     for mesh in root.iter('mesh'):
         name = mesh.get('filename', '')
