@@ -65,6 +65,20 @@ def test_profile_whitelists_only_loopback():
             assert whitelist == ['127.0.0.1']
 
 
+@pytest.mark.parametrize('path', [harness.PROFILE_FILE, harness.REPO_ROOT / 'docs' / 'examples' / 'fastdds_lan.xml'],
+                         ids=['loopback', 'lan example'])
+def test_service_responses_wait_for_a_slow_discovery(path):
+    """rmw_fastrtps drops a response when the client's response reader is not matched within the
+    response writer's max_blocking_time (100 ms by default): a loaded machine lost an /allocate
+    answer that way. Both profiles give service response writers (profile "service") seconds."""
+    root = ET.parse(path).getroot()
+    service = [p for p in root.iterfind('f:publisher', NS) if p.get('profile_name') == 'service']
+    assert len(service) == 1, f'{path.name}: one publisher profile named "service"'
+    wait = service[0].find('f:qos/f:reliability/f:max_blocking_time', NS)
+    seconds = int(wait.findtext('f:sec', '0', NS)) + int(wait.findtext('f:nanosec', '0', NS)) * 1e-9
+    assert seconds >= 2.0
+
+
 def test_node_process_runs_with_dds_settings(process):
     chatter = start_chatter(process)
     environ = harness.read_proc_environ(chatter.pid)
