@@ -20,6 +20,7 @@ import numpy as np
 from rad_core.agents import AgentSpec, label, parse
 from rad_core.errors import RadError
 from rad_core.scene import Scene
+from rad_core.sequencing.hand_order import hand_order
 from rad_core.sequencing.plan import AssemblyPlan, plan_assembly
 
 
@@ -48,7 +49,10 @@ def plan_for_agent(spec: AgentSpec, scene: Scene, allocate, plan_motion, rank, r
     budget): while the best plan leaves cells unfilled and the latest plan's refusals taught
     precedences not known before (`AssemblyPlan.conflicts`), at most `REPAIR_ROUNDS` more plans
     with the same allocation and ranking that keep to all of them (`plan.precedences_last`), each
-    kept only where it fills more. The search then gets what is left of the budget.
+    kept only where it fills more; where cells are still left, a second chain from the hand's own
+    order of the allocation (`hand_order`: one plan keeping to its precedences, then rounds as
+    before), for at most as long again as everything before took. The search then gets what is
+    left of the budget.
     `AssemblyPlan.anytime` records each plan's time and coverage, and the answer's `timings` the
     stages of all of them. Otherwise one plan, the agent's own (its one entry in `anytime`:
     'scorer', or 'search' for an agent that searches)."""
@@ -90,19 +94,40 @@ def plan_for_agent(spec: AgentSpec, scene: Scene, allocate, plan_motion, rank, r
         # Repair is bounded by its rounds, not by the budget: each round may take the time left
         # before the time limit (a large structure's third repair plan is often the one that fills it).
         repair_until = t0 + time_limit_s if improve_time_s > 0 else t0
-        latest, known = best, {}
         first_allocation = best.allocation
-        for _ in range(REPAIR_ROUNDS):
-            left = repair_until - time.perf_counter()
-            new = [p for p in latest.conflicts if p not in known]
-            if best.predicted_coverage >= 1.0 - 1e-9 or left <= 0 or not new or best.allocation is None:
-                break
-            known.update(dict.fromkeys(new))
-            latest = plan_with(first_rank, left, lambda s: first_allocation, tuple(known))
-            plans.append(latest)
-            if latest.predicted_coverage > best.predicted_coverage + 1e-9 and not _invalid(latest):
-                best, kind = latest, 'repair'
+
+        def keep(plan: AssemblyPlan) -> None:
+            nonlocal best, kind
+            plans.append(plan)
+            if plan.predicted_coverage > best.predicted_coverage + 1e-9 and not _invalid(plan):
+                best, kind = plan, 'repair'
             anytime.append({'t': time.perf_counter() - t0, 'coverage': best.predicted_coverage, 'plan': kind})
+
+        def repair(latest: AssemblyPlan, known: dict, until: float) -> None:
+            """Rounds of order repair after `latest`, keeping to `known` and what its refusals teach."""
+            for _ in range(REPAIR_ROUNDS):
+                left = until - time.perf_counter()
+                new = [p for p in latest.conflicts if p not in known]
+                if best.predicted_coverage >= 1.0 - 1e-9 or left <= 0 or not new or best.allocation is None:
+                    break
+                known.update(dict.fromkeys(new))
+                latest = plan_with(first_rank, left, lambda s: first_allocation, tuple(known))
+                keep(latest)
+
+        repair(best, {}, repair_until)
+        # Where refusals alone left cells unfilled: the hand's own order of the allocation
+        # (`hand_order`) as the known precedences, and repair rounds after it, for at most as long
+        # again as everything before took.
+        now = time.perf_counter()
+        until = min(repair_until, now + (now - t0))
+        if best.predicted_coverage < 1.0 - 1e-9 and until > now and first_allocation is not None:
+            guess = hand_order(scene, first_allocation.placements).precedences
+            if guess:
+                known = dict.fromkeys(guess)
+                latest = plan_with(first_rank, until - time.perf_counter(), lambda s: first_allocation,
+                                   tuple(known))
+                keep(latest)
+                repair(latest, known, until)
     left = improve_until - time.perf_counter()
     if anytime_search and best.predicted_coverage < 1.0 - 1e-9 and left > 0:
         searched = plan_with(rank, left)
