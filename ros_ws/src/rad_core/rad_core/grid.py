@@ -44,7 +44,7 @@ class Grid:
         self.on_table = np.abs(self.centres[:, 2] - self.unit / 2) < GRID_SNAP_TOL * self.unit
         # The grid cell directly under each cell, -1 where there is none.
         down = np.array([0.0, 0.0, self.unit])
-        self.below_idx = self._lookup(self.centres - down)
+        self.below_idx = self.lookup(self.centres - down)
 
     @cached_property
     def face_neighbours(self) -> np.ndarray:
@@ -79,10 +79,10 @@ class Grid:
 
     def cells_at(self, points: np.ndarray) -> np.ndarray | None:
         """Global indices for each point, or None if any point is off the grid."""
-        out = self._lookup(points)
+        out = self.lookup(points)
         return None if (out < 0).any() else out
 
-    def _lookup(self, points: np.ndarray) -> np.ndarray:
+    def lookup(self, points: np.ndarray) -> np.ndarray:
         """Global index of the cell at each point, -1 where it is off the grid."""
         points = np.asarray(points, dtype=float).reshape(-1, 3)
         out = np.full(len(points), -1, dtype=np.int64)

@@ -209,7 +209,7 @@ class HandBlocked:
         return found
 
     def _on_grid(self, points: np.ndarray) -> np.ndarray:
-        ids = self.grid._lookup(points)
+        ids = self.grid.lookup(points)
         return ids[ids >= 0]
 
     def blocked(self, type_name: str, yaw: int, cell_ids, occupied: np.ndarray) -> bool:

@@ -49,10 +49,10 @@ def plan_for_agent(spec: AgentSpec, scene: Scene, allocate, plan_motion, rank, r
     budget): while the best plan leaves cells unfilled and the latest plan's refusals taught
     precedences not known before (`AssemblyPlan.conflicts`), at most `REPAIR_ROUNDS` more plans
     with the same allocation and ranking that keep to all of them (`plan.precedences_last`), each
-    kept only where it fills more; where cells are still left, a second chain from the hand's own
-    order of the allocation (`hand_order`: one plan keeping to its precedences, then rounds as
-    before), for at most as long again as everything before took. The search then gets what is
-    left of the budget.
+    kept only where it fills more; where cells are still left and the hand's own order of the
+    allocation (`hand_order`) places more, a second chain from that order (one plan keeping to its
+    precedences, then rounds as before), for at most as long again as everything before took.
+    The search then gets what is left of the budget.
     `AssemblyPlan.anytime` records each plan's time and coverage, and the answer's `timings` the
     stages of all of them. Otherwise one plan, the agent's own (its one entry in `anytime`:
     'scorer', or 'search' for an agent that searches)."""
@@ -117,13 +117,14 @@ def plan_for_agent(spec: AgentSpec, scene: Scene, allocate, plan_motion, rank, r
         repair(best, {}, repair_until)
         # Where refusals alone left cells unfilled: the hand's own order of the allocation
         # (`hand_order`) as the known precedences, and repair rounds after it, for at most as long
-        # again as everything before took.
+        # again as everything before took (and within the time limit); only where that order
+        # places more than the best plan.
         now = time.perf_counter()
         until = min(repair_until, now + (now - t0))
         if best.predicted_coverage < 1.0 - 1e-9 and until > now and first_allocation is not None:
-            guess = hand_order(scene, first_allocation.placements).precedences
-            if guess:
-                known = dict.fromkeys(guess)
+            guess = hand_order(scene, first_allocation.placements)
+            if guess.precedences and guess.coverage > best.predicted_coverage + 1e-9:
+                known = dict.fromkeys(guess.precedences)
                 latest = plan_with(first_rank, until - time.perf_counter(), lambda s: first_allocation,
                                    tuple(known))
                 keep(latest)

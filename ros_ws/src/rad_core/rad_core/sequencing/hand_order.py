@@ -40,6 +40,8 @@ class HandOrder:
 
     order: list[tuple[int, ...]] = field(default_factory=list)
     precedences: list[Precedence] = field(default_factory=list)
+    coverage: float = 0.0
+    """The target's coverage once the order is placed (cells built before it included)."""
 
 
 def hand_order(scene: Scene, placements, time_limit_s: float = 1.0, gamp=None) -> HandOrder:
@@ -114,5 +116,7 @@ def hand_order(scene: Scene, placements, time_limit_s: float = 1.0, gamp=None) -
                     if solver.boolean_value(placed[m]):
                         out.append(Precedence(poses[n][0], poses[m][0], 'hand order'))
                 break
-    return HandOrder([poses[n][0] for n in chosen], out)
+    total = int(grid.is_target.sum())
+    filled = int((grid.is_target & occupied).sum()) + sum(poses[n][2] for n in chosen)
+    return HandOrder([poses[n][0] for n in chosen], out, filled / total if total else 1.0)
 
