@@ -1,7 +1,7 @@
 """Planning time and coverage against structure size, up to 100 blocks from a feeder.
 
     python benchmarks/bench_large.py [--agent greedy] [--grids 4,6,8,10] [--seeds 3] [--seed 7000]
-                                     [--large all] [--time-limit 300] [--out docs/results]
+                                     [--large all] [--time-limit 120] [--out docs/results]
 
 For each generated two-sided scene (g in --grids, seeds --seed.., unseen by training; from
 g = 7 or 8 on the generator puts the blocks in a feeder, the table within reach being too
@@ -116,7 +116,8 @@ def main(argv=None) -> int:
     ap.add_argument('--seeds', type=int, default=3)
     ap.add_argument('--seed', type=int, default=7000, help='first seed of the generated scenes')
     ap.add_argument('--large', default='all', help="comma-separated large shapes, 'all' or 'none'")
-    ap.add_argument('--time-limit', type=float, default=300.0, help='planning time limit per structure (s)')
+    ap.add_argument('--time-limit', type=float, default=120.0,
+                    help="planning time limit per structure (s); 120: the assembly node's default")
     ap.add_argument('--improve-time-s', type=float, default=None,
                     help="anytime planning's budget after the first plan (default: the assembly node's, "
                          "agent_plan.IMPROVE_TIME_S)")
