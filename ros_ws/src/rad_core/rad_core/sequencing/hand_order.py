@@ -11,14 +11,15 @@ built against). Where its rounds leave cells unfilled, a second chain starts fro
 (`agent_plan.plan_for_agent`).
 
 `hand_order` asks the whole question at once, for the allocation's poses: an order in which each
-pose, when its turn comes, has a way of being held (a grasp at a hand yaw: `allocation.arm.
-HandBlocked.cells`) none of whose blocking cells is built, and rests on something (the table, a
-built cell or a pose before it under one of its units: the MDP refuses a block that would rest
-on nothing). CP-SAT finds the order placing the most target cells (all of them where it can).
-Its answer as precedences: each placed pose before every pose that fills a blocking cell of the
-way it is held. The blocking cells are those the hand, its fingers or panda_link7 always enter
-(`gamp.hand_cells`); the arm's other links, the carried block and the pick are left to GAMP, so
-the order is a guess that a plan still checks step by step.
+pose, when its turn comes, has a way of being held (a grasp at a hand yaw, as
+`allocation.arm.HandBlocked.cells` gives them) none of whose blocking cells is built, and rests
+on something (the table, a built cell or a pose before it under one of its units: the MDP
+refuses a block that would rest on nothing). CP-SAT finds the order placing the most target
+cells (all of them where it can). Its answer as precedences: each placed pose before every pose
+that fills a blocking cell of the way it is held. The blocking cells are those the hand, its
+fingers or panda_link7 always enter (`gamp.hand_cells`); the arm's other links, the carried
+block and the pick are left to GAMP, so the order is a guess that a plan still checks step by
+step.
 """
 
 from __future__ import annotations
