@@ -1,4 +1,4 @@
-"""The hand's own order of an allocation (`sequencing.hand_order`): order repair's first guess."""
+"""The hand's own order of an allocation (`sequencing.hand_order`): order repair's second chain."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from rad_core.grid import Grid
 from rad_core.scene import Scene
 from rad_core.sequencing.hand_order import hand_order
 
-from scenes import doc
+from scenes import scene as make_scene
 
 U = 0.05
 
@@ -20,9 +20,9 @@ def square(n_cubes: int = 4) -> Scene:
     """A flush 2 x 2 square of cube cells on the table, and cubes on the table for it."""
     blocks = [{'id': f'c{k}', 'type': 'cube', 'position': [0.35 + 0.1 * k, -0.3, U / 2], 'yaw': 0}
               for k in range(n_cubes)]
-    return Scene.from_dict(doc(blocks=blocks, unit=U, types={'cube': [[0, 0, 0]]},
-                               targets=[{'name': 't', 'origin': [0.45, 0.1, U / 2], 'size': [2, 2, 1],
-                                         'filled': [[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]]}]))
+    return make_scene(blocks=blocks, unit=U, types={'cube': [[0, 0, 0]]},
+                      targets=[{'name': 't', 'origin': [0.45, 0.1, U / 2], 'size': [2, 2, 1],
+                                'filled': [[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]]}])
 
 
 def replay(scene: Scene, found) -> None:
@@ -56,9 +56,9 @@ def test_poses_needing_no_order_give_no_precedences_and_built_cells_count():
     # Two cubes side by side in a one-cell-deep row: the fingers close across the row, both free.
     blocks = [{'id': f'c{k}', 'type': 'cube', 'position': [0.35 + 0.1 * k, -0.3, U / 2], 'yaw': 0}
               for k in range(2)]
-    row = Scene.from_dict(doc(blocks=blocks, unit=U, types={'cube': [[0, 0, 0]]},
-                              targets=[{'name': 't', 'origin': [0.45, 0.1, U / 2], 'size': [2, 1, 1],
-                                        'filled': [[0, 0, 0], [1, 0, 0]]}]))
+    row = make_scene(blocks=blocks, unit=U, types={'cube': [[0, 0, 0]]},
+                     targets=[{'name': 't', 'origin': [0.45, 0.1, U / 2], 'size': [2, 1, 1],
+                               'filled': [[0, 0, 0], [1, 0, 0]]}])
     found = hand_order(row, solve(row).placements)
     assert len(found.order) == 2 and found.precedences == []
     # The square with one cube already built in a corner: three cells open, two of them beside it.

@@ -15,7 +15,7 @@ from rad_core.scene import Scene
 from rad_core.sequencing.plan import PlanStep, local_motion_planner
 from rad_core.shapes import LayoutConfig, footprint, move_aside_spot
 
-from scenes import packed
+from scenes import packed, scene as make_scene
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -98,11 +98,10 @@ def test_move_aside_off_says_why_and_a_block_nothing_frees_keeps_its_reason(plan
     o4 = [[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]]
     blocks = {'b5': ('cube', 0.45, -0.25), 'b8': ('O4', 0.45 + u + 0.01, -0.25),
               'b9': ('O4', 0.45 - u, -0.25 + u + 0.015)}
-    scene = Scene.from_dict({
-        'format': 'rad-scene/1', 'unit': u, 'block_types': {'cube': [[0, 0, 0]], 'O4': o4},
-        'blocks': [{'id': b, 'type': t, 'position': [x, y, u / 2], 'yaw': 0} for b, (t, x, y) in blocks.items()],
-        'targets': [{'name': 't', 'origin': [0.4, 0.25, u / 2], 'size': [2, 1, 1], 'filled': [[0, 0, 0]]}],
-    })
+    scene = make_scene(unit=u, types={'cube': [[0, 0, 0]], 'O4': o4},
+                       blocks=[{'id': b, 'type': t, 'position': [x, y, u / 2], 'yaw': 0}
+                               for b, (t, x, y) in blocks.items()],
+                       targets=[{'name': 't', 'origin': [0.4, 0.25, u / 2], 'size': [2, 1, 1], 'filled': [[0, 0, 0]]}])
     target = scene.targets[0]
     result, _, _ = moving(scene, SceneAction('b5', 0, target.name, tuple(target.filled[0]), 0), move_aside=True)
     assert not result.success and result.failure == 'grasp'

@@ -59,10 +59,10 @@ def hand_order(scene: Scene, placements, time_limit_s: float = 1.0, gamp=None) -
     poses = []
     for p in placements:
         ids = [grid.index(regions.index(p.target), c) for c in p.cells]
-        if None in ids or occupied[ids].any():
-            continue
+        if None in ids or occupied[ids].any() or hand.blocked(p.type, p.yaw, ids, occupied):
+            continue                      # taken, or every way of holding it is blocked already
         ways = [w for pair in hand.cells(p.type, p.yaw, ids) for w in pair if not occupied[w].any()]
-        poses.append((tuple(sorted(int(c) for c in ids)), ways, int(grid.is_target[ids].sum()), p.type))
+        poses.append((tuple(sorted(int(c) for c in ids)), ways, int(grid.is_target[ids].sum())))
     if not poses:
         return HandOrder()
     owner = {c: n for n, (cells, *_) in enumerate(poses) for c in cells}
@@ -70,7 +70,7 @@ def hand_order(scene: Scene, placements, time_limit_s: float = 1.0, gamp=None) -
     placed = [model.new_bool_var(f'x{n}') for n in range(len(poses))]
     order = [model.new_int_var(0, len(poses) - 1, f't{n}') for n in range(len(poses))]
     held_by: list[list] = []
-    for n, (cells, ways, _, type_name) in enumerate(poses):
+    for n, (cells, ways, _) in enumerate(poses):
         used = []
         for w, blocking in enumerate(ways):
             var = model.new_bool_var(f'w{n}_{w}')
@@ -78,10 +78,8 @@ def hand_order(scene: Scene, placements, time_limit_s: float = 1.0, gamp=None) -
             for m in sorted({owner[c] for c in blocking.tolist() if c in owner} - {n}):
                 model.add(order[n] < order[m]).only_enforce_if([var, placed[m]])
             used.append((var, blocking))
-        if used:
+        if used:          # none for a type without a top-down grasp: GAMP says why
             model.add_bool_or([v for v, _ in used]).only_enforce_if(placed[n])
-        elif hand.grasps.get(type_name):
-            model.add(placed[n] == 0)     # every way of holding it is blocked already
         held_by.append(used)
         # Resting on something: the table, a built cell, or a pose placed before it.
         ids = np.asarray(cells)
@@ -100,7 +98,7 @@ def hand_order(scene: Scene, placements, time_limit_s: float = 1.0, gamp=None) -
         for var, m in zip(rests, under):
             model.add_implication(var, placed[m])
             model.add(order[m] < order[n]).only_enforce_if(var)
-    model.maximize(sum(k * placed[n] for n, (_, _, k, _) in enumerate(poses)))
+    model.maximize(sum(k * placed[n] for n, (_, _, k) in enumerate(poses)))
     solver = cp_model.CpSolver()
     solver.parameters.max_time_in_seconds = float(time_limit_s)
     solver.parameters.num_workers = 1
