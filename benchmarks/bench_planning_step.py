@@ -21,7 +21,9 @@ Every step records its outcome, reason, every block's pose afterwards (1e-5 m, 1
 quaternion), the arm's joints, GAMP's grasp, hand yaw, final joints and every trajectory point of
 its motion (1e-6 rad); restores record whether the world came back exactly. `--record FILE` saves
 the record, `--compare FILE` checks against a saved one (exit 1, listing the differences): text
-and integers (outcomes, reasons, grasps) equal, numbers within `--tol` (see `differences`). Both
+and integers (outcomes, reasons, grasps) equal, numbers within `--tol` (see `differences`);
+with `--verdicts` only what each step decides (`verdicts`: outcomes, GAMP's success, reasons
+without their numbers), the check the settling's early end is held to. Both
 print the time per step and per GAMP call (wall and process CPU: the machine may be shared), and
 `--profile N` the N entries of a cProfile run that take the most time (a second pass).
 """
@@ -33,6 +35,7 @@ import cProfile
 import io
 import json
 import pstats
+import re
 import sys
 import time
 from pathlib import Path
@@ -251,6 +254,24 @@ def differences(old: list[dict], new: list[dict], tol: float) -> tuple[list[str]
     return out, (worst[0], worst[1])
 
 
+def verdicts(rows: list[dict]) -> list[dict]:
+    """What a step decides, as the issue's and the robot training's outcome checks read it: per
+    entry the outcome and GAMP's success, the reasons with their numbers left out (how far a
+    falling block got depends on when it is read); restores and the allocation as they are."""
+    def mask(text: str) -> str:
+        return re.sub(r'-?\d+(\.\d+)?', '#', text)
+    out = []
+    for r in rows:
+        if r['kind'] in ('allocation', 'restore'):
+            out.append(r)
+            continue
+        plan = r['plan']
+        out.append({k: r[k] for k in ('scene', 'depth', 'kind', 'action')}
+                   | {'outcome': r.get('outcome'), 'reason': mask(r.get('reason', '')),
+                      'gamp': [plan.get('success'), plan.get('failure'), mask(plan.get('reason', ''))] if plan else []})
+    return out
+
+
 def summary(rows: list[dict]) -> str:
     steps = [r for r in rows if r['kind'] in ('step', 'advance')]
     kinds = {}
@@ -277,6 +298,9 @@ def main() -> int:
     p.add_argument('--quick', action='store_true', help='two scenes only (a smoke run)')
     p.add_argument('--tol', type=float, default=1e-4,
                    help='--compare: numbers (m, rad) may differ by this much; text and integers must be equal')
+    p.add_argument('--verdicts', action='store_true',
+                   help='--compare the verdicts only: outcomes, GAMP success and reasons with their numbers '
+                        'left out (what a step decides; the motions and poses may differ)')
     p.add_argument('--only', default='', help='only the scenes whose name contains this (a look at one)')
     p.add_argument('--profile', type=int, default=0, help='then a cProfile pass: print its N costliest entries')
     args = p.parse_args()
@@ -297,7 +321,10 @@ def main() -> int:
         print(f'record of {len(rows)} entries -> {args.record}')
     if args.compare:
         saved = json.loads(args.compare.read_text())
-        diffs, worst = differences(saved['rows'], json.loads(json.dumps(rows)), args.tol)
+        old, new = saved['rows'], json.loads(json.dumps(rows))
+        if args.verdicts:
+            old, new = verdicts(old), verdicts(new)
+        diffs, worst = differences(old, new, args.tol)
         print(f'largest numeric deviation from the record: {worst[0]:.2e} at {worst[1]} (tolerance {args.tol:g})')
         if diffs:
             print(f'{len(diffs)} DIFFERENCES from {args.compare}:')

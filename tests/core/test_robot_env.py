@@ -8,7 +8,8 @@ from rad_core.allocation import solve
 from rad_core.allocation.guide import AllocationGuide
 from rad_core.generator import GeneratorConfig, generate_scene
 from rad_core.mdp import TERMINATE, Action, Outcome
-from rad_core.robot_env import RobotAssemblyEnv, RobotEnvConfig, outcome_class
+from rad_core.errors import RadError
+from rad_core.robot_env import AtRest, RobotAssemblyEnv, RobotEnvConfig, outcome_class
 from rad_core.scene import Scene
 
 U = 0.05
@@ -163,3 +164,29 @@ def test_the_step_cache_replays_the_verdicts_of_a_fresh_env():
         assert cached.cache.hits >= len(walks[1]) - 1 and cached.cache.misses > 0
     with pytest.raises(Exception, match='needs markov'):
         RobotEnvConfig(execution='teleport', cache=True)
+
+
+@pytest.mark.parametrize('overhang', [False, True])
+def test_settling_ended_at_rest_judges_as_the_full_settling(overhang):
+    # A bar on a one-cube column: centred on it, it stands; reaching two cells past it, it falls.
+    col = 0 if overhang else 1
+    blocks = [('col', 'cube', (0.45 + col * U, 0.15, U / 2)), ('bar', 'I3', (0.40, -0.25, U / 2))]
+    filled = ((col, 0, 0), (0, 0, 1), (1, 0, 1), (2, 0, 1))
+    verdicts, settled = [], []
+    for at_rest in (None, AtRest()):
+        config = RobotEnvConfig(execution='teleport', at_rest=at_rest)
+        with RobotAssemblyEnv(scene_of(blocks, filled=filled), config) as renv:
+            t0 = renv.twin.time
+            r = renv.step(action(renv.env, 'bar', 0, (0, 0, 1)))
+            verdicts.append((r.outcome, r.reason.split(':')[0]))
+            settled.append(renv.twin.time - t0)
+    assert verdicts[0] == verdicts[1]
+    assert verdicts[0][0] == (Outcome.INVALID_UNSTABLE if overhang else Outcome.COMPLETED)
+    assert settled[0] == pytest.approx(0.5) and settled[1] < 0.5
+
+
+def test_at_rest_refuses_bad_settings():
+    with pytest.raises(RadError, match='AtRest'):
+        AtRest(every_s=0.0)
+    with pytest.raises(RadError, match='AtRest'):
+        AtRest(speed=-1.0)

@@ -621,3 +621,25 @@ def test_a_path_abort_names_what_the_held_block_touches(twin):
     report = twin.execute(move(q, below, speed=0.2), tolerances=Tolerances(path=0.02))
     assert report.error_code == PATH_TOLERANCE_VIOLATED
     assert report.error_string.endswith('holding block c0, which touches the table)'), report.error_string
+
+
+def test_settling_until_rest_ends_after_two_calm_checks_and_runs_on_while_a_block_falls():
+    with World(one_cube_scene()) as world:
+        twin = Twin(world)
+        ran = twin.settle_until_rest(0.5, 0.1, 0.025, 0.002, 0.05)
+        assert ran == pytest.approx(0.15)          # 0.1 s, then two calm checks 25 ms apart
+        assert twin.time == pytest.approx(ran)
+    dropped = one_cube_scene(at=PICK + (0.0, 0.0, 0.1))    # 10 cm above the table: falls for ~0.14 s
+    with World(dropped) as world:
+        twin = Twin(world)
+        ran = twin.settle_until_rest(0.5, 0.1, 0.025, 0.002, 0.05)
+        assert 0.2 <= ran <= 0.5
+        assert world.block_pose('c0')[0][2] == pytest.approx(U / 2, abs=2e-3)   # judged where it landed
+        assert twin.settle_until_rest(0.05, 0.1, 0.025, 0.002, 0.05) == pytest.approx(0.05)   # capped
+
+
+@pytest.mark.parametrize('args', [(-1, 0.1, 0.025, 0.002, 0.05), (0.5, 0.1, 0.0, 0.002, 0.05),
+                                  (0.5, float('nan'), 0.025, 0.002, 0.05), (0.5, 0.1, 0.025, -1, 0.05)])
+def test_settling_until_rest_refuses_bad_arguments(bare, args):
+    with pytest.raises(RadError, match='settle_until_rest'):
+        bare.settle_until_rest(*args)

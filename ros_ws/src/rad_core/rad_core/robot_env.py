@@ -63,6 +63,30 @@ def outcome_class(outcome: Outcome) -> str:
 
 
 @dataclass(frozen=True)
+class AtRest:
+    """When a teleporting step's settling may end before `RobotEnvConfig.settle_s`.
+
+    From `min_s` on, every `every_s`, the twin reads every block's speed; when all are under
+    `speed` (m/s) and `spin` (rad/s) at two checks in a row, the blocks are judged there
+    (`Twin.settle_until_rest`). Why that decides as the full settling does: a block that will fall
+    or tip is pulled by an unbalanced force and speeds up, so it does not pass two checks in a
+    row. One that tips so slowly that it passes (angular acceleration under spin / min_s, 0.5
+    rad/s^2 by default) would turn less than 4 degrees by 0.5 s, and `tilt_tol_deg` is 5.
+    Measured: the same verdicts as the full 0.5 s on every step of the planning-step benchmark
+    (docs/results/planning_step.md).
+    """
+
+    min_s: float = 0.1
+    every_s: float = 0.025
+    speed: float = 0.002
+    spin: float = 0.05
+
+    def __post_init__(self):
+        if not (self.min_s >= 0 and self.every_s > 0 and self.speed >= 0 and self.spin >= 0):
+            raise RadError(f'AtRest: min_s, speed and spin must be >= 0 and every_s > 0, got {self}')
+
+
+@dataclass(frozen=True)
 class RobotEnvConfig:
     """How the robot environment executes and judges an action.
 
@@ -79,6 +103,9 @@ class RobotEnvConfig:
         the world before a step is a function of the MDP state.
     cache: replay the verdict of an action already judged from the same state
         (scene, placed blocks); needs markov and teleport execution.
+    at_rest: with teleport execution, end the settling once the blocks are at rest
+        (`AtRest`), at most settle_s; None settles the full settle_s. Simulated
+        execution always settles settle_s.
     """
 
     env: EnvConfig = field(default_factory=lambda: EnvConfig(stability='none'))
@@ -92,6 +119,7 @@ class RobotEnvConfig:
     twin: TwinConfig = field(default_factory=TwinConfig)
     markov: bool = False
     cache: bool = False
+    at_rest: AtRest | None = field(default_factory=AtRest)
 
     def __post_init__(self):
         if self.execution not in ('simulate', 'teleport'):
@@ -283,6 +311,10 @@ class RobotAssemblyEnv:
             self.world.set_block_pose(block_id, position, yaw_quaternion(yaw))
             self.world.set_joint_positions(plan.motion.final_joints())
             twin.sync()
+            rest = self.config.at_rest
+            if rest is not None:
+                twin.settle_until_rest(self.config.settle_s, rest.min_s, rest.every_s, rest.speed, rest.spin)
+                return
         twin.settle(self.config.settle_s)
 
     def _judge(self, before: dict, block_id: str, position, yaw) -> tuple[Outcome, str] | None:

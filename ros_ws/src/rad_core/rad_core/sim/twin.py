@@ -500,6 +500,37 @@ class Twin:
         """Let physics run for `seconds`: the robot holds its command (a running one goes on)."""
         self.advance(seconds)
 
+    def settle_until_rest(self, seconds: float, min_s: float, every_s: float, speed: float, spin: float) -> float:
+        """Let physics run at most `seconds`, and stop once the blocks are at rest; returns the seconds run.
+
+        From `min_s` on, every `every_s`, every block's linear speed (m/s) and angular speed (rad/s)
+        are read; when both are under `speed` and `spin` at two checks in a row, the settling ends
+        there. A block that tips or slides keeps speeding up, so it never passes two checks in a row
+        (`RobotEnvConfig.at_rest` says what that bounds). Whole time steps, as `settle`.
+        """
+        if not all(math.isfinite(x) and x >= 0 for x in (seconds, min_s, speed, spin)) or not every_s > 0:
+            raise RadError(f'settle_until_rest: bad arguments {(seconds, min_s, every_s, speed, spin)!r}')
+        p, cid, bodies = self._p, self.world.client, list(self.world.blocks.values())
+        total = int(seconds / self.dt + 1e-9)
+        first, every = min(total, int(min_s / self.dt + 1e-9)), max(1, round(every_s / self.dt))
+        self._steps(first)
+        done, calm = first, 0
+        while done < total:
+            n = min(every, total - done)
+            self._steps(n)
+            done += n
+            still = True
+            for body in bodies:
+                v, w = p.getBaseVelocity(body, physicsClientId=cid)
+                if v[0] * v[0] + v[1] * v[1] + v[2] * v[2] >= speed * speed or \
+                        w[0] * w[0] + w[1] * w[1] + w[2] * w[2] >= spin * spin:
+                    still = False
+                    break
+            calm = calm + 1 if still else 0
+            if calm >= 2:
+                break
+        return done * self.dt
+
     def execute(self, trajectory: Trajectory | dict, callback=None, callback_period: float = 0.02,
                 real_time_factor: float | None = None, tolerances: Tolerances = Tolerances()) -> ExecutionReport:
         """Run an arm trajectory to its end (goal hold included) and report (its error_code says how it ended).
