@@ -101,6 +101,23 @@ def test_from_voxels_with_two_named_regions_back_to_back(tmp_path, capsys):
     assert scene.num_target_cells == 8
 
 
+def test_from_voxels_chooses_blocks_the_hand_can_place_unless_any_order_is_asked(tmp_path, capsys):
+    step = np.zeros((3, 2, 2), dtype=bool)     # a 3 x 2 floor with a two-cell step on it
+    step[:, :, 0] = True
+    step[0, :, 1] = True
+    np.save(tmp_path / 'step.npy', step)
+    reports = {}
+    for flags in ([], ['--any-order']):
+        report = tmp_path / f'report{len(flags)}.json'
+        rc, _, _ = run(['scene', 'from-voxels', tmp_path / 'step.npy', '-o', tmp_path / 'scene.json',
+                        '--report', report, *flags], capsys)
+        assert rc == 0
+        reports[bool(flags)] = json.loads(report.read_text())
+    assert reports[False]['exact'] and reports[False]['hand_covered'] == 8
+    assert reports[True]['exact'] and reports[True]['hand_covered'] is None
+    assert reports[False]['counts'] != reports[True]['counts']
+
+
 def test_the_scene_goes_to_stdout_and_the_summary_to_stderr(tmp_path, capsys):
     rc, stdout, stderr = run(['scene', 'from-mesh', letter_t(tmp_path / 't.ply'), '--size', 3], capsys)
     assert rc == 0 and Scene.loads(stdout).num_target_cells == 5 and 'exactly' in stderr

@@ -146,3 +146,45 @@ def test_inventory_files_and_costs_are_checked(tmp_path):
         sp.choose_blocks(regions(bar(2)), UNIT, types('I2'), params=sp.SupplyParams(objective='cheapest'))
     with pytest.raises(RadError, match='unknown block type'):
         sp.pick_types('I2,Q7', known)
+
+
+def _hand_placeable(placements, targets) -> int:
+    """Target cells of `placements` that sequencing.hand_order can place in some order."""
+    from rad_core.grid import Grid
+    from rad_core.scene import Scene
+    from rad_core.sequencing.hand_order import hand_order
+    scene = Scene(UNIT, dict(DEFAULT_LIBRARY), (), tuple(targets))
+    found = hand_order(scene, placements)
+    grid = Grid(scene)
+    return int(sum(grid.is_target[list(cells)].sum() for cells in found.order))
+
+
+def test_the_cover_is_one_a_top_down_hand_can_place_in_some_order():
+    # A 3 x 2 floor with a step of two cells on it. The fewest blocks (a cube, an L3 and an upright
+    # 2 x 2) leave a piece the hand cannot take between its neighbours; three others can all go in.
+    step = np.zeros((3, 2, 2), dtype=bool)
+    step[:, :, 0] = True
+    step[0, :, 1] = True
+    targets = regions(step)
+    blind, report = sp.choose_blocks(targets, UNIT, dict(DEFAULT_LIBRARY), params=sp.SupplyParams(hand=False))
+    assert report.exact and report.hand_covered is None
+    assert _hand_placeable(blind, targets) < 8
+    placements, report = sp.choose_blocks(targets, UNIT, dict(DEFAULT_LIBRARY))
+    assert report.exact and report.hand_covered == 8 and report.rounds >= 2
+    assert _hand_placeable(placements, targets) == 8
+    assert 'hand' not in report.summary()
+
+
+def test_where_no_cover_can_be_placed_whole_the_report_says_how_much_can():
+    # A flush 3 x 3 floor: whatever the blocks, the last one has neighbours on both sides both ways.
+    floor = regions(np.ones((3, 3, 1), dtype=bool))
+    placements, report = sp.choose_blocks(floor, UNIT, dict(DEFAULT_LIBRARY), params=sp.SupplyParams(hand_rounds=3))
+    assert report.exact and report.rounds == 3
+    assert report.hand_covered == _hand_placeable(placements, floor) < 9
+    assert f'a top-down hand can place {report.hand_covered} of the 9 covered cells' in report.summary()
+    assert report.to_dict()['hand_covered'] == report.hand_covered
+
+
+def test_hand_rounds_must_be_positive():
+    with pytest.raises(RadError, match='hand_rounds'):
+        sp.choose_blocks(regions(bar(2)), UNIT, types('cube', 'I2'), params=sp.SupplyParams(hand_rounds=0))

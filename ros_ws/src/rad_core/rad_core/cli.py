@@ -137,7 +137,8 @@ def _supply_and_write(args, targets, unit: float, clearance: float = 0.0, scene=
         _say(args, f'target only: {len(targets)} regions, {cells} target cells, no blocks '
                    f'(rad scene supply lays them out)')
         return 0
-    params = SupplyParams(objective=args.objective, costs=costs, time_limit_s=args.time_limit, seed=args.seed)
+    params = SupplyParams(objective=args.objective, costs=costs, time_limit_s=args.time_limit, seed=args.seed,
+                          hand=not args.any_order)
     result, report = supply(targets, unit, types, inventory, params, clearance)
     _write_text(result.dumps(), args.output)
     if args.report:
@@ -482,6 +483,9 @@ def _add_supply_args(p: argparse.ArgumentParser, no_supply: bool = True) -> None
     p.add_argument('--cost', metavar='T=C,...', help='per-type costs for --objective cheapest (others cost 1)')
     p.add_argument('--seed', type=int, default=0, help='solver and layout seed')
     p.add_argument('--time-limit', type=float, default=10.0, metavar='S', help='solver time limit, seconds')
+    p.add_argument('--any-order', action='store_true',
+                   help='take the best cover even where a top-down hand cannot place all of it in any order '
+                        '(default: rule out the pieces it cannot and solve again, rad_core.supply)')
     p.add_argument('--report', metavar='FILE', help='write how well the blocks cover (JSON) here')
     p.add_argument('--clearance', type=float, metavar='C',
                    help="gap between neighbouring blocks, a fraction of the unit (0.2: the paper's 1 cm at 5 cm; "

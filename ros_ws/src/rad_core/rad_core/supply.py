@@ -11,6 +11,16 @@ every block rests on the table, a chosen block or a filled cell when placed), le
    as in the allocation);
 3. the fewest blocks (`fewest`) or the lowest total cost (`cheapest`, per-type costs).
 
+With `SupplyParams.hand` (the default) the cover must also be one a top-down hand can build:
+`sequencing.hand_order` looks for an order in which each chosen piece, when its turn comes, has
+a way of being held that no piece placed before it is in the way of, and rests on something.
+The pieces it cannot place are ruled out and the model solved again, for at most `hand_rounds`
+rounds within the time limit; the cover whose order places the most target cells is kept (ties:
+the earlier round, the better by the levels above). Without this, a solid 2 x 2 tower becomes
+six 2 x 2 slabs standing back to back, and the hand can take none of the second slabs of a pair
+(a flush slab on one side, 10 cm across the other). The order is a guess that ignores the arm's
+other links and the pick (`hand_order`); GAMP still checks every step.
+
 An inventory caps how many blocks of each type there are; without one the count of each
 type is free. So the allocation the planner solves later, over exactly these blocks, finds
 a cover as good (this one is a feasible answer to it). The chosen pieces are checked with
@@ -63,6 +73,10 @@ class SupplyParams:
     costs: Mapping[str, float] = field(default_factory=dict)
     time_limit_s: float = 10.0
     seed: int = 0
+    hand: bool = True
+    """Keep to covers a top-down hand can place in some order (module docstring)."""
+    hand_rounds: int = 8
+    """At most this many solves, each ruling out the pieces the hand could not place."""
 
     def validate(self, types: Mapping[str, BlockType]) -> None:
         if self.objective not in OBJECTIVES:
@@ -80,6 +94,8 @@ class SupplyParams:
             raise RadError(f'time limit must be a positive number of seconds, got {self.time_limit_s!r}')
         if not (isinstance(self.seed, int) and 0 <= self.seed < 2 ** 31):
             raise RadError(f'seed must be an integer in 0..2^31-1, got {self.seed!r}')
+        if not (isinstance(self.hand_rounds, int) and self.hand_rounds >= 1):
+            raise RadError(f'hand_rounds must be a positive integer, got {self.hand_rounds!r}')
 
 
 @dataclass(frozen=True)
@@ -94,6 +110,10 @@ class SupplyReport:
     cost: float | None
     stands: bool
     solve_time_s: float
+    hand_covered: int | None = None
+    """Target cells of the cover a top-down hand can place in some order (`SupplyParams.hand`);
+    None where it was not asked."""
+    rounds: int = 1
 
     @property
     def exact(self) -> bool:
@@ -108,7 +128,8 @@ class SupplyReport:
         return {'status': self.status, 'target_cells': self.target_cells, 'covered': self.covered,
                 'filler_cells': self.filler_cells, 'coverage': round(self.coverage, 4), 'exact': self.exact,
                 'blocks': sum(self.counts.values()), 'counts': dict(self.counts), 'cost': self.cost,
-                'stands': self.stands, 'solve_time_s': round(self.solve_time_s, 3)}
+                'stands': self.stands, 'hand_covered': self.hand_covered, 'rounds': self.rounds,
+                'solve_time_s': round(self.solve_time_s, 3)}
 
     def summary(self) -> str:
         counts = ', '.join(f'{n} {k}' for k, n in sorted(self.counts.items()) if n)
@@ -121,6 +142,9 @@ class SupplyReport:
             text += f', cost {self.cost:g}'
         if not self.stands:
             text += '; no order found in which every block rests when placed'
+        if self.hand_covered is not None and self.hand_covered < self.covered:
+            text += (f'; a top-down hand can place {self.hand_covered} of the {self.covered} covered cells '
+                     f'in some order')
         return f'{text} [{self.status}]'
 
 
@@ -215,16 +239,33 @@ def choose_blocks(targets: Sequence[TargetRegion], unit: float, types: Mapping[s
     model.maximize(cover_span * sum(c.value * w[n] for n, c in enumerate(candidates))
                    + cost_span * sum(k * w[n] for n, k in enumerate(covered) if k)
                    - sum(k * w[n] for n, k in enumerate(unit_cost) if k))
-    solver = cp_model.CpSolver()
-    solver.parameters.max_time_in_seconds = float(params.time_limit_s)
-    solver.parameters.num_workers = 1
-    solver.parameters.random_seed = params.seed
-    solver.parameters.catch_sigint_signal = False
-    status = solver.solve(model)
-    if status not in (cp_model.OPTIMAL, cp_model.FEASIBLE):
-        raise RadError(f'the supply model found no answer in {params.time_limit_s:g} s '
-                       f'({solver.status_name(status)}): give it a longer --time-limit')
-    picked = [candidates[n] for n in range(len(candidates)) if solver.boolean_value(w[n])]
+    hand_scene = scene if params.hand else None
+    best, rounds = None, 0
+    while True:
+        rounds += 1
+        left = params.time_limit_s - (time.perf_counter() - start)
+        solver = cp_model.CpSolver()
+        solver.parameters.max_time_in_seconds = float(max(left, 0.05) if rounds > 1 else params.time_limit_s)
+        solver.parameters.num_workers = 1
+        solver.parameters.random_seed = params.seed
+        solver.parameters.catch_sigint_signal = False
+        status = solver.solve(model)
+        if status not in (cp_model.OPTIMAL, cp_model.FEASIBLE):
+            if best is not None:
+                break               # the rounds before found covers: keep the best of them
+            raise RadError(f'the supply model found no answer in {params.time_limit_s:g} s '
+                           f'({solver.status_name(status)}): give it a longer --time-limit')
+        chosen = [n for n in range(len(candidates)) if solver.boolean_value(w[n])]
+        unplaced, hand_covered = _unplaced(hand_scene, grid, candidates, chosen)
+        score = (hand_covered if hand_covered is not None else 0, -rounds)
+        if best is None or score > best[0]:
+            best = (score, chosen, solver.status_name(status), hand_covered)
+        if not unplaced or rounds >= params.hand_rounds or time.perf_counter() - start >= params.time_limit_s:
+            break
+        for n in unplaced:
+            model.add(w[n] == 0)
+    _, chosen, status_name, hand_covered = best
+    picked = [candidates[n] for n in chosen]
     placements = [c.placement for c in picked]
     cells = sorted({i for c in picked for i in c.cell_ids})
     n_covered = int(grid.is_target[cells].sum()) if cells else 0
@@ -234,10 +275,23 @@ def choose_blocks(targets: Sequence[TargetRegion], unit: float, types: Mapping[s
     cost = None
     if params.objective == 'cheapest':
         cost = round(sum(_cost(p.type, params) for p in placements) / COST_SCALE, 6)
-    report = SupplyReport(solver.status_name(status), n_target, n_covered, len(cells) - n_covered,
+    report = SupplyReport(status_name, n_target, n_covered, len(cells) - n_covered,
                           {k: v for k, v in kinds.items() if v}, cost, stands(placements, targets),
-                          time.perf_counter() - start)
+                          time.perf_counter() - start, hand_covered, rounds)
     return placements, report
+
+
+def _unplaced(scene: Scene | None, grid, candidates, chosen: list[int]) -> tuple[list[int], int | None]:
+    """The chosen candidates a top-down hand cannot place in any order (`sequencing.hand_order`),
+    and the target cells of those it can; ([], None) when not asked (scene None)."""
+    if scene is None or not chosen:
+        return [], None
+    from rad_core.sequencing.hand_order import hand_order
+    found = hand_order(scene, [candidates[n].placement for n in chosen])
+    placed = set(found.order)
+    unplaced = [n for n in chosen if tuple(sorted(int(c) for c in candidates[n].cell_ids)) not in placed]
+    covered = sum(int(grid.is_target[list(candidates[n].cell_ids)].sum()) for n in chosen if n not in set(unplaced))
+    return unplaced, covered
 
 
 def _cost(type_name: str, params: SupplyParams) -> int:
