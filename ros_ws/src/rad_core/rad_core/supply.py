@@ -212,8 +212,10 @@ def pick_types(names: str, types: Mapping[str, BlockType]) -> dict[str, BlockTyp
 
 def choose_blocks(targets: Sequence[TargetRegion], unit: float, types: Mapping[str, BlockType],
                   inventory: Mapping[str, int] | None = None,
-                  params: SupplyParams = SupplyParams()) -> tuple[list, SupplyReport]:
-    """The placements (allocation.Placement) of the blocks to lay out, and how well they cover."""
+                  params: SupplyParams = SupplyParams(), clearance: float = 0.0) -> tuple[list, SupplyReport]:
+    """The placements (allocation.Placement) of the blocks to lay out, and how well they cover.
+
+    clearance: the scene's (`rad_core.scene`), which gives the hand's fingers room between blocks."""
     from ortools.sat.python import cp_model
 
     from rad_core.allocation.cpsat import build_model
@@ -224,7 +226,7 @@ def choose_blocks(targets: Sequence[TargetRegion], unit: float, types: Mapping[s
     start = time.perf_counter()
     if not types:
         raise RadError('no block types offered')
-    scene = Scene(unit, dict(types), (), tuple(targets))
+    scene = Scene(unit, dict(types), (), tuple(targets), clearance)
     grid = Grid(scene)
     candidates = [c for c in enumerate_candidates(scene, grid, positive_only=False) if c.value >= 0]
     n_target = int(grid.is_target.sum())
@@ -343,7 +345,7 @@ def supply(targets: Sequence[TargetRegion], unit: float, types: Mapping[str, Blo
     if not 0.01 <= unit <= MAX_UNIT:
         raise RadError(f'unit {unit} m is outside 0.01..{MAX_UNIT} m: the open hand takes cubes up to '
                        f'{MAX_UNIT} m wide')
-    placements, report = choose_blocks(targets, unit, types, inventory, params)
+    placements, report = choose_blocks(targets, unit, types, inventory, params, clearance)
     if report.covered == 0:
         offered = ', '.join(f'{k} x{inventory[k]}' for k in types if inventory and inventory.get(k)) \
             if inventory is not None else ', '.join(types)
