@@ -39,7 +39,7 @@ def test_the_default_preset_is_what_the_node_graph_runs():
     assert graph['sequencer']['ros__parameters']['agent'] == 'default'
     assert SequencerConfig().spec() == default                          # scorer, search, budget
     assembly = graph['assembly']['ros__parameters']
-    assert assembly['agent'] == 'default' and default.verify and default.realloc and default.support == 'arm'
+    assert assembly['agent'] == 'default' and default.verify and default.realloc and default.support == 'hand'
     # The older node policy names keep meaning what they meant on the node (the mixed network).
     assert SequencerConfig(policy='milp-dqn-lookahead').spec() == AgentSpec('milp-dqn-mixed', 'lookahead')
     assert SequencerConfig(policy='milp-dqn-dfs', search_time_s=30.0).spec() == \

@@ -58,8 +58,9 @@ def test_agents_without_a_search_plan_once_and_a_bad_budget_is_refused(planners)
     scene = generate_scene(GeneratorConfig(grid=4), 3)
     once = planners['greedy'](scene)
     assert [a['plan'] for a in once.anytime] == ['scorer'] and once.anytime[0]['coverage'] == once.predicted_coverage
-    # The default agent is the greedy one with order repair (tests/core/test_repair.py).
-    assert planners['default'].spec == replace(planners['greedy'].spec, repair=True)
+    # The default agent is the greedy one with order repair (tests/core/test_repair.py) and the hand's
+    # allocation (tests/core/test_hand_allocation.py).
+    assert planners['default'].spec == replace(planners['greedy'].spec, repair=True, support='hand')
     p = planners['lookahead']
     with pytest.raises(RadError, match='improve_time_s'):
         plan_for_agent(p.spec, scene, p.allocate, p.motion, p.sequencer.rank, quick_rank=p.quick_rank,

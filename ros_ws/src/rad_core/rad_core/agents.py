@@ -21,10 +21,11 @@
   is kept (`sequencing.agent_plan.plan_for_agent`). It learns from GAMP, so it acts
   only with the robot in the loop; without it the agent plans as it would without repair.
 - support: the allocation's support rule, `none` (the paper's MILP), `stable`
-  (every allocated block can rest on something) or `arm` (stable, and nothing the
+  (every allocated block can rest on something), `arm` (stable, and nothing the
   arm can never do: no type the hand cannot take, no block it cannot pick, no pose
-  out of reach; `allocation.arm`); left out: the scorer's own (a model file records
-  the allocation it was trained on; `none` for heur).
+  out of reach; `allocation.arm`) or `hand` (arm, and an allocation a top-down hand
+  can place in some order, `allocation.cpsat`); left out: the scorer's own (a model
+  file records the allocation it was trained on; `none` for heur).
 
 The text form is the value: `parse(label(a)) == a` for every agent, `label` prints
 the canonical text that result documents record, and `rad eval --agent <that
@@ -44,7 +45,7 @@ from rad_core.errors import RadError
 
 SEARCHES = ('mcts', 'halving', 'lookahead', 'bnb')
 SIMULATION_SEARCHES = ('mcts', 'halving', 'lookahead')
-SUPPORTS = ('none', 'stable', 'arm')
+SUPPORTS = ('none', 'stable', 'arm', 'hand')
 DEFAULT_BUDGET = {'mcts': 5, 'halving': 5, 'lookahead': 5, 'bnb': 10.0}
 NETWORKS = ('milp-dqn', 'milp-dqn-mixed', 'milp-dqn-robot', 'dqn', 'dqn-rel')
 
@@ -142,8 +143,10 @@ PRESETS = {
     # the node's improve_time_s; docs/search.md). Until 2026-12-03 it was the greedy network with a
     # look-ahead search (lookahead:5), whose plan, tried after the network's wherever that left
     # cells open, changed no plan's coverage in 111 measured (rad eval g = 5 and 6, the hard set,
-    # /plan_assembly's benchmark twice) and cost up to improve_time_s each time.
-    'default': 'milp-dqn-mixed+verify+realloc+repair+support:arm',
+    # /plan_assembly's benchmark twice) and cost up to improve_time_s each time. Since 2026-12-04 its
+    # allocation asks for an order the hand can place (support:hand; g = 5 0.959 -> 0.966, g = 6
+    # 0.952 -> 0.979, held-out 0.953 -> 0.965, hard 0.956 -> 0.968; docs/search.md).
+    'default': 'milp-dqn-mixed+verify+realloc+repair+support:hand',
     'greedy': 'milp-dqn-mixed+verify+realloc+support:arm',   # the network alone, verified
     'paper': 'milp-dqn+mcts:5+support:none',         # the paper's MILP-DQN-MCTS
     'heur': 'heur',                                   # the paper's HEUR
@@ -237,5 +240,5 @@ def _apply(spec: AgentSpec, parts: list[str], whole: str) -> AgentSpec:
             fields['support'] = 'stable'
         else:
             raise RadError(f'unknown part {part!r} in agent {whole!r}: a search ({", ".join(SEARCHES)}, '
-                           f'with :budget), verify, realloc, repair or support:none|stable|arm')
+                           f'with :budget), verify, realloc, repair or support:none|stable|arm|hand')
     return AgentSpec(**fields)

@@ -624,10 +624,11 @@ def build_parser(command: str | None = 'train') -> argparse.ArgumentParser:
     p.add_argument('--execution', choices=['teleport', 'simulate'], default='teleport',
                    help='robot runs: put the block in place (fast) or simulate the whole arm motion')
     p.add_argument('--scene-dir', metavar='DIR', help='evaluate every *.json scene in DIR instead of generating')
-    p.add_argument('--support', choices=['none', 'stable', 'arm'],
-                   help="allocation: the paper's MILP (none), every allocated block able to stand (stable), or "
-                        "that and nothing the arm can never do (arm); default: the agent's own (its support: part, "
-                        "else what its model file was trained for, none for heur)")
+    p.add_argument('--support', choices=['none', 'stable', 'arm', 'hand'],
+                   help="allocation: the paper's MILP (none), every allocated block able to stand (stable), "
+                        "that and nothing the arm can never do (arm), or that and an order a top-down hand can "
+                        "place it in (hand); default: the agent's own (its support: part, else what its model "
+                        "file was trained for, none for heur)")
     p.add_argument('--json', metavar='FILE', help='write the metrics and per-scene rows here')
     p.add_argument('--workers', type=int, metavar='N',
                    help='run the scenes on a Dask cluster of N worker processes on 127.0.0.1 (the same rows and '

@@ -40,6 +40,15 @@ whatever the order (`allocation.arm`): block types the open hand cannot take fro
 blocks on the table it cannot pick where they lie, poses whose every grasp is out of
 reach; the result's `arm` says what and why.
 
+`support='hand'` (rad's, arm as above) also asks for an order in which a top-down hand can
+place the allocation (`sequencing.hand_order`: each pose, when its turn comes, has a way of
+being held that no pose placed before it is in the way of): the poses it cannot place are ruled
+out and the model solved again, at most `HAND_ROUNDS` times within the time limit, and the
+allocation whose order places the most target cells is kept (ties: the earlier solve). Those
+poses would be refused by GAMP in any order anyway (`allocation.arm.HandBlocked` is sound for
+the hand, the fingers and panda_link7); what the order leaves out (the arm's other links, the
+carried block, the pick) GAMP still checks.
+
 `exclude` (no-goods) removes (block type, pose) pairs from the model: poses
 the robot or physics already failed to build from the current state, when
 sequencing stalled and the allocation is solved again over the cells still
@@ -66,7 +75,9 @@ from rad_core.grid import Grid, blocks_on_grid
 from rad_core.scene import Scene
 
 
-SUPPORT_MODES = ('none', 'stable', 'arm')
+SUPPORT_MODES = ('none', 'stable', 'arm', 'hand')
+HAND_ROUNDS = 6
+"""support='hand': at most this many solves."""
 PREFER_MODES = ('none', 'fewer', 'flat', 'open')
 
 
@@ -84,8 +95,9 @@ class AllocationParams:
     seed: int = 0
     num_workers: int = 1
     support: str = 'none'
-    """'none' (the paper's MILP), 'stable' (every allocated block can stand where it goes) or 'arm'
-    (stable, and nothing the arm can never do: `allocation.arm`)."""
+    """'none' (the paper's MILP), 'stable' (every allocated block can stand where it goes), 'arm'
+    (stable, and nothing the arm can never do: `allocation.arm`) or 'hand' (arm, and an allocation
+    a top-down hand can place in some order; module docstring)."""
     prefer: str = 'none'
     """Tie-break among equally good stable allocations: 'none', 'fewer' (fewer poses), 'flat'
     (blocks spanning fewer levels) or 'open' (poses a top-down hand can hold from free sides:
@@ -258,7 +270,7 @@ def solve(scene: Scene, params: AllocationParams = AllocationParams(), exclude=(
                       if pose_key(c.placement.type, c.placement.target, c.placement.cells) not in banned]
     counts = available_counts(scene, grid)
     arm = None
-    if params.support == 'arm':
+    if params.support in ('arm', 'hand'):
         from rad_core.allocation.arm import arm_filter
         candidates, counts, arm = arm_filter(scene, grid, candidates)
     occupied = None
@@ -274,27 +286,52 @@ def solve(scene: Scene, params: AllocationParams = AllocationParams(), exclude=(
     incumbent = set(greedy(candidates, counts)) if params.support == 'none' else set()
     for n, var in enumerate(w):
         model.add_hint(var, n in incumbent)
-    solver = cp_model.CpSolver()
-    solver.parameters.max_time_in_seconds = float(params.time_limit_s)
-    solver.parameters.num_workers = params.num_workers
-    solver.parameters.random_seed = params.seed
-    # CP-SAT would install its own SIGINT handler for the solve and leave SIGINT at
-    # the default action afterwards: a node then dies by the signal instead of
-    # shutting down. Signals belong to the process owner, not to a library call.
-    solver.parameters.catch_sigint_signal = False
-    status = solver.solve(model)
-    name = solver.status_name(status)
+    rounds = HAND_ROUNDS if params.support == 'hand' else 1
+    best = None
+    for round_ in range(rounds):
+        left = params.time_limit_s - (time.perf_counter() - start)
+        if round_ and left <= 0.05:
+            break
+        solver = cp_model.CpSolver()
+        solver.parameters.max_time_in_seconds = float(params.time_limit_s if not round_ else left)
+        solver.parameters.num_workers = params.num_workers
+        solver.parameters.random_seed = params.seed
+        # CP-SAT would install its own SIGINT handler for the solve and leave SIGINT at
+        # the default action afterwards: a node then dies by the signal instead of
+        # shutting down. Signals belong to the process owner, not to a library call.
+        solver.parameters.catch_sigint_signal = False
+        status = solver.solve(model)
+        if status not in (cp_model.OPTIMAL, cp_model.FEASIBLE):
+            if round_:
+                break               # keep what the solves before found
+            return _unsolved(scene, grid, solver, status, candidates, incumbent, start, arm)
+        picked = [n for n in range(len(candidates)) if solver.boolean_value(w[n])]
+        unplaced, hand_cells = _hand_unplaced(scene, candidates, picked) if rounds > 1 else ([], 0)
+        if best is None:        # the first solve's bound is the whole model's
+            objective_bound = float(solver.best_objective_bound)
+        if best is None or hand_cells > best[0]:
+            best = (hand_cells, picked, solver.status_name(status))
+        if not unplaced:
+            break
+        for n in unplaced:
+            model.add(w[n] == 0)
+    _, picked, name = best
     elapsed = time.perf_counter() - start
     # c^T g can never exceed the number of free target cells.
     free_targets = float(grid.is_target.sum() - _filled_targets(scene, grid))
-    if status in (cp_model.OPTIMAL, cp_model.FEASIBLE):
-        picked = [n for n in range(len(candidates)) if solver.boolean_value(w[n])]
-        chosen = tuple(candidates[n].placement for n in picked)
-        value = float(sum(candidates[n].value for n in picked))
-        # scale * c^T g + coverage <= bound with 0 <= coverage < scale: c^T g <= bound / scale.
-        bound = math.floor(float(solver.best_objective_bound) / scale + 1e-9) if scale > 1 \
-            else float(solver.best_objective_bound)
-        return AllocationResult(name, value, min(float(bound), free_targets), elapsed, chosen, arm=arm)
+    chosen = tuple(candidates[n].placement for n in picked)
+    value = float(sum(candidates[n].value for n in picked))
+    # scale * c^T g + coverage <= bound with 0 <= coverage < scale: c^T g <= bound / scale.
+    bound = math.floor(objective_bound / scale + 1e-9) if scale > 1 else objective_bound
+    return AllocationResult(name, value, min(float(bound), free_targets), elapsed, chosen, arm=arm)
+
+
+def _unsolved(scene: Scene, grid: Grid, solver, status, candidates, incumbent, start: float, arm) -> AllocationResult:
+    """What `solve` answers when CP-SAT found no allocation: the greedy one where the time limit
+    cut the search short, else nothing."""
+    name = solver.status_name(status)
+    elapsed = time.perf_counter() - start
+    free_targets = float(grid.is_target.sum() - _filled_targets(scene, grid))
     if status == cp_model.UNKNOWN and incumbent:
         # CP-SAT's bound means nothing without a status; only the cell count is proven.
         value = float(sum(candidates[n].value for n in incumbent))
@@ -302,6 +339,17 @@ def solve(scene: Scene, params: AllocationParams = AllocationParams(), exclude=(
         return AllocationResult('OPTIMAL' if value >= free_targets else 'FEASIBLE', value, free_targets, elapsed,
                                 chosen, arm=arm)
     return AllocationResult(name, 0.0, 0.0, elapsed, arm=arm)
+
+
+def _hand_unplaced(scene: Scene, candidates: list[Candidate], picked: list[int]) -> tuple[list[int], int]:
+    """The picked candidates no order of `sequencing.hand_order` places, and the target cells of
+    those it places."""
+    from rad_core.sequencing.hand_order import hand_order
+    found = hand_order(scene, [candidates[n].placement for n in picked])
+    placed = set(found.order)
+    unplaced = [n for n in picked if tuple(sorted(int(c) for c in candidates[n].cell_ids)) not in placed]
+    cells = sum(candidates[n].value for n in picked if n not in set(unplaced))
+    return unplaced, cells
 
 
 def _filled_targets(scene: Scene, grid: Grid) -> int:

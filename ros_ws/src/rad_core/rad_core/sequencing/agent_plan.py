@@ -51,8 +51,10 @@ def plan_for_agent(spec: AgentSpec, scene: Scene, allocate, plan_motion, rank, r
     with the same allocation and ranking that keep to all of them (`plan.precedences_last`), each
     kept only where it fills more; where cells are still left and the hand's own order of the
     allocation (`hand_order`) places more, a second chain from that order (one plan keeping to its
-    precedences, then rounds as before), for at most as long again as everything before took.
-    The search then gets what is left of the budget.
+    precedences, then rounds as before), for at most as long again as everything before took;
+    with support 'hand', where cells are still left, a third chain from the arm's allocation (one
+    plan and its rounds), for at most as long again. The search then gets what is left of the
+    budget.
     `AssemblyPlan.anytime` records each plan's time and coverage, and the answer's `timings` the
     stages of all of them. Otherwise one plan, the agent's own (its one entry in `anytime`:
     'scorer', or 'search' for an agent that searches)."""
@@ -103,15 +105,17 @@ def plan_for_agent(spec: AgentSpec, scene: Scene, allocate, plan_motion, rank, r
                 best, kind = plan, 'repair'
             anytime.append({'t': time.perf_counter() - t0, 'coverage': best.predicted_coverage, 'plan': kind})
 
-        def repair(latest: AssemblyPlan, known: dict, until: float) -> None:
-            """Rounds of order repair after `latest`, keeping to `known` and what its refusals teach."""
+        def repair(latest: AssemblyPlan, known: dict, until: float, allocation=None) -> None:
+            """Rounds of order repair after `latest` (of `allocation`, default the first), keeping to
+            `known` and what its refusals teach."""
+            allocation = allocation or first_allocation
             for _ in range(REPAIR_ROUNDS):
                 left = until - time.perf_counter()
                 new = [p for p in latest.conflicts if p not in known]
                 if best.predicted_coverage >= 1.0 - 1e-9 or left <= 0 or not new or best.allocation is None:
                     break
                 known.update(dict.fromkeys(new))
-                latest = plan_with(first_rank, left, lambda s: first_allocation, tuple(known))
+                latest = plan_with(first_rank, left, lambda s: allocation, tuple(known))
                 keep(latest)
 
         repair(best, {}, repair_until)
@@ -129,6 +133,17 @@ def plan_for_agent(spec: AgentSpec, scene: Scene, allocate, plan_motion, rank, r
                                    tuple(known))
                 keep(latest)
                 repair(latest, known, until)
+        # With the hand's allocation (support 'hand'), where cells are still left: a plan from the
+        # arm's allocation, which the hand's order may have traded away (a pair of blocks the order
+        # cannot place both of, where a re-allocation on the way would have found a way round), and
+        # its repair rounds, for at most as long again as everything before took.
+        now = time.perf_counter()
+        until = min(repair_until, now + (now - t0))
+        if support == 'hand' and best.predicted_coverage < 1.0 - 1e-9 and until > now:
+            latest = plan_with(first_rank, until - now, lambda s: allocate(s, support='arm'))
+            keep(latest)
+            if latest.allocation is not None:
+                repair(latest, {}, until, latest.allocation)
     left = improve_until - time.perf_counter()
     if anytime_search and best.predicted_coverage < 1.0 - 1e-9 and left > 0:
         searched = plan_with(rank, left)
@@ -194,8 +209,8 @@ def _invalid(plan: AssemblyPlan) -> bool:
 
 def reallocation_support(support: str) -> str:
     """The support rule of re-allocations: stable (every new block can rest on something), and
-    arm-aware when the agent's first allocation is ('arm')."""
-    return 'arm' if support == 'arm' else 'stable'
+    arm-aware (and hand-ordered) when the agent's first allocation is ('arm', 'hand')."""
+    return support if support in ('arm', 'hand') else 'stable'
 
 
 class AgentPlanner:

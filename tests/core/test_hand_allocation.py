@@ -1,0 +1,48 @@
+"""support='hand': the allocation a top-down hand can place in some order (`allocation.cpsat`)."""
+
+from rad_core.agents import label, parse
+from rad_core.allocation.cpsat import AllocationParams, solve
+from rad_core.grid import Grid
+from rad_core.sequencing.agent_plan import reallocation_support
+from rad_core.sequencing.hand_order import hand_order
+from scenes import U, scene
+
+
+def flush_square():
+    """A flush 2 x 2 square to fill from two I2s and three cubes."""
+    bars = [{'id': f'i{k}', 'type': 'I2', 'position': [0.35 + 0.15 * k, -0.25, U / 2], 'yaw': 0} for k in range(2)]
+    cubes = [{'id': f'c{k}', 'type': 'cube', 'position': [0.35 + 0.1 * k, -0.4, U / 2], 'yaw': 0} for k in range(3)]
+    blocks = bars + cubes
+    return scene(types={'cube': [[0, 0, 0]], 'I2': [[0, 0, 0], [1, 0, 0]]}, blocks=blocks,
+                 targets=[{'name': 't', 'origin': [0.45, 0.15, U / 2], 'size': [2, 2, 1],
+                           'filled': [[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]]}])
+
+
+def hand_cells(sc, placements) -> int:
+    grid = Grid(sc)
+    return sum(int(grid.is_target[list(cells)].sum()) for cells in hand_order(sc, placements).order)
+
+
+def test_the_hand_allocation_trades_an_unplaceable_cover_for_one_the_hand_can_place_more_of():
+    sc = flush_square()
+    # Two I2s side by side fill it, but the second is flush against the first on one side and 10 cm
+    # long the other way: the hand places only one. An I2 and two cubes let it place three.
+    arm = solve(sc, AllocationParams(support='arm'))
+    assert arm.objective == 4 and hand_cells(sc, arm.placements) == 2      # what 'arm' picks here
+    hand = solve(sc, AllocationParams(support='hand'))
+    assert hand.objective == 4 and hand.bound == 4
+    assert hand_cells(sc, hand.placements) == 3                            # no order places all four
+    assert sorted(p.type for p in hand.placements) == ['I2', 'cube', 'cube']
+
+
+def test_where_the_hand_can_place_everything_the_first_answer_stands():
+    sc = scene()      # a row of three cells and one on top of its end: the hand places it whole
+    arm, hand = (solve(sc, AllocationParams(support=s)) for s in ('arm', 'hand'))
+    assert hand.placements == arm.placements and hand_cells(sc, hand.placements) == hand.objective == 4
+
+
+def test_agents_and_reallocations_name_the_hand_support():
+    agent = parse('milp-dqn-mixed+verify+realloc+repair+support:hand')
+    assert agent.support == 'hand' and parse(label(agent)) == agent
+    assert reallocation_support('hand') == 'hand' and reallocation_support('arm') == 'arm'
+    assert reallocation_support('none') == 'stable'
