@@ -1,9 +1,12 @@
 """support='hand': the allocation a top-down hand can place in some order (`allocation.cpsat`)."""
 
+import pytest
+
 from rad_core.agents import label, parse
 from rad_core.allocation.cpsat import AllocationParams, solve
+from rad_core.generator import GeneratorConfig, generate_scene
 from rad_core.grid import Grid
-from rad_core.sequencing.agent_plan import reallocation_support
+from rad_core.sequencing.agent_plan import AgentPlanner, reallocation_support
 from rad_core.sequencing.hand_order import hand_order
 from scenes import U, scene
 
@@ -46,3 +49,21 @@ def test_agents_and_reallocations_name_the_hand_support():
     assert agent.support == 'hand' and parse(label(agent)) == agent
     assert reallocation_support('hand') == 'hand' and reallocation_support('arm') == 'arm'
     assert reallocation_support('none') == 'stable'
+
+
+@pytest.mark.slow   # plans a g = 5 scene with GAMP, two agents (a few seconds)
+def test_where_the_hands_allocation_falls_short_the_arms_plan_is_kept():
+    # g = 5 seed 9009: the hand's allocation is one its order places whole, but the plans of it stop
+    # at 0.8; the arm's allocation has a pair the order cannot place both of, and its plan, with a
+    # re-allocation on the way, builds everything. The default agent plans both and keeps the better.
+    scene = generate_scene(GeneratorConfig(grid=5, sides=2), 9009)
+    planners = {name: AgentPlanner(f'milp-dqn-mixed+verify+realloc+repair+support:{name}') for name in ('arm', 'hand')}
+    try:
+        arm, hand = (planners[n](scene) for n in ('arm', 'hand'))
+    finally:
+        for p in planners.values():
+            p.close()
+    assert arm.predicted_coverage == 1.0 and hand.predicted_coverage == 1.0
+    assert hand.anytime[0]['coverage'] < 1.0              # its first plan, of the hand's allocation
+    first_hand = solve(scene, AllocationParams(support='hand'))
+    assert hand_cells(scene, first_hand.placements) == scene.num_target_cells == 5
