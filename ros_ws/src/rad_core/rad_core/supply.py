@@ -284,15 +284,14 @@ def choose_blocks(targets: Sequence[TargetRegion], unit: float, types: Mapping[s
 
 
 def _unplaced(scene: Scene | None, grid, candidates, chosen: list[int]) -> tuple[list[int], int | None]:
-    """The chosen candidates a top-down hand cannot place in any order (`sequencing.hand_order`),
+    """The chosen candidates a top-down hand cannot place in any order (`allocation.cpsat.hand_unplaced`),
     and the target cells of those it can; ([], None) when not asked (scene None)."""
     if scene is None or not chosen:
         return [], None
-    from rad_core.sequencing.hand_order import hand_order
-    found = hand_order(scene, [candidates[n].placement for n in chosen])
-    placed = set(found.order)
-    unplaced = [n for n in chosen if tuple(sorted(int(c) for c in candidates[n].cell_ids)) not in placed]
-    covered = sum(int(grid.is_target[list(candidates[n].cell_ids)].sum()) for n in chosen if n not in set(unplaced))
+    from rad_core.allocation.cpsat import hand_unplaced
+    unplaced = [chosen[k] for k in hand_unplaced(scene, [candidates[n].placement for n in chosen])]
+    left_out = set(unplaced)
+    covered = sum(int(grid.is_target[list(candidates[n].cell_ids)].sum()) for n in chosen if n not in left_out)
     return unplaced, covered
 
 

@@ -44,10 +44,12 @@ reach; the result's `arm` says what and why.
 place the allocation (`sequencing.hand_order`: each pose, when its turn comes, has a way of
 being held that no pose placed before it is in the way of): the poses it cannot place are ruled
 out and the model solved again, at most `HAND_ROUNDS` times within the time limit, and the
-allocation whose order places the most target cells is kept (ties: the earlier solve). Those
-poses would be refused by GAMP in any order anyway (`allocation.arm.HandBlocked` is sound for
-the hand, the fingers and panda_link7); what the order leaves out (the arm's other links, the
-carried block, the pick) GAMP still checks.
+allocation whose order places the most (c^T g of the poses it places) is kept (ties: the earlier
+solve). A pose the order cannot place beside the others, GAMP refuses too in every order of that
+allocation (`allocation.arm.HandBlocked` is sound for the hand, the fingers and panda_link7);
+alone, or beside other poses, it may be fine, which is why it is ruled out only for this solve's
+successors. What the order leaves out (the arm's other links, the carried block, the pick) GAMP
+still checks.
 
 `exclude` (no-goods) removes (block type, pose) pairs from the model: poses
 the robot or physics already failed to build from the current state, when
@@ -306,15 +308,17 @@ def solve(scene: Scene, params: AllocationParams = AllocationParams(), exclude=(
                 break               # keep what the solves before found
             return _unsolved(scene, grid, solver, status, candidates, incumbent, start, arm)
         picked = [n for n in range(len(candidates)) if solver.boolean_value(w[n])]
-        unplaced, hand_cells = _hand_unplaced(scene, candidates, picked) if rounds > 1 else ([], 0)
+        unplaced = hand_unplaced(scene, [candidates[n].placement for n in picked]) if rounds > 1 else []
+        left_out = set(unplaced)
+        placed_value = sum(candidates[n].value for k, n in enumerate(picked) if k not in left_out)
         if best is None:        # the first solve's bound is the whole model's
             objective_bound = float(solver.best_objective_bound)
-        if best is None or hand_cells > best[0]:
-            best = (hand_cells, picked, solver.status_name(status))
+        if best is None or placed_value > best[0]:
+            best = (placed_value, picked, solver.status_name(status))
         if not unplaced:
             break
-        for n in unplaced:
-            model.add(w[n] == 0)
+        for k in unplaced:
+            model.add(w[picked[k]] == 0)
     _, picked, name = best
     elapsed = time.perf_counter() - start
     # c^T g can never exceed the number of free target cells.
@@ -341,15 +345,17 @@ def _unsolved(scene: Scene, grid: Grid, solver, status, candidates, incumbent, s
     return AllocationResult(name, 0.0, 0.0, elapsed, arm=arm)
 
 
-def _hand_unplaced(scene: Scene, candidates: list[Candidate], picked: list[int]) -> tuple[list[int], int]:
-    """The picked candidates no order of `sequencing.hand_order` places, and the target cells of
-    those it places."""
+def hand_unplaced(scene: Scene, placements) -> list[int]:
+    """The indices of the `placements` (allocation.Placement, of the scene's free cells) that no
+    order `sequencing.hand_order` finds places beside the others (the support rule 'hand' and
+    `rad_core.supply` rule them out and solve again)."""
     from rad_core.sequencing.hand_order import hand_order
-    found = hand_order(scene, [candidates[n].placement for n in picked])
-    placed = set(found.order)
-    unplaced = [n for n in picked if tuple(sorted(int(c) for c in candidates[n].cell_ids)) not in placed]
-    cells = sum(candidates[n].value for n in picked if n not in set(unplaced))
-    return unplaced, cells
+    placements = list(placements)
+    placed = set(hand_order(scene, placements).order)
+    grid = Grid(scene)
+    regions = [t.name for t in scene.targets]
+    return [k for k, p in enumerate(placements)
+            if tuple(sorted(grid.index(regions.index(p.target), c) for c in p.cells)) not in placed]
 
 
 def _filled_targets(scene: Scene, grid: Grid) -> int:
