@@ -14,7 +14,7 @@ where it lies, which moves with the moment it is read). Printed: how many agree,
 difference of a block between the two (m, placed blocks and the rest apart), and the simulated
 seconds settled. Scenes: generated ones from seeds the project never used elsewhere (6000 up;
 g = 4, 5, 6, tight tables, 4 cm units, far structures) and every hand-made shape
-(`shapes.SPECS`: training, held-out and hard ones alike: this checks physics, not a policy).
+(`shapes.SPECS`: training and held-out ones alike: this checks physics, not a policy).
 The walk draws its candidates as `bench_planning_step` does and goes on with the first one that
 succeeded under the full settling.
 """
