@@ -218,7 +218,7 @@ def choose_blocks(targets: Sequence[TargetRegion], unit: float, types: Mapping[s
     clearance: the scene's (`rad_core.scene`), which gives the hand's fingers room between blocks."""
     from ortools.sat.python import cp_model
 
-    from rad_core.allocation.cpsat import build_model
+    from rad_core.allocation.cpsat import build_model, solve_rounds
     from rad_core.allocation.placements import enumerate_candidates
     from rad_core.grid import Grid
 
@@ -241,31 +241,20 @@ def choose_blocks(targets: Sequence[TargetRegion], unit: float, types: Mapping[s
     model.maximize(cover_span * sum(c.value * w[n] for n, c in enumerate(candidates))
                    + cost_span * sum(k * w[n] for n, k in enumerate(covered) if k)
                    - sum(k * w[n] for n, k in enumerate(unit_cost) if k))
-    hand_scene = scene if params.hand else None
     best, rounds = None, 0
-    while True:
+    for solver, status, chosen, unplaced in solve_rounds(model, w, candidates, scene,
+                                                         params.hand_rounds if params.hand else 1,
+                                                         params.time_limit_s, start, params.seed):
         rounds += 1
-        left = params.time_limit_s - (time.perf_counter() - start)
-        solver = cp_model.CpSolver()
-        solver.parameters.max_time_in_seconds = float(max(left, 0.05) if rounds > 1 else params.time_limit_s)
-        solver.parameters.num_workers = 1
-        solver.parameters.random_seed = params.seed
-        solver.parameters.catch_sigint_signal = False
-        status = solver.solve(model)
         if status not in (cp_model.OPTIMAL, cp_model.FEASIBLE):
             if best is not None:
                 break               # the rounds before found covers: keep the best of them
             raise RadError(f'the supply model found no answer in {params.time_limit_s:g} s '
                            f'({solver.status_name(status)}): give it a longer --time-limit')
-        chosen = [n for n in range(len(candidates)) if solver.boolean_value(w[n])]
-        unplaced, hand_covered = _unplaced(hand_scene, grid, candidates, chosen)
+        hand_covered = _placeable_cells(grid, candidates, chosen, unplaced) if params.hand and chosen else None
         score = (hand_covered if hand_covered is not None else 0, -rounds)
         if best is None or score > best[0]:
             best = (score, chosen, solver.status_name(status), hand_covered)
-        if not unplaced or rounds >= params.hand_rounds or time.perf_counter() - start >= params.time_limit_s:
-            break
-        for n in unplaced:
-            model.add(w[n] == 0)
     _, chosen, status_name, hand_covered = best
     picked = [candidates[n] for n in chosen]
     placements = [c.placement for c in picked]
@@ -283,16 +272,11 @@ def choose_blocks(targets: Sequence[TargetRegion], unit: float, types: Mapping[s
     return placements, report
 
 
-def _unplaced(scene: Scene | None, grid, candidates, chosen: list[int]) -> tuple[list[int], int | None]:
-    """The chosen candidates a top-down hand cannot place in any order (`allocation.cpsat.hand_unplaced`),
-    and the target cells of those it can; ([], None) when not asked (scene None)."""
-    if scene is None or not chosen:
-        return [], None
-    from rad_core.allocation.cpsat import hand_unplaced
-    unplaced = [chosen[k] for k in hand_unplaced(scene, [candidates[n].placement for n in chosen])]
+def _placeable_cells(grid, candidates, chosen: list[int], unplaced: list[int]) -> int:
+    """Target cells of the chosen candidates but those the hand cannot place (indices into chosen)."""
     left_out = set(unplaced)
-    covered = sum(int(grid.is_target[list(candidates[n].cell_ids)].sum()) for n in chosen if n not in left_out)
-    return unplaced, covered
+    return sum(int(grid.is_target[list(candidates[n].cell_ids)].sum()) for k, n in enumerate(chosen)
+               if k not in left_out)
 
 
 def _cost(type_name: str, params: SupplyParams) -> int:

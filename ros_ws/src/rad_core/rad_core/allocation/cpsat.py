@@ -290,35 +290,18 @@ def solve(scene: Scene, params: AllocationParams = AllocationParams(), exclude=(
         model.add_hint(var, n in incumbent)
     rounds = HAND_ROUNDS if params.support == 'hand' else 1
     best = None
-    for round_ in range(rounds):
-        left = params.time_limit_s - (time.perf_counter() - start)
-        if round_ and left <= 0.05:
-            break
-        solver = cp_model.CpSolver()
-        solver.parameters.max_time_in_seconds = float(params.time_limit_s if not round_ else left)
-        solver.parameters.num_workers = params.num_workers
-        solver.parameters.random_seed = params.seed
-        # CP-SAT would install its own SIGINT handler for the solve and leave SIGINT at
-        # the default action afterwards: a node then dies by the signal instead of
-        # shutting down. Signals belong to the process owner, not to a library call.
-        solver.parameters.catch_sigint_signal = False
-        status = solver.solve(model)
+    for solver, status, picked, unplaced in solve_rounds(model, w, candidates, scene, rounds, params.time_limit_s,
+                                                          start, params.seed, params.num_workers):
         if status not in (cp_model.OPTIMAL, cp_model.FEASIBLE):
-            if round_:
+            if best is not None:
                 break               # keep what the solves before found
             return _unsolved(scene, grid, solver, status, candidates, incumbent, start, arm)
-        picked = [n for n in range(len(candidates)) if solver.boolean_value(w[n])]
-        unplaced = hand_unplaced(scene, [candidates[n].placement for n in picked]) if rounds > 1 else []
         left_out = set(unplaced)
         placed_value = sum(candidates[n].value for k, n in enumerate(picked) if k not in left_out)
         if best is None:        # the first solve's bound is the whole model's
             objective_bound = float(solver.best_objective_bound)
         if best is None or placed_value > best[0]:
             best = (placed_value, picked, solver.status_name(status))
-        if not unplaced:
-            break
-        for k in unplaced:
-            model.add(w[picked[k]] == 0)
     _, picked, name = best
     elapsed = time.perf_counter() - start
     # c^T g can never exceed the number of free target cells.
@@ -343,6 +326,40 @@ def _unsolved(scene: Scene, grid: Grid, solver, status, candidates, incumbent, s
         return AllocationResult('OPTIMAL' if value >= free_targets else 'FEASIBLE', value, free_targets, elapsed,
                                 chosen, arm=arm)
     return AllocationResult(name, 0.0, 0.0, elapsed, arm=arm)
+
+
+def solve_rounds(model, w, candidates: list[Candidate], scene: Scene, rounds: int, time_limit_s: float,
+                 start: float, seed: int = 0, num_workers: int = 1):
+    """Solve `model` (one bool `w[n]` per candidate), then again without the picked poses the hand
+    cannot place beside the others (`hand_unplaced`), at most `rounds` solves, the first with the
+    whole `time_limit_s`, the others with what is left of it since `start` (none with 50 ms or
+    less). Yields (solver, status, picked candidate indices, indices into picked the hand cannot
+    place) per solve; ends after a solve with no answer (picked empty), or with nothing to rule
+    out. One round: the plain solve, the hand not asked. The support rule 'hand' and
+    `rad_core.supply` choose among the answers, each by its own measure."""
+    for round_ in range(rounds):
+        left = time_limit_s - (time.perf_counter() - start)
+        if round_ and left <= 0.05:
+            return
+        solver = cp_model.CpSolver()
+        solver.parameters.max_time_in_seconds = float(time_limit_s if not round_ else left)
+        solver.parameters.num_workers = num_workers
+        solver.parameters.random_seed = seed
+        # CP-SAT would install its own SIGINT handler for the solve and leave SIGINT at
+        # the default action afterwards: a node then dies by the signal instead of
+        # shutting down. Signals belong to the process owner, not to a library call.
+        solver.parameters.catch_sigint_signal = False
+        status = solver.solve(model)
+        if status not in (cp_model.OPTIMAL, cp_model.FEASIBLE):
+            yield solver, status, [], []
+            return
+        picked = [n for n in range(len(candidates)) if solver.boolean_value(w[n])]
+        unplaced = hand_unplaced(scene, [candidates[n].placement for n in picked]) if rounds > 1 and picked else []
+        yield solver, status, picked, unplaced
+        if not unplaced:
+            return
+        for k in unplaced:
+            model.add(w[picked[k]] == 0)
 
 
 def hand_unplaced(scene: Scene, placements) -> list[int]:
