@@ -10,15 +10,18 @@ execution). Scenes: generated two-sided scenes, seeds 0..N-1, and hand-made shap
 ('train', 'holdout', or 'tight': the held-out shapes with their blocks packed at least 2 cm apart,
 2.5 cm on the layout's lattice).
 The ceiling is `sequencing.exact.robot_ceiling` (the branch and bound over orders and
-re-allocations from the empty scene, --ceiling-s per scene): proven where its search
-completes, a lower bound elsewhere. Its search starts from the best coverage the agents'
-plans built on the scene (the incumbent: the robot is known to reach it, moving blocks aside
-included, which the search's own steps do not do), so it prunes from the start and ends at
-once where an agent reached the bound; --no-incumbent searches from nothing.
+re-allocations from the empty scene, the arm's allocation and then the hand's, --ceiling-s per
+scene). Its rows say how each search ended (`proof`): 'bound', the ceiling over every allocation
+(the best reached what any allocation could cover with poses the arm might build); 'exhausted',
+every order of the allocations searched (and their re-allocations at dead ends) tried below that
+bound, the best of those and not a proof over others; '' (cut), a lower bound. Its search starts
+from the best coverage the agents' plans built on the scene (the incumbent: the robot is known to
+reach it, moving blocks aside included, which the search's own steps do not do), so it prunes from
+the start and ends at once where an agent reached the bound; --no-incumbent searches from nothing.
 
 Columns: the paper's metrics, a-bar (coverage of the whole target), 'of paper' (coverage
 over what the paper's unconstrained allocation fills), 'to ceiling' (the ceiling's
-coverage minus the agent's, on the scenes where the ceiling is proven), re-allocations
+coverage minus the agent's, on the scenes where the ceiling's search is complete), re-allocations
 per scene and the share of episode time spent re-allocating (checks + CP-SAT).
 
 Writes docs/results/reallocation.md and docs/results/reallocation.rows.jsonl; results are
@@ -57,6 +60,10 @@ def cell_name(grid, n: int, clearance: float) -> str:
     return f'g{grid}-c{clearance:g}-n{n}' if isinstance(grid, int) else f'shapes-{grid}'
 
 
+# How a ceiling's search ended (`ExactResult.proof`), in words.
+ENDED = {'bound': 'at its bound', 'exhausted': 'exhausted below its bound', '': 'lower bound (cut)'}
+
+
 def run(agent: str, grid, n: int, clearance: float, force: bool) -> dict:
     return cached_evaluation('reallocation', agent, cell_name(grid, n, clearance),
                              lambda: cell_scenes(grid, n, clearance), force)
@@ -66,7 +73,7 @@ def ceiling(grid, n: int, clearance: float, seconds: float, force: bool, incumbe
     """Per scene: the robot-feasible ceiling's coverage, whether it is proven, its states and time.
     incumbents: per scene, the best coverage an agent built there (the search's incumbent)."""
     from rad_core.sequencing.exact import robot_ceiling
-    tag = '-inc' if incumbents is not None else ''
+    tag = ('-inc' if incumbents is not None else '') + '-proof'   # rows with 'proof' and 'bound'
     path = cache_dir('reallocation') / f'ceiling-{seconds:g}s{tag}-{cell_name(grid, n, clearance)}.json'
     if path.exists() and not force:
         return json.loads(path.read_text())
@@ -74,10 +81,11 @@ def ceiling(grid, n: int, clearance: float, seconds: float, force: bool, incumbe
     for k, (name, scene) in enumerate(cell_scenes(grid, n, clearance)):
         known = float(incumbents[k]) if incumbents is not None else 0.0
         found = robot_ceiling(scene, seconds, incumbent=known)
-        out.append({'name': name, 'coverage': found.coverage, 'complete': found.complete, 'states': found.states,
-                    'seconds': found.elapsed_s, 'reason': found.reason, 'incumbent': known})
-        print(f'ceiling {name}: {found.coverage:.3f} {"proven" if found.complete else "lower bound"} '
-              f'({found.states} states, {found.elapsed_s:.0f} s)', flush=True)
+        out.append({'name': name, 'coverage': found.coverage, 'complete': found.complete, 'proof': found.proof,
+                    'bound': found.bound, 'states': found.states, 'seconds': found.elapsed_s,
+                    'reason': found.reason, 'incumbent': known})
+        print(f'ceiling {name}: {found.coverage:.3f} {ENDED[found.proof]} (bound {found.bound:.3f}, '
+              f'{found.states} states, {found.elapsed_s:.0f} s)', flush=True)
     path.write_text(json.dumps(out))
     return out
 
@@ -167,11 +175,13 @@ def main() -> int:
                 print(f'{agent:52s} {cell} cov={r["coverage"]:.3f} of_paper={of_paper:.3f} '
                       f'gap={fmt(gap)} realloc={np.mean(events):.1f} share={share:.0%}', flush=True)
             if roof is not None:
-                proven = [c for c in roof if c['complete']]
+                ended = {k: sum(1 for c in roof if c.get('proof', '') == k) for k in ENDED}
                 lines.append(f'| ceiling ({args.ceiling_s:g} s) | | | | {fmt(np.mean([c["coverage"] for c in roof]))} '
                              f'| | | | | {np.mean([c["seconds"] for c in roof]):.1f} |')
-                lines += ['', f'The ceiling is proven on {len(proven)} of {len(roof)} scenes (the others are lower '
-                          'bounds, left out of "to ceiling").']
+                lines += ['', f'Of {len(roof)} scenes, the ceiling is at its bound (the ceiling over every '
+                          f'allocation) on {ended["bound"]}, exhausted below it on {ended["exhausted"]} (the best '
+                          'of the allocations searched: not a proof over others), cut on '
+                          f'{ended[""]} (lower bounds, left out of "to ceiling").']
                 if any(c.get('incumbent') for c in roof):
                     better = sum(1 for c in roof if c['coverage'] > c['incumbent'] + 1e-9)
                     lines += ['', f'Its search started from the best agent\'s built coverage on each scene (the '

@@ -43,6 +43,16 @@ def packed() -> Scene:
                            'filled': [[0, 0, 0], [1, 0, 0]]}])
 
 
+def flush_square():
+    """A flush 2 x 2 square to fill from two I2s and three cubes."""
+    bars = [{'id': f'i{k}', 'type': 'I2', 'position': [0.35 + 0.15 * k, -0.25, U / 2], 'yaw': 0} for k in range(2)]
+    cubes = [{'id': f'c{k}', 'type': 'cube', 'position': [0.35 + 0.1 * k, -0.4, U / 2], 'yaw': 0} for k in range(3)]
+    blocks = bars + cubes
+    return scene(types={'cube': [[0, 0, 0]], 'I2': [[0, 0, 0], [1, 0, 0]]}, blocks=blocks,
+                 targets=[{'name': 't', 'origin': [0.45, 0.15, U / 2], 'size': [2, 2, 1],
+                           'filled': [[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]]}])
+
+
 def mutated(path: str, value) -> dict:
     """A copy of the default doc with one field (dotted path, [n] for lists) replaced."""
     d = copy.deepcopy(doc())

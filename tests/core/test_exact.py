@@ -56,7 +56,7 @@ def test_finds_full_coverage_and_its_line_builds_it_with_the_robot():
         space = stable_space(renv)
         before, poses = renv.env.snapshot(), world_poses(renv)
         result = exact_search(model(renv, space), time_limit_s=30)
-        assert result.complete and result.reason == ''
+        assert result.complete and result.reason == '' and result.proof == 'bound'
         assert result.coverage == result.bound == 1.0 and len(result.actions) == 3
         # The env is back where it was given.
         assert renv.env.state.placed == before.placed and not renv.env.state.done
@@ -81,6 +81,7 @@ def test_a_pose_only_an_unreachable_block_can_fill_gives_a_proven_lower_coverage
         result = exact_search(model(renv, stable_space(renv)), time_limit_s=60)
         assert result.complete and result.bound == 1.0
         assert result.coverage == pytest.approx(2 / 3) and len(result.actions) == 2
+        assert result.proof == 'exhausted'      # below the allocation's bound: no proof over others
         assert result.states == 13 and sum(valid) == 12 < 18
         assert not renv.env.state.placed
 
@@ -99,12 +100,13 @@ def test_an_incumbent_prunes_and_an_incumbent_at_the_bound_ends_the_search_at_on
     with robot_env(default_scene()) as renv:
         at_bound = exact_search(model(renv, stable_space(renv)), time_limit_s=60, incumbent=1.0)
         assert at_bound.complete and at_bound.coverage == 1.0 and at_bound.states == 1 and at_bound.actions == []
+        assert at_bound.proof == 'bound' and known.proof == 'exhausted'
 
 
 def test_a_cut_search_answers_a_lower_bound_and_says_why():
     with robot_env(default_scene()) as renv:
         result = exact_search(model(renv, stable_space(renv)), time_limit_s=1e-6)
-        assert not result.complete and result.coverage == 0.0 and result.actions == []
+        assert not result.complete and result.coverage == 0.0 and result.actions == [] and result.proof == ''
         assert 'time limit of 1e-06 s reached after 1 states; 0.00 is a lower bound' == result.reason
         result = exact_search(model(renv, stable_space(renv)), max_states=2)
         assert not result.complete and result.states == 2 and 'state limit of 2' in result.reason
@@ -193,10 +195,30 @@ def test_the_robot_ceiling_searches_orders_and_reallocations_to_a_proven_answer(
     from rad_core.sequencing.exact import robot_ceiling
     found = robot_ceiling(row_scene(2, far=True), time_limit_s=60)
     assert found.complete and found.reason == '' and found.coverage == pytest.approx(2 / 3)
+    # The arm's bound leaves out the cube it cannot pick: 2/3 is the ceiling over every allocation.
+    assert found.proof == 'bound' and found.bound == pytest.approx(2 / 3)
     i2 = {'id': 'i2', 'type': 'I2', 'position': [0.5, -0.35, U / 2], 'yaw': 0}
     # A cube out of reach, an I2 within it: only re-allocating around the far cube fills the row.
     found = robot_ceiling(row_scene(1, far=True, extra=[i2]), time_limit_s=60)
     assert found.complete and found.coverage == 1.0
+
+
+def test_an_exhausted_ceiling_searches_the_hands_allocation_too_and_says_it_proves_nothing_beyond():
+    from rad_core.sequencing.exact import robot_ceiling
+    from scenes import flush_square
+    sc = flush_square()
+    arm = robot_ceiling(sc, time_limit_s=60, support='arm')
+    both = robot_ceiling(sc, time_limit_s=60)        # the arm's allocation, then the hand's
+    # Three of the four flush cells: no top-down hand closes the square. The bound (every cell) is
+    # not reached, so the answer is the best of what was searched, and both allocations were.
+    for found in (arm, both):
+        assert found.complete and found.coverage == pytest.approx(0.75) and found.bound == 1.0
+        assert found.proof == 'exhausted' and found.reason == ''
+    assert both.states > arm.states
+    cut = robot_ceiling(sc, time_limit_s=1e-6)
+    assert not cut.complete and cut.proof == '' and 'lower bound' in cut.reason
+    with pytest.raises(RadError, match='support'):
+        robot_ceiling(sc, support=())
 
 
 def test_the_ceilings_twin_plans_a_failed_move_once_per_state_and_answers_it_again_as_before():

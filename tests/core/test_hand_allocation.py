@@ -8,17 +8,7 @@ from rad_core.generator import GeneratorConfig, generate_scene
 from rad_core.grid import Grid
 from rad_core.sequencing.agent_plan import AgentPlanner, reallocation_support
 from rad_core.sequencing.hand_order import hand_order
-from scenes import U, scene
-
-
-def flush_square():
-    """A flush 2 x 2 square to fill from two I2s and three cubes."""
-    bars = [{'id': f'i{k}', 'type': 'I2', 'position': [0.35 + 0.15 * k, -0.25, U / 2], 'yaw': 0} for k in range(2)]
-    cubes = [{'id': f'c{k}', 'type': 'cube', 'position': [0.35 + 0.1 * k, -0.4, U / 2], 'yaw': 0} for k in range(3)]
-    blocks = bars + cubes
-    return scene(types={'cube': [[0, 0, 0]], 'I2': [[0, 0, 0], [1, 0, 0]]}, blocks=blocks,
-                 targets=[{'name': 't', 'origin': [0.45, 0.15, U / 2], 'size': [2, 2, 1],
-                           'filled': [[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]]}])
+from scenes import flush_square, scene
 
 
 def hand_cells(sc, placements) -> int:

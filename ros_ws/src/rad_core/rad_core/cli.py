@@ -13,6 +13,7 @@
     rad calibrate PAIRS.csv [--out FILE] [--max-rms M] [--mocap-frame NAME]
     rad eval --agent AGENT [--checkpoint FILE] --grid G [--robot] --scenes N --seed S --json FILE
              [--workers N [--dashboard] | --scheduler ADDR [--workers N]]
+    rad ceiling SCENE.json [...] [--time-limit S] [--agent AGENT] [--support arm,hand] [--json FILE]
     rad dataset build --grids 3 --scenes 50000 -o data/train-g3.jsonl.gz [--shapes train]
     rad train --method milp-dqn|dqn|dqn-rel --out runs/NAME [--resume] [--<config field> VALUE ...]
               [--actors N [--chunk-steps S] [--refresh-every K] | --seeds S1,S2,...] [--scheduler ADDR]
@@ -316,6 +317,48 @@ def cmd_eval(args) -> int:
           f'{result["f_g"]:5.2f} {result["f_p"]:5.2f} {result["coverage"]:5.2f} {result["coverage_rel"]:7.2f}')
     if args.json:
         _write_text(jsonfmt.dumps(result), args.json)
+        print(f'wrote {args.json}')
+    return 0
+
+
+def cmd_ceiling(args) -> int:
+    from rad_core.sequencing.exact import robot_ceiling
+    if not args.time_limit > 0:
+        raise RadError(f'--time-limit must be a positive number of seconds, got {args.time_limit}')
+    supports = tuple(s for s in args.support.split(',') if s)
+    for rule in supports:
+        if rule not in ('none', 'stable', 'arm', 'hand'):
+            raise RadError(f'--support: unknown rule {rule!r} (none, stable, arm, hand)')
+    scenes = [(Path(f).stem if f != '-' else 'stdin', _read_scene(f)) for f in args.scenes]
+    agent = None
+    if args.agent:
+        from rad_core.evaluation import evaluate, get_agent
+        agent = get_agent(args.agent)
+    rows = []
+    for k, (name, scene) in enumerate(scenes):
+        row = {'name': name}
+        known = 0.0
+        if agent is not None:
+            built = evaluate(agent, [(name, scene)], robot=True, seed=args.seed + k)['scenes'][0]
+            row['agent'], row['agent_coverage'] = agent.name, built['coverage']
+            known = float(built['coverage'])
+        found = robot_ceiling(scene, args.time_limit, support=supports, incumbent=known)
+        row.update(ceiling=found.coverage, proof=found.proof, complete=found.complete, bound=found.bound,
+                   states=found.states, seconds=round(found.elapsed_s, 3), reason=found.reason,
+                   line=[{'block': scene.blocks[a.block].id, 'unit': a.unit, 'cell': a.cell, 'rotation': a.rotation}
+                         for a in found.actions])   # MDP actions (mdp.Action), the block by its id
+        rows.append(row)
+        ended = {'bound': 'the ceiling over every allocation (it reached the bound)',
+                 'exhausted': (f'the best of the allocations searched; any allocation covers at most '
+                               f'{found.bound:.3f}'),
+                 '': f'a lower bound ({found.reason})'}[found.proof]
+        line = f'{name}: ceiling {found.coverage:.3f}, {ended}; {found.states} states, {found.elapsed_s:.1f} s'
+        if agent is not None:
+            line += f'; {args.agent} builds {row["agent_coverage"]:.3f}'
+        print(line, flush=True)
+    if args.json:
+        _write_text(jsonfmt.dumps({'time_limit_s': args.time_limit, 'support': list(supports),
+                                   'agent': agent.name if agent else None, 'scenes': rows}), args.json)
         print(f'wrote {args.json}')
     return 0
 
@@ -639,6 +682,21 @@ def build_parser(command: str | None = 'train') -> argparse.ArgumentParser:
     p.add_argument('--dashboard', action='store_true',
                    help='with --workers: serve the Dask dashboard on 127.0.0.1:8787 (needs bokeh)')
     p.set_defaults(func=cmd_eval)
+
+    p = sub.add_parser('ceiling', help='what the best order of the allocations builds with the robot: the '
+                                      'robot-feasible ceiling of a scene, and how far an agent is from it')
+    p.add_argument('scenes', nargs='+', metavar='SCENE', help='scene files (- reads one from stdin)')
+    p.add_argument('--time-limit', type=float, default=60.0, metavar='S',
+                   help='seconds of branch and bound per scene (default 60); a cut search is a lower bound')
+    p.add_argument('--agent', metavar='AGENT',
+                   help="plan with this agent first (e.g. default), build its plan in the twin, and start the "
+                        "search from what it built (the incumbent); the line says how far it is from the ceiling")
+    p.add_argument('--support', default='arm,hand', metavar='RULES',
+                   help="the allocations searched from the empty scene, in turn, while the one before was "
+                        "exhausted below the bound (default arm,hand)")
+    p.add_argument('--seed', type=int, default=0, help="the agent's seed (scene i: seed + i)")
+    p.add_argument('--json', metavar='FILE', help='write each scene\'s ceiling, how its search ended and its line here')
+    p.set_defaults(func=cmd_ceiling)
 
     dataset = sub.add_parser('dataset', help='training scenes with precomputed allocations').add_subparsers(
         dest='action', required=True)

@@ -67,6 +67,11 @@ class ExactResult:
     states: states visited (distinct sets of placements).
     elapsed_s: wall time of the search.
     reason: why the search is not complete ('' when it is).
+    proof: how a complete search ended: 'bound' where the best coverage reached the root's bound
+        (with a `bound_of` over every allocation, as `robot_ceiling`'s, no plan of any allocation
+        does better: the true ceiling), 'exhausted' where every state the search could reach was
+        searched below the bound (the best of the orders and re-allocations it reached, not a
+        proof over allocations it never took); '' when a limit cut it.
     """
 
     coverage: float
@@ -76,6 +81,7 @@ class ExactResult:
     states: int = 0
     elapsed_s: float = 0.0
     reason: str = ''
+    proof: str = 'exhausted'
 
 
 class _Cut(Exception):
@@ -218,19 +224,21 @@ def exact_search(model, time_limit_s: float = 60.0, max_states: int = 100_000,
             space = new
             check_time()
 
-    complete, reason = True, ''
+    complete, reason, proof = True, '', 'exhausted'
     try:
         search(space, [])
     except _AtBound:
-        pass
+        proof = 'bound'
     except _Cut as cut:
-        complete = False
+        complete, proof = False, ''
         reason = (f'{cut.args[0]} reached after {len(seen)} states; '
                   f'{best:.2f} is a lower bound')
     finally:
         model.restore(root)
+    if complete and best >= bound - _EPS:
+        proof = 'bound'          # e.g. an incumbent or a start at the bound: nothing was searched
     return ExactResult(best, best_line, complete, bound, len(seen),
-                       time.monotonic() - start_time, reason)
+                       time.monotonic() - start_time, reason, proof)
 
 
 class _FailedMoves:
@@ -328,8 +336,8 @@ class _FailedMoves:
         return check
 
 
-def robot_ceiling(scene, time_limit_s: float = 60.0, support: str = 'arm', reallocation=None,
-                  max_states: int = 100_000, incumbent: float = 0.0) -> ExactResult:
+def robot_ceiling(scene, time_limit_s: float = 60.0, support: str | tuple[str, ...] = ('arm', 'hand'),
+                  reallocation=None, max_states: int = 100_000, incumbent: float = 0.0) -> ExactResult:
     """What the best order of the scene's allocation, and of its re-allocations at dead ends,
     builds with the robot: the branch and bound from the empty scene in a planning twin
     (teleporting execution), children most target cells first, re-allocating where no move
@@ -337,12 +345,19 @@ def robot_ceiling(scene, time_limit_s: float = 60.0, support: str = 'arm', reall
     cover at most with poses the arm might still build (`allocation.arm.ArmCoverageBound`:
     `allocation.cpsat.coverage_bound` without blocks it cannot pick, poses out of reach and
     poses the hand can no longer enter between built cells). Each move is planned once per state,
-    and moves the hand test refuses are not planned (`_FailedMoves`). A complete answer is the
-    robot-feasible ceiling every agent is compared with; a cut one is a lower bound (its
-    `reason` says so).
+    and moves the hand test refuses are not planned (`_FailedMoves`). An answer at its bound
+    (`proof` 'bound') is the robot-feasible ceiling over every allocation; an exhausted one
+    ('exhausted') the best of the allocations searched; a cut one a lower bound (its `reason`
+    says so).
 
-    support: the first allocation's support rule; reallocation: a `ReallocationConfig`
-    (default: its defaults with the re-solves' support `agent_plan.reallocation_support(support)`).
+    support: the first allocation's support rule, or several: each allocation is searched in turn
+    from the empty scene, with the best found so far as its incumbent, while the searches before
+    were exhausted below the bound and time is left (the default: the arm's allocation, then the
+    hand's, `allocation.cpsat`'s 'hand' rounds, a different cover the first search may never
+    reach); the same allocation twice is searched once. The answer is complete only where every
+    search that ran was, and states and time are summed over them.
+    reallocation: a `ReallocationConfig` (default: its defaults with the re-solves' support
+    `agent_plan.reallocation_support` of the first support).
     incumbent: a coverage the robot is known to build on the scene (an agent's plan, built in the
     twin): the search starts from it (`exact_search`), and the answer is the better of the two."""
     from rad_core.allocation import AllocationParams, solve
@@ -351,11 +366,14 @@ def robot_ceiling(scene, time_limit_s: float = 60.0, support: str = 'arm', reall
     from rad_core.sequencing.reallocation import ReallocationConfig, Reallocator
     from rad_core.sequencing.search import EnvModel
     from rad_core.sequencing.agent_plan import reallocation_support
-    config = reallocation or ReallocationConfig(params=AllocationParams(support=reallocation_support(support)))
+    supports = (support,) if isinstance(support, str) else tuple(support)
+    if not supports:
+        raise RadError('robot_ceiling: give at least one support rule')
+    config = reallocation or ReallocationConfig(params=AllocationParams(support=reallocation_support(supports[0])))
+    deadline = time.monotonic() + time_limit_s
     with RobotAssemblyEnv(scene, RobotEnvConfig(execution='teleport')) as renv:
         renv.reset()
         env = renv.env
-        space = AllocationActions(env, solve(scene, AllocationParams(support=support)).placements)
         arm_bound = ArmCoverageBound(scene, env.grid, renv.config.gamp)
         memo = _FailedMoves(renv, arm_bound.hand)
         check = memo.check()
@@ -373,5 +391,27 @@ def robot_ceiling(scene, time_limit_s: float = 60.0, support: str = 'arm', reall
         def bound_of(_model) -> float:   # re-allocating: what any allocation of the free cells could cover
             return arm_bound(env)
 
-        return exact_search(EnvModel(memo, None, space), time_limit_s, max_states=max_states,
-                            on_dead_end=on_dead_end, bound_of=bound_of, incumbent=incumbent)
+        answer, searched = None, set()
+        for rule in supports:
+            placements = solve(scene, AllocationParams(support=rule)).placements
+            key = frozenset(placements)
+            left = deadline - time.monotonic()
+            if answer is not None and (key in searched or left <= 0):
+                continue
+            left = max(left, 1e-9)      # the first search runs, if only to say the limit cut it
+            searched.add(key)
+            known = incumbent if answer is None else max(incumbent, answer.coverage)
+            found = exact_search(EnvModel(memo, None, AllocationActions(env, placements)), left,
+                                 max_states=max_states if answer is None else max(1, max_states - answer.states),
+                                 on_dead_end=on_dead_end, bound_of=bound_of, incumbent=known)
+            answer = found if answer is None else _better(answer, found)
+            if not answer.complete or answer.proof == 'bound':
+                break
+        return answer
+
+
+def _better(first: ExactResult, then: ExactResult) -> ExactResult:
+    """Two searches from the same state, the second started from the first's best as its incumbent."""
+    line = then.actions if then.actions else first.actions
+    return ExactResult(max(first.coverage, then.coverage), list(line), then.complete, max(first.bound, then.bound),
+                       first.states + then.states, first.elapsed_s + then.elapsed_s, then.reason, then.proof)

@@ -389,15 +389,15 @@ def bnb(model: Model, rng: np.random.Generator, budget: float = 10.0, epsilon: f
     (termination when no line fills more of the target than stopping here). The
     ranking lists that move, then the other allowed actions by Q as a verified caller's
     fallbacks; with no line it lists nothing. `line` is the whole line; `info` has the
-    line's coverage, whether the search was complete, its bound, states and why it
-    stopped short. rng and epsilon are unused (the search is deterministic)."""
+    line's coverage, whether the search was complete and how it ended (`ExactResult.proof`), its
+    bound, states and why it stopped short. rng and epsilon are unused (the search is deterministic)."""
     from rad_core.sequencing.exact import exact_search
     if not budget > 0:
         raise ValueError(f'bnb: budget must be a positive number of seconds, got {budget}')
     actions, q_all, _, _ = _root(model)
     by_value = getattr(getattr(model, 'policy', None), 'values', True)
     found = exact_search(model, float(budget), max_states=max_states, order=q_order(model) if by_value else None)
-    info = {'coverage': found.coverage, 'complete': found.complete, 'bound': found.bound,
+    info = {'coverage': found.coverage, 'complete': found.complete, 'proof': found.proof, 'bound': found.bound,
             'states': found.states, 'reason': found.reason}
     if not found.actions and not found.complete:
         # Cut before it found anything better than here: no verdict, so the ranking is Q's.
