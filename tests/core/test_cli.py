@@ -83,17 +83,20 @@ def test_rad_ceiling_says_how_each_search_ended_and_refuses_bad_options(tmp_path
     from scenes import flush_square
     square = tmp_path / 'square.json'
     square.write_text(flush_square().dumps())
-    r = rad('ceiling', str(square), '--time-limit', '60', '--json', str(tmp_path / 'c.json'))
+    r = rad('ceiling', str(square), '--time-limit', '60', '--allocations-only', '--json', str(tmp_path / 'c.json'))
     assert r.returncode == 0, r.stderr
-    # No top-down hand closes the flush square: three of four cells, searched to the end below the
-    # bound (every cell), which proves nothing about allocations the search never took.
-    assert ('square: ceiling 0.750, the best of the allocations searched; any allocation covers at most 1.000'
-            in r.stdout)
+    # No top-down hand closes the flush square: three of four cells, the allocations searched to the
+    # end below the bound (every cell), which proves nothing about allocations never taken...
+    assert ('square: ceiling 0.750, the best found; the allocations searched do no better, any allocation '
+            'covers at most 1.000' in r.stdout)
     found = json.loads((tmp_path / 'c.json').read_text())
     row = found['scenes'][0]
     assert found['support'] == ['arm', 'hand'] and row['proof'] == 'exhausted' and row['complete']
     assert row['ceiling'] == 0.75 and len(row['line']) == 2
     assert {step['block'] for step in row['line']} <= {'i0', 'i1', 'c0', 'c1', 'c2'}
+    # ... and every sequence of every pose searched as well: the true ceiling.
+    r = rad('ceiling', str(square), '--time-limit', '120')
+    assert r.returncode == 0 and 'ceiling 0.750, the ceiling over every allocation (every sequence' in r.stdout
     r = rad('ceiling', str(square), '--time-limit', '1e-6')
     assert r.returncode == 0 and 'a lower bound (time limit' in r.stdout
     r = rad('ceiling', str(square), '--support', 'arm,anywhere')

@@ -203,18 +203,23 @@ def test_the_robot_ceiling_searches_orders_and_reallocations_to_a_proven_answer(
     assert found.complete and found.coverage == 1.0
 
 
-def test_an_exhausted_ceiling_searches_the_hands_allocation_too_and_says_it_proves_nothing_beyond():
+def test_an_exhausted_ceiling_searches_the_hands_allocation_then_every_pose_and_says_how_it_ended():
     from rad_core.sequencing.exact import robot_ceiling
     from scenes import flush_square
     sc = flush_square()
-    arm = robot_ceiling(sc, time_limit_s=60, support='arm')
-    both = robot_ceiling(sc, time_limit_s=60)        # the arm's allocation, then the hand's
+    arm = robot_ceiling(sc, time_limit_s=60, support='arm', every_pose=False)
+    both = robot_ceiling(sc, time_limit_s=60, every_pose=False)    # the arm's allocation, then the hand's
     # Three of the four flush cells: no top-down hand closes the square. The bound (every cell) is
     # not reached, so the answer is the best of what was searched, and both allocations were.
     for found in (arm, both):
         assert found.complete and found.coverage == pytest.approx(0.75) and found.bound == 1.0
         assert found.proof == 'exhausted' and found.reason == ''
     assert both.states > arm.states
+    # Every sequence of every pose the bound counts (each I2 and cube pose in the square) searched:
+    # three cells is the true ceiling, whatever the allocation.
+    every = robot_ceiling(sc, time_limit_s=120)
+    assert every.complete and every.coverage == pytest.approx(0.75) and every.proof == 'all poses'
+    assert every.states > both.states
     cut = robot_ceiling(sc, time_limit_s=1e-6)
     assert not cut.complete and cut.proof == '' and 'lower bound' in cut.reason
     with pytest.raises(RadError, match='support'):

@@ -342,15 +342,17 @@ def cmd_ceiling(args) -> int:
             built = evaluate(agent, [(name, scene)], robot=True, seed=args.seed + k)['scenes'][0]
             row['agent'], row['agent_coverage'] = agent.name, built['coverage']
             known = float(built['coverage'])
-        found = robot_ceiling(scene, args.time_limit, support=supports, incumbent=known)
+        found = robot_ceiling(scene, args.time_limit, support=supports, incumbent=known,
+                              every_pose=not args.allocations_only)
         row.update(ceiling=found.coverage, proof=found.proof, complete=found.complete, bound=found.bound,
                    states=found.states, seconds=round(found.elapsed_s, 3), reason=found.reason,
                    line=[{'block': scene.blocks[a.block].id, 'unit': a.unit, 'cell': a.cell, 'rotation': a.rotation}
                          for a in found.actions])   # MDP actions (mdp.Action), the block by its id
         rows.append(row)
         ended = {'bound': 'the ceiling over every allocation (it reached the bound)',
-                 'exhausted': (f'the best of the allocations searched; any allocation covers at most '
-                               f'{found.bound:.3f}'),
+                 'all poses': 'the ceiling over every allocation (every sequence of poses searched)',
+                 'exhausted': (f'the best found; the allocations searched do no better, any allocation '
+                               f'covers at most {found.bound:.3f}'),
                  '': f'a lower bound ({found.reason})'}[found.proof]
         line = f'{name}: ceiling {found.coverage:.3f}, {ended}; {found.states} states, {found.elapsed_s:.1f} s'
         if agent is not None:
@@ -693,7 +695,9 @@ def build_parser(command: str | None = 'train') -> argparse.ArgumentParser:
                         "search from what it built (the incumbent); the line says how far it is from the ceiling")
     p.add_argument('--support', default='arm,hand', metavar='RULES',
                    help="the allocations searched from the empty scene, in turn, while the one before was "
-                        "exhausted below the bound (default arm,hand)")
+                        "exhausted below the bound (default arm,hand); then every pose, while time is left")
+    p.add_argument('--allocations-only', action='store_true',
+                   help='do not search every pose after the allocations (small targets finish there)')
     p.add_argument('--seed', type=int, default=0, help="the agent's seed (scene i: seed + i)")
     p.add_argument('--json', metavar='FILE', help='write each scene\'s ceiling, how its search ended and its line here')
     p.set_defaults(func=cmd_ceiling)

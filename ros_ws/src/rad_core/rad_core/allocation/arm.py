@@ -226,8 +226,10 @@ class ArmCoverageBound:
     """`cpsat.coverage_bound` of the states of one scene, without what the arm can never do.
 
     A bound over what any continuation can still cover, for the robot ceiling: the most target
-    cells disjoint free poses of the blocks left can cover, where the poses and blocks are only
-    those the arm might still build. Left out, as `arm_filter` leaves them out whatever the order:
+    cells disjoint free poses of the blocks left can cover, where the poses are those an allocation
+    may propose (more target than non-target cells, as `cpsat` enumerates them: no scaffolding
+    outside the target) and the poses and blocks are only those the arm might still build. Left out,
+    as `arm_filter` leaves them out whatever the order:
     types with no top-down grasp, blocks on the table it cannot pick where they lie (blocks are
     not moved there), poses whose every grasp is out of reach; and, of the state, poses the hand
     can no longer place (`HandBlocked`). Each is conservative, so it stays a bound; it is tighter
@@ -237,9 +239,7 @@ class ArmCoverageBound:
 
     def __init__(self, scene: Scene, grid: Grid, gamp=None, time_limit_s: float = 2.0):
         from rad_core.allocation.placements import enumerate_candidates
-        everything = enumerate_candidates(scene, grid, positive_only=False)
-        self.candidates, _, self.report = arm_filter(scene, grid, [c for c in everything
-                                                                   if grid.is_target[list(c.cell_ids)].any()])
+        self.candidates, _, self.report = arm_filter(scene, grid, enumerate_candidates(scene, grid))
         self.unpickable = {b for b, block in enumerate(scene.blocks) if block.id in self.report.blocks}
         self.hand = HandBlocked(scene, grid, gamp)
         self.grid, self.scene, self.time_limit_s = grid, scene, time_limit_s

@@ -71,7 +71,8 @@ class ExactResult:
         (with a `bound_of` over every allocation, as `robot_ceiling`'s, no plan of any allocation
         does better: the true ceiling), 'exhausted' where every state the search could reach was
         searched below the bound (the best of the orders and re-allocations it reached, not a
-        proof over allocations it never took); '' when a limit cut it.
+        proof over allocations it never took); '' when a limit cut it. `robot_ceiling` adds
+        'all poses': exhausted over every pose its bound counts, the true ceiling too.
     """
 
     coverage: float
@@ -337,7 +338,8 @@ class _FailedMoves:
 
 
 def robot_ceiling(scene, time_limit_s: float = 60.0, support: str | tuple[str, ...] = ('arm', 'hand'),
-                  reallocation=None, max_states: int = 100_000, incumbent: float = 0.0) -> ExactResult:
+                  reallocation=None, max_states: int = 100_000, incumbent: float = 0.0,
+                  every_pose: bool = True) -> ExactResult:
     """What the best order of the scene's allocation, and of its re-allocations at dead ends,
     builds with the robot: the branch and bound from the empty scene in a planning twin
     (teleporting execution), children most target cells first, re-allocating where no move
@@ -359,7 +361,14 @@ def robot_ceiling(scene, time_limit_s: float = 60.0, support: str | tuple[str, .
     reallocation: a `ReallocationConfig` (default: its defaults with the re-solves' support
     `agent_plan.reallocation_support` of the first support).
     incumbent: a coverage the robot is known to build on the scene (an agent's plan, built in the
-    twin): the search starts from it (`exact_search`), and the answer is the better of the two."""
+    twin): the search starts from it (`exact_search`), and the answer is the better of the two.
+    every_pose: where the allocations' searches were exhausted below the bound and time is left,
+    search once more over every pose the bound counts (every pose of every type an allocation may
+    propose, more target cells than others, that the arm might build: `ArmCoverageBound.candidates`),
+    from the best found;
+    exhausted there, the answer is the true ceiling over all of them (`proof` 'all poses'). Its
+    moves per state are many (each pose times each block of its type), so it finishes on small
+    targets; cut, the answer stays 'exhausted' with the other searches' proof, its line the best found."""
     from rad_core.allocation import AllocationParams, solve
     from rad_core.allocation.arm import ArmCoverageBound
     from rad_core.robot_env import RobotAssemblyEnv, RobotEnvConfig
@@ -407,6 +416,20 @@ def robot_ceiling(scene, time_limit_s: float = 60.0, support: str | tuple[str, .
             answer = found if answer is None else _better(answer, found)
             if not answer.complete or answer.proof == 'bound':
                 break
+        left = deadline - time.monotonic()
+        if every_pose and answer.complete and answer.proof == 'exhausted' and left > 0:
+            # Every pose the bound counts, in one space: exhausted, no placement sequence of them does
+            # better, which is what the bound is over: the true ceiling.
+            space = AllocationActions(env, [c.placement for c in arm_bound.candidates])
+            found = exact_search(EnvModel(memo, None, space), left,
+                                 max_states=max(1, max_states - answer.states), bound_of=bound_of,
+                                 incumbent=max(incumbent, answer.coverage))
+            done = found.complete
+            answer = _better(answer, found)
+            # Cut, it still searched more than the allocations did: their answer stands, or the line it found.
+            answer.complete, answer.reason = True, ''
+            answer.proof = {'bound': 'bound', 'exhausted': 'all poses'}.get(found.proof, 'exhausted') if done \
+                else 'exhausted'
         return answer
 
 
