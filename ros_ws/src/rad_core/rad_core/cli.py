@@ -13,7 +13,8 @@
     rad calibrate PAIRS.csv [--out FILE] [--max-rms M] [--mocap-frame NAME]
     rad eval --agent AGENT [--checkpoint FILE] --grid G [--robot] --scenes N --seed S --json FILE
              [--workers N [--dashboard] | --scheduler ADDR [--workers N]]
-    rad ceiling SCENE.json [...] [--time-limit S] [--agent AGENT] [--support arm,hand] [--json FILE]
+    rad ceiling SCENE.json [...] [--time-limit S] [--agent AGENT] [--support arm,hand] [--allocations-only]
+                [--json FILE]
     rad dataset build --grids 3 --scenes 50000 -o data/train-g3.jsonl.gz [--shapes train]
     rad train --method milp-dqn|dqn|dqn-rel --out runs/NAME [--resume] [--<config field> VALUE ...]
               [--actors N [--chunk-steps S] [--refresh-every K] | --seeds S1,S2,...] [--scheduler ADDR]
@@ -685,8 +686,9 @@ def build_parser(command: str | None = 'train') -> argparse.ArgumentParser:
                    help='with --workers: serve the Dask dashboard on 127.0.0.1:8787 (needs bokeh)')
     p.set_defaults(func=cmd_eval)
 
-    p = sub.add_parser('ceiling', help='what the best order of the allocations builds with the robot: the '
-                                      'robot-feasible ceiling of a scene, and how far an agent is from it')
+    p = sub.add_parser('ceiling', help='the robot-feasible ceiling of a scene (the most any order of its '
+                                      'allocations, then of every pose, builds with the robot), and how far an '
+                                      'agent is from it')
     p.add_argument('scenes', nargs='+', metavar='SCENE', help='scene files (- reads one from stdin)')
     p.add_argument('--time-limit', type=float, default=60.0, metavar='S',
                    help='seconds of branch and bound per scene (default 60); a cut search is a lower bound')
