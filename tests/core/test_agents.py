@@ -33,6 +33,13 @@ def test_parts_have_their_defaults_and_a_canonical_order():
     assert parse_with_robot('exact')[1] is True and parse_with_robot('heur+verify')[1] is None
 
 
+def test_the_ceiling_part_is_seconds_and_reads_back():
+    agent = parse('default+ceiling:30')
+    assert agent.ceiling == 30.0 and agent.repair and agent.support == 'hand'
+    assert label(agent) == 'milp-dqn-mixed+verify+realloc+repair+ceiling:30+support:hand'
+    assert parse(label(agent)) == agent and parse('default').ceiling == 0.0
+
+
 def test_the_default_preset_is_what_the_node_graph_runs():
     default = parse('default')
     graph = yaml.safe_load(CONFIG.read_text())
@@ -56,6 +63,9 @@ def test_the_default_preset_is_what_the_node_graph_runs():
     ('heur+bnb:10', 'add \\+verify'),
     ('milp-dqn+fast', "unknown part 'fast'"),
     ('milp-dqn+support:maybe', "unknown allocation support 'maybe'"),
+    ('milp-dqn+ceiling:20', 'add \\+verify'),
+    ('milp-dqn+verify+ceiling:-1', 'seconds of search, 0 to 3600'),
+    ('milp-dqn+verify+ceiling:soon', "bad ceiling seconds 'soon'"),
 ])
 def test_bad_agents_are_refused_with_what_is_wrong(text, message):
     with pytest.raises(RadError, match=message):

@@ -57,3 +57,16 @@ def test_where_the_hands_allocation_falls_short_the_arms_plan_is_kept():
     assert hand.anytime[0]['coverage'] < 1.0              # its first plan, of the hand's allocation
     first_hand = solve(scene, AllocationParams(support='hand'))
     assert hand_cells(scene, first_hand.placements) == scene.num_target_cells == 5
+
+
+@pytest.mark.slow   # the ceiling's search and three plans of a g = 5 scene with GAMP (about 30 s)
+def test_the_ceiling_part_builds_what_the_allocations_cannot():
+    # g = 5 seed 16 (flush): the arm's and the hand's allocations fill every cell exactly, and no
+    # order of either builds more than 7 of 9 (the ceiling's search exhausts them). Every pose
+    # searched, an I3 one cell past the target where they take an exact I2 builds all 9.
+    from rad_core.evaluation import evaluate
+    scene = generate_scene(GeneratorConfig(grid=5, sides=2), 16)
+    plain = evaluate('default', [('s16', scene)], robot=True, seed=0)['scenes'][0]
+    more = evaluate('default+ceiling:30', [('s16', scene)], robot=True, seed=0)['scenes'][0]
+    assert plain['coverage'] == pytest.approx(7 / 9)
+    assert more['coverage'] == 1.0 and more['outcome'] == 'completed'

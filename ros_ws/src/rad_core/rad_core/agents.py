@@ -1,6 +1,6 @@
 """An agent: what decides the next step of an assembly, as one value made of parts.
 
-    scorer [+ search[:budget]] [+ verify] [+ realloc] [+ repair] [+ support:S]
+    scorer [+ search[:budget]] [+ verify] [+ realloc] [+ repair] [+ ceiling:S] [+ support:S]
 
 - scorer: what ranks the allocation's actions. `heur` (the paper's heuristic), a
   shipped network by name (`milp-dqn-mixed`, `milp-dqn`, `dqn`, `dqn-rel`,
@@ -20,6 +20,10 @@
   kept the arm from are still open (`sequencing.plan.Precedence`); the better plan
   is kept (`sequencing.agent_plan.plan_for_agent`). It learns from GAMP, so it acts
   only with the robot in the loop; without it the agent plans as it would without repair.
+- ceiling:S: where the plans leave target cells unfilled, spend up to S seconds on the
+  robot-feasible ceiling's search (`sequencing.exact.robot_ceiling`: the allocations' orders,
+  then every pose) from the best plan's coverage, and plan the line it finds, kept where it
+  fills more (needs verify; with the robot in the loop only). Time for coverage: off by default.
 - support: the allocation's support rule, `none` (the paper's MILP), `stable`
   (every allocated block can rest on something), `arm` (stable, and nothing the
   arm can never do: no type the hand cannot take, no block it cannot pick, no pose
@@ -63,6 +67,8 @@ class AgentSpec:
     realloc: bool = False
     support: str | None = None
     repair: bool = False
+    ceiling: float = 0.0
+    """Seconds of the ceiling's search where cells are left (0: none)."""
 
     def __post_init__(self):
         if not isinstance(self.scorer, str) or not self.scorer or any(c in self.scorer for c in '+ \t\n'):
@@ -95,6 +101,12 @@ class AgentSpec:
             raise RadError('the bnb search plays only lines it verified: add +verify')
         if self.repair and not self.verify:
             raise RadError('order repair learns from the verified plan\'s refusals: add +verify')
+        ceiling = self.ceiling
+        if isinstance(ceiling, bool) or not isinstance(ceiling, (int, float)) or not 0 <= ceiling <= 3600:
+            raise RadError(f'the ceiling part is seconds of search, 0 to 3600, got {ceiling!r}')
+        object.__setattr__(self, 'ceiling', float(ceiling))
+        if self.ceiling and not self.verify:
+            raise RadError('the ceiling\'s line is planned as a verified plan: add +verify')
 
     # ---- what the parts imply -------------------------------------------------
     @property
@@ -131,6 +143,8 @@ def label(spec: AgentSpec) -> str:
         parts.append('realloc')
     if spec.repair:
         parts.append('repair')
+    if spec.ceiling:
+        parts.append(f'ceiling:{spec.ceiling:g}')
     if spec.support is not None:
         parts.append(f'support:{spec.support}')
     return '+'.join(parts)
@@ -202,7 +216,7 @@ def parse_with_robot(text: str) -> tuple[AgentSpec, bool | None]:
     spec = _apply(base, rest, text)
     if budget_override is not None:
         spec = AgentSpec(spec.scorer, spec.search, budget_override, spec.verify, spec.realloc, spec.support,
-                         spec.repair)
+                         spec.repair, spec.ceiling)
     return spec, robot
 
 
@@ -218,7 +232,7 @@ def _parse_parts(text: str, whole: str) -> AgentSpec:
 
 def _apply(spec: AgentSpec, parts: list[str], whole: str) -> AgentSpec:
     fields = {'scorer': spec.scorer, 'search': spec.search, 'budget': spec.budget, 'verify': spec.verify,
-              'realloc': spec.realloc, 'support': spec.support, 'repair': spec.repair}
+              'realloc': spec.realloc, 'support': spec.support, 'repair': spec.repair, 'ceiling': spec.ceiling}
     for part in parts:
         name, _, value = part.partition(':')
         if name in SEARCHES:
@@ -236,9 +250,14 @@ def _apply(spec: AgentSpec, parts: list[str], whole: str) -> AgentSpec:
             fields[part] = True
         elif name == 'support' and value:
             fields['support'] = value
+        elif name == 'ceiling' and value:
+            try:
+                fields['ceiling'] = float(value)
+            except ValueError:
+                raise RadError(f'bad ceiling seconds {value!r} in agent {whole!r}') from None
         elif part == 'stable':     # the old modifier
             fields['support'] = 'stable'
         else:
             raise RadError(f'unknown part {part!r} in agent {whole!r}: a search ({", ".join(SEARCHES)}, '
-                           f'with :budget), verify, realloc, repair or support:none|stable|arm|hand')
+                           f'with :budget), verify, realloc, repair, ceiling:S or support:none|stable|arm|hand')
     return AgentSpec(**fields)

@@ -53,8 +53,10 @@ def plan_for_agent(spec: AgentSpec, scene: Scene, allocate, plan_motion, rank, r
     allocation (`hand_order`) places more, a second chain from that order (one plan keeping to its
     precedences, then rounds as before), for at most as long again as everything before took;
     with support 'hand', where cells are still left, a third chain from the arm's allocation (one
-    plan and its rounds), for at most as long again. The search then gets what is left of the
-    budget.
+    plan and its rounds), for at most as long again. With `spec.ceiling` (S seconds), where cells
+    are still left: the robot-feasible ceiling's search for up to S seconds (within the time limit)
+    and a plan of the line it finds (`ceiling_line`), kept where it fills more. The search then
+    gets what is left of the budget.
     `AssemblyPlan.anytime` records each plan's time and coverage, and the answer's `timings` the
     stages of all of them. Otherwise one plan, the agent's own (its one entry in `anytime`:
     'scorer', or 'search' for an agent that searches)."""
@@ -144,6 +146,19 @@ def plan_for_agent(spec: AgentSpec, scene: Scene, allocate, plan_motion, rank, r
             keep(latest)
             if latest.allocation is not None:
                 repair(latest, {}, until, latest.allocation)
+    if spec.ceiling and spec.verify and best.predicted_coverage < 1.0 - 1e-9:
+        # The ceiling's search from the best plan's coverage, for up to spec.ceiling seconds, and a
+        # plan of the line it finds (its poses as the allocation, its order as precedences).
+        seconds = min(spec.ceiling, t0 + time_limit_s - time.perf_counter())
+        line = ceiling_line(scene, best.predicted_coverage, seconds) if seconds > 0 else None
+        left = t0 + time_limit_s - time.perf_counter()
+        if line is not None and left > 0:
+            allocation, order = line
+            searched = plan_with(first_rank, left, lambda s: allocation, order)
+            plans.append(searched)
+            if searched.predicted_coverage > best.predicted_coverage + 1e-9 and not _invalid(searched):
+                best, kind = searched, 'ceiling'
+            anytime.append({'t': time.perf_counter() - t0, 'coverage': best.predicted_coverage, 'plan': kind})
     left = improve_until - time.perf_counter()
     if anytime_search and best.predicted_coverage < 1.0 - 1e-9 and left > 0:
         searched = plan_with(rank, left)
@@ -160,6 +175,35 @@ def plan_for_agent(spec: AgentSpec, scene: Scene, allocate, plan_motion, rank, r
         best.timings = summed
     best.timings['total'] = time.perf_counter() - t0
     return best
+
+
+def ceiling_line(scene: Scene, incumbent: float, seconds: float):
+    """The line of the robot-feasible ceiling's search (`sequencing.exact.robot_ceiling`, at most
+    `seconds`) from the scene's state, where it beats `incumbent`: (an `AllocationResult` of its
+    poses, the `Precedence`s that put them in its order); None where it found nothing better."""
+    from rad_core.allocation.placements import Placement
+    from rad_core.allocation.result import AllocationResult
+    from rad_core.mdp import AssemblyEnv
+    from rad_core.sequencing.exact import robot_ceiling
+    from rad_core.sequencing.plan import Precedence
+    t0 = time.perf_counter()
+    found = robot_ceiling(scene, seconds, incumbent=incumbent)
+    if not found.actions or found.coverage <= incumbent + 1e-9:
+        return None
+    env = AssemblyEnv(scene)
+    env.reset()
+    placements, poses = [], []
+    for action in found.actions:
+        cells, yaw = env.resulting_cells(action)
+        region, ijk = env.grid.region_cells(cells)
+        placements.append(Placement(scene.blocks[action.block].type, scene.targets[region].name, int(yaw),
+                                    tuple(tuple(c) for c in ijk)))
+        poses.append(tuple(sorted(int(c) for c in cells)))
+        env.step(action)
+    order = tuple(Precedence(a, b, 'the ceiling\'s line') for i, a in enumerate(poses) for b in poses[i + 1:])
+    value = float(sum(int(env.grid.weights[list(c)].sum()) for c in poses))
+    return AllocationResult('FEASIBLE', value, value, time.perf_counter() - t0, tuple(placements),
+                            solver='ceiling'), order
 
 
 def _world_key(scene: Scene, q) -> tuple:
