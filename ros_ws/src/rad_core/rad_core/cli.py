@@ -323,13 +323,14 @@ def cmd_eval(args) -> int:
 
 
 def cmd_ceiling(args) -> int:
+    from rad_core.agents import SUPPORTS
     from rad_core.sequencing.exact import robot_ceiling
     if not args.time_limit > 0:
         raise RadError(f'--time-limit must be a positive number of seconds, got {args.time_limit}')
     supports = tuple(s for s in args.support.split(',') if s)
     for rule in supports:
-        if rule not in ('none', 'stable', 'arm', 'hand'):
-            raise RadError(f'--support: unknown rule {rule!r} (none, stable, arm, hand)')
+        if rule not in SUPPORTS:
+            raise RadError(f'--support: unknown rule {rule!r} ({", ".join(SUPPORTS)})')
     scenes = [(Path(f).stem if f != '-' else 'stdin', _read_scene(f)) for f in args.scenes]
     agent = None
     if args.agent:

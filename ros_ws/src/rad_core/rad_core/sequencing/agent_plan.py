@@ -89,6 +89,15 @@ def plan_for_agent(spec: AgentSpec, scene: Scene, allocate, plan_motion, rank, r
     plans = [best]
     kind = 'search' if spec.search and not anytime_search else 'scorer'
     anytime = [{'t': time.perf_counter() - t0, 'coverage': best.predicted_coverage, 'plan': kind}]
+
+    def keep(plan: AssemblyPlan, made_by: str) -> None:
+        """Record a further plan; it becomes the best (made by `made_by`) where it fills more."""
+        nonlocal best, kind
+        plans.append(plan)
+        if plan.predicted_coverage > best.predicted_coverage + 1e-9 and not _invalid(plan):
+            best, kind = plan, made_by
+        anytime.append({'t': time.perf_counter() - t0, 'coverage': best.predicted_coverage, 'plan': kind})
+
     # Improving may take as long again as the first plan did, and at least improve_time_s (0: not at
     # all): a large structure's first plan takes minutes, and a plan in another order about as long.
     first_s = time.perf_counter() - t0
@@ -99,13 +108,6 @@ def plan_for_agent(spec: AgentSpec, scene: Scene, allocate, plan_motion, rank, r
         # before the time limit (a large structure's third repair plan is often the one that fills it).
         repair_until = t0 + time_limit_s if improve_time_s > 0 else t0
         first_allocation = best.allocation
-
-        def keep(plan: AssemblyPlan) -> None:
-            nonlocal best, kind
-            plans.append(plan)
-            if plan.predicted_coverage > best.predicted_coverage + 1e-9 and not _invalid(plan):
-                best, kind = plan, 'repair'
-            anytime.append({'t': time.perf_counter() - t0, 'coverage': best.predicted_coverage, 'plan': kind})
 
         def repair(latest: AssemblyPlan, known: dict, until: float, allocation=None) -> None:
             """Rounds of order repair after `latest` (of `allocation`, default the first), keeping to
@@ -118,7 +120,7 @@ def plan_for_agent(spec: AgentSpec, scene: Scene, allocate, plan_motion, rank, r
                     break
                 known.update(dict.fromkeys(new))
                 latest = plan_with(first_rank, left, lambda s: allocation, tuple(known))
-                keep(latest)
+                keep(latest, 'repair')
 
         repair(best, {}, repair_until)
         # Where refusals alone left cells unfilled: the hand's own order of the allocation
@@ -133,7 +135,7 @@ def plan_for_agent(spec: AgentSpec, scene: Scene, allocate, plan_motion, rank, r
                 known = dict.fromkeys(guess.precedences)
                 latest = plan_with(first_rank, until - time.perf_counter(), lambda s: first_allocation,
                                    tuple(known))
-                keep(latest)
+                keep(latest, 'repair')
                 repair(latest, known, until)
         # With the hand's allocation (support 'hand'), where cells are still left: a plan from the
         # arm's allocation, which the hand's order may have traded away (a pair of blocks the order
@@ -143,7 +145,7 @@ def plan_for_agent(spec: AgentSpec, scene: Scene, allocate, plan_motion, rank, r
         until = min(repair_until, now + (now - t0))
         if support == 'hand' and best.predicted_coverage < 1.0 - 1e-9 and until > now:
             latest = plan_with(first_rank, until - now, lambda s: allocate(s, support='arm'))
-            keep(latest)
+            keep(latest, 'repair')
             if latest.allocation is not None:
                 repair(latest, {}, until, latest.allocation)
     if spec.ceiling and spec.verify and best.predicted_coverage < 1.0 - 1e-9:
@@ -154,18 +156,10 @@ def plan_for_agent(spec: AgentSpec, scene: Scene, allocate, plan_motion, rank, r
         left = t0 + time_limit_s - time.perf_counter()
         if line is not None and left > 0:
             allocation, order = line
-            searched = plan_with(first_rank, left, lambda s: allocation, order)
-            plans.append(searched)
-            if searched.predicted_coverage > best.predicted_coverage + 1e-9 and not _invalid(searched):
-                best, kind = searched, 'ceiling'
-            anytime.append({'t': time.perf_counter() - t0, 'coverage': best.predicted_coverage, 'plan': kind})
+            keep(plan_with(first_rank, left, lambda s: allocation, order), 'ceiling')
     left = improve_until - time.perf_counter()
     if anytime_search and best.predicted_coverage < 1.0 - 1e-9 and left > 0:
-        searched = plan_with(rank, left)
-        plans.append(searched)
-        if searched.predicted_coverage > best.predicted_coverage + 1e-9 and not _invalid(searched):
-            best, kind = searched, 'search'
-        anytime.append({'t': time.perf_counter() - t0, 'coverage': best.predicted_coverage, 'plan': kind})
+        keep(plan_with(rank, left), 'search')
     best.anytime = anytime
     if len(plans) > 1:      # the stages of every plan made for it, so they add up to the total
         summed: dict = {}
@@ -193,13 +187,12 @@ def ceiling_line(scene: Scene, incumbent: float, seconds: float):
     env = AssemblyEnv(scene)
     env.reset()
     placements, poses = [], []
-    for action in found.actions:
+    for action in found.actions:    # each block once: its cells and yaw follow from where it lies now
         cells, yaw = env.resulting_cells(action)
         region, ijk = env.grid.region_cells(cells)
         placements.append(Placement(scene.blocks[action.block].type, scene.targets[region].name, int(yaw),
                                     tuple(tuple(c) for c in ijk)))
         poses.append(tuple(sorted(int(c) for c in cells)))
-        env.step(action)
     order = tuple(Precedence(a, b, 'the ceiling\'s line') for i, a in enumerate(poses) for b in poses[i + 1:])
     value = float(sum(int(env.grid.weights[list(c)].sum()) for c in poses))
     return AllocationResult('FEASIBLE', value, value, time.perf_counter() - t0, tuple(placements),

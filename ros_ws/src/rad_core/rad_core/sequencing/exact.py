@@ -236,8 +236,6 @@ def exact_search(model, time_limit_s: float = 60.0, max_states: int = 100_000,
                   f'{best:.2f} is a lower bound')
     finally:
         model.restore(root)
-    if complete and best >= bound - _EPS:
-        proof = 'bound'          # e.g. an incumbent or a start at the bound: nothing was searched
     return ExactResult(best, best_line, complete, bound, len(seen),
                        time.monotonic() - start_time, reason, proof)
 
