@@ -80,23 +80,32 @@ def test_rad_eval_accepts_every_allocation_support_the_agents_use():
 
 
 def test_rad_ceiling_says_how_each_search_ended_and_refuses_bad_options(tmp_path):
+    from rad_core.generator import GeneratorConfig, generate_scene
     from scenes import flush_square
     square = tmp_path / 'square.json'
     square.write_text(flush_square().dumps())
-    r = rad('ceiling', str(square), '--time-limit', '60', '--allocations-only', '--json', str(tmp_path / 'c.json'))
+    # No top-down hand closes the flush square: the bound, which asks for an order the hand can keep,
+    # is three of four cells, and the first line reaches it.
+    r = rad('ceiling', str(square), '--time-limit', '60')
+    assert r.returncode == 0 and 'square: ceiling 0.750, the ceiling over every allocation (it reached the bound)' \
+        in r.stdout
+    # Generated g = 5 seed 23: five of six cells, below a bound of every cell. The allocations
+    # searched to the end below it, which proves nothing about allocations never taken...
+    g5 = tmp_path / 'g5.json'
+    g5.write_text(generate_scene(GeneratorConfig(grid=5, sides=2), 23).dumps())
+    r = rad('ceiling', str(g5), '--time-limit', '60', '--allocations-only', '--json', str(tmp_path / 'c.json'))
     assert r.returncode == 0, r.stderr
-    # No top-down hand closes the flush square: three of four cells, the allocations searched to the
-    # end below the bound (every cell), which proves nothing about allocations never taken...
-    assert ('square: ceiling 0.750, the best found; the allocations searched do no better, any allocation '
+    assert ('g5: ceiling 0.833, the best found; the allocations searched do no better, any allocation '
             'covers at most 1.000' in r.stdout)
     found = json.loads((tmp_path / 'c.json').read_text())
     row = found['scenes'][0]
     assert found['support'] == ['arm', 'hand'] and row['proof'] == 'exhausted' and row['complete']
-    assert row['ceiling'] == 0.75 and len(row['line']) == 2
-    assert {step['block'] for step in row['line']} <= {'i0', 'i1', 'c0', 'c1', 'c2'}
+    assert row['ceiling'] == pytest.approx(5 / 6) and len(row['line']) == 3
+    assert {step['block'] for step in row['line']} <= {b.id for b in generate_scene(GeneratorConfig(grid=5, sides=2),
+                                                                                     23).blocks}
     # ... and every sequence of every pose searched as well: the true ceiling.
-    r = rad('ceiling', str(square), '--time-limit', '120')
-    assert r.returncode == 0 and 'ceiling 0.750, the ceiling over every allocation (every sequence' in r.stdout
+    r = rad('ceiling', str(g5), '--time-limit', '120')
+    assert r.returncode == 0 and 'ceiling 0.833, the ceiling over every allocation (every sequence' in r.stdout
     r = rad('ceiling', str(square), '--time-limit', '1e-6')
     assert r.returncode == 0 and 'a lower bound (time limit' in r.stdout
     r = rad('ceiling', str(square), '--support', 'arm,anywhere')

@@ -207,8 +207,9 @@ def test_an_exhausted_ceiling_searches_the_hands_allocation_then_every_pose_and_
     from rad_core.sequencing.exact import robot_ceiling
     from scenes import flush_square
     sc = flush_square()
-    arm = robot_ceiling(sc, time_limit_s=60, support='arm', every_pose=False)
-    both = robot_ceiling(sc, time_limit_s=60, every_pose=False)    # the arm's allocation, then the hand's
+    # Without the hand order in its bound (ordered=False), the bound counts every cell.
+    arm = robot_ceiling(sc, time_limit_s=60, support='arm', every_pose=False, ordered=False)
+    both = robot_ceiling(sc, time_limit_s=60, every_pose=False, ordered=False)   # the arm's allocation, then the hand's
     # Three of the four flush cells: no top-down hand closes the square. The bound (every cell) is
     # not reached, so the answer is the best of what was searched, and both allocations were.
     for found in (arm, both):
@@ -217,9 +218,14 @@ def test_an_exhausted_ceiling_searches_the_hands_allocation_then_every_pose_and_
     assert both.states > arm.states
     # Every sequence of every pose the bound counts (each I2 and cube pose in the square) searched:
     # three cells is the true ceiling, whatever the allocation.
-    every = robot_ceiling(sc, time_limit_s=120)
+    every = robot_ceiling(sc, time_limit_s=120, ordered=False)
     assert every.complete and every.coverage == pytest.approx(0.75) and every.proof == 'all poses'
     assert every.states > both.states
+    # With it (the default), the bound itself sees that the last block of the closed square has
+    # nowhere for the fingers: three cells at most, reached by the first line, so no more is searched.
+    ordered = robot_ceiling(sc, time_limit_s=60)
+    assert ordered.complete and ordered.coverage == pytest.approx(0.75) and ordered.proof == 'bound'
+    assert ordered.bound == pytest.approx(0.75) and ordered.states < arm.states
     cut = robot_ceiling(sc, time_limit_s=1e-6)
     assert not cut.complete and cut.proof == '' and 'lower bound' in cut.reason
     with pytest.raises(RadError, match='support'):

@@ -89,3 +89,43 @@ def test_order_repair_with_the_hands_order_builds_held_out_spire_cup_whole():
     assert parse('default').repair
     assert plan.predicted_coverage == 1.0 and plan.success
     assert 'repair' in [a['plan'] for a in plan.anytime]
+
+
+def test_the_ordered_cover_picks_poses_and_an_order_the_hand_can_keep_within_the_blocks():
+    # The flush square from two I2s and three cubes: four cells as a cover, but whichever block
+    # closes it has a neighbour or its own length in the fingers' way. The ordered cover takes
+    # three cells with an order, and never more blocks of a type than the table holds.
+    from scenes import flush_square
+    from rad_core.sequencing.hand_order import ordered_cover
+    scene = flush_square()
+    cover = ordered_cover(scene)
+    assert cover.coverage == pytest.approx(0.75) and len(cover.order) == len(cover.placements)
+    grid, hand = Grid(scene), HandBlocked(scene, Grid(scene))
+    occupied = np.zeros(grid.num_cells, dtype=bool)
+    counts: dict = {}
+    for cells, p in zip(cover.order, cover.placements):
+        assert tuple(sorted(grid.index(0, c) for c in p.cells)) == cells
+        assert not occupied[list(cells)].any() and not hand.blocked(p.type, p.yaw, list(
+            grid.index(0, c) for c in p.cells), occupied)
+        occupied[list(cells)] = True
+        counts[p.type] = counts.get(p.type, 0) + 1
+    assert counts.get('I2', 0) <= 2 and counts.get('cube', 0) <= 3
+    assert cover.value == 3                      # three target cells, no filler
+
+
+@pytest.mark.slow
+def test_order_repairs_fourth_chain_plans_the_ordered_cover_where_the_allocations_leave_cells(monkeypatch):
+    # Generated g = 5 seed 17: the hand's and the arm's allocations and their repair rounds stop at
+    # 0.8; the cover chosen together with an order the hand can keep fills the target. Without that
+    # chain (its CP-SAT answering nothing), the agent stops where it did.
+    from rad_core.generator import GeneratorConfig, generate_scene
+    from rad_core.sequencing import agent_plan, hand_order as ho
+    scene = generate_scene(GeneratorConfig(grid=5, sides=2), 17)
+    planner = agent_plan.AgentPlanner('default', time_limit_s=120)
+    plan = planner(scene, None, 0)
+    assert plan.predicted_coverage == 1.0 and plan.success
+    cover = ho.ordered_cover(scene, agent_plan.ORDERED_COVER_S)
+    assert cover.coverage == 1.0 and cover.precedences
+    monkeypatch.setattr(agent_plan, 'ordered_cover', lambda *a, **k: ho.HandOrder())
+    without = planner(scene, None, 0)
+    assert without.predicted_coverage < 0.9

@@ -20,7 +20,7 @@ import numpy as np
 from rad_core.agents import AgentSpec, label, parse
 from rad_core.errors import RadError
 from rad_core.scene import Scene
-from rad_core.sequencing.hand_order import hand_order
+from rad_core.sequencing.hand_order import hand_order, ordered_cover
 from rad_core.sequencing.plan import AssemblyPlan, plan_assembly
 
 
@@ -56,7 +56,12 @@ def plan_for_agent(spec: AgentSpec, scene: Scene, allocate, plan_motion, rank, r
     plan and its rounds), for at most as long again. With `spec.ceiling` (S seconds), where cells
     are still left: the robot-feasible ceiling's search for up to S seconds (within the time limit)
     and a plan of the line it finds (`ceiling_line`), kept where it fills more. The search then
-    gets what is left of the budget.
+    gets what is left of the budget. Last, with order repair and an arm-aware support ('arm',
+    'hand'), where cells are still left: order repair's fourth chain, the allocation and its order
+    found together (`hand_order.ordered_cover`) where they place more than the best plan, planned
+    with that order's precedences and repair rounds after it, then another cover where those fall
+    short (at most `COVER_TRIES`); for at most as long again as everything before took, and at
+    least `ORDERED_COVER_S` and the improvement budget (within the time limit).
     `AssemblyPlan.anytime` records each plan's time and coverage, and the answer's `timings` the
     stages of all of them. Otherwise one plan, the agent's own (its one entry in `anytime`:
     'scorer', or 'search' for an agent that searches)."""
@@ -160,6 +165,28 @@ def plan_for_agent(spec: AgentSpec, scene: Scene, allocate, plan_motion, rank, r
     left = improve_until - time.perf_counter()
     if anytime_search and best.predicted_coverage < 1.0 - 1e-9 and left > 0:
         keep(plan_with(rank, left), 'search')
+    # Last, where cells are still left: the cover and its order at once (`ordered_cover`, the robot
+    # ceiling's ordered bound as a plan), where it places more than the best plan, as the
+    # allocation with its order's precedences, and repair rounds after it; where those fall
+    # short, another cover (at most COVER_TRIES), all for at most as long again as everything
+    # before took, and at least one CP-SAT time and the improvement budget.
+    if spec.repair and spec.verify and support in ('arm', 'hand'):
+        now = time.perf_counter()
+        until = min(repair_until, now + max(now - t0, ORDERED_COVER_S + improve_time_s))
+        avoid: list = []
+        for _ in range(COVER_TRIES):
+            now = time.perf_counter()
+            if best.predicted_coverage >= 1.0 - 1e-9 or now >= until:
+                break
+            cover = ordered_cover(scene, min(ORDERED_COVER_S, until - now), avoid=avoid)
+            if cover.coverage <= best.predicted_coverage + 1e-9 or time.perf_counter() >= until:
+                break
+            avoid.append(cover.order)    # the next try, where this one's plans fall short, another cover
+            allocation = cover_allocation(cover, time.perf_counter() - now)
+            known = dict.fromkeys(cover.precedences)
+            latest = plan_with(first_rank, until - time.perf_counter(), lambda s: allocation, tuple(known))
+            keep(latest, 'repair')
+            repair(latest, known, until, allocation)
     best.anytime = anytime
     if len(plans) > 1:      # the stages of every plan made for it, so they add up to the total
         summed: dict = {}
@@ -169,6 +196,21 @@ def plan_for_agent(spec: AgentSpec, scene: Scene, allocate, plan_motion, rank, r
         best.timings = summed
     best.timings['total'] = time.perf_counter() - t0
     return best
+
+
+COVER_TRIES = 2
+"""Order repair's fourth chain: the most covers it plans (`ordered_cover`, each avoiding those before)."""
+
+ORDERED_COVER_S = 5.0
+"""Order repair's fourth chain: CP-SAT's most seconds (deterministic time) for the cover and its
+order (`ordered_cover`)."""
+
+
+def cover_allocation(cover, seconds: float):
+    """An `AllocationResult` of an `ordered_cover`'s poses (FEASIBLE, its c^T g), solved in `seconds`."""
+    from rad_core.allocation.result import AllocationResult
+    return AllocationResult('FEASIBLE', float(cover.value), float(cover.value), seconds, tuple(cover.placements),
+                            solver='ordered cover')
 
 
 def ceiling_line(scene: Scene, incumbent: float, seconds: float):

@@ -337,15 +337,16 @@ class _FailedMoves:
 
 def robot_ceiling(scene, time_limit_s: float = 60.0, support: str | tuple[str, ...] = ('arm', 'hand'),
                   reallocation=None, max_states: int = 100_000, incumbent: float = 0.0,
-                  every_pose: bool = True) -> ExactResult:
+                  every_pose: bool = True, ordered: bool = True) -> ExactResult:
     """What the best order of the scene's allocation, and of its re-allocations at dead ends,
     builds with the robot: the branch and bound from the empty scene in a planning twin
     (teleporting execution), children most target cells first, re-allocating where no move
     succeeds (the no-goods found there excluded) and bounded by what the blocks left could
     cover at most with poses the arm might still build (`allocation.arm.ArmCoverageBound`:
     `allocation.cpsat.coverage_bound` without blocks it cannot pick, poses out of reach and
-    poses the hand can no longer enter between built cells). Each move is planned once per state,
-    and moves the hand test refuses are not planned (`_FailedMoves`). An answer at its bound
+    poses the hand can no longer enter between built cells; `ordered`: and only poses with an
+    order the hand can place them in, `ArmCoverageBound.ordered_bound`). Each move is planned
+    once per state, and moves the hand test refuses are not planned (`_FailedMoves`). An answer at its bound
     (`proof` 'bound') is the robot-feasible ceiling over every allocation; an exhausted one
     ('exhausted') the best of the allocations searched; a cut one a lower bound (its `reason`
     says so).
@@ -366,7 +367,11 @@ def robot_ceiling(scene, time_limit_s: float = 60.0, support: str | tuple[str, .
     from the best found;
     exhausted there, the answer is the true ceiling over all of them (`proof` 'all poses'). Its
     moves per state are many (each pose times each block of its type), so it finishes on small
-    targets; cut, the answer stays 'exhausted' with the other searches' proof, its line the best found."""
+    targets; cut, the answer stays 'exhausted' with the other searches' proof, its line the best found.
+    ordered: the bound asks for a hand order too (`ArmCoverageBound`): where no order of the
+    target's poses lets the hand place the last ones (a flush, closed course), the bound is below
+    1 and an answer at it is the true ceiling without the every-pose search; False: the bound
+    without it (slower to finish, kept to compare)."""
     from rad_core.allocation import AllocationParams, solve
     from rad_core.allocation.arm import ArmCoverageBound
     from rad_core.robot_env import RobotAssemblyEnv, RobotEnvConfig
@@ -381,7 +386,13 @@ def robot_ceiling(scene, time_limit_s: float = 60.0, support: str | tuple[str, .
     with RobotAssemblyEnv(scene, RobotEnvConfig(execution='teleport')) as renv:
         renv.reset()
         env = renv.env
-        arm_bound = ArmCoverageBound(scene, env.grid, renv.config.gamp)
+        arm_bound = ArmCoverageBound(scene, env.grid, renv.config.gamp, ordered=ordered)
+        # The root's bound decides whether an answer is the true ceiling: CP-SAT gets longer there
+        # (remembered for every search from the root), the states below it the bound's own limit.
+        per_state = arm_bound.time_limit_s
+        arm_bound.time_limit_s = max(per_state, min(30.0, time_limit_s / 10))
+        arm_bound(env)
+        arm_bound.time_limit_s = per_state
         memo = _FailedMoves(renv, arm_bound.hand)
         check = memo.check()
 
