@@ -95,8 +95,7 @@ def test_the_ordered_bound_sees_that_no_hand_closes_a_flush_square_and_the_plain
     # every way of holding it: three of the four cells at most. Without the order, all four.
     assert ordered(env) == pytest.approx(0.75) and ordered.last_loose == 1.0
     assert plain(env) == 1.0
-    # Once a cube is in a corner, the three cells left still have an order (this corner's
-    # neighbours first... the last one is hemmed in): the bound stays at three of four.
+    # With a cube in one corner, still three of four: whichever block fills the last cell is hemmed in.
     assert not env.step(Action(2, 0, env.grid.index(0, (0, 0, 0)), 0)).outcome.is_invalid
     assert ordered(env) == pytest.approx(0.75)
 
