@@ -260,7 +260,9 @@ class ArmCoverageBound:
         self.last_loose = None    # the last call's bound without the order (None before a call)
         self._memo: dict[tuple, tuple] = {}     # a state's (bound, loose bound, hand-blocked)
 
-    def __call__(self, env) -> float:
+    def __call__(self, env, time_limit_s: float | None = None) -> float:
+        """The bound of the env's state (remembered per state); time_limit_s: CP-SAT's for each of
+        the two bounds here (default the bound's own)."""
         from rad_core.allocation.cpsat import max_coverage
         occupied = env.state.occupancy >= 0
         counts: dict[str, int] = {}
@@ -276,17 +278,20 @@ class ArmCoverageBound:
         free = [c for c in self.candidates if not occupied[list(c.cell_ids)].any()]
         kept = [c for c in free if not self.hand(c, occupied)]
         self.hand_blocked = len(free) - len(kept)
-        loose = self.last_loose = max_coverage(self.grid, occupied, kept, counts, self.time_limit_s)
+        limit = self.time_limit_s if time_limit_s is None else time_limit_s
+        loose = self.last_loose = max_coverage(self.grid, occupied, kept, counts, limit)
         filled = int((self.grid.is_target & occupied).sum()) / max(1, int(self.grid.is_target.sum()))
         value = loose
         if self.ordered and loose > filled:     # with nothing to place, nothing the order can take away
-            value = min(loose, self.ordered_bound(occupied, kept, counts))
+            value = min(loose, self.ordered_bound(occupied, kept, counts, limit))
         self._memo[key] = (value, loose, self.hand_blocked)
         return value
 
-    def ordered_bound(self, occupied: np.ndarray, kept: list[Candidate], counts: dict[str, int]) -> float:
+    def ordered_bound(self, occupied: np.ndarray, kept: list[Candidate], counts: dict[str, int],
+                      time_limit_s: float) -> float:
         """The coverage bound over `kept` (free poses the hand may still place) with a hand order."""
         from ortools.sat.python import cp_model
+        from rad_core.allocation.cpsat import cp_solver
         from rad_core.sequencing.hand_order import candidate_poses, order_model
         grid = self.grid
         total = int(grid.is_target.sum())
@@ -295,10 +300,7 @@ class ArmCoverageBound:
         if not poses:
             return filled / total
         model, *_ = order_model(grid, occupied, poses, counts)
-        solver = cp_model.CpSolver()
-        solver.parameters.max_time_in_seconds = float(self.time_limit_s)
-        solver.parameters.num_workers = 1
-        solver.parameters.catch_sigint_signal = False
+        solver = cp_solver(time_limit_s)
         status = solver.solve(model)
         if status not in (cp_model.OPTIMAL, cp_model.FEASIBLE):
             return 1.0                          # nothing proven: the caller keeps the looser bound

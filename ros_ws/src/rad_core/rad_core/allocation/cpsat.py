@@ -171,6 +171,20 @@ def build_model(candidates: list[Candidate], counts: dict[str, int], support: st
     return model, w, scale
 
 
+def cp_solver(time_limit_s: float, num_workers: int = 1, seed: int | None = None) -> cp_model.CpSolver:
+    """A CP-SAT solver with a wall-time limit and `num_workers` workers (and `seed`, where given),
+    that leaves SIGINT alone: CP-SAT would install its own handler for the solve and leave SIGINT
+    at the default action afterwards, so a node would die by the signal instead of shutting down.
+    Signals belong to the process owner, not to a library call."""
+    solver = cp_model.CpSolver()
+    solver.parameters.max_time_in_seconds = float(time_limit_s)
+    solver.parameters.num_workers = num_workers
+    if seed is not None:
+        solver.parameters.random_seed = seed
+    solver.parameters.catch_sigint_signal = False
+    return solver
+
+
 def _pose_cost(cand: Candidate, grid: Grid, prefer: str) -> int:
     if prefer == 'fewer':
         return 1
@@ -183,21 +197,32 @@ def _pose_cost(cand: Candidate, grid: Grid, prefer: str) -> int:
 def _add_support(model, candidates, w, by_cell, grid: Grid, occupied) -> None:
     """The 'stable' constraints (see the module docstring)."""
     for n, cand in enumerate(candidates):
-        ids = list(cand.cell_ids)
-        below, sets, trivial = _support_sets(grid, ids, occupied)
-        if any(set(S) <= trivial for S in sets):
+        sets = support_options(grid, list(cand.cell_ids), occupied, by_cell)
+        if sets is None:
             continue                                   # stands whatever else is chosen
         options = []
-        for S in sets:
-            need = [i for i in S if i not in trivial]
-            unders = [by_cell.get(below[i], []) if below[i] >= 0 else [] for i in need]
-            if any(not u for u in unders):
-                continue                               # some unit of S can never be supported
+        for unders in sets:
             z = model.new_bool_var(f'z{n}_{len(options)}')
             for u in unders:
                 model.add(z <= sum(u))
             options.append(z)
         model.add(sum(options) >= w[n])
+
+
+def support_options(grid: Grid, ids: list[int], occupied, holders: dict) -> list[list[list]] | None:
+    """How a pose (its cell ids) can stand, as the 'stable' rule asks: None where it stands on the
+    table or built cells whatever else is chosen; else, per sufficient support set that can be held
+    up, per unit of it not resting already, `holders` of the cell below it (holders: cell -> what
+    may fill it, e.g. the poses covering it). Sets with a unit nothing can hold up are left out."""
+    below, sets, trivial = _support_sets(grid, ids, occupied)
+    if any(set(S) <= trivial for S in sets):
+        return None
+    out = []
+    for S in sets:
+        unders = [holders.get(below[i], []) if below[i] >= 0 else [] for i in S if i not in trivial]
+        if all(unders):
+            out.append(unders)
+    return out
 
 
 def _support_sets(grid: Grid, ids: list[int], occupied):
@@ -341,14 +366,7 @@ def solve_rounds(model, w, candidates: list[Candidate], scene: Scene, rounds: in
         left = time_limit_s - (time.perf_counter() - start)
         if round_ and left <= 0.05:
             return
-        solver = cp_model.CpSolver()
-        solver.parameters.max_time_in_seconds = float(time_limit_s if not round_ else left)
-        solver.parameters.num_workers = num_workers
-        solver.parameters.random_seed = seed
-        # CP-SAT would install its own SIGINT handler for the solve and leave SIGINT at
-        # the default action afterwards: a node then dies by the signal instead of
-        # shutting down. Signals belong to the process owner, not to a library call.
-        solver.parameters.catch_sigint_signal = False
+        solver = cp_solver(time_limit_s if not round_ else left, num_workers, seed)
         status = solver.solve(model)
         if status not in (cp_model.OPTIMAL, cp_model.FEASIBLE):
             yield solver, status, [], []
@@ -411,10 +429,7 @@ def max_coverage(grid: Grid, occupied, candidates: list[Candidate], counts: dict
     if not scored or total == 0:
         return filled / total if total else 1.0
     model, _, _ = build_model(scored, counts)
-    solver = cp_model.CpSolver()
-    solver.parameters.max_time_in_seconds = float(time_limit_s)
-    solver.parameters.num_workers = 1
-    solver.parameters.catch_sigint_signal = False
+    solver = cp_solver(time_limit_s)
     status = solver.solve(model)
     best = float(solver.best_objective_bound) if status in (cp_model.OPTIMAL, cp_model.FEASIBLE) \
         else float(total - filled)

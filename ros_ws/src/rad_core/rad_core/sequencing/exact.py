@@ -389,10 +389,7 @@ def robot_ceiling(scene, time_limit_s: float = 60.0, support: str | tuple[str, .
         arm_bound = ArmCoverageBound(scene, env.grid, renv.config.gamp, ordered=ordered)
         # The root's bound decides whether an answer is the true ceiling: CP-SAT gets longer there
         # (remembered for every search from the root), the states below it the bound's own limit.
-        per_state = arm_bound.time_limit_s
-        arm_bound.time_limit_s = max(per_state, min(30.0, time_limit_s / 10))
-        arm_bound(env)
-        arm_bound.time_limit_s = per_state
+        arm_bound(env, max(arm_bound.time_limit_s, min(30.0, time_limit_s / 10)))
         memo = _FailedMoves(renv, arm_bound.hand)
         check = memo.check()
 

@@ -72,7 +72,7 @@ def order_model(grid: Grid, occupied: np.ndarray, poses: list[tuple], counts: di
     Maximizes the target cells placed.
 
     cover: `ordered_cover`'s stricter rules for a plan (the bound keeps the MDP's): each pose
-    stands as the allocation's support='stable' asks (`allocation.cpsat._support_sets`: its
+    stands as the allocation's support='stable' asks (`allocation.cpsat.support_options`: its
     centre of mass over units resting on the table, built cells or poses placed before it), and
     among the best, the fewest cells outside the target (fillers), as c^T g would."""
     from ortools.sat.python import cp_model
@@ -135,19 +135,15 @@ def order_model(grid: Grid, occupied: np.ndarray, poses: list[tuple], counts: di
 
 
 def _stands(model, grid: Grid, occupied: np.ndarray, cells, n: int, placed, order, owners) -> None:
-    """Pose n, where placed, stands on one of its sufficient support sets: every unit of the set on
-    the table, a built cell, or a pose placed before it."""
-    from rad_core.allocation.cpsat import _support_sets
-    ids = list(cells)
-    below, sets, trivial = _support_sets(grid, ids, occupied)
-    if any(set(S) <= trivial for S in sets):
+    """Pose n, where placed, stands on one of its sufficient support sets
+    (`allocation.cpsat.support_options`): every unit of the set on the table, a built cell, or a
+    pose placed before it."""
+    from rad_core.allocation.cpsat import support_options
+    sets = support_options(grid, list(cells), occupied, owners)
+    if sets is None:
         return                                   # stands whatever else is placed
     options = []
-    for S in sets:
-        need = [i for i in S if i not in trivial]
-        unders = [owners.get(below[i], []) if below[i] >= 0 else [] for i in need]
-        if any(not u for u in unders):
-            continue                             # a unit of S can never be held up
+    for unders in sets:
         z = model.new_bool_var(f'z{n}_{len(options)}')
         for under in unders:
             rests = [model.new_bool_var(f'r{n}_{len(options)}_{m}') for m in under]
@@ -233,6 +229,7 @@ def _solve(grid: Grid, occupied: np.ndarray, poses: list[tuple], items: list, co
     (about seconds of one core), so that the answer does not depend on how busy the machine is
     (wall time only as a backstop). avoid: sets of poses (cells sorted) not to be placed all together."""
     from ortools.sat.python import cp_model
+    from rad_core.allocation.cpsat import cp_solver
     if not poses:
         return HandOrder()
     model, placed, order, held_by = order_model(grid, occupied, poses, counts, cover=cover)
@@ -241,13 +238,9 @@ def _solve(grid: Grid, occupied: np.ndarray, poses: list[tuple], items: list, co
         ns = [index[cells] for cells in before if cells in index]
         if len(ns) == len(before) and ns:
             model.add(sum(placed[n] for n in ns) <= len(ns) - 1)
-    solver = cp_model.CpSolver()
+    solver = cp_solver(3.0 * time_limit_s if cover else time_limit_s)
     if cover:
         solver.parameters.max_deterministic_time = float(time_limit_s)
-        time_limit_s *= 3.0
-    solver.parameters.max_time_in_seconds = float(time_limit_s)
-    solver.parameters.num_workers = 1
-    solver.parameters.catch_sigint_signal = False
     if solver.solve(model) not in (cp_model.OPTIMAL, cp_model.FEASIBLE):
         return HandOrder()
     chosen = sorted((n for n in range(len(poses)) if solver.boolean_value(placed[n])),
