@@ -127,6 +127,14 @@ def plan_for_agent(spec: AgentSpec, scene: Scene, allocate, plan_motion, rank, r
                 latest = plan_with(first_rank, left, lambda s: allocation, tuple(known))
                 keep(latest, 'repair')
 
+        def chain(allocation, precedences, until: float) -> None:
+            """A chain from known precedences: one plan of `allocation` keeping to them, then
+            repair rounds after it."""
+            known = dict.fromkeys(precedences)
+            latest = plan_with(first_rank, until - time.perf_counter(), lambda s: allocation, tuple(known))
+            keep(latest, 'repair')
+            repair(latest, known, until, allocation)
+
         repair(best, {}, repair_until)
         # Where refusals alone left cells unfilled: the hand's own order of the allocation
         # (`hand_order`) as the known precedences, and repair rounds after it, for at most as long
@@ -137,11 +145,7 @@ def plan_for_agent(spec: AgentSpec, scene: Scene, allocate, plan_motion, rank, r
         if best.predicted_coverage < 1.0 - 1e-9 and until > now and first_allocation is not None:
             guess = hand_order(scene, first_allocation.placements)
             if guess.precedences and guess.coverage > best.predicted_coverage + 1e-9:
-                known = dict.fromkeys(guess.precedences)
-                latest = plan_with(first_rank, until - time.perf_counter(), lambda s: first_allocation,
-                                   tuple(known))
-                keep(latest, 'repair')
-                repair(latest, known, until)
+                chain(first_allocation, guess.precedences, until)
         # With the hand's allocation (support 'hand'), where cells are still left: a plan from the
         # arm's allocation, which the hand's order may have traded away (a pair of blocks the order
         # cannot place both of, where a re-allocation on the way would have found a way round), and
@@ -182,11 +186,7 @@ def plan_for_agent(spec: AgentSpec, scene: Scene, allocate, plan_motion, rank, r
             if cover.coverage <= best.predicted_coverage + 1e-9 or time.perf_counter() >= until:
                 break
             avoid.append(cover.order)    # the next try, where this one's plans fall short, another cover
-            allocation = cover_allocation(cover, time.perf_counter() - now)
-            known = dict.fromkeys(cover.precedences)
-            latest = plan_with(first_rank, until - time.perf_counter(), lambda s: allocation, tuple(known))
-            keep(latest, 'repair')
-            repair(latest, known, until, allocation)
+            chain(cover_allocation(cover, time.perf_counter() - now), cover.precedences, until)
     best.anytime = anytime
     if len(plans) > 1:      # the stages of every plan made for it, so they add up to the total
         summed: dict = {}
