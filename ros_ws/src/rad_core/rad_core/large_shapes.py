@@ -15,7 +15,9 @@ stays within the reach of a top-down hand (the far cells at 0.72 m from the base
 
 And three with the two leaves flush, back to back (the generator's two-sided layout, filled):
 `wall_openings`, `viaduct` and `stepped_wall`. A parallel gripper taking blocks from above cannot
-fill such a wall, whatever the order (`FLUSH_LIMIT`); they show how far rad gets there.
+fill such a wall whatever the order: every full course loses a cell (`FLUSH_LIMIT`;
+`sequencing.courses.course_bound` puts their limit at 0.977-0.988). Built course by course
+(`sequencing.courses.course_line`), rad gets 0.93-0.97 of them.
 
 Their block multisets are exact stable tilings by small types plus a few spares: for the
 faces a bond drawn course by course (`coursed_tiling`: bars of three and two, joints staggered
@@ -160,6 +162,11 @@ def large_scene(name: str) -> Scene:
         spec = LARGE_SPECS[name]
     except KeyError:
         raise RadError(f'unknown large shape {name!r} (known: {", ".join(LARGE_SPECS)})') from None
+    return feeder_scene(spec)
+
+
+def feeder_scene(spec: ShapeSpec) -> Scene:
+    """A shape drawn as the large ones are, with every block of its multiset in a feeder at `STATION`."""
     kinds = _multiset(spec)
     blocks = [Block(f'b{n}', kind, station_position(spec.types[kind], STATION, 0, UNIT), 0)
               for n, kind in enumerate(kinds)]

@@ -250,11 +250,8 @@ class ArmCoverageBound:
     Call it with an env (`AssemblyEnv`) of the scene between steps."""
 
     def __init__(self, scene: Scene, grid: Grid, gamp=None, time_limit_s: float = 2.0, ordered: bool = True):
-        from rad_core.allocation.placements import enumerate_candidates
-        fillers = [c for c in enumerate_candidates(scene, grid, positive_only=False) if c.value >= 0]
-        self.candidates, _, self.report = arm_filter(scene, grid, fillers)
-        self.unpickable = {b for b, block in enumerate(scene.blocks) if block.id in self.report.blocks}
-        self.hand = HandBlocked(scene, grid, gamp)
+        from rad_core.sequencing.hand_order import cover_candidates
+        self.candidates, _, self.hand, self.unpickable = cover_candidates(scene, grid, gamp)
         self.grid, self.scene, self.time_limit_s, self.ordered = grid, scene, time_limit_s, ordered
         self.hand_blocked = 0     # poses the last call left out as hand-blocked
         self.last_loose = None    # the last call's bound without the order (None before a call)

@@ -20,8 +20,10 @@ import numpy as np
 from rad_core.agents import AgentSpec, label, parse
 from rad_core.errors import RadError
 from rad_core.scene import Scene
+from rad_core.sequencing.courses import course_line
 from rad_core.sequencing.hand_order import hand_order, ordered_cover
 from rad_core.sequencing.plan import AssemblyPlan, plan_assembly
+from rad_core.sequencing.policy import LinePolicy
 
 
 IMPROVE_TIME_S = 2.0
@@ -45,6 +47,12 @@ def plan_for_agent(spec: AgentSpec, scene: Scene, allocate, plan_motion, rank, r
     its search) within the improvement budget (and the time limit), kept only where it fills more.
     The improvement budget: as long again as the first plan took, and at least `improve_time_s`;
     none when `improve_time_s` is 0.
+    A large structure first (more candidate poses than one ordered cover takes,
+    `courses.COURSES_ABOVE`), for agents with order repair and an arm-aware support ('arm',
+    'hand'), where the first plan leaves cells: the line built course by course in the planning
+    twin (`courses.course_line`), planned as the allocation with its order (ranked by
+    `LinePolicy`); where it fills more than the first plan, what follows re-plans the first
+    allocation and is skipped, and the fourth chain below is skipped on large structures either way.
     Order repair (`spec.repair`) comes first, within the time limit (its rounds bound it, not the
     budget): while the best plan leaves cells unfilled and the latest plan's refusals taught
     precedences not known before (`AssemblyPlan.conflicts`), at most `REPAIR_ROUNDS` more plans
@@ -82,6 +90,7 @@ def plan_for_agent(spec: AgentSpec, scene: Scene, allocate, plan_motion, rank, r
                              verify=spec.verify, precedences=precedences)
 
     t0 = time.perf_counter()
+    large = False       # a structure planned course by course (`courses`)
     anytime_search = quick_rank is not None and bool(spec.search) and spec.verify
     first_rank = quick_rank if anytime_search else rank
     if spec.repair and spec.verify:
@@ -135,7 +144,25 @@ def plan_for_agent(spec: AgentSpec, scene: Scene, allocate, plan_motion, rank, r
             keep(latest, 'repair')
             repair(latest, known, until, allocation)
 
-        repair(best, {}, repair_until)
+        # A large structure (more candidate poses than one ordered cover takes), where the first
+        # plan leaves cells: the line built course by course in the planning twin (`courses`), as
+        # the allocation with its order, ranked in that order (`LinePolicy`: the agent's network may
+        # value stopping more halfway along it), before any repair round (each takes long at this size).
+        first = best
+        if support in ('arm', 'hand') and best.predicted_coverage < 1.0 - 1e-9 and repair_until > t0:
+            line = course_line(scene, repair_until - time.perf_counter())
+            large = line is not None
+            left = repair_until - time.perf_counter()
+            if large and line.actions and line.coverage > best.predicted_coverage + 1e-9 and left > 0:
+                allocation, order, poses = line_allocation(scene, line.actions, 'courses', 'the course line',
+                                                           line.seconds)
+                keep(plan_with(LinePolicy(poses), left, lambda s: allocation, order), 'courses')
+                if kind == 'courses':
+                    # The rounds and chains below re-plan the first allocation, which the line has
+                    # beaten; at this size each takes as long as the line (measured: on the flush
+                    # walls they found nothing better in the time left), so they end here.
+                    repair_until = time.perf_counter()
+        repair(first, {}, repair_until)
         # Where refusals alone left cells unfilled: the hand's own order of the allocation
         # (`hand_order`) as the known precedences, and repair rounds after it, for at most as long
         # again as everything before took (and within the time limit); only where that order
@@ -174,7 +201,7 @@ def plan_for_agent(spec: AgentSpec, scene: Scene, allocate, plan_motion, rank, r
     # allocation with its order's precedences, and repair rounds after it; where those fall
     # short, another cover (at most COVER_TRIES), all for at most as long again as everything
     # before took, and at least one CP-SAT time and the improvement budget.
-    if spec.repair and spec.verify and support in ('arm', 'hand'):
+    if spec.repair and spec.verify and support in ('arm', 'hand') and not large:
         now = time.perf_counter()
         until = min(repair_until, now + max(now - t0, ORDERED_COVER_S + improve_time_s))
         avoid: list = []
@@ -217,28 +244,34 @@ def ceiling_line(scene: Scene, incumbent: float, seconds: float):
     """The line of the robot-feasible ceiling's search (`sequencing.exact.robot_ceiling`, at most
     `seconds`) from the scene's state, where it beats `incumbent`: (an `AllocationResult` of its
     poses, the `Precedence`s that put them in its order); None where it found nothing better."""
-    from rad_core.allocation.placements import Placement
-    from rad_core.allocation.result import AllocationResult
-    from rad_core.mdp import AssemblyEnv
     from rad_core.sequencing.exact import robot_ceiling
-    from rad_core.sequencing.plan import Precedence
     t0 = time.perf_counter()
     found = robot_ceiling(scene, seconds, incumbent=incumbent)
     if not found.actions or found.coverage <= incumbent + 1e-9:
         return None
+    return line_allocation(scene, found.actions, 'ceiling', 'the ceiling\'s line', time.perf_counter() - t0)[:2]
+
+
+def line_allocation(scene: Scene, actions, solver: str, why: str, seconds: float):
+    """A line of actions from the scene's state as (an `AllocationResult` of its poses, named
+    `solver`, the `Precedence`s (`why`) that put them in the line's order, the poses (cells) in
+    that order)."""
+    from rad_core.allocation.placements import Placement
+    from rad_core.allocation.result import AllocationResult
+    from rad_core.mdp import AssemblyEnv
+    from rad_core.sequencing.plan import Precedence
     env = AssemblyEnv(scene)
     env.reset()
     placements, poses = [], []
-    for action in found.actions:    # each block once: its cells and yaw follow from where it lies now
+    for action in actions:    # each block once: its cells and yaw follow from where it lies now
         cells, yaw = env.resulting_cells(action)
         region, ijk = env.grid.region_cells(cells)
         placements.append(Placement(scene.blocks[action.block].type, scene.targets[region].name, int(yaw),
                                     tuple(tuple(c) for c in ijk)))
         poses.append(tuple(sorted(int(c) for c in cells)))
-    order = tuple(Precedence(a, b, 'the ceiling\'s line') for i, a in enumerate(poses) for b in poses[i + 1:])
+    order = tuple(Precedence(a, b, why) for i, a in enumerate(poses) for b in poses[i + 1:])
     value = float(sum(int(env.grid.weights[list(c)].sum()) for c in poses))
-    return AllocationResult('FEASIBLE', value, value, time.perf_counter() - t0, tuple(placements),
-                            solver='ceiling'), order
+    return AllocationResult('FEASIBLE', value, value, seconds, tuple(placements), solver=solver), order, poses
 
 
 def _world_key(scene: Scene, q) -> tuple:

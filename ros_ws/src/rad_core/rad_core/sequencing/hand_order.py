@@ -60,7 +60,7 @@ def hand_ways(grid: Grid, hand, occupied: np.ndarray, type_name: str, yaw: int, 
 
 
 def order_model(grid: Grid, occupied: np.ndarray, poses: list[tuple], counts: dict[str, int] | None = None,
-                cover: bool = False):
+                cover: bool = False, rest: bool = True):
     """The CP-SAT model of an order of poses: which are placed (`placed[n]`), their positions
     (`order[n]`), and per pose the ways it is held (`held_by[n]`: (variable, blocking cells)).
 
@@ -74,7 +74,8 @@ def order_model(grid: Grid, occupied: np.ndarray, poses: list[tuple], counts: di
     cover: `ordered_cover`'s stricter rules for a plan (the bound keeps the MDP's): each pose
     stands as the allocation's support='stable' asks (`allocation.cpsat.support_options`: its
     centre of mass over units resting on the table, built cells or poses placed before it), and
-    among the best, the fewest cells outside the target (fillers), as c^T g would."""
+    among the best, the fewest cells outside the target (fillers), as c^T g would. rest=False: no
+    rule on what a pose rests on (`courses.course_bound`'s relaxation)."""
     from ortools.sat.python import cp_model
     owners: dict[int, list[int]] = {}
     for n, (cells, *_) in enumerate(poses):
@@ -107,6 +108,8 @@ def order_model(grid: Grid, occupied: np.ndarray, poses: list[tuple], counts: di
         held_by.append(used)
         if cover:
             _stands(model, grid, occupied, cells, n, placed, order, owners)
+            continue
+        if not rest:
             continue
         # Resting on something: the table, a built cell, or a pose placed before it.
         ids = np.asarray(cells)
@@ -162,7 +165,7 @@ def hand_order(scene: Scene, placements, time_limit_s: float = 1.0, gamp=None) -
     """An order in which the hand can place the most target cells of `placements` (the allocation's
     poses of the scene's free cells; module docstring), with its precedences."""
     from rad_core.allocation.arm import HandBlocked
-    grid, occupied = _state(scene)
+    grid, occupied = scene_state(scene)
     regions = [t.name for t in scene.targets]
     hand = HandBlocked(scene, grid, gamp)
     poses, items = [], []
@@ -175,7 +178,7 @@ def hand_order(scene: Scene, placements, time_limit_s: float = 1.0, gamp=None) -
             continue                      # every way of holding it is blocked already
         poses.append((tuple(sorted(int(c) for c in ids)), ways, int(grid.is_target[ids].sum()), p.type))
         items.append(p)
-    return _solve(grid, occupied, poses, items, None, time_limit_s)
+    return solve_order(grid, occupied, poses, items, None, time_limit_s)
 
 
 def ordered_cover(scene: Scene, time_limit_s: float = 2.0, gamp=None, avoid=()) -> HandOrder:
@@ -188,14 +191,23 @@ def ordered_cover(scene: Scene, time_limit_s: float = 2.0, gamp=None, avoid=()) 
     before its neighbour is there, which needs another block below it), this one picks a cover
     that has. CP-SAT's best within `time_limit_s` (deterministic time); empty where it found none.
     avoid: covers found before (their `order`s), not to be found again as they were."""
+    grid, occupied = scene_state(scene)
+    candidates, counts, hand, _ = cover_candidates(scene, grid, gamp)
+    poses, items = candidate_poses(grid, hand, occupied, candidates, counts)
+    return solve_order(grid, occupied, poses, items, counts, time_limit_s, cover=True, avoid=avoid)
+
+
+def cover_candidates(scene: Scene, grid: Grid, gamp=None):
+    """What an ordered cover chooses from: every pose an arm-aware allocation may propose
+    (`allocation.arm.ArmCoverageBound.candidates`: fillers worth 0 included, the arm's filter
+    applied), the blocks per type the arm can pick, the hand's blocking cells (`HandBlocked`) and
+    the indices of the blocks it cannot pick where they lie."""
     from rad_core.allocation.arm import HandBlocked, arm_filter
     from rad_core.allocation.placements import enumerate_candidates
-    grid, occupied = _state(scene)
     fillers = [c for c in enumerate_candidates(scene, grid, positive_only=False) if c.value >= 0]
-    candidates, counts, _ = arm_filter(scene, grid, fillers)
-    hand = HandBlocked(scene, grid, gamp)
-    poses, items = candidate_poses(grid, hand, occupied, candidates, counts)
-    return _solve(grid, occupied, poses, items, counts, time_limit_s, cover=True, avoid=avoid)
+    candidates, counts, report = arm_filter(scene, grid, fillers)
+    unpickable = {b for b, block in enumerate(scene.blocks) if block.id in report.blocks}
+    return candidates, counts, HandBlocked(scene, grid, gamp), unpickable
 
 
 def candidate_poses(grid: Grid, hand, occupied: np.ndarray, candidates, counts: dict[str, int]):
@@ -213,7 +225,8 @@ def candidate_poses(grid: Grid, hand, occupied: np.ndarray, candidates, counts: 
     return poses, items
 
 
-def _state(scene: Scene) -> tuple[Grid, np.ndarray]:
+def scene_state(scene: Scene) -> tuple[Grid, np.ndarray]:
+    """The scene's grid and the cells its blocks fill now."""
     grid = Grid(scene)
     occupied = np.zeros(grid.num_cells, dtype=bool)
     for cells in blocks_on_grid(scene, grid).values():
@@ -221,7 +234,7 @@ def _state(scene: Scene) -> tuple[Grid, np.ndarray]:
     return grid, occupied
 
 
-def _solve(grid: Grid, occupied: np.ndarray, poses: list[tuple], items: list, counts, time_limit_s: float,
+def solve_order(grid: Grid, occupied: np.ndarray, poses: list[tuple], items: list, counts, time_limit_s: float,
            cover: bool = False, avoid=()) -> HandOrder:
     """`order_model` solved: the poses it places in its order, their precedences (each before the
     poses filling the blocking cells of the way it is held), the coverage, the items of those poses.

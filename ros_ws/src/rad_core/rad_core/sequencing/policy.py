@@ -60,6 +60,27 @@ class HeurPolicy:
         return out
 
 
+class LinePolicy:
+    """A line's poses in its order (a line the course planner built in the twin, `courses`): an
+    action filling the line's k-th pose scores above the (k+1)-th, any other (a re-allocation's
+    pose) below the line's but above stopping. It never stops while an allowed action is left,
+    where a learned agent may value stopping more halfway along a line it did not choose."""
+
+    name = 'line'
+    values = False   # its scores are a line's ranks, not values
+
+    def __init__(self, poses):
+        self.rank = {tuple(sorted(int(c) for c in cells)): k for k, cells in enumerate(poses)}
+
+    def scores(self, env: AssemblyEnv, actions: list[Action], rng: np.random.Generator) -> np.ndarray:
+        out = np.zeros(len(actions) + 1)
+        for n, action in enumerate(actions):
+            cells, _ = env.resulting_cells(action)
+            k = None if cells is None else self.rank.get(tuple(sorted(int(c) for c in cells)))
+            out[n] = 1.0 if k is None else 2.0 + len(self.rank) - k
+        return out
+
+
 def ranked_actions(policy: Policy, env: AssemblyEnv, actions: list[Action],
                    rng: np.random.Generator, fallbacks: bool = False) -> list[Action]:
     """Actions the policy values above terminating, best first (ties keep the given order).

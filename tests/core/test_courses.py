@@ -1,0 +1,62 @@
+"""A line built course by course (`sequencing.courses`), for structures too large for one ordered cover."""
+
+from __future__ import annotations
+
+import pytest
+
+from rad_core.large_shapes import SMALL_TYPES, feeder_scene
+from rad_core.robot_env import RobotAssemblyEnv, RobotEnvConfig
+from rad_core.sequencing import courses
+from rad_core.sequencing.courses import course_bound, course_line
+from rad_core.shapes import ShapeSpec, face, one_sided, two_sided
+
+pytestmark = pytest.mark.slow
+
+
+def flush_wall():
+    """A two-deep flush wall, 6 long and 3 courses high at a 4 cm unit, its blocks in a feeder: no
+    top-down hand closes a full course of it (`large_shapes.FLUSH_LIMIT`), so 33 of its 36 cells
+    at most."""
+    drawn = face('######', '######', '######')
+    return feeder_scene(ShapeSpec('flush_wall', 'wall', two_sided(drawn, drawn), SMALL_TYPES, ('cube', 'I2'),
+                                  n_spare=2, why='a small two-deep flush wall'))
+
+
+def test_the_course_line_fills_all_but_one_cell_of_each_course_and_the_twin_builds_it_again():
+    scene = flush_wall()
+    assert course_line(scene, 60.0) is None         # 16 blocks: one ordered cover takes it
+    line = course_line(scene, 60.0, least_poses=0)
+    assert 32 / 36 <= line.coverage <= course_bound(scene) == pytest.approx(33 / 36)
+    assert line.covers >= 3                         # a cover per course at least
+    with RobotAssemblyEnv(scene, RobotEnvConfig(execution='teleport')) as renv:
+        renv.reset()
+        for action in line.actions:
+            result = renv.step(action)
+            assert not result.outcome.is_invalid, result.reason
+        assert renv.env.coverage() == pytest.approx(line.coverage)
+
+
+def test_the_course_bound_loses_one_cell_per_full_course_of_a_flush_wall_and_none_of_a_single_leaf():
+    assert course_bound(flush_wall()) == pytest.approx(33 / 36)
+    drawn = face('######', '######', '######')
+    leaf = feeder_scene(ShapeSpec('leaf', 'wall', one_sided(drawn), SMALL_TYPES, ('cube', 'I2'), n_spare=1,
+                                  why='one leaf: the fingers close across it'))
+    assert course_bound(leaf) == 1.0
+    line = course_line(leaf, 60.0, least_poses=0)
+    assert line.coverage == 1.0
+
+
+def test_the_course_line_ends_at_its_time_limit_with_the_line_so_far():
+    line = course_line(flush_wall(), 1e-6, least_poses=0)
+    assert line.actions == [] and line.coverage == 0.0
+
+
+def test_order_repair_plans_the_course_line_of_a_large_structure(monkeypatch):
+    from rad_core.sequencing.agent_plan import AgentPlanner
+    scene = flush_wall()
+    monkeypatch.setattr(courses, 'COURSES_ABOVE', 0)
+    line = course_line(scene, 60.0)
+    plan = AgentPlanner('default', time_limit_s=60.0)(scene, None, 0)
+    stages = [entry['plan'] for entry in plan.anytime]
+    assert stages[0] == 'scorer' and 'courses' in stages
+    assert plan.predicted_coverage >= line.coverage - 1e-9
