@@ -11,7 +11,8 @@ as a group of their own), the agent plans with the robot in the loop in process 
 sequencer, GAMP on the planning twin, re-allocation), then the twin builds the plan
 (teleporting execution, physics settling after each block) and motion capture registers it.
 Per structure it records the blocks in the scene, the blocks placed, the planning time and
-its stages, the predicted and the built coverage and the failures (blocks the build lost);
+its stages, the predicted and the built coverage, the failures (blocks the build lost) and, after
+planning, an upper bound on what any top-down build reaches (`sequencing.courses.course_bound`);
 it writes <out>/large.md, <out>/large.rows.jsonl and <out>/large.png (planning time per
 placed block against the blocks in the scene: the issue asks that it grow no faster than
 linearly, i.e. that the time per block stay flat or grow at most linearly). While it runs,
@@ -52,10 +53,12 @@ def measure(planner, name: str, kind: str, scene) -> dict:
     planning = time.perf_counter() - t0
     registered = build_teleported(scene, plan.steps)
     placed = len(plan.steps)
+    from rad_core.sequencing.courses import course_bound
     return {'case': name, 'kind': kind, 'blocks': len(scene.blocks), 'cells': scene.num_target_cells,
             'feeder': scene.feeder is not None, 'placed': placed, 'planning_s': round(planning, 2),
             's_per_block': round(planning / max(placed, 1), 3),
             'predicted': round(plan.predicted_coverage, 3), 'built': round(measured_coverage(registered.scene), 3),
+            'course_bound': round(course_bound(scene), 3),
             'lost': sorted(registered.set_aside), 'success': plan.success, 'reason': plan.reason[:300],
             'stages': {k: round(v, 2) for k, v in plan.timings.items()}}
 
@@ -93,12 +96,13 @@ def write(rows: list[dict], out: Path, command: str, agent: str) -> None:
              f'`{command}` ({date.today()}, {platform.node() or "this machine"}, 2 shared cores; agent `{agent}`, '
              'robot in the loop, teleporting twin build).', '',
              '![planning time per block and coverage against size](large.png)', '',
-             '| case | blocks | feeder | target cells | placed | planning (s) | s / block | predicted | built | lost |',
-             '|---|---|---|---|---|---|---|---|---|---|']
+             '| case | blocks | feeder | target cells | placed | planning (s) | s / block | predicted | built '
+             '| bound | lost |',
+             '|---|---|---|---|---|---|---|---|---|---|---|']
     for r in rows:
         lines.append(f"| {r['case']} | {r['blocks']} | {'yes' if r['feeder'] else 'no'} | {r['cells']} | {r['placed']} "
                      f"| {r['planning_s']:.1f} | {r['s_per_block']:.2f} | {r['predicted']:.3f} | {r['built']:.3f} "
-                     f"| {len(r['lost'])} |")
+                     f"| {r['course_bound']:.3f} | {len(r['lost'])} |")
     lines += ['', '| group | structures | mean built coverage | median planning (s) | max planning (s) |',
               '|---|---|---|---|---|']
     for kind in dict.fromkeys(r['kind'] for r in rows):

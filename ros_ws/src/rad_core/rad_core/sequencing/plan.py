@@ -139,8 +139,8 @@ class AssemblyPlan:
     first action that GAMP or the stability check refuses ends it invalid: f_g / f_p), steps."""
     anytime: list = field(default_factory=list)
     """Anytime planning (`agent_plan.plan_for_agent`): after each plan, {'t': seconds since the
-    start, 'coverage': the best predicted coverage so far, 'plan': 'scorer' | 'repair' | 'ceiling' | 'search'
-    (which plan is the best so far)}; one entry for an agent that plans once, none from
+    start, 'coverage': the best predicted coverage so far, 'plan': 'scorer' | 'courses' | 'repair' |
+    'ceiling' | 'search' (which plan is the best so far)}; one entry for an agent that plans once, none from
     `plan_assembly` called directly."""
     conflicts: list = field(default_factory=list)
     """`Precedence`s this plan's failures teach: an action GAMP refused because the arm hit a
