@@ -108,6 +108,7 @@ def test_rad_ceiling_says_how_each_search_ended_and_refuses_bad_options(tmp_path
     assert r.returncode == 0 and 'ceiling 0.833, the ceiling over every allocation (every sequence' in r.stdout
     r = rad('ceiling', str(square), '--time-limit', '1e-6')
     assert r.returncode == 0 and 'a lower bound (time limit' in r.stdout
+    assert 'any build covers at most 0.750' in r.stdout
     r = rad('ceiling', str(square), '--support', 'arm,anywhere')
     assert r.returncode == 2 and "unknown rule 'anywhere'" in r.stderr
     r = rad('ceiling', str(square), '--time-limit', '0')

@@ -60,3 +60,14 @@ def test_order_repair_plans_the_course_line_of_a_large_structure(monkeypatch):
     stages = [entry['plan'] for entry in plan.anytime]
     assert stages[0] == 'scorer' and 'courses' in stages
     assert plan.predicted_coverage >= line.coverage - 1e-9
+
+
+def test_the_ceiling_takes_the_course_bound_at_the_root_where_the_hands_order_proves_nothing(monkeypatch):
+    # A 72-block wall's ordered bound is not proven in the ceiling's time: made to happen here by an
+    # ordered bound that proves nothing (1.0), the course bound says 33 of 36 cells at most.
+    from rad_core.allocation.arm import ArmCoverageBound
+    from rad_core.sequencing.exact import robot_ceiling
+    monkeypatch.setattr(ArmCoverageBound, 'ordered_bound', lambda self, *a, **k: 1.0)
+    found = robot_ceiling(flush_wall(), 5.0)
+    assert found.bound == pytest.approx(33 / 36)
+    assert found.coverage <= found.bound

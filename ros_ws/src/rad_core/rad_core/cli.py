@@ -355,7 +355,7 @@ def cmd_ceiling(args) -> int:
                  'all poses': 'the ceiling over every allocation (every sequence of poses searched)',
                  'exhausted': (f'the best found; the allocations searched do no better, any allocation '
                                f'covers at most {found.bound:.3f}'),
-                 '': f'a lower bound ({found.reason})'}[found.proof]
+                 '': f'a lower bound ({found.reason}); any build covers at most {found.bound:.3f}'}[found.proof]
         line = f'{name}: ceiling {found.coverage:.3f}, {ended}; {found.states} states, {found.elapsed_s:.1f} s'
         if agent is not None:
             line += f'; {args.agent} builds {row["agent_coverage"]:.3f}'

@@ -257,17 +257,25 @@ class ArmCoverageBound:
         self.last_loose = None    # the last call's bound without the order (None before a call)
         self._memo: dict[tuple, tuple] = {}     # a state's (bound, loose bound, hand-blocked)
 
-    def __call__(self, env, time_limit_s: float | None = None) -> float:
-        """The bound of the env's state (remembered per state); time_limit_s: CP-SAT's for each of
-        the two bounds here (default the bound's own)."""
-        from rad_core.allocation.cpsat import max_coverage
-        occupied = env.state.occupancy >= 0
+    def _counts(self, env) -> dict[str, int]:
+        """The blocks per type left that the arm can pick."""
         counts: dict[str, int] = {}
         for b in env.unplaced():
             if b not in self.unpickable:
                 name = self.scene.blocks[b].type
                 counts[name] = counts.get(name, 0) + 1
-        key = (occupied.tobytes(), tuple(sorted(counts.items())))
+        return counts
+
+    def _key(self, env) -> tuple:
+        return (env.state.occupancy >= 0).tobytes(), tuple(sorted(self._counts(env).items()))
+
+    def __call__(self, env, time_limit_s: float | None = None) -> float:
+        """The bound of the env's state (remembered per state); time_limit_s: CP-SAT's for each of
+        the two bounds here (default the bound's own)."""
+        from rad_core.allocation.cpsat import max_coverage
+        occupied = env.state.occupancy >= 0
+        counts = self._counts(env)
+        key = self._key(env)
         known = self._memo.get(key)
         if known is not None:
             value, self.last_loose, self.hand_blocked = known
@@ -283,6 +291,14 @@ class ArmCoverageBound:
             value = min(loose, self.ordered_bound(occupied, kept, counts, limit))
         self._memo[key] = (value, loose, self.hand_blocked)
         return value
+
+    def cap(self, env, value: float) -> float:
+        """Lower the remembered bound of the env's state (asked before) to `value` where that is
+        tighter (another bound of the same state, `sequencing.courses.course_bound`); the bound now."""
+        key = self._key(env)
+        bound, loose, blocked = self._memo[key]
+        self._memo[key] = (min(bound, value), loose, blocked)
+        return self._memo[key][0]
 
     def ordered_bound(self, occupied: np.ndarray, kept: list[Candidate], counts: dict[str, int],
                       time_limit_s: float) -> float:
