@@ -46,9 +46,13 @@ def test_the_course_bound_loses_one_cell_per_full_course_of_a_flush_wall_and_non
     assert line.coverage == 1.0
 
 
-def test_the_course_line_ends_at_its_time_limit_with_the_line_so_far():
+def test_the_course_line_ends_at_its_time_limit_with_the_line_so_far_and_leaves_a_queue_alone():
+    from dataclasses import replace
     line = course_line(flush_wall(), 1e-6, least_poses=0)
     assert line.actions == [] and line.coverage == 0.0
+    scene = flush_wall()
+    queued = replace(scene, feeder=replace(scene.feeder, order='queue'))
+    assert course_line(queued, 60.0, least_poses=0) is None     # the queue, not the line, picks the blocks
 
 
 def test_order_repair_plans_the_course_line_of_a_large_structure(monkeypatch):

@@ -65,10 +65,13 @@ class CourseLine:
 def course_line(scene: Scene, time_limit_s: float, least_poses: int | None = None) -> CourseLine | None:
     """The line built course by course in the planning twin (module docstring) within
     `time_limit_s` (the line so far where it ends first); None where the scene has at most
-    `least_poses` candidate poses (default `COURSES_ABOVE`: one ordered cover takes those)."""
+    `least_poses` candidate poses (default `COURSES_ABOVE`: one ordered cover takes those), and
+    where a queue feeder dictates the blocks' order (the line chooses its blocks)."""
     from rad_core.allocation.guide import AllocationGuide
     from rad_core.robot_env import RobotAssemblyEnv, RobotEnvConfig
     from rad_core.sequencing.hand_order import candidate_poses, cover_candidates, scene_state, solve_order
+    if scene.feeder is not None and scene.feeder.order == 'queue':
+        return None
     t0 = time.perf_counter()
     deadline = t0 + time_limit_s
     config = RobotEnvConfig(execution='teleport')
