@@ -1,4 +1,4 @@
-"""Large hand-made targets, 50 to 100 blocks, with every block in a feeder.
+"""Large hand-made targets, 45 to 100 blocks, with every block in a feeder.
 
 Structures this size do not fit on the table within the arm's reach (a g = 5 scene's
 ten blocks already fill much of it), so their blocks arrive from a feeder at a pick
@@ -11,7 +11,8 @@ stays within the reach of a top-down hand (the far cells at 0.72 m from the base
 - `tower`: a hollow square tower, 4 x 4 in plan, 10 layers high;
 - `cavity_viaduct`: a bridge, two leaves 12 x 6 around a cavity, on four piers with three
   openings, its deck on lintels;
-- `cavity_steps`: a cavity wall that steps down from 8 layers to 2, a staircase.
+- `cavity_steps`: a cavity wall that steps down from 8 layers to 2, a staircase;
+- `tall_cavity_wall`: the cavity wall with three more courses above its lintels, 100 blocks.
 
 And three with the two leaves flush, back to back (the generator's two-sided layout, filled):
 `wall_openings`, `viaduct` and `stepped_wall`. A parallel gripper taking blocks from above cannot
@@ -50,7 +51,7 @@ beside it in its own leaf lies (and a bar of two or more cells, 8 cm and up, doe
 of such a wall can be completed (unless an opening leaves its last cell free on two opposite
 sides). A cavity wall's leaves have a free side each, the cavity."""
 
-_WALL = face(
+_WALL_ROWS = (
     '############',
     '############',
     '##..####..##',
@@ -59,6 +60,8 @@ _WALL = face(
     '#####..#####',
     '#####..#####',
     '#####..#####')
+_WALL = face(*_WALL_ROWS)
+_TALL = face(*['############'] * 3, *_WALL_ROWS)
 _VIADUCT = face(
     '############',
     '############',
@@ -98,6 +101,8 @@ LARGE_SPECS = {
                   n_spare=5, why='a staircase wall, tall at the far end'),
         ShapeSpec('cavity_wall', 'wall', cavity(_WALL), SMALL_TYPES, ('cube', 'I2'), n_spare=6,
                   why='a cavity wall with a door and two windows, each under a lintel'),
+        ShapeSpec('tall_cavity_wall', 'wall', cavity(_TALL), SMALL_TYPES, ('cube', 'I2'), n_spare=8,
+                  why='the cavity wall three courses taller: 100 blocks, 0.44 m high'),
         ShapeSpec('cavity_viaduct', 'bridge', cavity(_VIADUCT), SMALL_TYPES, ('cube', 'I2'), n_spare=5,
                   why='three openings bridged by four-bars, in two leaves around a cavity'),
         ShapeSpec('cavity_steps', 'stairs', cavity(_STEPS), ('cube', 'I2', 'I3'), ('cube', 'I2'),
