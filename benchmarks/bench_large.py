@@ -5,7 +5,7 @@
 
 For each generated two-sided scene (g in --grids, seeds --seed.., unseen by training; from
 g = 7 or 8 on the generator puts the blocks in a feeder, the table within reach being too
-small) and each large hand-made target (`rad_core.large_shapes`, 45 to 72 blocks, all in a
+small) and each large hand-made target (`rad_core.large_shapes`, 45 to 100 blocks, all in a
 feeder; the two-deep flush walls, which a parallel gripper cannot fill (`large_shapes.FLUSH_LIMIT`),
 as a group of their own), the agent plans with the robot in the loop in process (`AgentPlanner`: CP-SAT, the
 sequencer, GAMP on the planning twin, re-allocation), then the twin builds the plan

@@ -36,7 +36,7 @@ from rad_core.scene import Scene
 COURSES_ABOVE = 200
 """`course_line` plans where a scene has more candidate poses than this (`hand_order.candidate_poses`):
 a generated g = 5 or 6 scene has 30-140, the hand-made held-out shapes 18-130, g = 8 230-310,
-g = 10 310-430, the 45- to 72-block walls and tower 280-830."""
+g = 10 310-430, the 45- to 100-block walls and tower 280-1190."""
 
 COURSE_WINDOW = 2
 """Courses covered together; only the lowest is stepped before the next cover."""
