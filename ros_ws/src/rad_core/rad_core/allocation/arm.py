@@ -223,6 +223,17 @@ class HandBlocked:
         return self.blocked(cand.placement.type, cand.placement.yaw, cand.cell_ids, occupied)
 
 
+def blocks_left(scene: Scene, env, unpickable) -> dict[str, int]:
+    """The blocks per type the env (an `AssemblyEnv`) has not placed, but for the indices in
+    `unpickable` (blocks the arm cannot pick where they lie)."""
+    counts: dict[str, int] = {}
+    for b in env.unplaced():
+        if b not in unpickable:
+            name = scene.blocks[b].type
+            counts[name] = counts.get(name, 0) + 1
+    return counts
+
+
 class ArmCoverageBound:
     """`cpsat.coverage_bound` of the states of one scene, without what the arm can never do, and
     (`ordered`) with an order the hand can place it in.
@@ -258,13 +269,7 @@ class ArmCoverageBound:
         self._memo: dict[tuple, tuple] = {}     # a state's (bound, loose bound, hand-blocked)
 
     def _counts(self, env) -> dict[str, int]:
-        """The blocks per type left that the arm can pick."""
-        counts: dict[str, int] = {}
-        for b in env.unplaced():
-            if b not in self.unpickable:
-                name = self.scene.blocks[b].type
-                counts[name] = counts.get(name, 0) + 1
-        return counts
+        return blocks_left(self.scene, env, self.unpickable)
 
     def _key(self, env) -> tuple:
         return (env.state.occupancy >= 0).tobytes(), tuple(sorted(self._counts(env).items()))
