@@ -268,19 +268,17 @@ class ArmCoverageBound:
         self.last_loose = None    # the last call's bound without the order (None before a call)
         self._memo: dict[tuple, tuple] = {}     # a state's (bound, loose bound, hand-blocked)
 
-    def _counts(self, env) -> dict[str, int]:
-        return blocks_left(self.scene, env, self.unpickable)
-
-    def _key(self, env) -> tuple:
-        return (env.state.occupancy >= 0).tobytes(), tuple(sorted(self._counts(env).items()))
+    def _state(self, env) -> tuple[np.ndarray, dict[str, int], tuple]:
+        """The env's built cells, the blocks left the arm can pick, and the memo's key of both."""
+        occupied = env.state.occupancy >= 0
+        counts = blocks_left(self.scene, env, self.unpickable)
+        return occupied, counts, (occupied.tobytes(), tuple(sorted(counts.items())))
 
     def __call__(self, env, time_limit_s: float | None = None) -> float:
         """The bound of the env's state (remembered per state); time_limit_s: CP-SAT's for each of
         the two bounds here (default the bound's own)."""
         from rad_core.allocation.cpsat import max_coverage
-        occupied = env.state.occupancy >= 0
-        counts = self._counts(env)
-        key = self._key(env)
+        occupied, counts, key = self._state(env)
         known = self._memo.get(key)
         if known is not None:
             value, self.last_loose, self.hand_blocked = known
@@ -300,7 +298,7 @@ class ArmCoverageBound:
     def cap(self, env, value: float) -> float:
         """Lower the remembered bound of the env's state (asked before) to `value` where that is
         tighter (another bound of the same state, `sequencing.courses.course_bound`); the bound now."""
-        key = self._key(env)
+        key = self._state(env)[2]
         bound, loose, blocked = self._memo[key]
         self._memo[key] = (min(bound, value), loose, blocked)
         return self._memo[key][0]

@@ -86,9 +86,10 @@ def course_line(scene: Scene, time_limit_s: float, least_poses: int | None = Non
     with RobotAssemblyEnv(scene, config) as renv:
         renv.reset()
         env = renv.env
+        height = heights(grid)
         courses: dict[float, list] = {}
         for c in candidates:
-            courses.setdefault(round(float(grid.centres[list(c.cell_ids), 2].min()), 6), []).append(c)
+            courses.setdefault(float(height[list(c.cell_ids)].min()), []).append(c)
         zs = sorted(courses)
         line = CourseLine()
         guide_of = lambda placement: AllocationGuide(scene, [placement], grid)    # noqa: E731
@@ -110,12 +111,18 @@ def course_line(scene: Scene, time_limit_s: float, least_poses: int | None = Non
                     if cover is None or found.coverage >= cover.coverage:
                         cover = found
                 here = [(cells, p) for cells, p in zip(cover.order, cover.placements)
-                        if round(float(grid.centres[list(cells), 2].min()), 6) == z]
+                        if float(height[list(cells)].min()) == z]
                 if not here or _step_all(renv, guide_of, here, refused, line, deadline):
                     break           # the course is done (or its cover has nothing for it): the next
         line.coverage = env.coverage()
         line.seconds = time.perf_counter() - t0
         return line
+
+
+def heights(grid) -> np.ndarray:
+    """Each cell's course: the height of its centre (m, rounded to a micrometre so that a course's
+    cells compare equal)."""
+    return np.round(grid.centres[:, 2], 6)
 
 
 def _step_all(renv, guide_of, poses, refused: set, line: CourseLine, deadline: float) -> bool:
@@ -159,7 +166,7 @@ def course_bound(scene: Scene, time_limit_s: float = 10.0) -> float:
     candidates, counts, hand, _ = cover_candidates(scene, grid)
     poses, _ = candidate_poses(grid, hand, occupied, candidates, counts)
     total = int(grid.is_target.sum())
-    height = np.round(grid.centres[:, 2], 6)
+    height = heights(grid)
     free = grid.is_target & ~occupied
     filled = int((grid.is_target & occupied).sum())
     zs = sorted(set(height[free].tolist()))
