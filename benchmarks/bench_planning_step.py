@@ -61,8 +61,14 @@ GENERATED = [('g4', dict(grid=4), 500), ('g4', dict(grid=4), 501), ('g5', dict(g
 SHAPES = [('tee', 0.05), ('overhangs', 0.05), ('pillars', 0.05), ('corbel_arch', 0.05), ('window', 0.04)]
 
 
-def fixed_scenes(quick: bool = False) -> list[tuple[str, object]]:
-    """The benchmark's scenes, by name (quick: one generated and one hand-made)."""
+def fixed_scenes(quick: bool = False, wide: int = 0) -> list[tuple[str, object]]:
+    """The benchmark's scenes, by name (quick: one generated and one hand-made). wide: instead, the
+    settling benchmark's wider set (`bench_at_rest.scenes`: six kinds of generated scene, `wide` seeds
+    each from 6000, and every hand-made shape), for checks of verdicts beyond the fixed set."""
+    if wide:
+        sys.path.insert(0, str(Path(__file__).resolve().parent))
+        from bench_at_rest import scenes
+        return scenes(wide)
     gen = GENERATED[:1] if quick else GENERATED
     shapes = SHAPES[:1] if quick else SHAPES
     out = [(f'{label}-seed{s}', generate_scene(GeneratorConfig(**kw), s)) for label, kw, s in gen]
@@ -207,7 +213,7 @@ def run_all(args) -> tuple[list[dict], dict]:
     rows = []
     planner = MotionPlanner()
     try:
-        for name, scene in fixed_scenes(args.quick):
+        for name, scene in fixed_scenes(args.quick, args.wide):
             if args.only not in name:
                 continue
             rows += run_scene(name, scene, args, timers, planner)
@@ -296,6 +302,8 @@ def main() -> int:
     p.add_argument('--depth', type=int, default=5, help='states the walk advances through per scene')
     p.add_argument('--seed', type=int, default=0, help='seed of the candidates draw')
     p.add_argument('--quick', action='store_true', help='two scenes only (a smoke run)')
+    p.add_argument('--wide', type=int, default=0,
+                   help='the wider set of bench_at_rest.py instead (this many seeds of each generated kind)')
     p.add_argument('--tol', type=float, default=1e-4,
                    help='--compare: numbers (m, rad) may differ by this much; text and integers must be equal')
     p.add_argument('--verdicts', action='store_true',
@@ -316,7 +324,7 @@ def main() -> int:
     if args.record:
         args.record.parent.mkdir(parents=True, exist_ok=True)
         args.record.write_text(json.dumps({'args': {k: getattr(args, k) for k in ('candidates', 'depth', 'seed',
-                                                                                   'quick', 'only')},
+                                                                                   'quick', 'only', 'wide')},
                                            'rows': rows}, indent=None) + '\n')
         print(f'record of {len(rows)} entries -> {args.record}')
     if args.compare:

@@ -595,3 +595,46 @@ def test_a_pick_met_again_in_the_same_world_is_answered_from_memory_and_plans_th
         world.set_block_pose('n1', (0.6, -0.45, U / 2), _yaw_quat(0))
         n = len(picked)
         assert plan_action(world, 'buried', there, 90).success and len(picked) > n
+
+
+def test_a_plans_motion_is_timed_when_read_and_ends_where_final_joints_says(generated):
+    """The teleporting twin asks only where the motion ends (GampResult.final_joints, without timing it);
+    the motion read later is the one plan_motion makes of the plan's waypoints, ending there exactly."""
+    from rad_core.gamp.trajectory import plan_motion
+    scene, alloc, world = generated
+    placement = next(p for p in alloc.placements if p.type == 'I2_up')
+    block = next(b for b in scene.blocks if b.type == 'I2_up')
+    position, yaw = allocated_pose(scene, placement)
+    r = plan_action(world, block.id, position, yaw)
+    assert r.success and r._motion is None
+    start, waypoints, timing, grasp = r._path
+    end = r.final_joints()
+    assert r._motion is None                                    # not timed for that
+    eager = plan_motion(start, waypoints, timing, grasp_expected=grasp)
+    assert r.motion.to_dict() == eager.to_dict()
+    assert np.array_equal(end, r.motion.final_joints())
+
+
+@pytest.mark.slow
+def test_never_touching_pairs_stay_apart_over_their_joints_ranges():
+    """The proof behind collision.NEVER_TOUCHING: each pair's relative pose depends on the joints between
+    them; over their URDF ranges on a 0.02 rad grid the pair keeps 1 cm more than any of its points can
+    move to a configuration between grid points (0.6 m/rad, more than any point's distance from those
+    joints' axes, times half a step on each joint)."""
+    from rad_core.gamp.collision import NEVER_TOUCHING
+    with World() as world:
+        p, cid, robot, index = world.pybullet, world.client, world.robot, world.link_index
+        step = 0.02
+        for a, b in NEVER_TOUCHING:
+            between = list(range(index[a] + 1, index[b] + 1 if index[b] < 7 else 7))
+            grids = [np.arange(panda.URDF_LOWER[j], panda.URDF_UPPER[j] + step, step) for j in between]
+            slack = 0.6 * step / 2 * len(between)
+            q = panda.HOME.copy()
+            nearest = math.inf
+            for values in np.array(np.meshgrid(*grids)).reshape(len(between), -1).T:
+                q[between] = values
+                world.set_joint_positions(q, hold=False)
+                pts = p.getClosestPoints(robot, robot, 0.2, linkIndexA=index[a], linkIndexB=index[b],
+                                         physicsClientId=cid)
+                nearest = min(nearest, min((pt[8] for pt in pts), default=0.2))
+            assert nearest > slack + 0.01, (a, b, nearest)

@@ -85,3 +85,30 @@ def test_hand_yaw_options_are_the_two_symmetric_hand_yaws_best_wrist_first(world
         r = solve_top_down(world, [0.45, -0.1, 0.05], closing)
         assert r.ok and abs(r.q[6]) < panda.UPPER[6]
 
+
+
+def test_numpy_forward_kinematics_is_pybullets(world):
+    """gamp.kinematics reads the chain off the loaded robot: the grasp target where pybullet puts it."""
+    from rad_core.gamp.kinematics import kinematics, rotation_matrix
+    kin = kinematics(world)
+    rng = np.random.default_rng(11)
+    with world.preserved():
+        for _ in range(100):
+            q = rng.uniform(panda.LOWER, panda.UPPER)
+            world.set_joint_positions(q, hold=False)
+            pos, orn = world.link_pose()
+            tip, _, _ = kin.forward(q)
+            assert np.abs(tip[:3, 3] - pos).max() < 1e-6
+            assert np.abs(tip[:3, :3] - rotation_matrix(orn)).max() < 1e-5
+
+
+def test_a_vertical_path_stays_on_its_branch(world):
+    """Each waypoint seeded from the one below (4 cm) moves the joints a little, as a straight move should."""
+    rng = np.random.default_rng(2)
+    below = solve_top_down(world, [0.5, 0.1, 0.03], 0.4, rng=rng)
+    assert below.ok
+    q = below.q
+    for k in range(1, 5):
+        r = solve_top_down(world, [0.5, 0.1, 0.03 + 0.04 * k], 0.0, seeds=[q], rng=rng, hand_yaw=below.hand_yaw)
+        assert r.ok and np.abs(r.q[:7] - q[:7]).max() < 0.2, (k, r.q - q)
+        q = r.q

@@ -156,3 +156,62 @@ def test_preserved_restores_joint_velocities_exactly(world):
     with world.preserved():
         world.set_joint_positions(np.zeros(9))
     assert _kinematic_state(world) == before
+
+
+def test_a_block_unparked_gets_back_its_mass_and_exact_inertia(scene):
+    """Bullet recomputes the inertia from the collision shape when only the mass is set; a block made
+    static and dynamic again (the feeder's park and unpark, `asleep`'s neighbours) must keep its own."""
+    from rad_core.scene import Scene
+    doc = scene.to_dict()
+    for b in doc['blocks']:
+        b['yaw'] = 0            # the feeder presents every block at its station, at yaw 0
+        b.pop('position')
+    doc['feeder'] = {'station': [0.45, -0.3], 'blocks': [b['id'] for b in doc['blocks']], 'order': 'request'}
+    with World(Scene.from_dict(doc)) as w:
+        p, cid = w.pybullet, w.client
+        block_id = scene.blocks[0].id
+        body = w.blocks[block_id]
+        assert block_id in w.parked and p.getDynamicsInfo(body, -1, physicsClientId=cid)[0] == 0.0
+        w.present(block_id)
+        mass, _, inertia = p.getDynamicsInfo(body, -1, physicsClientId=cid)[:3]
+    with World(scene) as fresh:         # the same block type: its mass and inertia as made
+        want = fresh.pybullet.getDynamicsInfo(fresh.blocks[block_id], -1, physicsClientId=fresh.client)[:3]
+    assert (mass, inertia) == (want[0], want[2])
+
+
+def test_asleep_blocks_stay_put_wake_when_hit_and_everything_is_awake_after(world, scene):
+    p, cid = world.pybullet, world.client
+    ids = [b.id for b in scene.blocks]
+    poses = {b: world.block_pose(b) for b in ids}
+    with world.preserved():
+        with world.asleep(ids[1:]):
+            world.step(120)
+            # Asleep, Bullet moves none of them, not even by the micrometres a block at rest on the
+            # table creeps (only the first step integrates them once).
+            still = {b: world.block_pose(b) for b in ids[1:]}
+            world.step(60)
+            assert all(np.array_equal(world.block_pose(b)[0], still[b][0]) for b in ids[1:])
+            # A block dropped on a sleeping one wakes it: it is pushed into the table like any body.
+            below = ids[1]
+            pos, quat = world.block_pose(below)
+            world.set_block_pose(ids[0], pos + [0.0, 0.0, 2.5 * scene.unit], quat)
+            world.step(120)
+            assert not np.array_equal(world.block_pose(below)[0], still[below][0])
+        # After it nothing sleeps: a block tossed up flies (from the second step on: the first after
+        # waking still counts Bullet's islands as asleep, see World.asleep).
+        world.step(1)
+        far = ids[-1]
+        p.resetBaseVelocity(world.blocks[far], [0.0, 0.0, 1.0], [0, 0, 0], physicsClientId=cid)
+        world.step(10)
+        assert world.block_pose(far)[0][2] > poses[far][0][2] + 0.02
+    assert all(np.allclose(world.block_pose(b)[0], poses[b][0]) for b in ids)
+
+
+def test_joints_kept_puts_the_joints_back_exactly(world):
+    world.set_joint_positions(panda.HOME)
+    world.step(3)
+    before = world.pybullet.getJointStates(world.robot, world.joints, physicsClientId=world.client)
+    with world.joints_kept():
+        world.set_joint_positions(panda.HOME + 0.1, hold=False)
+    after = world.pybullet.getJointStates(world.robot, world.joints, physicsClientId=world.client)
+    assert [s[:2] for s in after] == [s[:2] for s in before]

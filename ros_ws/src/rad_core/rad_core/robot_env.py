@@ -310,11 +310,13 @@ class RobotAssemblyEnv:
             twin.execute_motion(plan.motion)     # what went wrong shows in the world, judged after
         else:
             self.world.set_block_pose(block_id, position, yaw_quaternion(yaw))
-            self.world.set_joint_positions(plan.motion.final_joints())
+            self.world.set_joint_positions(plan.final_joints())
             twin.sync()
             rest = self.config.at_rest
             if rest is not None:
-                twin.settle_until_rest(self.config.settle_s, rest.min_s, rest.every_s, rest.speed, rest.spin)
+                placed = {self.scene.blocks[b].id for b in self.env.state.placed} | {block_id}
+                with self.world.asleep([b for b in self.world.blocks if b not in placed]):
+                    twin.settle_until_rest(self.config.settle_s, rest.min_s, rest.every_s, rest.speed, rest.spin)
                 return
         twin.settle(self.config.settle_s)
 

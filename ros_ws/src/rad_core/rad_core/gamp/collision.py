@@ -13,18 +13,22 @@ What counts as a collision:
   the sides and a hair taller (see sim.world), so face contact with a neighbour
   or the block below reads as distance ~0, an overlap of a real cube as -unit.
 
-Candidates are pruned with Bullet's broadphase (getOverlappingObjects on each
-link's bounding box) and then measured exactly with getClosestPoints.
+Candidates are pruned by bounding boxes (each link's against the obstacles', read
+when the probe is made; link pairs by theirs, and `NEVER_TOUCHING` pairs not at all)
+and then measured exactly with getClosestPoints. A probe function reads where the
+obstacles are once: make a new one after moving a block.
 """
 
 from __future__ import annotations
 
+import math
 import weakref
 from dataclasses import dataclass
 from collections.abc import Callable, Iterable
 
 import numpy as np
 
+from rad_core.sim import panda
 from rad_core.sim.world import World
 
 CollisionFn = Callable[[np.ndarray], str]
@@ -84,6 +88,18 @@ def robot_links(world: World) -> list[int]:
             and p.getCollisionShapeData(world.robot, j, physicsClientId=cid)]
 
 
+NEVER_TOUCHING = (('panda_link1', 'panda_link3'), ('panda_link2', 'panda_link4'), ('panda_link3', 'panda_link5'),
+                  ('panda_link4', 'panda_link6'), ('panda_link6', 'panda_hand'))
+"""Panda link pairs that cannot touch anywhere in the URDF's joint ranges, so a probe of a
+configuration within them skips them. Each pair's relative pose depends on the one or two joints
+between them only; over those joints' URDF ranges on a 0.02 rad grid they are never nearer than
+11.5, 4.0, 4.3, 13.0 and 2.8 cm, and no point of a link is 0.6 m from those joints' axes, so
+between grid points nothing moves more than 0.6 m/rad x 0.01 rad per joint: 1.2 cm at most, and
+the pairs stay 1.6 cm apart or more
+(tests/core/test_gamp.py::test_never_touching_pairs_stay_apart_over_their_joints_ranges). Their
+boxes overlap in most probes of a plan, so each was measured there before 2026-12-05."""
+
+
 def self_collision_pairs(world: World) -> list[tuple[int, int]]:
     """Link pairs that can meet: not chain neighbours, not both in the wrist group."""
     links = [-1, world.link_index['panda_link1']] + robot_links(world)
@@ -106,16 +122,19 @@ def make_collision_fn(world: World, exclude: Iterable[str] = (), attached: Attac
     does. Only for callers that move nothing but the robot and the held block between
     probes of one fn (the planner: each fn is made where the world stays put).
     """
-    probe = _make_probe(world, exclude, attached, config)
     if not remember:
-        return probe
+        return _make_probe(world, exclude, attached, config)
     memo = _memo_for(world, world_key(world, exclude, attached, config))
+    probe = None            # made at the first configuration not in memory (often none is)
 
     def collision(q: np.ndarray) -> str:
+        nonlocal probe
         q = np.asarray(q, dtype=float)
         key = q.tobytes()
         reason = memo.get(key)
         if reason is None:
+            if probe is None:
+                probe = _make_probe(world, exclude, attached, config)
             reason = memo[key] = probe(q)
         else:
             # What the probe leaves behind: the robot at q, the held block in the hand.
@@ -181,46 +200,70 @@ def _make_probe(world: World, exclude, attached: Attachment | None, config: Coll
     pairs = self_collision_pairs(world)
     box_links = sorted({a for pair in pairs for a in pair} | set(links))
     row = {link: i for i, link in enumerate(box_links)}
+    link_rows = np.array([row[link] for link in links], dtype=np.int64)
     pair_a = np.array([row[a] for a, _ in pairs], dtype=np.int64)
     pair_b = np.array([row[b] for _, b in pairs], dtype=np.int64)
-    link_rows = np.array([row[link] for link in links], dtype=np.int64)
+    never = {(world.link_index[a], world.link_index[b]) for a, b in NEVER_TOUCHING
+             if a in world.link_index and b in world.link_index}
+    may_touch = np.array([pair not in never for pair in pairs])
+    urdf_low, urdf_high = panda.URDF_LOWER[:7], panda.URDF_UPPER[:7]
     carried = world.blocks[attached.block_id] if attached is not None else None
-    carried_obstacles = (obstacles - {carried}) if carried is not None else set()
     m, s = config.robot_margin, config.self_margin
+    # The obstacles in rank order with their bounding boxes, read once: they stay put while fn is used.
+    # A body whose box (which holds its collision shape) does not come within the margin of a link's
+    # box cannot be within it of the link, so only those that do are measured, in rank order (as
+    # Bullet's broadphase queries found them before 2026-12-05, which also returned bodies whose box
+    # only came near: measuring those found nothing).
+    order = sorted(obstacles, key=rank.__getitem__)
+    obstacle_box = np.array([p.getAABB(body, -1, physicsClientId=cid) for body in order]).reshape(len(order), 2, 3)
+    low_m, high_m = obstacle_box[:, 0] - m, obstacle_box[:, 1] + m      # grown by the margin
+    # The carried block is never its own obstacle.
+    carried_rows = np.array([k for k, body in enumerate(order) if body != carried], dtype=np.int64)
+    carried_low, carried_high = obstacle_box[carried_rows, 0], obstacle_box[carried_rows, 1]
+    if carried is not None:
+        # place_attached's arithmetic, inlined: the grasp target's frame, the attachment, the body's inertial frame.
+        held_frame, inertial = (attached.position, attached.quaternion), world.inertial_frame(attached.block_id)
+    joints, zeros, ee = world.joints, [[0.0]] * len(world.joints), world.ee_link
+    get_aabb, closest = p.getAABB, p.getClosestPoints
+    multiply = p.multiplyTransforms
 
     def collision(q: np.ndarray) -> str:
-        world.set_joint_positions(q, hold=False)
-        if attached is not None:
+        # world.set_joint_positions(q, hold=False), the robot's joints in one reset command.
+        q = np.asarray(q, dtype=float).ravel()
+        values = q.tolist()
+        if len(values) != 9 or not math.isfinite(sum(values)):
+            world.set_joint_positions(q, hold=False)            # a 7-joint q, or raises naming the problem
+        else:
+            p.resetJointStatesMultiDof(robot, joints, [[v] for v in values], zeros, physicsClientId=cid)
+        if carried is not None:
             # The held block first: its overlap is the more telling reason at a placement.
-            place_attached(world, attached)
-            lo, hi = p.getAABB(carried, -1, physicsClientId=cid)
-            near = p.getOverlappingObjects(lo, hi, physicsClientId=cid) or ()
-            for body in sorted({b for b, _ in near if b in carried_obstacles}, key=rank.__getitem__):
-                pts = p.getClosestPoints(carried, body, 0.0, physicsClientId=cid)
+            state = p.getLinkState(robot, ee, computeForwardKinematics=True, physicsClientId=cid)
+            pos, orn = multiply(*multiply(state[4], state[5], *held_frame), *inertial)
+            p.resetBasePositionAndOrientation(carried, pos, orn, physicsClientId=cid)
+            p.resetBaseVelocity(carried, [0, 0, 0], [0, 0, 0], physicsClientId=cid)
+            lo, hi = get_aabb(carried, -1, physicsClientId=cid)
+            for k in carried_rows[(carried_low <= hi).all(axis=1) & (carried_high >= lo).all(axis=1)]:
+                pts = closest(carried, order[k], 0.0, physicsClientId=cid)
                 if any(pt[8] < -config.block_penetration for pt in pts):
-                    return f'carried block hits {names[body]}'
-        boxes = {link: p.getAABB(robot, link, physicsClientId=cid) for link in box_links}
-        box = np.array([boxes[link] for link in box_links])          # (links, lo/hi, xyz)
-        # Broad phase over the whole arm first: a body Bullet's broadphase does not find near
-        # the union of the links' boxes is near none of them, so when there is none, no
-        # link's own query below could find one.
-        lo = (box[link_rows, 0].min(axis=0) - m).tolist()
-        hi = (box[link_rows, 1].max(axis=0) + m).tolist()
-        if any(b in obstacles for b, _ in p.getOverlappingObjects(lo, hi, physicsClientId=cid) or ()):
-            for link in links:
-                lo, hi = boxes[link]
-                near = p.getOverlappingObjects([v - m for v in lo], [v + m for v in hi], physicsClientId=cid) or ()
-                for body in sorted({b for b, _ in near if b in obstacles}, key=rank.__getitem__):
-                    pts = p.getClosestPoints(robot, body, m, linkIndexA=link, physicsClientId=cid)
-                    if any(pt[8] < m for pt in pts):
-                        return f'{link_name[link]} hits {names[body]}'
+                    return f'carried block hits {names[order[k]]}'
+        box = np.array([get_aabb(robot, link, physicsClientId=cid) for link in box_links])   # (links, lo/hi, xyz)
+        arm = box[link_rows]
+        # (links, obstacles): the obstacle's box within the margin of the link's.
+        near = ((arm[:, None, 0] <= high_m) & (arm[:, None, 1] >= low_m)).all(axis=2)
+        for i, k in zip(*near.nonzero()):                       # links in order, bodies in rank order
+            pts = closest(robot, order[k], m, linkIndexA=links[i], physicsClientId=cid)
+            if any(pt[8] < m for pt in pts):
+                return f'{link_name[links[i]]} hits {names[order[k]]}'
         # Links whose bounding boxes (which hold their collision shapes, margins included) are
         # farther apart than self_margin along an axis cannot be closer than it: no contact
         # point below the margin, so no need to ask for one (`_apart`, for all pairs at once).
-        near = ~(((box[pair_a, 0] > box[pair_b, 1] + s) | (box[pair_b, 0] > box[pair_a, 1] + s)).any(axis=1))
-        for k in np.flatnonzero(near):
+        a_box, b_box = box[pair_a], box[pair_b]
+        touching = ((a_box[:, 0] <= b_box[:, 1] + s) & (b_box[:, 0] <= a_box[:, 1] + s)).all(axis=1)
+        if s <= 0.0 and ((urdf_low <= q[:7]) & (q[:7] <= urdf_high)).all():
+            touching &= may_touch                                # NEVER_TOUCHING
+        for k in touching.nonzero()[0]:
             a, b = pairs[k]
-            pts = p.getClosestPoints(robot, robot, s, linkIndexA=a, linkIndexB=b, physicsClientId=cid)
+            pts = closest(robot, robot, s, linkIndexA=a, linkIndexB=b, physicsClientId=cid)
             if any(pt[8] < s for pt in pts):
                 return f'self-collision {link_name[a]} / {link_name[b]}'
         return ''

@@ -1,23 +1,34 @@
 """Inverse kinematics of the Panda's grasp target for top-down hand poses.
 
-pybullet's calculateInverseKinematics is one damped-least-squares run, not a
-guaranteed solution: with null-space terms (joint limits, rest pose) it lands
-1-8 mm off because the rest-pose pull fights the target; without them it
-converges to < 0.1 mm in one or two calls but may leave the joint limits.
-So each attempt does both (measured, see benchmarks/bench_gamp.py):
+pybullet's calculateInverseKinematics is damped least squares: with null-space
+terms (joint limits, rest pose) it lands millimetres off because the rest-pose
+pull fights the target; without them it needs a hundred iterations a call and
+up to six calls to come within 0.2 mm. So each attempt, from a seed
+(measured, see docs/results/planning_step.md):
 
-1. one null-space call from the seed, with limits and a rest pose whose joint 1
-   points at the target and whose joint 7 is the one the requested hand yaw
-   needs (this picks the arm's elbow-up, wrist-centred branch);
-2. up to `refine_calls` plain calls, each from the previous answer, until the
-   forward-kinematics residual is under a tenth of the tolerance;
-3. the answer is accepted only when the FK residual (position and orientation)
+1. where the seed is a caller's and already puts the target within
+   `near_seed_m` / `near_seed_deg` of the pose (the waypoint below on a
+   vertical path), Newton steps from it, which keep its branch; where their
+   answer passes step 3 it is the answer;
+2. otherwise one null-space call of `solver_iterations` from the seed, with
+   limits and a rest pose whose joint 1 points at the target and whose joint 7
+   is the one the requested hand yaw needs (this picks the arm's elbow-up,
+   wrist-centred branch), then up to `newton_steps` Newton steps on the exact
+   Jacobian (`gamp.kinematics`: the Panda's forward kinematics in numpy, read
+   off the loaded robot), which reach 1e-6 m in two or three;
+3. the answer is accepted only when the residual (position and orientation)
    is within tolerance and every joint is within the URDF limits.
+
+Until 2026-12-05 step 2 was the null-space call of a hundred iterations and
+plain calls of a hundred after it, three times the cost of a solve now; the
+answers moved by a few milliradians (the verdicts of every planning step
+measured did not change: docs/results/planning_step.md).
 
 Attempts are seeded in turn from the caller's seeds (e.g. the previous
 waypoint, so a path stays on one branch), from HOME turned towards the target,
 and from random configurations within the limits drawn from the caller's
-generator. Every call runs inside ``world.preserved()``: the world is unchanged.
+generator. Every call puts the robot's joints back (``world.joints_kept()``):
+the world is unchanged.
 
 The Panda hand is symmetric under a 180 deg turn about its axis, so a grasp
 with closing direction phi can be taken with hand yaw phi + 90 or phi + 270 deg;
@@ -35,9 +46,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from rad_core.gamp.kinematics import kinematics, newton, rotation_matrix
 from rad_core.sim import panda
 from rad_core.sim.world import World
-from rad_core.transforms import quaternion_angle_deg
 
 
 SHOULDER = np.array([0.0, 0.0, 0.333])
@@ -55,10 +66,16 @@ class IkConfig:
     """Accepted FK position residual of the grasp target (m)."""
     orientation_tol_deg: float = 2.0
     """Accepted FK orientation residual (deg, angle of the relative rotation)."""
-    solver_iterations: int = 100
-    """maxNumIterations of each pybullet call."""
-    refine_calls: int = 6
-    """Plain (no null space) calls after the null-space one, per attempt."""
+    solver_iterations: int = 20
+    """maxNumIterations of the null-space pybullet call that picks an attempt's branch (until
+    2026-12-05 a hundred, and plain calls of a hundred after it; Newton steps finish it now)."""
+    newton_steps: int = 8
+    """Newton steps after the null-space call, per attempt (two or three reach 1e-6 m)."""
+    near_seed_m: float = 0.05
+    near_seed_deg: float = 5.0
+    """A caller's seed that already puts the grasp target this near the pose (the waypoint below on a
+    vertical path, 4 cm) is finished by Newton steps alone, on its own branch; where that answer
+    leaves the limits or the tolerance, the attempt goes on as from any other seed."""
     random_seeds: int = 4
     """Random restarts after the caller's seeds and HOME."""
     min_height: float = 0.005
@@ -146,29 +163,32 @@ def _solve_pose(world: World, position: np.ndarray, quaternion: np.ndarray, cand
     lo, hi = panda.LOWER, panda.UPPER
     limits = dict(lowerLimits=lo.tolist(), upperLimits=hi.tolist(), jointRanges=(hi - lo).tolist(),
                   restPoses=rest.tolist())
+    kin = kinematics(world)
+    rotation = rotation_matrix(quaternion)
+    near = (config.near_seed_m, config.near_seed_deg)
     best = (math.inf, math.inf, None)
     calls = 0
     n_attempts = len(candidates) + config.random_seeds
-    with world.preserved():
+    with world.joints_kept():
         for attempt in range(n_attempts):
             seed = candidates[attempt] if attempt < len(candidates) else _random_q(rng, fingers)
-            world.set_joint_positions(seed, hold=False)
-            q = np.array(p.calculateInverseKinematics(
-                robot, world.ee_link, position.tolist(), quaternion.tolist(),
-                maxNumIterations=config.solver_iterations, residualThreshold=1e-6,
-                physicsClientId=cid, **limits))
-            calls += 1
-            for _ in range(config.refine_calls + 1):
-                q[7:] = fingers
-                world.set_joint_positions(q, hold=False)
-                pos_err, orn_err = _residual(world, position, quaternion)
-                if pos_err < config.position_tol / 10 and orn_err < config.orientation_tol_deg / 10:
-                    break
+            found = None
+            if attempt < len(candidates):
+                # A caller's seed near the pose already (the waypoint below, on a vertical path): Newton
+                # from it, the branch it is on; where that leaves the limits, as from any other seed.
+                found = newton(kin, position, rotation, seed, config.newton_steps, start_within=near)
+                if found is not None and not (panda.within_limits(found[0]) and found[1] <= config.position_tol
+                                              and found[2] <= config.orientation_tol_deg):
+                    found = None
+            if found is None:
+                world.set_joint_positions(seed, hold=False)
                 q = np.array(p.calculateInverseKinematics(
                     robot, world.ee_link, position.tolist(), quaternion.tolist(),
                     maxNumIterations=config.solver_iterations, residualThreshold=1e-6,
-                    physicsClientId=cid))
+                    physicsClientId=cid, **limits))
                 calls += 1
+                found = newton(kin, position, rotation, q, config.newton_steps)
+            q, pos_err, orn_err = found
             q[7:] = fingers
             within = panda.within_limits(q)
             if within and pos_err <= config.position_tol and orn_err <= config.orientation_tol_deg:
@@ -225,11 +245,6 @@ def out_of_workspace(position: np.ndarray, config: IkConfig = IkConfig()) -> str
     if reach > config.max_reach:
         return f'unreachable: target is {reach:.2f} m from the shoulder (reach < {config.max_reach:.2f} m)'
     return ''
-
-
-def _residual(world: World, position: np.ndarray, quaternion: np.ndarray) -> tuple[float, float]:
-    pos, orn = world.link_pose(world.ee_link)
-    return float(np.linalg.norm(pos - position)), quaternion_angle_deg(orn, quaternion)
 
 
 def _full(q, fingers) -> np.ndarray:

@@ -97,8 +97,11 @@ class GampResult:
     """What GAMP says about one action.
 
     motion: the arm trajectories (7 joints, timed within the robot model's limits)
-    and gripper commands that do it, in order (`rad_core.motion.Motion`). Timings
-    in seconds.
+    and gripper commands that do it, in order (`rad_core.motion.Motion`). It is timed
+    when first read (`trajectory.plan_motion` over the plan's waypoints, about 1 ms): a
+    planning-twin step that teleports needs only where the motion ends (`final_joints`),
+    and a search asks GAMP thousands of times. Timings in seconds (the motion's timing
+    is not in total_s).
     """
 
     success: bool
@@ -106,12 +109,34 @@ class GampResult:
     reason: str = ''
     grasp: Grasp | None = None
     hand_yaw_deg: float = 0.0         # hand yaw at the grasp
-    motion: Motion | None = None
     timings: dict = field(default_factory=lambda: {'ik_s': 0.0, 'collision_s': 0.0, 'total_s': 0.0})
     ik_calls: int = 0
     moved_aside: list = field(default_factory=list)
     """Blocks the motion first moves out of the way on the table, in order:
     {'block', 'position' (anchor, m), 'yaw' (deg)}; the motion holds their pick and place first."""
+    _motion: Motion | None = field(default=None, repr=False)
+    _path: tuple | None = field(default=None, repr=False)
+    """(start, waypoints, timing config, expected grasp width) until the motion is timed."""
+
+    @property
+    def motion(self) -> Motion | None:
+        if self._motion is None and self._path is not None:
+            start, waypoints, timing, grasp_expected = self._path
+            self._motion = plan_motion(start, waypoints, timing, grasp_expected=grasp_expected)
+            self._path = None
+        return self._motion
+
+    @motion.setter
+    def motion(self, motion: Motion | None) -> None:
+        self._motion, self._path = motion, None
+
+    def final_joints(self) -> np.ndarray:
+        """The 9 joints where the motion leaves the robot (`Motion.final_joints`), without timing it:
+        the motion ends at rest on its last waypoint, with the fingers as that waypoint has them
+        (every finger change is a gripper command of the waypoints' own opening)."""
+        if self._motion is None and self._path is not None:
+            return np.array(self._path[1][-1], dtype=float)
+        return self.motion.final_joints()
 
 
 def placement_pose(scene: Scene, block_id: str, unit: int, cell_centre, rotation: int,
@@ -229,8 +254,7 @@ def plan_action(world: World, block_id: str, position, yaw_deg: float, start=Non
                     place_reason = place_reason or str(e)
                     world.set_block_pose(block_id, block_pos, block_quat)
                     continue
-                result.motion = plan_motion(start, pick['waypoints'] + place['waypoints'], config.timing,
-                                            grasp_expected=width / 2)
+                result._path = (start, pick['waypoints'] + place['waypoints'], config.timing, width / 2)
                 result.grasp, result.hand_yaw_deg = grasp, math.degrees(hand_yaw)
                 result.success = True
                 return _finish(result, '', '', clock, t0)

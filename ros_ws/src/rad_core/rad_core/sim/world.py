@@ -91,7 +91,7 @@ class World:
         self.obstacles: dict[str, int] = {}     # the scene's obstacles (set-aside blocks), fixed bodies
         self._shapes: dict[tuple, tuple[BlockShape, list[float]]] = {}   # -> shape, RGBA
         self._inertial: dict[int, tuple[list, list]] = {}   # body -> inertial frame in body frame
-        self._mass: dict[int, float] = {}
+        self._mass: dict[int, tuple[float, tuple]] = {}     # body -> (mass, principal inertia)
         self.parked: set[str] = set()           # feeder blocks not presented (static, out of the way)
         self.presented: str | None = None       # the feeder block put at the station last
         self.table = -1
@@ -212,7 +212,7 @@ class World:
             body = add_block_body(p, cid, shape, list(position), list(quaternion), self.config.physics)
             p.changeVisualShape(body, -1, rgbaColor=rgba or colour, physicsClientId=cid)
             self._inertial[body] = (shape.com.tolist(), shape.axes)
-            self._mass[body] = shape.mass
+            self._mass[body] = (shape.mass, tuple(shape.inertia))
             return body
 
         for block in scene.blocks:
@@ -241,9 +241,38 @@ class World:
 
     def unpark(self, block_id: str) -> None:
         """A parked feeder block becomes a body like any other (where it is; move it next)."""
-        body = self.blocks[block_id]
-        self._p.changeDynamics(body, -1, mass=self._mass[body], physicsClientId=self.client)
+        self._dynamic(self.blocks[block_id])
         self.parked.discard(block_id)
+
+    def _dynamic(self, body: int) -> None:
+        """A block body made static (mass 0) gets its mass and exact inertia back: Bullet recomputes the
+        inertia from the collision shape when only the mass is set, which is not the block's."""
+        mass, inertia = self._mass[body]
+        self._p.changeDynamics(body, -1, mass=mass, localInertiaDiagonal=inertia, physicsClientId=self.client)
+
+    @contextmanager
+    def asleep(self, block_ids, robot: bool = True) -> Iterator[None]:
+        """These blocks (and the robot) sleep inside the block: Bullet neither moves them nor solves their
+        contacts with the table (a settling step of a heap of blocks at rest costs a tenth), and wakes
+        them, with everything they touch, when a body that moves touches them. For bodies at rest.
+
+        After it they are awake and cannot sleep, as pybullet makes bodies, with one trace left: Bullet
+        keeps their collision objects marked asleep until its next step, which therefore does not move
+        them (a velocity set before it is lost; measured: a block put in the air after a settle falls
+        one step late). The planning twin steps only while settling, where this block puts them to sleep
+        again, or moves them into a structure that then starts to settle one 1/240 s step later."""
+        p, cid = self._p, self.client
+        bodies = [self.blocks[b] for b in block_ids if b not in self.parked] + ([self.robot] if robot else [])
+        for body in bodies:
+            p.changeDynamics(body, -1, activationState=p.ACTIVATION_STATE_ENABLE_SLEEPING, physicsClientId=cid)
+            p.changeDynamics(body, -1, activationState=p.ACTIVATION_STATE_SLEEP, physicsClientId=cid)
+        try:
+            yield
+        finally:
+            for body in bodies:
+                p.changeDynamics(body, -1, activationState=p.ACTIVATION_STATE_WAKE_UP, physicsClientId=cid)
+                p.changeDynamics(body, -1, activationState=p.ACTIVATION_STATE_DISABLE_SLEEPING,
+                                 physicsClientId=cid)
 
     def at_station(self, block_id: str) -> bool:
         """Whether a feeder block lies presented at the station, not taken (within half a unit)."""
@@ -299,6 +328,11 @@ class World:
                                         *self._inertial[body])
         p.resetBasePositionAndOrientation(body, pos, orn, physicsClientId=cid)
         p.resetBaseVelocity(body, [0, 0, 0], [0, 0, 0], physicsClientId=cid)
+
+    def inertial_frame(self, block_id: str) -> tuple:
+        """(position, quaternion) of a block's body frame in its anchor frame: Bullet's base frame of
+        the body is this, applied to the anchor pose (`set_block_pose`)."""
+        return self._inertial[self._body(block_id)]
 
     def set_block_velocities_zero(self) -> None:
         for body in self.blocks.values():
@@ -392,6 +426,18 @@ class World:
             raise RadError('World.restore: the state was freed')
         self._restore(state.snap)
         self._p.restoreState(stateId=state.bullet, physicsClientId=self.client)
+
+    @contextmanager
+    def joints_kept(self) -> Iterator[World]:
+        """The robot's joints (positions and velocities) are put back on exit; for callers that move
+        nothing else (IK). A fraction of `preserved`'s cost, which also puts back every block."""
+        p, cid = self._p, self.client
+        states = p.getJointStates(self.robot, self._movable, physicsClientId=cid)
+        try:
+            yield self
+        finally:
+            p.resetJointStatesMultiDof(self.robot, self._movable, [[s[0]] for s in states], [[s[1]] for s in states],
+                                       physicsClientId=cid)
 
     @contextmanager
     def preserved(self, exact: bool = False) -> Iterator[World]:
