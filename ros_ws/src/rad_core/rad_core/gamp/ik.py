@@ -6,10 +6,10 @@ pull fights the target; without them it needs a hundred iterations a call and
 up to six calls to come within 0.2 mm. So each attempt, from a seed
 (measured, see docs/results/planning_step.md):
 
-1. where the seed is a caller's and already puts the target within
-   `near_seed_m` / `near_seed_deg` of the pose (the waypoint below on a
-   vertical path), Newton steps from it, which keep its branch; where their
-   answer passes step 3 it is the answer;
+1. where the seed (a caller's, or HOME turned towards the target; not a
+   random one) already puts the target within `near_seed_m` / `near_seed_deg`
+   of the pose (the waypoint below on a vertical path), Newton steps from it,
+   which keep its branch; where their answer passes step 3 it is the answer;
 2. otherwise one null-space call of `solver_iterations` from the seed, with
    limits and a rest pose whose joint 1 points at the target and whose joint 7
    is the one the requested hand yaw needs (this picks the arm's elbow-up,
@@ -20,9 +20,12 @@ up to six calls to come within 0.2 mm. So each attempt, from a seed
    is within tolerance and every joint is within the URDF limits.
 
 Until 2026-12-05 step 2 was the null-space call of a hundred iterations and
-plain calls of a hundred after it, three times the cost of a solve now; the
-answers moved by a few milliradians (the verdicts of every planning step
-measured did not change: docs/results/planning_step.md).
+plain calls of a hundred after it, three times the cost of a solve now. The
+answers are other ones: 0.018 rad apart (median over 1,940 solves of the
+planning-step benchmark, the same inputs), and a plan's vertical paths keep the
+branch of the waypoint below where each waypoint was pulled towards the rest
+pose, so a plan ends 0.23 rad apart (median); every planning step measured
+decides the same (docs/results/planning_step.md).
 
 Attempts are seeded in turn from the caller's seeds (e.g. the previous
 waypoint, so a path stays on one branch), from HOME turned towards the target,
@@ -73,9 +76,9 @@ class IkConfig:
     """Newton steps after the null-space call, per attempt (two or three reach 1e-6 m)."""
     near_seed_m: float = 0.05
     near_seed_deg: float = 5.0
-    """A caller's seed that already puts the grasp target this near the pose (the waypoint below on a
-    vertical path, 4 cm) is finished by Newton steps alone, on its own branch; where that answer
-    leaves the limits or the tolerance, the attempt goes on as from any other seed."""
+    """A seed (not a random one) that already puts the grasp target this near the pose (the waypoint
+    below on a vertical path, 4 cm) is finished by Newton steps alone, on its own branch; where that
+    answer leaves the limits or the tolerance, the attempt goes on as from any other seed."""
     random_seeds: int = 4
     """Random restarts after the caller's seeds and HOME."""
     min_height: float = 0.005
@@ -174,8 +177,8 @@ def _solve_pose(world: World, position: np.ndarray, quaternion: np.ndarray, cand
             seed = candidates[attempt] if attempt < len(candidates) else _random_q(rng, fingers)
             found = None
             if attempt < len(candidates):
-                # A caller's seed near the pose already (the waypoint below, on a vertical path): Newton
-                # from it, the branch it is on; where that leaves the limits, as from any other seed.
+                # A seed near the pose already (the waypoint below, on a vertical path): Newton from it,
+                # the branch it is on; where that fails the checks, as from any other seed.
                 found = newton(kin, position, rotation, seed, config.newton_steps, start_within=near)
                 if found is not None and not (panda.within_limits(found[0]) and found[1] <= config.position_tol
                                               and found[2] <= config.orientation_tol_deg):

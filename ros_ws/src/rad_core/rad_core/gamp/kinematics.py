@@ -23,6 +23,7 @@ import weakref
 
 import numpy as np
 
+from rad_core.errors import RadError
 from rad_core.sim.world import World
 
 # World -> (the robot's base pose when read, PandaKinematics).
@@ -46,7 +47,7 @@ class PandaKinematics:
         for link in world.joints[:7]:
             axis = p.getJointInfo(robot, link, physicsClientId=cid)[13]
             if tuple(axis) != (0.0, 0.0, 1.0):
-                raise ValueError(f'PandaKinematics expects every arm joint to turn about z, joint {link} about {axis}')
+                raise RadError(f'PandaKinematics expects every arm joint to turn about z, joint {link} about {axis}')
         # At zero joints every joint's rotation is the identity, so link j's frame is the chain of the
         # fixed transforms up to it: constants[j] = frame[j-1]^-1 frame[j] (the first one from the world).
         self.constants = np.stack([frames[0]] + [np.linalg.inv(frames[j - 1]) @ frames[j] for j in range(1, 7)])
