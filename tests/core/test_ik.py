@@ -89,7 +89,8 @@ def test_hand_yaw_options_are_the_two_symmetric_hand_yaws_best_wrist_first(world
 
 def test_numpy_forward_kinematics_is_pybullets(world):
     """gamp.kinematics reads the chain off the loaded robot: the grasp target where pybullet puts it."""
-    from rad_core.gamp.kinematics import kinematics, rotation_matrix
+    from rad_core.gamp.kinematics import kinematics
+    from rad_core.transforms import matrix_from_quaternion
     kin = kinematics(world)
     rng = np.random.default_rng(11)
     with world.preserved():
@@ -99,7 +100,7 @@ def test_numpy_forward_kinematics_is_pybullets(world):
             pos, orn = world.link_pose()
             tip, _, _ = kin.forward(q)
             assert np.abs(tip[:3, 3] - pos).max() < 1e-6
-            assert np.abs(tip[:3, :3] - rotation_matrix(orn)).max() < 1e-5
+            assert np.abs(tip[:3, :3] - matrix_from_quaternion(orn)).max() < 1e-5
 
 
 def test_a_vertical_path_stays_on_its_branch(world):

@@ -314,11 +314,15 @@ class RobotAssemblyEnv:
             twin.sync()
             rest = self.config.at_rest
             if rest is not None:
-                placed = {self.scene.blocks[b].id for b in self.env.state.placed} | {block_id}
-                with self.world.asleep([b for b in self.world.blocks if b not in placed]):
+                awake = self._placed_ids() | {block_id}
+                with self.world.asleep([b for b in self.world.blocks if b not in awake]):
                     twin.settle_until_rest(self.config.settle_s, rest.min_s, rest.every_s, rest.speed, rest.spin)
                 return
         twin.settle(self.config.settle_s)
+
+    def _placed_ids(self) -> set[str]:
+        """The ids of the blocks placed in the structure."""
+        return {self.scene.blocks[b].id for b in self.env.state.placed}
 
     def _judge(self, before: dict, block_id: str, position, yaw) -> tuple[Outcome, str] | None:
         """What went wrong physically, if anything (new block, structure, the rest)."""
@@ -329,7 +333,7 @@ class RobotAssemblyEnv:
         if moved > cfg.new_block_tol * u or _tilt_deg(q) > cfg.tilt_tol_deg or turned > cfg.tilt_tol_deg:
             return Outcome.INVALID_UNSTABLE, (f'block {block_id} did not stay: {moved * 1e3:.1f} mm off its pose, '
                                               f'tilted {_tilt_deg(q):.1f} deg')
-        placed = {self.scene.blocks[b].id for b in self.env.state.placed}
+        placed = self._placed_ids()
         for other, (p0, q0) in before.items():
             if other == block_id:
                 continue
@@ -351,7 +355,7 @@ class RobotAssemblyEnv:
             anchor = self.env.grid.centres[cells[0]]
             self.world.set_block_pose(self.scene.blocks[b].id, anchor, yaw_quaternion(yaw))
         if self.config.markov:
-            placed = {self.scene.blocks[b].id for b in self.env.state.placed}
+            placed = self._placed_ids()
             for block_id, (position, quaternion) in self._start_poses.items():
                 if block_id in placed:
                     continue

@@ -73,10 +73,10 @@ def attachment_from_world(world: World, block_id: str) -> Attachment:
 
 
 def place_attached(world: World, attachment: Attachment) -> None:
-    """Move the held block to where the hand holds it now."""
-    p = world.pybullet
-    ee_pos, ee_orn = world.link_pose()
-    pos, orn = p.multiplyTransforms(ee_pos.tolist(), ee_orn.tolist(), attachment.position, attachment.quaternion)
+    """Move the held block to where the hand holds it now (every probe of a carrying plan does)."""
+    p, cid = world.pybullet, world.client
+    state = p.getLinkState(world.robot, world.ee_link, computeForwardKinematics=True, physicsClientId=cid)
+    pos, orn = p.multiplyTransforms(state[4], state[5], attachment.position, attachment.quaternion)
     world.set_block_pose(attachment.block_id, pos, orn)
 
 
@@ -220,12 +220,8 @@ def _make_probe(world: World, exclude, attached: Attachment | None, config: Coll
     # The carried block is never its own obstacle.
     carried_rows = np.array([k for k, body in enumerate(order) if body != carried], dtype=np.int64)
     carried_low, carried_high = obstacle_box[carried_rows, 0], obstacle_box[carried_rows, 1]
-    if carried is not None:
-        # place_attached's arithmetic, inlined: the grasp target's frame, the attachment, the body's inertial frame.
-        held_frame, inertial = (attached.position, attached.quaternion), world.inertial_frame(attached.block_id)
-    joints, zeros, ee = world.joints, [[0.0]] * len(world.joints), world.ee_link
+    joints, zeros = world.joints, [[0.0]] * len(world.joints)
     get_aabb, closest = p.getAABB, p.getClosestPoints
-    multiply = p.multiplyTransforms
 
     def collision(q: np.ndarray) -> str:
         # world.set_joint_positions(q, hold=False), the robot's joints in one reset command.
@@ -237,10 +233,7 @@ def _make_probe(world: World, exclude, attached: Attachment | None, config: Coll
             p.resetJointStatesMultiDof(robot, joints, [[v] for v in values], zeros, physicsClientId=cid)
         if carried is not None:
             # The held block first: its overlap is the more telling reason at a placement.
-            state = p.getLinkState(robot, ee, computeForwardKinematics=True, physicsClientId=cid)
-            pos, orn = multiply(*multiply(state[4], state[5], *held_frame), *inertial)
-            p.resetBasePositionAndOrientation(carried, pos, orn, physicsClientId=cid)
-            p.resetBaseVelocity(carried, [0, 0, 0], [0, 0, 0], physicsClientId=cid)
+            place_attached(world, attached)
             lo, hi = get_aabb(carried, -1, physicsClientId=cid)
             for k in carried_rows[(carried_low <= hi).all(axis=1) & (carried_high >= lo).all(axis=1)]:
                 pts = closest(carried, order[k], 0.0, physicsClientId=cid)

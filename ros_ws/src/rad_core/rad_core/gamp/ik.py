@@ -49,9 +49,10 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from rad_core.gamp.kinematics import kinematics, newton, rotation_matrix
+from rad_core.gamp.kinematics import kinematics, newton
 from rad_core.sim import panda
 from rad_core.sim.world import World
+from rad_core.transforms import matrix_from_quaternion
 
 
 SHOULDER = np.array([0.0, 0.0, 0.333])
@@ -167,7 +168,7 @@ def _solve_pose(world: World, position: np.ndarray, quaternion: np.ndarray, cand
     limits = dict(lowerLimits=lo.tolist(), upperLimits=hi.tolist(), jointRanges=(hi - lo).tolist(),
                   restPoses=rest.tolist())
     kin = kinematics(world)
-    rotation = rotation_matrix(quaternion)
+    rotation = matrix_from_quaternion(quaternion)
     near = (config.near_seed_m, config.near_seed_deg)
     best = (math.inf, math.inf, None)
     calls = 0

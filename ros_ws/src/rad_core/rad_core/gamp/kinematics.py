@@ -25,6 +25,7 @@ import numpy as np
 
 from rad_core.errors import RadError
 from rad_core.sim.world import World
+from rad_core.transforms import matrix_from_quaternion
 
 # World -> (the robot's base pose when read, PandaKinematics).
 _KINEMATICS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
@@ -133,16 +134,8 @@ def newton(kin: PandaKinematics, position: np.ndarray, rotation: np.ndarray, q: 
     return q, float(np.linalg.norm(e[:3])), math.degrees(float(np.linalg.norm(e[3:])))
 
 
-def rotation_matrix(quaternion) -> np.ndarray:
-    """(3, 3) of a unit quaternion (x, y, z, w)."""
-    x, y, z, w = (float(v) for v in quaternion)
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
-
-
 def _matrix(position, quaternion) -> np.ndarray:
     out = np.eye(4)
-    out[:3, :3] = rotation_matrix(quaternion)
+    out[:3, :3] = matrix_from_quaternion(quaternion)
     out[:3, 3] = position
     return out

@@ -329,11 +329,6 @@ class World:
         p.resetBasePositionAndOrientation(body, pos, orn, physicsClientId=cid)
         p.resetBaseVelocity(body, [0, 0, 0], [0, 0, 0], physicsClientId=cid)
 
-    def inertial_frame(self, block_id: str) -> tuple:
-        """(position, quaternion) of a block's body frame in its anchor frame: Bullet's base frame of
-        the body is this, applied to the anchor pose (`set_block_pose`)."""
-        return self._inertial[self._body(block_id)]
-
     def set_block_velocities_zero(self) -> None:
         for body in self.blocks.values():
             self._p.resetBaseVelocity(body, [0, 0, 0], [0, 0, 0], physicsClientId=self.client)
