@@ -252,7 +252,7 @@ def process(tmp_path):
 def motion():
     """An in-process GAMP as plans take it (`sequencing.plan.local_motion_planner`), one per test module."""
     from rad_core.gamp.action import MotionPlanner
-    from rad_core.sequencing.plan import local_motion_planner
+    from rad_core.sequencing.planning.plan import local_motion_planner
     planner = MotionPlanner()
     yield local_motion_planner(planner)
     planner.close()

@@ -230,8 +230,9 @@ def wait_for_plant(node, timeout: float = 30.0) -> None:
     A node started beside the plant can only know the task once the plant publishes it; a test
     that asks for a plan from motion capture must not race the plant's start-up.
     """
+    from rad_msgs.msg import RigidBodies
+    from rad_msgs.msg import Scene as SceneMsg
     from rclpy.qos import DurabilityPolicy, QoSProfile, qos_profile_sensor_data
-    from rad_msgs.msg import RigidBodies, Scene as SceneMsg
 
     seen: set[str] = set()
     latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)

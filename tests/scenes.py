@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import copy
 
-from rad_core.scene import Scene
+from rad_core.domain.scene import Scene
 
 U = 0.05
 

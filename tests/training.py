@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from rad_core.learning.dataset import build
-from rad_core.learning.dqn import TrainConfig
+from rad_core.training.dataset import build
+from rad_core.training.dqn import TrainConfig
 
 SMALL_NET = dict(dim=32, heads=4, rounds=2, ff=64, readout=32)
 SMALL_NET_FLAGS = [a for k, v in SMALL_NET.items() for a in (f'--{k}', str(v))]   # the same as rad train flags

@@ -1,4 +1,4 @@
-"""rad_core.agents: an agent is a value made of parts, with one text form that parses back to it."""
+"""rad_core.sequencing.decide.agents: an agent is a value made of parts, with one text form that parses back to it."""
 
 import subprocess
 import sys
@@ -6,11 +6,10 @@ from pathlib import Path
 
 import pytest
 import yaml
-
-from rad_core.agents import LEGACY, PRESETS, AgentSpec, label, parse, parse_with_robot
-from rad_core.errors import RadError
-from rad_core.evaluation import get_agent
-from rad_core.sequencing.sequencer import SequencerConfig
+from rad_core.domain.errors import RadError
+from rad_core.experiment.evaluation import get_agent
+from rad_core.sequencing.decide.agents import LEGACY, PRESETS, AgentSpec, label, parse, parse_with_robot
+from rad_core.sequencing.decide.sequencer import SequencerConfig
 
 CONFIG = Path(__file__).resolve().parents[2] / 'ros_ws' / 'src' / 'rad_planner' / 'config' / 'graph.yaml'
 
@@ -92,7 +91,7 @@ def test_results_name_agents_by_their_canonical_text_whatever_name_was_used():
 
 
 def test_parsing_agents_imports_neither_torch_nor_pybullet():
-    code = ('import sys; from rad_core.agents import parse, label; '
+    code = ('import sys; from rad_core.sequencing.decide.agents import parse, label; '
             '[label(parse(n)) for n in ("default", "paper", "exact")]; '
             'print(sorted(m for m in ("torch", "pybullet") if m in sys.modules))')
     out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True, timeout=60)

@@ -3,13 +3,12 @@ import json
 
 import numpy as np
 import pytest
-
 from rad_core.allocation import AllocationParams, solve, validate_allocation
 from rad_core.allocation.highs import solve_highs
-from rad_core.blocks import DEFAULT_LIBRARY
-from rad_core.errors import RadError
-from rad_core.generator import GeneratorConfig, generate_scene
-from rad_core.scene import Scene
+from rad_core.domain.blocks import DEFAULT_LIBRARY
+from rad_core.domain.errors import RadError
+from rad_core.domain.generator import GeneratorConfig, generate_scene
+from rad_core.domain.scene import Scene
 
 from scenes import U, doc, scene
 
@@ -168,7 +167,7 @@ def test_solving_leaves_the_process_sigint_handling_alone():
     code = ('import os, signal, time, json\n'
             'signal.signal(signal.SIGINT, signal.default_int_handler)\n'
             'from rad_core.allocation import solve\n'
-            'from rad_core.scene import Scene\n'
+            'from rad_core.domain.scene import Scene\n'
             f'solve(Scene.loads({json.dumps(doc())!r}))\n'
             'try:\n'
             '    os.kill(os.getpid(), signal.SIGINT)\n'

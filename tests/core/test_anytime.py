@@ -6,10 +6,9 @@ from __future__ import annotations
 from dataclasses import replace
 
 import pytest
-
-from rad_core.errors import RadError
-from rad_core.generator import GeneratorConfig, generate_scene
-from rad_core.sequencing.agent_plan import AgentPlanner, plan_for_agent
+from rad_core.domain.errors import RadError
+from rad_core.domain.generator import GeneratorConfig, generate_scene
+from rad_core.sequencing.agent.agent_plan import AgentPlanner, plan_for_agent
 
 
 def steps_of(plan):

@@ -1,9 +1,8 @@
 """support='arm': the allocation rules out what the arm can never do, at the level it fails."""
 
 import pytest
-
 from rad_core.allocation import AllocationParams, solve
-from rad_core.scene import Scene
+from rad_core.domain.scene import Scene
 
 from scenes import doc
 
@@ -44,7 +43,7 @@ def test_a_block_out_of_reach_is_not_counted_and_a_pose_out_of_reach_not_offered
 
 
 def test_nothing_is_ruled_out_where_the_arm_can_do_everything():
-    from rad_core.generator import GeneratorConfig, generate_scene
+    from rad_core.domain.generator import GeneratorConfig, generate_scene
     for seed in (500, 501):
         scene = generate_scene(GeneratorConfig(grid=4), seed)
         stable = solve(scene, AllocationParams(support='stable'))
@@ -60,8 +59,8 @@ def test_prefer_needs_a_support_rule():
 
 
 def test_a_plan_whose_allocation_places_nothing_says_what_the_arm_cannot_do():
-    from rad_core.sequencing.plan import plan_assembly
-    from rad_core.sequencing.policy import HeurPolicy
+    from rad_core.sequencing.decide.policy import HeurPolicy
+    from rad_core.sequencing.planning.plan import plan_assembly
 
     def never(*_):
         raise AssertionError('nothing to plan a motion for')

@@ -1,7 +1,6 @@
 import numpy as np
 import pytest
-
-from rad_core.blocks import DEFAULT_LIBRARY, BlockType, canonical_shape, rotation_z
+from rad_core.domain.blocks import DEFAULT_LIBRARY, BlockType, canonical_shape, rotation_z
 
 
 def test_rotation_is_exact_and_counter_clockwise():

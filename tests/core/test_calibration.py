@@ -9,12 +9,21 @@ import sys
 import numpy as np
 import pytest
 import yaml
-
-from rad_core.calibration import (PAIR_COLUMNS, Calibration, PointPairs, RestConfig, append_pair_row, fit,
-                                  marker_in_base, parse_pairs_csv, read_pairs_csv, still_mean)
-from rad_core.errors import RadError
-from rad_core.sim.panda import HOME
-from rad_core.transforms import matrix_from_quaternion, quaternion_angle_deg
+from rad_core.cell.calibration import (
+    PAIR_COLUMNS,
+    Calibration,
+    PointPairs,
+    RestConfig,
+    append_pair_row,
+    fit,
+    marker_in_base,
+    parse_pairs_csv,
+    read_pairs_csv,
+    still_mean,
+)
+from rad_core.cell.panda import HOME
+from rad_core.domain.errors import RadError
+from rad_core.domain.transforms import matrix_from_quaternion, quaternion_angle_deg
 
 
 def random_transform(rng):

@@ -9,19 +9,18 @@ import math
 
 import numpy as np
 import pytest
-
-from rad_core import viz
-from rad_core.blocks import unit_boxes
-from rad_core.errors import RadError, SceneError
-from rad_core.generator import GeneratorConfig, generate_scene
-from rad_core.grid import Grid, blocks_on_grid
-from rad_core.mdp import Action, AssemblyEnv, EnvConfig
-from rad_core.physics import PhysicsConfig, PhysicsStability, add_block_body, block_shape, direct_client
-from rad_core.render import _scene_boxes, render_scene
-from rad_core.scene import Block, Scene
-from rad_core.sim.mocap import RegistrationConfig, RigidBodyPose, body_map_for, register_scene, scene_to_bodies
+from rad_core.cell.mocap import RegistrationConfig, RigidBodyPose, body_map_for, register_scene, scene_to_bodies
+from rad_core.domain.blocks import unit_boxes
+from rad_core.domain.errors import RadError, SceneError
+from rad_core.domain.generator import GeneratorConfig, generate_scene
+from rad_core.domain.grid import Grid, blocks_on_grid
+from rad_core.domain.scene import Block, Scene
+from rad_core.domain.transforms import yaw_quaternion
+from rad_core.env.mdp import Action, AssemblyEnv, EnvConfig
+from rad_core.sim.physics import PhysicsConfig, PhysicsStability, add_block_body, block_shape, direct_client
 from rad_core.sim.world import World
-from rad_core.transforms import yaw_quaternion
+from rad_core.view import viz
+from rad_core.view.render import _scene_boxes, render_scene
 
 from scenes import U, doc, scene
 

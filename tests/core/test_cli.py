@@ -80,7 +80,8 @@ def test_rad_eval_accepts_every_allocation_support_the_agents_use():
 
 
 def test_rad_ceiling_says_how_each_search_ended_and_refuses_bad_options(tmp_path):
-    from rad_core.generator import GeneratorConfig, generate_scene
+    from rad_core.domain.generator import GeneratorConfig, generate_scene
+
     from scenes import flush_square
     square = tmp_path / 'square.json'
     square.write_text(flush_square().dumps())

@@ -3,12 +3,11 @@
 from __future__ import annotations
 
 import pytest
-
-from rad_core.large_shapes import SMALL_TYPES, feeder_scene
-from rad_core.robot_env import RobotAssemblyEnv, RobotEnvConfig
-from rad_core.sequencing import courses
-from rad_core.sequencing.courses import course_bound, course_line
-from rad_core.shapes import ShapeSpec, face, one_sided, two_sided
+from rad_core.domain.large_shapes import SMALL_TYPES, feeder_scene
+from rad_core.domain.shapes import ShapeSpec, face, one_sided, two_sided
+from rad_core.env.robot_env import RobotAssemblyEnv, RobotEnvConfig
+from rad_core.sequencing.planning import courses
+from rad_core.sequencing.planning.courses import course_bound, course_line
 
 pytestmark = pytest.mark.slow
 
@@ -56,7 +55,7 @@ def test_the_course_line_ends_at_its_time_limit_with_the_line_so_far_and_leaves_
 
 
 def test_order_repair_plans_the_course_line_of_a_large_structure(monkeypatch):
-    from rad_core.sequencing.agent_plan import AgentPlanner
+    from rad_core.sequencing.agent.agent_plan import AgentPlanner
     scene = flush_wall()
     monkeypatch.setattr(courses, 'COURSES_ABOVE', 0)
     line = course_line(scene, 60.0)
@@ -69,8 +68,8 @@ def test_order_repair_plans_the_course_line_of_a_large_structure(monkeypatch):
 def test_the_ceiling_takes_the_course_bound_at_the_root_where_the_hands_order_proves_nothing(monkeypatch):
     # A 72-block wall's ordered bound is not proven in the ceiling's time: made to happen here by an
     # ordered bound that proves nothing (1.0), the course bound says 33 of 36 cells at most.
-    from rad_core.allocation.arm import ArmCoverageBound
-    from rad_core.sequencing.exact import robot_ceiling
+    from rad_core.allocation.bounds import ArmCoverageBound
+    from rad_core.sequencing.bounds.robot_ceiling import robot_ceiling
     monkeypatch.setattr(ArmCoverageBound, 'ordered_bound', lambda self, *a, **k: 1.0)
     found = robot_ceiling(flush_wall(), 5.0)
     assert found.bound == pytest.approx(33 / 36)

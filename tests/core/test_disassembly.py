@@ -6,17 +6,24 @@ injected only where the real parts will not make it on demand (a block pushed as
 
 import numpy as np
 import pytest
-
 from rad_core.allocation import solve
-from rad_core.errors import RadError
+from rad_core.domain.coverage import measured_coverage
+from rad_core.domain.errors import RadError
+from rad_core.domain.generator import GeneratorConfig, generate_scene
 from rad_core.gamp.action import MotionPlanner
-from rad_core.generator import GeneratorConfig, generate_scene
 from rad_core.sequencing import HeurPolicy
-from rad_core.sequencing.disassembly import (TableConfig, local_place_planner, plan_take_apart, removal_order,
-                                             resting_on, return_poses, take_apart, to_take_apart)
-from rad_core.sequencing.execute import ExecuteConfig, execute_assembly
-from rad_core.sequencing.plan import MotionPlan, local_motion_planner, moved, plan_assembly
-from rad_core.coverage import measured_coverage
+from rad_core.sequencing.execution.disassembly import (
+    TableConfig,
+    local_place_planner,
+    plan_take_apart,
+    removal_order,
+    resting_on,
+    return_poses,
+    take_apart,
+    to_take_apart,
+)
+from rad_core.sequencing.execution.execute import ExecuteConfig, execute_assembly
+from rad_core.sequencing.planning.plan import MotionPlan, local_motion_planner, moved, plan_assembly
 from rad_core.sim.twin import Twin, twin_world_config
 from rad_core.sim.world import World
 
@@ -197,7 +204,7 @@ def test_a_block_missing_from_a_frame_is_looked_for_again_and_one_never_seen_is_
 
 def without_block(scene, block_id):
     """The scene without one block (motion capture did not report its body)."""
-    from rad_core.scene import Scene
+    from rad_core.domain.scene import Scene
     doc = scene.to_dict()
     doc['blocks'] = [b for b in doc['blocks'] if b['id'] != block_id]
     return Scene.from_dict(doc)

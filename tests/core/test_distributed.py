@@ -1,4 +1,4 @@
-"""`rad eval --workers N` (rad_core.distributed): the serial run's rows from Dask workers on loopback.
+"""`rad eval --workers N` (rad_core.experiment.distributed): the serial run's rows from Dask workers on loopback.
 
 One cluster of two worker processes, started by rad's own `dask_client` on 127.0.0.1 the way
 `rad eval --workers 2` starts it (forked from this process, `START_METHOD`), serves the whole
@@ -17,11 +17,17 @@ import time
 
 import psutil
 import pytest
-
-from rad_core.distributed import START_METHOD, AgentArgs, WarmUp, dask_client, evaluate_distributed, scene_cost
-from rad_core.errors import RadError
-from rad_core.evaluation import evaluate
-from rad_core.scene_sources import generated_scenes
+from rad_core.domain.errors import RadError
+from rad_core.domain.scene_sources import generated_scenes
+from rad_core.experiment.distributed import (
+    START_METHOD,
+    AgentArgs,
+    WarmUp,
+    dask_client,
+    evaluate_distributed,
+    scene_cost,
+)
+from rad_core.experiment.evaluation import evaluate
 
 SCENES = list(generated_scenes(3, 2, 6, 0))
 SEED = 5
@@ -57,7 +63,7 @@ def test_two_workers_give_exactly_the_serial_rows_and_metrics(client, serial, ag
 
 def built_here(agent: str, robot: bool):
     """What this worker thread has built for the agent: (agents, planners, stability check)."""
-    from rad_core import distributed
+    from rad_core.experiment import distributed
     state = getattr(distributed._local, 'state', None) or {}
     return ([a.agent for a in state.get('agents', {})], [k[0].agent for k in state.get('planners', {})],
             state.get('stability') is not None)
@@ -66,7 +72,7 @@ def built_here(agent: str, robot: bool):
 def test_every_worker_is_warm_before_the_first_scene_and_workers_that_join_later_too(client):
     """warm_up builds the agent, its network and the planner's worlds on every worker, the one
     that gets no scene included; a worker plugin, so one that joins later is warm as it joins."""
-    from rad_core.distributed import warm_up
+    from rad_core.experiment.distributed import warm_up
     name = warm_up(client, AgentArgs('heur'), True)
     assert name == WarmUp(AgentArgs('heur'), True).name   # by settings: a second run finds it
 

@@ -1,4 +1,4 @@
-"""`rad train --actors N` and `--seeds` (rad_core.learning.actors) on Dask workers on loopback.
+"""`rad train --actors N` and `--seeds` (rad_core.training.actors) on Dask workers on loopback.
 
 One cluster of two worker processes (rad's own `dask_client`, 127.0.0.1) serves the module.
 Tiny configs and a small network keep each training to seconds. The serial path's own
@@ -11,14 +11,14 @@ import sys
 
 import pytest
 import torch
-
-from rad_core.distributed import dask_client
-from rad_core.errors import RadError
-from rad_core.learning.actors import ActorConfig, DistributedTrainer, seed_folder, train_seeds, train_with_actors
-from rad_core.learning.dqn import TrainConfig, train
+from rad_core.domain.errors import RadError
+from rad_core.experiment.distributed import dask_client
 from rad_core.learning.policy import QPolicy
+from rad_core.training.actors import ActorConfig, DistributedTrainer, seed_folder, train_seeds, train_with_actors
+from rad_core.training.dqn import TrainConfig, train
 from training import SMALL_NET_FLAGS, tiny_dataset
 from training import tiny as tiny_config
+
 
 @pytest.fixture(scope='module')
 def dataset(tmp_path_factory):

@@ -14,16 +14,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-
+from rad_core.env.mdp import TERMINATE, AssemblyEnv, EnvConfig
 from rad_core.learning import checkpoint as ckpt
-from rad_core.learning.dataset import Dataset
-from rad_core.learning.dqn import TrainConfig, Trainer, train
 from rad_core.learning.policy import QPolicy
-from rad_core.mdp import AssemblyEnv, EnvConfig
-from rad_core.sequencing.actions import action_space
-from rad_core.sequencing.episode import Decision, run_episode
-from rad_core.mdp import TERMINATE
+from rad_core.sequencing.decide.actions import action_space
+from rad_core.sequencing.decide.episode import Decision, run_episode
+from rad_core.training.dataset import Dataset
+from rad_core.training.dqn import TrainConfig, Trainer, train
 from training import SMALL_NET_FLAGS, tiny, tiny_dataset
+
 
 @pytest.fixture(scope='module')
 def dataset(tmp_path_factory):
@@ -196,8 +195,8 @@ def test_config_errors_are_clear():
 
 @pytest.mark.parametrize('name', ['milp-dqn', 'dqn', 'dqn-rel', 'milp-dqn-mixed'])
 def test_shipped_agents_load_by_name_and_evaluate_with_the_same_keys(name):
-    from rad_core.evaluation import KEYS, evaluate
-    from rad_core.scene_sources import generated_scenes
+    from rad_core.domain.scene_sources import generated_scenes
+    from rad_core.experiment.evaluation import KEYS, evaluate
     assert ckpt.resolve(name).is_file(), f'{name}: no shipped weights in {ckpt.WEIGHTS_DIR}'
     q = QPolicy.load(name)
     assert q.name in name and q.source.endswith(f'{name}.pt')
@@ -208,8 +207,8 @@ def test_shipped_agents_load_by_name_and_evaluate_with_the_same_keys(name):
 def test_verify_never_fails_and_never_builds_less():
     """--verify: the best-ranked action the stability check accepts; a failing action
     is skipped instead of ending the episode."""
-    from rad_core.evaluation import evaluate, get_agent
-    from rad_core.scene_sources import generated_scenes
+    from rad_core.domain.scene_sources import generated_scenes
+    from rad_core.experiment.evaluation import evaluate, get_agent
     scenes = list(generated_scenes(4, 2, 12, 0))
     plain = evaluate('milp-dqn', scenes, robot=False, seed=0)
     checked = evaluate(get_agent('milp-dqn', verify=True), scenes, robot=False, seed=0)
@@ -221,8 +220,8 @@ def test_verify_never_fails_and_never_builds_less():
 
 
 def test_a_model_of_another_action_space_is_refused():
-    from rad_core.evaluation import evaluate
-    from rad_core.scene_sources import generated_scenes
+    from rad_core.domain.scene_sources import generated_scenes
+    from rad_core.experiment.evaluation import evaluate
     with pytest.raises(Exception, match="trained on the 'milp' action space"):
         evaluate('dqn', generated_scenes(3, 2, 1, 0), robot=False, seed=0, policy=QPolicy.load('milp-dqn'))
 

@@ -1,4 +1,4 @@
-"""`rad eval` and rad_core.evaluation: the paper's metrics, each agent's setting, reproducibility."""
+"""`rad eval` and rad_core.experiment.evaluation: the paper's metrics, each agent's setting, reproducibility."""
 
 import json
 import shutil
@@ -6,12 +6,11 @@ import subprocess
 import sys
 
 import pytest
-
-from rad_core.evaluation import KEYS, evaluate, summarize
-from rad_core.scene_sources import generated_scenes
-from rad_core.generator import GeneratorConfig, generate_scene
-from rad_core.mdp import Outcome
-from rad_core.scene import Scene
+from rad_core.domain.generator import GeneratorConfig, generate_scene
+from rad_core.domain.scene import Scene
+from rad_core.domain.scene_sources import generated_scenes
+from rad_core.env.mdp import Outcome
+from rad_core.experiment.evaluation import KEYS, evaluate, summarize
 
 FAILS = {Outcome.INVALID_GRASP.value, Outcome.INVALID_PLACEMENT.value, Outcome.INVALID_DISTURBED.value}
 # g=4 two-sided scenes 0..3: HEUR's blind choice fails with the robot on some of them.
@@ -96,7 +95,7 @@ def test_execution_mode_reaches_the_robot_env():
     simulate = evaluate('heur', [scene], robot=True, seed=0, execution='simulate')
     assert teleport['scenes'][0]['outcome'] == Outcome.COMPLETED.value
     assert simulate['n'] == 1 and tuple(simulate) == KEYS
-    from rad_core.errors import RadError
+    from rad_core.domain.errors import RadError
     with pytest.raises(RadError, match='execution'):
         evaluate('heur', [scene], robot=True, seed=0, execution='warp')
 
@@ -118,7 +117,7 @@ def test_progress_is_called_once_per_scene():
 
 
 def test_summarize_rejects_no_scenes():
-    from rad_core.errors import RadError
+    from rad_core.domain.errors import RadError
     with pytest.raises(RadError):
         summarize([])
 

@@ -2,15 +2,14 @@
 
 import numpy as np
 import pytest
-
 from rad_core.allocation import AllocationParams, Placement, solve
-from rad_core.errors import RadError
-from rad_core.robot_env import RobotAssemblyEnv, RobotEnvConfig
-from rad_core.scene import Scene
-from rad_core.sequencing.actions import AllocationActions
-from rad_core.sequencing.exact import exact_search
-from rad_core.sequencing.policy import HeurPolicy
-from rad_core.sequencing.search import SEARCHES, EnvModel
+from rad_core.domain.errors import RadError
+from rad_core.domain.scene import Scene
+from rad_core.env.robot_env import RobotAssemblyEnv, RobotEnvConfig
+from rad_core.sequencing.decide.actions import AllocationActions
+from rad_core.sequencing.decide.exact import exact_search
+from rad_core.sequencing.decide.policy import HeurPolicy
+from rad_core.sequencing.decide.search import SEARCHES, EnvModel
 
 from scenes import scene as default_scene
 
@@ -172,7 +171,7 @@ def test_bnb_is_a_search_whose_move_starts_its_best_line():
 
 
 def test_rad_eval_exact_plans_and_builds_its_best_line():
-    from rad_core.evaluation import evaluate, get_agent
+    from rad_core.experiment.evaluation import evaluate, get_agent
     scene = row_scene(2, far=True)      # two cubes within reach, one out of it: 2 of 3 cells at best
     result = evaluate(get_agent('exact'), [('row', scene)], robot=True, seed=0)
     row = result['scenes'][0]
@@ -181,7 +180,7 @@ def test_rad_eval_exact_plans_and_builds_its_best_line():
 
 
 def test_the_networks_bnb_agent_builds_within_its_time_and_a_cut_one_stops_without_failing():
-    from rad_core.evaluation import evaluate, get_agent
+    from rad_core.experiment.evaluation import evaluate, get_agent
     agent = get_agent('milp-dqn-mixed-dfs')
     assert agent.search == 'bnb' and agent.verified and agent.robot and agent.budget == 10
     result = evaluate(agent, [('row', row_scene(3))], robot=True, seed=0)
@@ -192,7 +191,7 @@ def test_the_networks_bnb_agent_builds_within_its_time_and_a_cut_one_stops_witho
 
 
 def test_the_robot_ceiling_searches_orders_and_reallocations_to_a_proven_answer():
-    from rad_core.sequencing.exact import robot_ceiling
+    from rad_core.sequencing.bounds.robot_ceiling import robot_ceiling
     found = robot_ceiling(row_scene(2, far=True), time_limit_s=60)
     assert found.complete and found.reason == '' and found.coverage == pytest.approx(2 / 3)
     # The arm's bound leaves out the cube it cannot pick: 2/3 is the ceiling over every allocation.
@@ -204,7 +203,8 @@ def test_the_robot_ceiling_searches_orders_and_reallocations_to_a_proven_answer(
 
 
 def test_an_exhausted_ceiling_searches_the_hands_allocation_then_every_pose_and_says_how_it_ended():
-    from rad_core.sequencing.exact import robot_ceiling
+    from rad_core.sequencing.bounds.robot_ceiling import robot_ceiling
+
     from scenes import flush_square
     sc = flush_square()
     # Without the hand order in its bound (ordered=False), the bound counts every cell.
@@ -233,8 +233,8 @@ def test_an_exhausted_ceiling_searches_the_hands_allocation_then_every_pose_and_
 
 
 def test_the_ceilings_twin_plans_a_failed_move_once_per_state_and_answers_it_again_as_before():
-    from rad_core.mdp import Outcome
-    from rad_core.sequencing.exact import _FailedMoves
+    from rad_core.env.mdp import Outcome
+    from rad_core.sequencing.bounds.robot_ceiling import _FailedMoves
     with robot_env(row_scene(2, far=True)) as renv:
         planned, plan = [], renv.plan
 

@@ -8,17 +8,16 @@ that never finishes, a cancel).
 
 import numpy as np
 import pytest
-
 from rad_core.allocation import solve
-from rad_core.errors import RadError
+from rad_core.cell.panda import HOME
+from rad_core.cell.trajectory import PATH_TOLERANCE_VIOLATED, TrajectoryAborted
+from rad_core.domain.errors import RadError
+from rad_core.domain.generator import GeneratorConfig, generate_scene
 from rad_core.gamp.action import MotionPlanner
-from rad_core.generator import GeneratorConfig, generate_scene
 from rad_core.sequencing import HeurPolicy
-from rad_core.sequencing.execute import ExecuteConfig, execute_assembly
-from rad_core.sequencing.plan import local_motion_planner, plan_assembly
-from rad_core.sim.panda import HOME
+from rad_core.sequencing.execution.execute import ExecuteConfig, execute_assembly
+from rad_core.sequencing.planning.plan import local_motion_planner, plan_assembly
 from rad_core.sim.twin import Tolerances, Twin, twin_world_config
-from rad_core.trajectory import PATH_TOLERANCE_VIOLATED, TrajectoryAborted
 from rad_core.sim.world import World
 
 SCENE = generate_scene(GeneratorConfig(grid=3), 1)
@@ -234,8 +233,8 @@ def test_a_block_wedged_on_the_way_back_is_let_go_and_the_arm_backs_out_empty(tw
 
 
 def test_back_out_path_follows_the_rest_points_in_reverse():
-    from rad_core.sequencing.execute import back_out_path
-    from rad_core.trajectory import Trajectory, TrajectoryPoint
+    from rad_core.cell.trajectory import Trajectory, TrajectoryPoint
+    from rad_core.sequencing.execution.execute import back_out_path
     names = tuple(f'panda_joint{k}' for k in range(1, 8))
     a, b, c, d = (np.full(7, v) for v in (0.0, 0.1, 0.2, 0.3))
 

@@ -1,4 +1,4 @@
-"""Expert iteration (`rad_core.learning.expert`): demonstrations from the lines the verified planner
+"""Expert iteration (`rad_core.training.expert`): demonstrations from the lines the verified planner
 keeps, the DQfD loss that teaches them, and a run that resumes."""
 
 from __future__ import annotations
@@ -7,16 +7,22 @@ import json
 
 import pytest
 import torch
-
-from rad_core.errors import RadError
-from rad_core.generator import GeneratorConfig, generate_scene
+from rad_core.domain.errors import RadError
+from rad_core.domain.generator import GeneratorConfig, generate_scene
+from rad_core.env.mdp import Action, AssemblyEnv, EnvConfig
 from rad_core.learning import checkpoint as ckpt
-from rad_core.learning.expert import (ExpertConfig, ExpertIteration, RecordingPolicy, agreement, demonstrations,
-                                      dqfd_loss, plan_scene)
 from rad_core.learning.network import QNetwork, collate
 from rad_core.learning.policy import QPolicy
-from rad_core.mdp import Action, AssemblyEnv, EnvConfig
-from rad_core.sequencing.agent_plan import AgentPlanner
+from rad_core.sequencing.agent.agent_plan import AgentPlanner
+from rad_core.training.expert import (
+    ExpertConfig,
+    ExpertIteration,
+    RecordingPolicy,
+    agreement,
+    demonstrations,
+    dqfd_loss,
+    plan_scene,
+)
 
 MODEL = str(ckpt.resolve('milp-dqn-mixed'))
 

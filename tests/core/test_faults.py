@@ -12,20 +12,19 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-
 from rad_core.allocation import solve
-from rad_core.errors import RadError
+from rad_core.domain.errors import RadError
+from rad_core.domain.generator import GeneratorConfig, generate_scene
+from rad_core.domain.scene import Scene
+from rad_core.domain.transforms import yaw_of_quaternion
 from rad_core.gamp.action import MotionPlanner
-from rad_core.generator import GeneratorConfig, generate_scene
-from rad_core.scene import Scene
 from rad_core.sequencing import HeurPolicy
-from rad_core.sequencing.execute import ExecuteConfig, execute_assembly
-from rad_core.sequencing.plan import local_motion_planner, plan_assembly
-from rad_core.sequencing.result import deviation
+from rad_core.sequencing.execution.execute import ExecuteConfig, execute_assembly
+from rad_core.sequencing.execution.result import deviation
+from rad_core.sequencing.planning.plan import local_motion_planner, plan_assembly
 from rad_core.sim.faults import KINDS, FaultConfig
 from rad_core.sim.twin import Twin, TwinConfig, twin_world_config
 from rad_core.sim.world import World
-from rad_core.transforms import yaw_of_quaternion
 
 from scenes import U, scene
 
@@ -298,8 +297,8 @@ def test_a_block_left_2mm_into_its_neighbours_cell_is_built_against_not_onto(mot
     it onto its cell and keeps the offset; with plan_motion the second block's motion is planned again
     against it and set down flush beside it. Without, the plan's motion lowers the block onto its edge
     (in a free row it shoves the first back; in a structure it jams and the controller aborts)."""
+    from rad_core.cell.trajectory import TrajectoryAborted
     from rad_core.sim.twin import Tolerances
-    from rad_core.trajectory import TrajectoryAborted
     world = World(ROW, twin_world_config())
     twin = Twin(world)
     shoved = {}
@@ -346,9 +345,9 @@ def test_a_block_left_2mm_into_its_neighbours_cell_is_built_against_not_onto(mot
 def test_a_block_found_turned_on_the_table_is_picked_where_it_lies_and_built_straight(motion):
     """A block that slipped lands anyhow: flat on the table, 30 degrees off the lattice. Registration
     keeps it (at the nearest yaw, the turn as its measured offset) and GAMP grasps it as it lies."""
+    from rad_core.cell.trajectory import TrajectoryAborted
+    from rad_core.domain.transforms import yaw_quaternion
     from rad_core.sim.twin import Tolerances
-    from rad_core.trajectory import TrajectoryAborted
-    from rad_core.transforms import yaw_quaternion
     world = World(ROW, twin_world_config())
     twin = Twin(world)
     world.set_block_pose('q', [0.5, -0.2, U / 2], yaw_quaternion(30.0))

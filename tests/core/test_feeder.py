@@ -8,12 +8,11 @@ import copy
 
 import numpy as np
 import pytest
+from rad_core.domain.errors import RadError, SceneError
+from rad_core.domain.scene import Scene, station_position
+from rad_core.sequencing.planning.plan import moved
 
 from scenes import U, doc
-
-from rad_core.errors import RadError, SceneError
-from rad_core.scene import Scene, station_position
-from rad_core.sequencing.plan import moved
 
 STATION = [0.45, -0.25]
 
@@ -127,7 +126,7 @@ def test_motion_capture_does_not_see_into_the_feeder_and_registration_keeps_its_
 # ---- the generator -----------------------------------------------------------------------------
 
 def test_the_generator_uses_a_feeder_where_the_table_cannot_hold_the_blocks():
-    from rad_core.generator import GeneratorConfig, generate_scene
+    from rad_core.domain.generator import GeneratorConfig, generate_scene
     with pytest.raises(RadError, match='do not fit on the table'):
         generate_scene(GeneratorConfig(grid=8, supply='table'), 0)
     big = generate_scene(GeneratorConfig(grid=8), 0)
@@ -145,7 +144,7 @@ def test_the_generator_uses_a_feeder_where_the_table_cannot_hold_the_blocks():
 def test_the_arm_aware_allocation_judges_a_feeder_block_where_it_is_presented(fed):
     from rad_core.allocation.arm import arm_filter
     from rad_core.allocation.placements import enumerate_candidates
-    from rad_core.grid import Grid
+    from rad_core.domain.grid import Grid
     grid = Grid(fed)
     _, counts, report = arm_filter(fed, grid, enumerate_candidates(fed, grid))
     assert counts == {'cube': 2, 'I2': 1, 'L3_up': 0} and not report.blocks
@@ -155,9 +154,9 @@ def test_the_arm_aware_allocation_judges_a_feeder_block_where_it_is_presented(fe
 
 
 def test_a_plan_picks_every_block_at_the_station_and_the_twin_builds_it(fed):
-    from rad_core.coverage import measured_coverage
-    from rad_core.sequencing.agent_plan import AgentPlanner
-    from rad_core.sequencing.twin_build import build_teleported
+    from rad_core.domain.coverage import measured_coverage
+    from rad_core.sequencing.agent.agent_plan import AgentPlanner
+    from rad_core.sequencing.execution.twin_build import build_teleported
     planner = AgentPlanner('greedy')
     from rad_core.sim.world import World
     plan = planner(fed, None, 0)
@@ -175,8 +174,8 @@ def test_a_plan_picks_every_block_at_the_station_and_the_twin_builds_it(fed):
 
 
 def test_the_robot_mdp_takes_blocks_from_the_feeder(fed):
-    from rad_core.robot_env import RobotAssemblyEnv, RobotEnvConfig
-    from rad_core.mdp import Action
+    from rad_core.env.mdp import Action
+    from rad_core.env.robot_env import RobotAssemblyEnv, RobotEnvConfig
     with RobotAssemblyEnv(fed, RobotEnvConfig()) as env:
         env.reset()
         target = env.env.grid
@@ -188,8 +187,8 @@ def test_the_robot_mdp_takes_blocks_from_the_feeder(fed):
 
 
 def test_execution_without_a_feeder_says_so():
-    from rad_core.sequencing.agent_plan import AgentPlanner
-    from rad_core.sequencing.execute import execute_assembly
+    from rad_core.sequencing.agent.agent_plan import AgentPlanner
+    from rad_core.sequencing.execution.execute import execute_assembly
     scene = Scene.from_dict(feeder_doc())
     planner = AgentPlanner('greedy')
     result = execute_assembly(scene, lambda s, q: planner(s, q, 0), lambda t: None, lambda c: None, lambda: scene)
@@ -219,7 +218,7 @@ def _two_cubes_feeder(order: str, **feeder) -> Scene:
 def test_a_request_feeder_offers_one_block_of_each_type_its_blocks_being_alike():
     from rad_core.allocation.cpsat import solve
     from rad_core.allocation.guide import AllocationGuide
-    from rad_core.mdp import AssemblyEnv
+    from rad_core.env.mdp import AssemblyEnv
     scene = _two_cubes_feeder('request')
     result = solve(scene)
     env = AssemblyEnv(scene)
@@ -235,7 +234,7 @@ def test_a_request_feeder_offers_one_block_of_each_type_its_blocks_being_alike()
 def test_a_queue_feeder_offers_its_window_and_the_mdp_refuses_a_block_behind_it():
     from rad_core.allocation.cpsat import solve
     from rad_core.allocation.guide import AllocationGuide
-    from rad_core.mdp import Action, AssemblyEnv, Outcome
+    from rad_core.env.mdp import Action, AssemblyEnv, Outcome
     scene = _two_cubes_feeder('queue', window=1)
     env = AssemblyEnv(scene)
     guide = AllocationGuide(scene, solve(scene).placements, env.grid)
@@ -249,7 +248,7 @@ def test_a_queue_feeder_offers_its_window_and_the_mdp_refuses_a_block_behind_it(
 # ---- large targets -------------------------------------------------------------------------------
 
 def test_the_large_targets_have_50_to_100_blocks_in_a_feeder_enough_to_cover_them():
-    from rad_core.large_shapes import LARGE_SPECS, large_scene
+    from rad_core.domain.large_shapes import LARGE_SPECS, large_scene
     for name, spec in LARGE_SPECS.items():
         scene = large_scene(name)
         assert 45 <= len(scene.blocks) <= 100 and set(scene.feeder.blocks) == {b.id for b in scene.blocks}, name
@@ -259,7 +258,7 @@ def test_the_large_targets_have_50_to_100_blocks_in_a_feeder_enough_to_cover_the
 
 
 def test_a_cavity_wall_has_two_leaves_a_finger_apart_each_tiled_on_its_own():
-    from rad_core.large_shapes import CAVITY, FLUSH, LARGE_SPECS, large_scene
+    from rad_core.domain.large_shapes import CAVITY, FLUSH, LARGE_SPECS, large_scene
     scene = large_scene('cavity_wall')
     (region,) = scene.targets
     depths = sorted({int(c[1]) for c in region.filled})
@@ -270,8 +269,8 @@ def test_a_cavity_wall_has_two_leaves_a_finger_apart_each_tiled_on_its_own():
 
 
 def test_a_coursed_tiling_spans_a_two_cell_opening_with_a_lintel_resting_on_both_sides():
-    from rad_core.large_shapes import coursed_tiling
-    from rad_core.shapes import face
+    from rad_core.domain.large_shapes import coursed_tiling
+    from rad_core.domain.shapes import face
     _, cells = face('######',
                     '#..###',
                     '#..###')
@@ -282,7 +281,7 @@ def test_a_coursed_tiling_spans_a_two_cell_opening_with_a_lintel_resting_on_both
 
 
 def test_a_result_document_keeps_what_is_left_in_the_feeder(fed):
-    from rad_core.sequencing.result import final_scene, result_document
+    from rad_core.sequencing.execution.result import final_scene, result_document
     after = moved(fed, 'c1', (0.45, 0.1, U / 2), 0)
     result = result_document(fed, None, [], after, {})
     assert result['final_feeder']['blocks'] == ['c0', 'i0']

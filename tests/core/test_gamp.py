@@ -5,22 +5,28 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from rad_core.allocation import AllocationParams, solve
-from rad_core.blocks import DEFAULT_LIBRARY
-from rad_core.errors import RadError
+from rad_core.cell import panda
+from rad_core.cell.motion import GripperCommand, Motion
+from rad_core.cell.robot_model import PANDA, robot_model
+from rad_core.cell.trajectory import limit_ratios
+from rad_core.domain.blocks import DEFAULT_LIBRARY
+from rad_core.domain.errors import RadError
+from rad_core.domain.generator import GeneratorConfig, generate_scene
+from rad_core.domain.scene import Scene
+from rad_core.domain.transforms import yaw_of_quaternion
 from rad_core.gamp import GampResult, Grasp, allocated_pose, block_grasps, placement_pose, plan_action
-from rad_core.gamp.collision import (CollisionConfig, _apart, attachment_from_world, make_collision_fn,
-                                     place_attached, robot_links, self_collision_pairs)
+from rad_core.gamp.collision import (
+    CollisionConfig,
+    _apart,
+    attachment_from_world,
+    make_collision_fn,
+    place_attached,
+    robot_links,
+    self_collision_pairs,
+)
 from rad_core.gamp.ik import solve_pose, solve_top_down
-from rad_core.generator import GeneratorConfig, generate_scene
-from rad_core.motion import GripperCommand, Motion
-from rad_core.robot_model import PANDA, robot_model
-from rad_core.trajectory import limit_ratios
-from rad_core.scene import Scene
-from rad_core.sim import panda
 from rad_core.sim.world import World
-from rad_core.transforms import yaw_of_quaternion
 
 U = 0.05
 

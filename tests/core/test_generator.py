@@ -2,10 +2,9 @@ import math
 
 import numpy as np
 import pytest
-
-from rad_core.errors import RadError
-from rad_core.generator import GeneratorConfig, generate_scene, inside_polygon, target_statistics
-from rad_core.scene import Scene
+from rad_core.domain.errors import RadError
+from rad_core.domain.generator import GeneratorConfig, generate_scene, inside_polygon, target_statistics
+from rad_core.domain.scene import Scene
 
 
 def test_same_seed_same_scene_other_seed_other_scene():

@@ -3,14 +3,13 @@
 import numpy as np
 import pytest
 import torch
-
 from rad_core.allocation import solve
-from rad_core.generator import GeneratorConfig, generate_scene
+from rad_core.domain.generator import GeneratorConfig, generate_scene
+from rad_core.domain.shapes import shape_scene
+from rad_core.env.mdp import AssemblyEnv, EnvConfig
 from rad_core.learning.graph import NON_TARGET, PLACED, TARGET, UNPLACED, Observer, attention_allowed
 from rad_core.learning.network import NetConfig, QNetwork, collate, graph_max
-from rad_core.mdp import AssemblyEnv, EnvConfig
-from rad_core.sequencing.actions import action_space, all_actions, relative_actions
-from rad_core.shapes import shape_scene
+from rad_core.sequencing.decide.actions import action_space, all_actions, relative_actions
 
 GEOM = EnvConfig(stability='none')
 

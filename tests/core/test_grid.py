@@ -1,9 +1,8 @@
-"""The voxel grid's cell look-ups (`rad_core.grid`)."""
+"""The voxel grid's cell look-ups (`rad_core.domain.grid`)."""
 
 import numpy as np
-
-from rad_core.generator import GeneratorConfig, generate_scene
-from rad_core.grid import Grid
+from rad_core.domain.generator import GeneratorConfig, generate_scene
+from rad_core.domain.grid import Grid
 
 
 def test_the_cell_below_each_cell_is_the_one_a_layer_down_in_its_region_and_none_on_the_bottom():

@@ -1,13 +1,14 @@
 """support='hand': the allocation a top-down hand can place in some order (`allocation.cpsat`)."""
 
 import pytest
-
-from rad_core.agents import label, parse
 from rad_core.allocation.cpsat import AllocationParams, solve
-from rad_core.generator import GeneratorConfig, generate_scene
-from rad_core.grid import Grid
-from rad_core.sequencing.agent_plan import AgentPlanner, reallocation_support
-from rad_core.sequencing.hand_order import hand_order
+from rad_core.allocation.order import hand_order
+from rad_core.domain.generator import GeneratorConfig, generate_scene
+from rad_core.domain.grid import Grid
+from rad_core.sequencing.agent.agent_plan import AgentPlanner
+from rad_core.sequencing.decide.agents import label, parse
+from rad_core.sequencing.planning.reallocation import reallocation_support
+
 from scenes import flush_square, scene
 
 
@@ -64,7 +65,7 @@ def test_the_ceiling_part_builds_what_the_allocations_cannot():
     # g = 5 seed 16 (flush): the arm's and the hand's allocations fill every cell exactly, and no
     # order of either builds more than 7 of 9 (the ceiling's search exhausts them). Every pose
     # searched, an I3 one cell past the target where they take an exact I2 builds all 9.
-    from rad_core.evaluation import evaluate
+    from rad_core.experiment.evaluation import evaluate
     scene = generate_scene(GeneratorConfig(grid=5, sides=2), 16)
     plain = evaluate('default', [('s16', scene)], robot=True, seed=0)['scenes'][0]
     more = evaluate('default+ceiling:30', [('s16', scene)], robot=True, seed=0)['scenes'][0]

@@ -2,20 +2,20 @@
 
 import numpy as np
 import pytest
-
 from rad_core.allocation import AllocationParams, solve
-from rad_core.allocation.arm import ArmCoverageBound, HandBlocked
+from rad_core.allocation.arm import HandBlocked
+from rad_core.allocation.bounds import ArmCoverageBound
 from rad_core.allocation.cpsat import coverage_bound
 from rad_core.allocation.placements import enumerate_candidates
-from rad_core.errors import RadError
+from rad_core.domain.errors import RadError
+from rad_core.domain.grid import Grid
+from rad_core.domain.scene import Scene
+from rad_core.domain.transforms import yaw_quaternion
+from rad_core.env.mdp import Action, AssemblyEnv
 from rad_core.gamp import plan_action
 from rad_core.gamp.hand_cells import blocking_offsets
-from rad_core.grid import Grid
-from rad_core.mdp import AssemblyEnv, Action
-from rad_core.scene import Scene
-from rad_core.sequencing.reallocation import placed_scene
+from rad_core.sequencing.planning.reallocation import placed_scene
 from rad_core.sim.world import World
-from rad_core.transforms import yaw_quaternion
 
 from scenes import doc
 
@@ -105,10 +105,10 @@ def test_the_ordered_bound_is_never_below_what_the_robot_builds_from_a_state():
     # Soundness on scenes nobody arranged for it: the best line the ceiling's search finds in 20 s
     # without the order in its bound, replayed in a planning twin; at every state on it the
     # ordered bound is at least the coverage the line reaches from there.
-    from rad_core.generator import GeneratorConfig, generate_scene
-    from rad_core.robot_env import RobotAssemblyEnv, RobotEnvConfig
-    from rad_core.sequencing.exact import robot_ceiling
-    from rad_core.shapes import shape_scene
+    from rad_core.domain.generator import GeneratorConfig, generate_scene
+    from rad_core.domain.shapes import shape_scene
+    from rad_core.env.robot_env import RobotAssemblyEnv, RobotEnvConfig
+    from rad_core.sequencing.bounds.robot_ceiling import robot_ceiling
     for scene in (generate_scene(GeneratorConfig(grid=5), 31), shape_scene('window')):
         found = robot_ceiling(scene, 20.0, ordered=False, every_pose=False)
         with RobotAssemblyEnv(scene, RobotEnvConfig(execution='teleport')) as renv:
@@ -128,7 +128,7 @@ def test_every_pose_the_hand_test_blocks_is_refused_by_the_planner_on_a_generate
     # Soundness on a scene nobody arranged for it: the allocation's poses are built one by one at
     # their exact poses; at each state every free pose the test calls blocked, for a block of its
     # type still on the table, is planned with GAMP, which must refuse it.
-    from rad_core.generator import GeneratorConfig, generate_scene
+    from rad_core.domain.generator import GeneratorConfig, generate_scene
     from rad_core.gamp import allocated_pose
     checked = 0
     for config, seed in ((GeneratorConfig(grid=5), 7), (GeneratorConfig(grid=5), 11),

@@ -4,12 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 from rad_core.allocation import AllocationParams, solve
 from rad_core.allocation.arm import HandBlocked
-from rad_core.grid import Grid
-from rad_core.scene import Scene
-from rad_core.sequencing.hand_order import hand_order
+from rad_core.allocation.order import hand_order
+from rad_core.domain.grid import Grid
+from rad_core.domain.scene import Scene
 
 from scenes import scene as make_scene
 
@@ -80,9 +79,9 @@ def test_poses_needing_no_order_give_no_precedences_and_built_cells_count():
 def test_order_repair_with_the_hands_order_builds_held_out_spire_cup_whole():
     # Refusals alone taught contradictory precedences here (two tall blocks back to back, each
     # placeable only while the other is not there yet): the default agent stopped at 0.917.
-    from rad_core.agents import parse
-    from rad_core.sequencing.agent_plan import AgentPlanner
-    from rad_core.shapes import shape_scene
+    from rad_core.domain.shapes import shape_scene
+    from rad_core.sequencing.agent.agent_plan import AgentPlanner
+    from rad_core.sequencing.decide.agents import parse
     scene = shape_scene('spire_cup')
     assert hand_order(scene, solve(scene, AllocationParams(support='arm')).placements).precedences
     plan = AgentPlanner('default', time_limit_s=120)(scene, None, 0)
@@ -95,8 +94,9 @@ def test_the_ordered_cover_picks_poses_and_an_order_the_hand_can_keep_within_the
     # The flush square from two I2s and three cubes: four cells as a cover, but whichever block
     # closes it has a neighbour or its own length in the fingers' way. The ordered cover takes
     # three cells with an order, and never more blocks of a type than the table holds.
+    from rad_core.allocation.order import ordered_cover
+
     from scenes import flush_square
-    from rad_core.sequencing.hand_order import ordered_cover
     scene = flush_square()
     cover = ordered_cover(scene)
     assert cover.coverage == pytest.approx(0.75) and len(cover.order) == len(cover.placements)
@@ -118,8 +118,9 @@ def test_order_repairs_fourth_chain_plans_the_ordered_cover_where_the_allocation
     # Generated g = 5 seed 17: the hand's and the arm's allocations and their repair rounds stop at
     # 0.8; the cover chosen together with an order the hand can keep fills the target. Without that
     # chain (its CP-SAT answering nothing), the agent stops where it did.
-    from rad_core.generator import GeneratorConfig, generate_scene
-    from rad_core.sequencing import agent_plan, hand_order as ho
+    from rad_core.allocation import order as ho
+    from rad_core.domain.generator import GeneratorConfig, generate_scene
+    from rad_core.sequencing.agent import agent_plan
     scene = generate_scene(GeneratorConfig(grid=5, sides=2), 17)
     planner = agent_plan.AgentPlanner('default', time_limit_s=120)
     plan = planner(scene, None, 0)

@@ -6,13 +6,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from rad_core import hard_shapes as hs
-from rad_core import shapes
-from rad_core.blocks import canonical_shape
-from rad_core.errors import RadError
+from rad_core.domain import hard_shapes as hs
+from rad_core.domain import shapes
+from rad_core.domain.blocks import canonical_shape
+from rad_core.domain.errors import RadError
+from rad_core.domain.scene import Scene
 from rad_core.gamp.grasps import block_grasps
-from rad_core.scene import Scene
 
 REPO = Path(__file__).resolve().parents[2]
 SCENE_DIR = REPO / 'scenes' / 'hard'

@@ -4,9 +4,8 @@ import math
 
 import numpy as np
 import pytest
-
+from rad_core.cell import panda
 from rad_core.gamp.ik import hand_yaw_options, solve_pose, solve_top_down
-from rad_core.sim import panda
 from rad_core.sim.world import World
 
 
@@ -89,8 +88,8 @@ def test_hand_yaw_options_are_the_two_symmetric_hand_yaws_best_wrist_first(world
 
 def test_numpy_forward_kinematics_is_pybullets(world):
     """gamp.kinematics reads the chain off the loaded robot: the grasp target where pybullet puts it."""
+    from rad_core.domain.transforms import matrix_from_quaternion
     from rad_core.gamp.kinematics import kinematics
-    from rad_core.transforms import matrix_from_quaternion
     kin = kinematics(world)
     rng = np.random.default_rng(11)
     with world.preserved():

@@ -1,12 +1,11 @@
 import numpy as np
 import pytest
-
 from rad_core.allocation import solve
 from rad_core.allocation.guide import AllocationGuide
-from rad_core.errors import RadError
-from rad_core.mdp import TERMINATE, Action, AssemblyEnv, EnvConfig, Outcome
-from rad_core.scene import Scene
-from rad_core.sequencing.episode import Decision, run_episode
+from rad_core.domain.errors import RadError
+from rad_core.domain.scene import Scene
+from rad_core.env.mdp import TERMINATE, Action, AssemblyEnv, EnvConfig, Outcome
+from rad_core.sequencing.decide.episode import Decision, run_episode
 
 from scenes import U, doc, scene
 

@@ -5,13 +5,19 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-
-from rad_core.errors import RadError
-from rad_core.generator import GeneratorConfig, generate_scene
-from rad_core.grid import Grid, blocks_on_grid
-from rad_core.scene import Block, Scene
-from rad_core.sim.mocap import (RegistrationConfig, RigidBodyPose, body_map_for, register_scene, register_world,
-                                scene_to_bodies, yaw_quaternion)
+from rad_core.cell.mocap import (
+    RegistrationConfig,
+    RigidBodyPose,
+    body_map_for,
+    register_scene,
+    register_world,
+    scene_to_bodies,
+    yaw_quaternion,
+)
+from rad_core.domain.errors import RadError
+from rad_core.domain.generator import GeneratorConfig, generate_scene
+from rad_core.domain.grid import Grid, blocks_on_grid
+from rad_core.domain.scene import Block, Scene
 
 from scenes import U, scene
 

@@ -5,12 +5,18 @@ import math
 
 import numpy as np
 import pytest
-
-from rad_core.errors import RadError
-from rad_core.mocap_input import (BodyEntry, BodyMap, FrameTransform, MocapFrames, MocapTracker, quaternion_multiply,
-                                  wait_for_bodies)
-from rad_core.sim.mocap import RegistrationConfig, RigidBodyPose, register_scene, scene_to_bodies
-from rad_core.transforms import matrix_from_quaternion, yaw_quaternion
+from rad_core.cell.mocap import RegistrationConfig, RigidBodyPose, register_scene, scene_to_bodies
+from rad_core.cell.mocap_input import (
+    BodyEntry,
+    BodyMap,
+    FrameTransform,
+    MocapFrames,
+    MocapTracker,
+    quaternion_multiply,
+    wait_for_bodies,
+)
+from rad_core.domain.errors import RadError
+from rad_core.domain.transforms import matrix_from_quaternion, yaw_quaternion
 
 from scenes import scene
 

@@ -7,15 +7,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
+from rad_core.cell.motion import Motion
+from rad_core.domain.scene import Scene
+from rad_core.domain.shapes import LayoutConfig, footprint, move_aside_spot
 from rad_core.gamp.action import MotionPlanner, SceneAction, table_neighbours
 from rad_core.gamp.planner import GampConfig
-from rad_core.motion import Motion
-from rad_core.scene import Scene
-from rad_core.sequencing.plan import PlanStep, local_motion_planner
-from rad_core.shapes import LayoutConfig, footprint, move_aside_spot
+from rad_core.sequencing.planning.plan import PlanStep, local_motion_planner
 
-from scenes import packed, scene as make_scene
+from scenes import packed
+from scenes import scene as make_scene
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -42,7 +42,7 @@ def test_a_spot_is_free_within_reach_clear_of_targets_and_of_the_block_to_free()
     scene = hard('pento_floor')
     config = LayoutConfig()
     position, yaw = move_aside_spot(scene, 'b1', clear_of=['b4'])
-    from rad_core.sequencing.plan import moved as moved_scene
+    from rad_core.sequencing.planning.plan import moved as moved_scene
     moved = moved_scene(scene, 'b1', position, yaw)
     units = footprint(moved.block('b1'), moved.block_types, moved.unit)
     r = np.linalg.norm(units, axis=1)
@@ -126,7 +126,7 @@ def test_plan_steps_carry_the_moves_and_the_scene_after_follows_them(planners):
 
 
 def test_the_twin_puts_moved_blocks_where_the_step_says():
-    from rad_core.sequencing.twin_build import build_teleported
+    from rad_core.sequencing.execution.twin_build import build_teleported
     scene = hard('pento_floor')
     spot, yaw = move_aside_spot(scene, 'b1', clear_of=['b4'])
     target = scene.targets[0]

@@ -7,11 +7,16 @@ lowest layer resting on the table).
 
 import numpy as np
 import pytest
-
-from rad_core.errors import RadError
-from rad_core.mdp import Action, AssemblyEnv, EnvConfig, Outcome
-from rad_core.physics import (PhysicsConfig, PhysicsStability, add_block_body, block_shape, direct_client,
-                              polycube_inertia)
+from rad_core.domain.errors import RadError
+from rad_core.env.mdp import Action, AssemblyEnv, EnvConfig, Outcome
+from rad_core.sim.physics import (
+    PhysicsConfig,
+    PhysicsStability,
+    add_block_body,
+    block_shape,
+    direct_client,
+    polycube_inertia,
+)
 
 from scenes import U, scene
 

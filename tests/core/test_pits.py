@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-from scenes import U, doc
-
 from rad_core.allocation.cpsat import solve
 from rad_core.allocation.guide import AllocationGuide
-from rad_core.mdp import AssemblyEnv, EnvConfig
-from rad_core.scene import Scene
-from rad_core.sequencing.plan import pits_last
+from rad_core.domain.scene import Scene
+from rad_core.env.mdp import AssemblyEnv, EnvConfig
+from rad_core.sequencing.planning.plan import pits_last
+
+from scenes import U, doc
 
 
 def test_a_block_rising_above_an_open_pose_beside_it_is_tried_after_the_others():

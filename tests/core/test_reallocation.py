@@ -1,4 +1,4 @@
-"""Re-allocation when sequencing stalls (rad_core.sequencing.reallocation) and its CP-SAT parts."""
+"""Re-allocation when sequencing stalls (rad_core.sequencing.planning.reallocation) and its CP-SAT parts."""
 
 from __future__ import annotations
 
@@ -6,21 +6,21 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-
 from rad_core.allocation import AllocationParams, solve
-from rad_core.allocation.cpsat import pose_key, rests_now
-from rad_core.errors import RadError
-from rad_core.evaluation import evaluate, get_agent
-from rad_core.sequencing.deciders import Check
-from rad_core.generator import GeneratorConfig, generate_scene
-from rad_core.mdp import AssemblyEnv, EnvConfig
-from rad_core.sequencing.actions import AllocationActions
-from rad_core.sequencing.episode import run_episode
-from rad_core.sequencing.deciders import policy_decider
-from rad_core.sequencing.policy import HeurPolicy
-from rad_core.sequencing.reallocation import (ReallocationConfig, Reallocator, placed_scene,
-                                              with_reallocation)
-from tests.scenes import U, scene as small_scene
+from rad_core.allocation.constraints import rests_now
+from rad_core.allocation.cpsat import pose_key
+from rad_core.domain.errors import RadError
+from rad_core.domain.generator import GeneratorConfig, generate_scene
+from rad_core.env.mdp import AssemblyEnv, EnvConfig
+from rad_core.experiment.evaluation import evaluate, get_agent
+from rad_core.sequencing.decide.actions import AllocationActions
+from rad_core.sequencing.decide.deciders import Check, policy_decider
+from rad_core.sequencing.decide.episode import run_episode
+from rad_core.sequencing.decide.policy import HeurPolicy
+from rad_core.sequencing.planning.reallocation import ReallocationConfig, Reallocator, placed_scene, with_reallocation
+
+from tests.scenes import U
+from tests.scenes import scene as small_scene
 
 STABLE = AllocationParams(support='stable')
 ROW = [{'name': 'front', 'origin': [0.45, 0.1, U / 2], 'size': [2, 1, 1], 'filled': [[0, 0, 0], [1, 0, 0]]}]
@@ -137,11 +137,11 @@ def test_a_failing_pose_becomes_a_no_good_and_the_sequencer_goes_on_with_a_new_a
     def check(action) -> Check:   # the I2 cannot be placed (a fault made to happen), cubes can
         return Check(action.block != i2_block, 'placement: hand hits block c1')
 
-    from rad_core.sequencing.policy import first_feasible
+    from rad_core.sequencing.decide.policy import first_feasible
 
     def decide_verified(env_, rng):
-        from rad_core.sequencing.episode import Decision, stop
-        from rad_core.sequencing.policy import ranked_actions
+        from rad_core.sequencing.decide.episode import Decision, stop
+        from rad_core.sequencing.decide.policy import ranked_actions
         action, _, _ = first_feasible(env_, ranked_actions(HeurPolicy(), env_, space(env_), rng), check)
         return Decision(action) if action is not None else stop('no feasible next action')
 

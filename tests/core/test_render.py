@@ -5,15 +5,25 @@ import zlib
 
 import numpy as np
 import pytest
-
 from rad_core.allocation import solve
-from rad_core.colours import PINK, type_colour
-from rad_core.errors import RadError
-from rad_core.mdp import Action, AssemblyEnv, EnvConfig
-from rad_core.png import SIGNATURE, encode_apng, encode_png, write_png
-from rad_core.render import (GHOST_EDGE, GUTTER, OFF_TARGET, build_layers, fit_camera, frame_points, render_build,
-                             render_scene, save_build_pictures, save_scene_png, scenes_after_steps)
-from rad_core.scene import Scene
+from rad_core.domain.colours import PINK, type_colour
+from rad_core.domain.errors import RadError
+from rad_core.domain.scene import Scene
+from rad_core.env.mdp import Action, AssemblyEnv, EnvConfig
+from rad_core.view.png import SIGNATURE, encode_apng, encode_png, write_png
+from rad_core.view.render import (
+    GHOST_EDGE,
+    GUTTER,
+    OFF_TARGET,
+    build_layers,
+    fit_camera,
+    frame_points,
+    render_build,
+    render_scene,
+    save_build_pictures,
+    save_scene_png,
+    scenes_after_steps,
+)
 
 from scenes import U, scene
 
@@ -138,7 +148,7 @@ def test_allocation_and_placed_blocks_cover_the_targets(picture):
 
 
 def test_type_colours_are_fixed_and_distinct():
-    from rad_core.blocks import DEFAULT_LIBRARY
+    from rad_core.domain.blocks import DEFAULT_LIBRARY
     colours = [type_colour(n) for n in DEFAULT_LIBRARY]
     assert len(set(colours)) == len(colours)
     assert type_colour('my_own_type') == type_colour('my_own_type')
@@ -185,8 +195,8 @@ def test_png_rejects_what_it_cannot_write(bad):
 
 
 def test_robot_is_drawn_at_the_given_joints():
-    from rad_core.render import ROBOT_BOX
-    from rad_core.sim.panda import HOME
+    from rad_core.cell.panda import HOME
+    from rad_core.view.render import ROBOT_BOX
     s = scene()
     camera = fit_camera(ROBOT_BOX[0], ROBOT_BOX[1] + [0.6, 0, 0], 4 / 3)
     bare = render_scene(s, width=160, height=120, camera=camera)

@@ -7,16 +7,16 @@ import time
 
 import numpy as np
 import pytest
-
-from rad_core.agents import label, parse
 from rad_core.allocation import solve
-from rad_core.errors import RadError
-from rad_core.generator import GeneratorConfig, generate_scene
-from rad_core.mdp import Action, AssemblyEnv, EnvConfig
+from rad_core.allocation.order import Precedence
+from rad_core.domain.errors import RadError
+from rad_core.domain.generator import GeneratorConfig, generate_scene
+from rad_core.env.mdp import Action, AssemblyEnv, EnvConfig
 from rad_core.sequencing import HeurPolicy
-from rad_core.sequencing.actions import AllocationActions
-from rad_core.sequencing.agent_plan import plan_for_agent, remembered_motion, remembered_rank
-from rad_core.sequencing.plan import (MotionPlan, Precedence, conflicts_of, plan_assembly, precedences_last)
+from rad_core.sequencing.agent.agent_plan import plan_for_agent, remembered_motion, remembered_rank
+from rad_core.sequencing.decide.actions import AllocationActions
+from rad_core.sequencing.decide.agents import label, parse
+from rad_core.sequencing.planning.plan import MotionPlan, conflicts_of, plan_assembly, precedences_last
 
 
 def test_repair_is_an_agent_part_that_needs_verification():

@@ -2,15 +2,14 @@
 
 import numpy as np
 import pytest
-
-from rad_core.sequencing import supported_actions
 from rad_core.allocation import solve
 from rad_core.allocation.guide import AllocationGuide
-from rad_core.generator import GeneratorConfig, generate_scene
-from rad_core.mdp import TERMINATE, Action, Outcome
-from rad_core.errors import RadError
-from rad_core.robot_env import AtRest, RobotAssemblyEnv, RobotEnvConfig, outcome_class
-from rad_core.scene import Scene
+from rad_core.domain.errors import RadError
+from rad_core.domain.generator import GeneratorConfig, generate_scene
+from rad_core.domain.scene import Scene
+from rad_core.env.mdp import TERMINATE, Action, Outcome
+from rad_core.env.robot_env import AtRest, RobotAssemblyEnv, RobotEnvConfig, outcome_class
+from rad_core.sequencing import supported_actions
 
 U = 0.05
 SEED = 5   # a generated scene whose supported allocation poses are all reachable
@@ -121,7 +120,7 @@ MARKOV = RobotEnvConfig(execution='teleport', markov=True)
 def test_markov_puts_the_arm_home_and_unplaced_blocks_back_so_gamp_sees_only_the_state():
     """Two orders of the same two placements leave the same world, so GAMP's plan of a
     third action is the same (a pure function of scene, placed blocks and action)."""
-    from rad_core.sim import panda
+    from rad_core.cell import panda
     blocks = [(name, 'cube', (x, -0.2, U / 2)) for name, x in (('c', 0.45), ('d', 0.55), ('e', 0.65))]
     scene = scene_of(blocks, filled=((0, 0, 0), (1, 0, 0), (2, 0, 0)))
     plans = []

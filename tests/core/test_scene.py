@@ -4,9 +4,8 @@ import math
 
 import numpy as np
 import pytest
-
-from rad_core.errors import SceneError
-from rad_core.scene import MAX_GRID_CELLS, Scene
+from rad_core.domain.errors import SceneError
+from rad_core.domain.scene import MAX_GRID_CELLS, Scene
 
 from scenes import U, doc, mutated, scene
 
@@ -141,7 +140,7 @@ def test_measured_offsets_round_trip_and_are_checked():
 
 
 def test_moving_a_block_drops_its_measured_offset_only():
-    from rad_core.sequencing.plan import moved
+    from rad_core.sequencing.planning.plan import moved
     d = doc()
     d['measured_offsets'] = {'c0': [0.002, 0.0], 'c1': [0.0, 0.001]}
     s = moved(Scene.from_dict(d), 'c1', (0.5, -0.3, U / 2), 0)

@@ -8,10 +8,9 @@ import sys
 import numpy as np
 import pytest
 import trimesh
-
 from rad_core.cli import main
-from rad_core.scene import Scene
-from rad_core.voxels import cells_to_mesh
+from rad_core.domain.scene import Scene
+from rad_core.domain.voxels import cells_to_mesh
 
 
 def letter_t(path) -> str:
@@ -41,12 +40,12 @@ def test_from_mesh_gives_a_scene_that_checks_allocates_fully_and_plans(tmp_path,
     assert rc == 0 and stdout.startswith('ok:') and '5 target cells' in stdout
 
     from rad_core.allocation.cpsat import AllocationParams, solve
-    from rad_core.coverage import placements_coverage
+    from rad_core.domain.coverage import placements_coverage
     scene = Scene.load(out)
     result = solve(scene, AllocationParams(support='stable'))
     assert result.status == 'OPTIMAL' and placements_coverage(scene, result.placements) == 1.0
 
-    from rad_core.sequencing.agent_plan import AgentPlanner
+    from rad_core.sequencing.agent.agent_plan import AgentPlanner
     planner = AgentPlanner('greedy')
     try:
         plan = planner(scene, None)

@@ -1,4 +1,4 @@
-"""The test-time searches (rad_core.sequencing.search): golden trees on a toy model,
+"""The test-time searches (rad_core.sequencing.decide.search): golden trees on a toy model,
 the paper's rules checked one by one, and a real robot env left as it was found.
 
 Golden trees: tests/core/golden/search_trees.json, written with
@@ -12,10 +12,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from rad_core.agents import SIMULATION_SEARCHES
-from rad_core.mdp import TERMINATE, Action
-from rad_core.sequencing.search import SEARCHES, EnvModel, first_round, halving, mcts
+from rad_core.env.mdp import TERMINATE, Action
+from rad_core.sequencing.decide.agents import SIMULATION_SEARCHES
+from rad_core.sequencing.decide.search import SEARCHES, EnvModel, first_round, halving, mcts
 
 # The searches whose budget counts simulations (bnb's is seconds; tests/core/test_exact.py has its own).
 SIMULATED = {name: SEARCHES[name] for name in SIMULATION_SEARCHES}
@@ -186,10 +185,10 @@ def test_budget_and_epsilon_are_validated():
 @pytest.fixture(scope='module')
 def robot_case():
     from rad_core.allocation import AllocationParams, solve
-    from rad_core.generator import GeneratorConfig, generate_scene
+    from rad_core.domain.generator import GeneratorConfig, generate_scene
+    from rad_core.env.robot_env import RobotAssemblyEnv, RobotEnvConfig
     from rad_core.learning.policy import QPolicy
-    from rad_core.robot_env import RobotAssemblyEnv, RobotEnvConfig
-    from rad_core.sequencing.actions import action_space
+    from rad_core.sequencing.decide.actions import action_space
     scene = generate_scene(GeneratorConfig(grid=3), 5)
     renv = RobotAssemblyEnv(scene, RobotEnvConfig(execution='teleport'))
     renv.reset()

@@ -1,15 +1,14 @@
-"""The sequencer (rad_core.sequencing.sequencer): what the sequencer node serves."""
+"""The sequencer (rad_core.sequencing.decide.sequencer): what the sequencer node serves."""
 
 import pytest
-
 from rad_core.allocation import AllocationParams, solve
 from rad_core.allocation.placements import Placement
-from rad_core.errors import RadError
-from rad_core.evaluation import evaluate, get_agent
-from rad_core.scene_sources import generated_scenes
-from rad_core.generator import GeneratorConfig, generate_scene
+from rad_core.domain.errors import RadError
+from rad_core.domain.generator import GeneratorConfig, generate_scene
+from rad_core.domain.scene_sources import generated_scenes
+from rad_core.experiment.evaluation import evaluate, get_agent
 from rad_core.learning.checkpoint import CheckpointError
-from rad_core.sequencing.sequencer import POLICIES, Sequencer, SequencerConfig
+from rad_core.sequencing.decide.sequencer import POLICIES, Sequencer, SequencerConfig
 
 SCENE = generate_scene(GeneratorConfig(grid=3), 4)
 PLACEMENTS = solve(SCENE, AllocationParams()).placements
@@ -109,7 +108,7 @@ def test_budget_only_for_search_agents():
 
 def test_dfs_answers_along_its_best_line_without_searching_again():
     from rad_core.gamp.action import MotionPlanner
-    from rad_core.sequencing.plan import local_motion_planner, plan_assembly
+    from rad_core.sequencing.planning.plan import local_motion_planner, plan_assembly
     s = Sequencer(SequencerConfig(policy='milp-dqn-dfs', search_time_s=30.0))
     scene = generate_scene(GeneratorConfig(grid=3), 1)
     stable = solve(scene, AllocationParams(support='stable')).placements

@@ -4,15 +4,14 @@ import time
 
 import numpy as np
 import pytest
-
 from rad_core.allocation import solve
 from rad_core.allocation.guide import AllocationGuide
 from rad_core.allocation.result import AllocationResult
-from rad_core.generator import GeneratorConfig, generate_scene
-from rad_core.mdp import AssemblyEnv, EnvConfig
-from rad_core import support
+from rad_core.domain import support
+from rad_core.domain.generator import GeneratorConfig, generate_scene
+from rad_core.env.mdp import AssemblyEnv, EnvConfig
 from rad_core.sequencing import HeurPolicy, ranked_actions
-from rad_core.sequencing.plan import MotionPlan, plan_assembly
+from rad_core.sequencing.planning.plan import MotionPlan, plan_assembly
 
 
 def test_heur_ranks_only_fully_supported_actions_and_is_seeded():
@@ -70,7 +69,7 @@ def test_failed_allocation_and_time_limit_are_reasons(motion):
 
 
 def test_a_plan_can_ask_a_ranking_callable_as_the_sequencer_node_is_asked(motion):
-    from rad_core.sequencing.sequencer import Sequencer, SequencerConfig
+    from rad_core.sequencing.decide.sequencer import Sequencer, SequencerConfig
     scene = generate_scene(GeneratorConfig(grid=3), 1)
     sequencer = Sequencer(SequencerConfig(policy='heur', seed=1))
     asked = []
@@ -91,9 +90,9 @@ def test_a_plan_can_ask_a_ranking_callable_as_the_sequencer_node_is_asked(motion
 
 
 def test_a_ranking_outside_the_allocation_is_never_taken_and_a_failing_sequencer_propagates(motion):
-    from rad_core.errors import RadError
+    from rad_core.domain.errors import RadError
     from rad_core.gamp.action import SceneAction
-    from rad_core.sequencing.sequencer import Ranking
+    from rad_core.sequencing.decide.sequencer import Ranking
     scene = generate_scene(GeneratorConfig(grid=3), 1)
     wrong = Ranking([SceneAction(scene.blocks[0].id, 0, scene.targets[0].name, (2, 0, 2), 0),
                      SceneAction('nosuch', 0, scene.targets[0].name, (0, 0, 0), 0)], [1.0, 0.5], False, '', {})
@@ -150,7 +149,7 @@ def test_a_pose_whose_block_would_tip_the_structure_is_a_no_good_of_the_robots_r
     then GAMP. A pose the arm can reach but whose block would bring the structure down is
     excluded like one the arm cannot reach (it was not: GAMP alone said it could be built, so
     the re-solve proposed it again and the plan ended)."""
-    import rad_core.sequencing.plan as plan_module
+    import rad_core.sequencing.planning.plan as plan_module
     scene = generate_scene(GeneratorConfig(grid=3), 1)
     floor = float(AssemblyEnv(scene).grid.centres[:, 2].min())
 
@@ -165,9 +164,9 @@ def test_a_pose_whose_block_would_tip_the_structure_is_a_no_good_of_the_robots_r
 
 
 def test_with_fallbacks_asks_for_them_only_where_the_first_answer_is_to_stop():
-    from rad_core.mdp import Action
-    from rad_core.sequencing.deciders import with_fallbacks
-    from rad_core.sequencing.episode import Decision, stop
+    from rad_core.env.mdp import Action
+    from rad_core.sequencing.decide.deciders import with_fallbacks
+    from rad_core.sequencing.decide.episode import Decision, stop
     build, asked = Decision(Action(0, 0, 0, 0)), []
 
     def decide(env, rng, fallbacks=False):
@@ -181,7 +180,7 @@ def test_with_fallbacks_asks_for_them_only_where_the_first_answer_is_to_stop():
 
 
 def test_ranked_indices_puts_the_fallbacks_below_stopping_after_the_rest_and_never_a_ruled_out_one():
-    from rad_core.sequencing.policy import ranked_indices
+    from rad_core.sequencing.decide.policy import ranked_indices
     scores = np.array([0.2, 0.9, -np.inf, 0.5, 0.1, 0.4])   # the last one: stopping
     assert ranked_indices(scores) == [1, 3]
     assert ranked_indices(scores, fallbacks=True) == [1, 3, 0, 4]
@@ -197,7 +196,7 @@ def test_a_verified_plan_goes_on_below_the_value_of_stopping_and_an_unverified_o
     assert checked.success and checked.predicted_coverage == 1.0, checked.reason
     # The sequencer (what the node serves) answers the same way: stopping is its choice, and the
     # actions below it are there for a verified caller.
-    from rad_core.sequencing.sequencer import Sequencer, SequencerConfig
+    from rad_core.sequencing.decide.sequencer import Sequencer, SequencerConfig
     ranking = Sequencer(SequencerConfig(policy='heur'), policy=_Shy()).rank(scene, solve(scene).placements)
     assert ranking.terminate and 'it values stopping more' in ranking.reason
     assert ranking.fallbacks == len(ranking.actions)      # every one of them is valued below stopping
@@ -207,10 +206,10 @@ def test_a_verified_plan_goes_on_below_the_value_of_stopping_and_an_unverified_o
     # structure down).
     env = AssemblyEnv(scene, EnvConfig(stability='none'))
     every = AllocationGuide(scene, solve(scene).placements).allowed_actions(env.state)
-    from rad_core.sequencing.actions import mdp_actions
+    from rad_core.sequencing.decide.actions import mdp_actions
     ranked = mdp_actions(env, ranking.actions, every)
     assert len(ranked) == len(ranking.actions)
-    from rad_core.sequencing.policy import FIRM_MARGIN
+    from rad_core.sequencing.decide.policy import FIRM_MARGIN
     firm = [a for a in every if support.rests_on_its_own(env.grid, env.state.occupancy, env.resulting_cells(a)[0],
                                                          FIRM_MARGIN)]
     assert set(ranked) == set(firm) and len(firm) < len(every)
@@ -220,7 +219,7 @@ def test_a_verified_plan_goes_on_below_the_value_of_stopping_and_an_unverified_o
 
 def test_a_lintel_on_two_piers_stands_on_its_own_a_cantilever_or_a_balanced_block_does_not():
     """support.rests_on_its_own, what fallbacks below stopping are held to, and `firm`."""
-    from rad_core.sequencing.policy import FIRM_MARGIN, firm
+    from rad_core.sequencing.decide.policy import FIRM_MARGIN, firm
     scene = generate_scene(GeneratorConfig(grid=4), 0)
     env = AssemblyEnv(scene, EnvConfig(stability='none'))
     grid, occ = env.grid, env.state.occupancy.copy()
@@ -256,8 +255,8 @@ def test_a_block_that_would_rest_on_nothing_is_never_planned(motion):
 
 def test_an_unverified_plan_stops_where_its_best_ranked_action_fails_and_a_verified_one_goes_on(motion):
     """The paper's agents take the best-ranked action blindly; /plan_assembly's default checks with GAMP."""
-    from rad_core.agents import parse
-    from rad_core.sequencing.agent_plan import plan_for_agent
+    from rad_core.sequencing.agent.agent_plan import plan_for_agent
+    from rad_core.sequencing.decide.agents import parse
     scene = generate_scene(GeneratorConfig(grid=3), 1)
     first = plan_assembly(scene, solve, motion, HeurPolicy(), seed=1).steps[0].block
     asked = []
@@ -281,9 +280,9 @@ def test_an_unverified_plan_stops_where_its_best_ranked_action_fails_and_a_verif
 def test_a_search_plan_the_improvement_budget_ends_before_its_first_step_is_not_an_error(motion):
     """Anytime planning: the first plan stops early, the search's gets almost no time (its episode
     has no outcome then); the answer is the first plan, not a crash."""
-    from rad_core.agents import parse
-    from rad_core.sequencing.agent_plan import plan_for_agent
-    from rad_core.sequencing.sequencer import Ranking
+    from rad_core.sequencing.agent.agent_plan import plan_for_agent
+    from rad_core.sequencing.decide.agents import parse
+    from rad_core.sequencing.decide.sequencer import Ranking
     scene = generate_scene(GeneratorConfig(grid=3), 1)
 
     def quick(*_):

@@ -6,12 +6,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from rad_core import shapes
 from rad_core.allocation import solve, validate_allocation
-from rad_core.coverage import placements_coverage
-from rad_core.errors import RadError
-from rad_core.scene import Scene
+from rad_core.domain import shapes
+from rad_core.domain.coverage import placements_coverage
+from rad_core.domain.errors import RadError
+from rad_core.domain.scene import Scene
 
 REPO = Path(__file__).resolve().parents[2]
 SCENE_DIR = REPO / 'scenes' / 'shapes'

@@ -1,4 +1,4 @@
-"""rad_core.supply: the blocks chosen for a target cover it exactly where a stable exact cover
+"""rad_core.allocation.supply: the blocks chosen for a target cover it exactly where a stable exact cover
 exists, with the fewest (or cheapest) blocks, within an inventory; they lie on the table
 within reach, apart and clear of the target; the allocation over them covers as much."""
 
@@ -6,14 +6,13 @@ import json
 
 import numpy as np
 import pytest
-
-from rad_core import supply as sp
+from rad_core.allocation import supply as sp
 from rad_core.allocation.cpsat import AllocationParams, solve
-from rad_core.blocks import DEFAULT_LIBRARY
-from rad_core.coverage import placements_coverage
-from rad_core.errors import RadError
-from rad_core.shapes import LayoutConfig
-from rad_core.voxels import Model, place_regions
+from rad_core.domain.blocks import DEFAULT_LIBRARY
+from rad_core.domain.coverage import placements_coverage
+from rad_core.domain.errors import RadError
+from rad_core.domain.shapes import LayoutConfig
+from rad_core.domain.voxels import Model, place_regions
 
 UNIT = 0.05
 
@@ -150,9 +149,9 @@ def test_inventory_files_and_costs_are_checked(tmp_path):
 
 def _hand_placeable(placements, targets) -> int:
     """Target cells of `placements` that sequencing.hand_order can place in some order."""
-    from rad_core.grid import Grid
-    from rad_core.scene import Scene
-    from rad_core.sequencing.hand_order import hand_order
+    from rad_core.allocation.order import hand_order
+    from rad_core.domain.grid import Grid
+    from rad_core.domain.scene import Scene
     scene = Scene(UNIT, dict(DEFAULT_LIBRARY), (), tuple(targets))
     found = hand_order(scene, placements)
     grid = Grid(scene)

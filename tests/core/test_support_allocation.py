@@ -2,16 +2,15 @@
 
 import numpy as np
 import pytest
-
-from rad_core import support
 from rad_core.allocation import AllocationParams, solve
 from rad_core.allocation.validate import validate_allocation
-from rad_core.coverage import optimum_coverage
-from rad_core.generator import GeneratorConfig, generate_scene
-from rad_core.mdp import AssemblyEnv, EnvConfig
-from rad_core.physics import PhysicsStability
-from rad_core.sequencing.actions import AllocationActions
-from rad_core.sequencing.ceiling import coverage_ceiling
+from rad_core.domain import support
+from rad_core.domain.coverage import optimum_coverage
+from rad_core.domain.generator import GeneratorConfig, generate_scene
+from rad_core.env.mdp import AssemblyEnv, EnvConfig
+from rad_core.sequencing.bounds.ceiling import coverage_ceiling
+from rad_core.sequencing.decide.actions import AllocationActions
+from rad_core.sim.physics import PhysicsStability
 
 from scenes import U, scene
 

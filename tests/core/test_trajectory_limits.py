@@ -1,4 +1,4 @@
-"""gamp.trajectory.retime against Franka's limits, checked independently of rad_core.trajectory.
+"""gamp.trajectory.retime against Franka's limits, checked independently of rad_core.cell.trajectory.
 
 The motion a joint_trajectory_controller makes of retime's points (quintic Hermite
 through each point's position, velocity and acceleration, from rest at the start)
@@ -12,10 +12,9 @@ import re
 
 import numpy as np
 import pytest
-
+from rad_core.cell.robot_model import FR3, PANDA, PLANNING_LOWER, PLANNING_UPPER
+from rad_core.cell.trajectory import Trajectory, TrajectoryPoint, limit_ratios, limit_violation
 from rad_core.gamp.trajectory import retime
-from rad_core.robot_model import FR3, PANDA, PLANNING_LOWER, PLANNING_UPPER
-from rad_core.trajectory import Trajectory, TrajectoryPoint, limit_ratios, limit_violation
 
 DT = 1e-3                       # Franka's control period
 MOVES = 20
@@ -173,7 +172,7 @@ def test_limit_violation_flags_the_same_path_run_twice_as_fast(model):
 
 
 def test_retime_refuses_what_it_cannot_time():
-    from rad_core.errors import RadError
+    from rad_core.domain.errors import RadError
     with pytest.raises(RadError, match='start and at least one waypoint'):
         retime([np.zeros(7)], PANDA, 0.5)
     with pytest.raises(RadError, match='does not move'):
@@ -188,15 +187,15 @@ def test_planned_scenes_stay_within_both_robots_limits_at_1khz(grid, seed):
     the previous one ended, within the Panda's and the FR3's velocity, acceleration and jerk limits
     as this test's own 1 kHz sampler sees them; and within the FR3's when timed for the FR3 alone."""
     from rad_core.allocation import solve
+    from rad_core.cell.motion import Motion
+    from rad_core.cell.panda import HOME
+    from rad_core.cell.robot_model import robot_model
+    from rad_core.domain.generator import GeneratorConfig, generate_scene
     from rad_core.gamp.action import MotionPlanner
     from rad_core.gamp.planner import GampConfig
     from rad_core.gamp.trajectory import TimingConfig
-    from rad_core.generator import GeneratorConfig, generate_scene
-    from rad_core.motion import Motion
-    from rad_core.robot_model import robot_model
     from rad_core.sequencing import HeurPolicy
-    from rad_core.sequencing.plan import local_motion_planner, plan_assembly
-    from rad_core.sim.panda import HOME
+    from rad_core.sequencing.planning.plan import local_motion_planner, plan_assembly
     scene = generate_scene(GeneratorConfig(grid=grid), seed)
     for timing, models in ((TimingConfig(), (PANDA, robot_model('fr3', 'panda'))),
                            (TimingConfig(robot='fr3', limits='robot', speed_scale=1.0), (FR3,))):

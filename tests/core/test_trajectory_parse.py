@@ -8,11 +8,10 @@ import math
 
 import numpy as np
 import pytest
-
-from rad_core import trajectory as tr
+from rad_core.cell import trajectory as tr
+from rad_core.cell.robot_model import FR3, PANDA, PLANNING_LOWER, PLANNING_UPPER
+from rad_core.cell.trajectory import Trajectory, TrajectoryPoint, TrajectoryRejected, parse_trajectory
 from rad_core.gamp.trajectory import retime
-from rad_core.robot_model import FR3, PANDA, PLANNING_LOWER, PLANNING_UPPER
-from rad_core.trajectory import Trajectory, TrajectoryPoint, TrajectoryRejected, parse_trajectory
 
 
 def _outcome(doc, model):

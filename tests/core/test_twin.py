@@ -13,18 +13,26 @@ import time
 
 import numpy as np
 import pytest
-
-from rad_core.errors import RadError
+from rad_core.cell import panda
+from rad_core.cell.motion import GripperCommand, Motion, grasp_problem
+from rad_core.cell.robot_model import FR3, PANDA
+from rad_core.cell.trajectory import (
+    GOAL_TOLERANCE_VIOLATED,
+    INVALID_GOAL,
+    INVALID_JOINTS,
+    PATH_TOLERANCE_VIOLATED,
+    SUCCESSFUL,
+    Spline,
+    Trajectory,
+    TrajectoryPoint,
+    TrajectoryRejected,
+    parse_trajectory,
+)
+from rad_core.domain.errors import RadError
+from rad_core.domain.scene import Scene
 from rad_core.gamp.trajectory import retime
-from rad_core.motion import GripperCommand, Motion, grasp_problem
-from rad_core.robot_model import FR3, PANDA
-from rad_core.scene import Scene
-from rad_core.sim import panda
 from rad_core.sim.twin import Tolerances, Twin, TwinConfig
 from rad_core.sim.world import World
-from rad_core.trajectory import (GOAL_TOLERANCE_VIOLATED, INVALID_GOAL, INVALID_JOINTS, PATH_TOLERANCE_VIOLATED,
-                                 SUCCESSFUL, Spline, Trajectory, TrajectoryPoint, TrajectoryRejected,
-                                 parse_trajectory)
 
 U = 0.05
 PICK = np.array([0.5, -0.2, U / 2])
@@ -603,7 +611,7 @@ def test_config_is_checked():
 
 @pytest.mark.parametrize('seed', [1, 3])
 def test_a_twin_at_rest_reports_the_scene_it_was_loaded_with(seed):
-    from rad_core.generator import GeneratorConfig, generate_scene
+    from rad_core.domain.generator import GeneratorConfig, generate_scene
     scene = generate_scene(GeneratorConfig(grid=4), seed)
     with World() as world:
         twin = Twin(world)

@@ -1,17 +1,18 @@
-"""rad_core.viz: the visualizer's geometry and plan parsing without ROS, and what it logs to an .rrd."""
+"""rad_core.view.viz: the visualizer's geometry and plan parsing without ROS, and what it logs to an .rrd."""
 
 import json
 import subprocess
 
 import numpy as np
 import pytest
-from rad_core import viz
 from rad_core.allocation import AllocationParams, solve
 from rad_core.allocation.placements import Placement
-from rad_core.errors import RadError
-from rad_core.colours import type_colour
-from rad_core.sequencing.plan import PlanStep
-from rad_core.transforms import yaw_quaternion
+from rad_core.domain.colours import type_colour
+from rad_core.domain.errors import RadError
+from rad_core.domain.transforms import yaw_quaternion
+from rad_core.sequencing.planning.plan import PlanStep
+from rad_core.view import viz
+
 from scenes import U, scene
 
 
@@ -87,7 +88,7 @@ def test_parse_plan_reads_allocation_steps_timings_coverage():
 
 
 def test_re_allocations_in_plan_json_are_read_and_shown_in_the_summary():
-    from rad_core.sequencing.reallocation import Reallocation
+    from rad_core.sequencing.planning.reallocation import Reallocation
     event = Reallocation(2, 'no feasible next action (1 tried): b3: placement: hand hits block b1',
                          [{'type': 'cube', 'target': 'front', 'cells': [[1, 0, 0]],
                            'reason': 'b3: hand hits block b1'}],

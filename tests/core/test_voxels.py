@@ -1,4 +1,4 @@
-"""Targets from files (rad_core.voxels): meshes and voxel grids give the cells they should,
+"""Targets from files (rad_core.domain.voxels): meshes and voxel grids give the cells they should,
 placed where the arm builds, and bad files are errors that name the problem and the fix."""
 
 import math
@@ -7,12 +7,11 @@ import re
 import numpy as np
 import pytest
 import trimesh
+from rad_core.domain import voxels
+from rad_core.domain.errors import RadError
+from rad_core.domain.scene import Scene
+from rad_core.domain.shapes import STRUCTURE_X
 from trimesh.exchange import binvox
-
-from rad_core import voxels
-from rad_core.errors import RadError
-from rad_core.scene import Scene
-from rad_core.shapes import STRUCTURE_X
 
 UNIT = 0.05
 

@@ -5,12 +5,11 @@ import time
 
 import numpy as np
 import pytest
-
-from rad_core.errors import RadError
-from rad_core.generator import GeneratorConfig, generate_scene
-from rad_core.sim import panda
+from rad_core.cell import panda
+from rad_core.domain.errors import RadError
+from rad_core.domain.generator import GeneratorConfig, generate_scene
+from rad_core.domain.transforms import yaw_of_quaternion
 from rad_core.sim.world import World
-from rad_core.transforms import yaw_of_quaternion
 
 
 @pytest.fixture(scope='module')
@@ -161,7 +160,7 @@ def test_preserved_restores_joint_velocities_exactly(world):
 def test_a_block_unparked_gets_back_its_mass_and_exact_inertia(scene):
     """Bullet recomputes the inertia from the collision shape when only the mass is set; a block made
     static and dynamic again (the feeder's park and unpark, `asleep`'s neighbours) must keep its own."""
-    from rad_core.scene import Scene
+    from rad_core.domain.scene import Scene
     doc = scene.to_dict()
     for b in doc['blocks']:
         b['yaw'] = 0            # the feeder presents every block at its station, at yaw 0

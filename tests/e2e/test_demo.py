@@ -4,7 +4,7 @@ import json
 import shutil
 import subprocess
 
-from rad_core.scene import Scene
+from rad_core.domain.scene import Scene
 
 
 def chunk_kinds(png: bytes) -> list[bytes]:

@@ -10,16 +10,14 @@ import json
 
 import numpy as np
 import pytest
-
-from ros_harness import call_service, ros_args, spin_until, wait_for_service
-
-from rad_core.sequencing import supported_actions
 from rad_core.allocation import solve
 from rad_core.allocation.guide import AllocationGuide
+from rad_core.domain.generator import GeneratorConfig, generate_scene
+from rad_core.domain.scene import Scene
+from rad_core.env.mdp import AssemblyEnv, EnvConfig
 from rad_core.gamp.planner import placement_pose
-from rad_core.generator import GeneratorConfig, generate_scene
-from rad_core.mdp import AssemblyEnv, EnvConfig
-from rad_core.scene import Scene
+from rad_core.sequencing import supported_actions
+from ros_harness import call_service, ros_args, spin_until, wait_for_service
 
 
 def yaw_of(q) -> float:

@@ -13,7 +13,6 @@ import os
 
 import pytest
 from ament_index_python.packages import get_package_share_directory
-
 from control_msgs.action import FollowJointTrajectory, GripperCommand
 from control_msgs.msg import GripperCommand as GripperCommandMsg
 from control_msgs.msg import JointComponentTolerance, JointTolerance

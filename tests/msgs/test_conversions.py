@@ -3,14 +3,18 @@
 import math
 
 import pytest
-
 from rad_core.allocation import solve
-from rad_core.errors import RadError
-from rad_core.generator import GeneratorConfig, generate_scene
+from rad_core.domain.errors import RadError
+from rad_core.domain.generator import GeneratorConfig, generate_scene
 from rad_msgs.msg import Scene as SceneMsg
 from rad_msgs.srv import Allocate
-from rad_ros.conversions import (allocation_from_response, fill_allocation_response,
-                                 scene_from_msg, scene_from_request, scene_to_msg)
+from rad_ros.conversions import (
+    allocation_from_response,
+    fill_allocation_response,
+    scene_from_msg,
+    scene_from_request,
+    scene_to_msg,
+)
 
 from scenes import scene
 

@@ -15,7 +15,6 @@ import os
 
 import pytest
 from ament_index_python.packages import get_package_share_directory
-
 from mocap4r2_msgs.msg import ImusInfo, Marker, Markers, RigidBodies, RigidBody
 from mocap4r2_msgs.srv import CreateRigidBody
 from tf2_msgs.action import LookupTransform
@@ -126,8 +125,8 @@ def test_type_hashes_match_upstream_jazzy(package, interface):
 
 def test_driver_messages_convert_to_rigid_bodies_and_the_calibration_to_tf_static():
     from geometry_msgs.msg import PoseStamped
-    from rad_core.errors import RadError
-    from rad_core.mocap_input import FrameTransform, MocapFrames
+    from rad_core.cell.mocap_input import FrameTransform, MocapFrames
+    from rad_core.domain.errors import RadError
     from rad_ros.mocap_input import bodies_from_mocap4r2, body_from_pose_stamped, body_topic, calibration_tf
     from rad_ros.motion import pose_msg
     msg = RigidBodies(frame_number=7)

@@ -5,9 +5,14 @@ from types import SimpleNamespace
 
 import pytest
 from builtin_interfaces.msg import Time
-
-from rad_ros.motion import (rigid_bodies_msg, s_to_duration, trajectory_from_msg, trajectory_to_msg,
-                            duration_to_s, pose_from_msg)
+from rad_ros.motion import (
+    duration_to_s,
+    pose_from_msg,
+    rigid_bodies_msg,
+    s_to_duration,
+    trajectory_from_msg,
+    trajectory_to_msg,
+)
 
 TRAJ = {'joint_names': ['panda_joint1', 'panda_joint2'],
         'points': [{'positions': [0.1, 0.2], 'velocities': [0.0, 0.5], 'time_from_start': 0.25},
@@ -46,7 +51,7 @@ def test_rigid_bodies_message_like_mocap4r2():
 
 
 def test_blocks_moved_aside_round_trip_and_mismatched_lengths_are_refused():
-    from rad_core.errors import RadError
+    from rad_core.domain.errors import RadError
     from rad_ros.motion import moved_aside_from_msgs, moved_aside_to_msgs
     moves = [{'block': 'b1', 'position': [0.35, 0.22, 0.02], 'yaw': 270},
              {'block': 'b7', 'position': [0.5, -0.18, 0.025], 'yaw': 0}]

@@ -3,14 +3,19 @@
 import math
 
 import pytest
-
 from rad_core.allocation import solve
-from rad_core.errors import RadError
+from rad_core.domain.errors import RadError
 from rad_core.gamp.action import SceneAction
-from rad_core.sequencing.sequencer import Ranking, Sequencer, SequencerConfig
+from rad_core.sequencing.decide.sequencer import Ranking, Sequencer, SequencerConfig
 from rad_msgs.srv import Sequence
-from rad_ros.sequencer_msgs import (action_from_msg, action_to_msg, fill_sequence_response, ranking_from_response,
-                                    sequence_inputs, sequence_request)
+from rad_ros.sequencer_msgs import (
+    action_from_msg,
+    action_to_msg,
+    fill_sequence_response,
+    ranking_from_response,
+    sequence_inputs,
+    sequence_request,
+)
 
 from scenes import scene
 

@@ -5,13 +5,12 @@ import math
 import time
 
 import pytest
-
-from ros_harness import call_service, ros_args, wait_for_service
-from scenes import U, doc
-
 from rad_core.allocation import validate_allocation
-from rad_core.generator import GeneratorConfig, generate_scene
-from rad_core.scene import Scene
+from rad_core.domain.generator import GeneratorConfig, generate_scene
+from rad_core.domain.scene import Scene
+from ros_harness import call_service, ros_args, wait_for_service
+
+from scenes import U, doc
 
 
 @pytest.fixture
@@ -119,9 +118,9 @@ def test_ros2run_script_starts_the_node_with_a_params_file(process, ros_node, tm
 
 
 def test_a_request_sets_support_prefer_and_no_goods(node_process, ros_node):
+    from rad_core.allocation import AllocationParams, Placement, solve
     from rad_msgs.srv import Allocate
     from rad_ros.conversions import placement_from_msg, placement_to_msg
-    from rad_core.allocation import AllocationParams, Placement, solve
     proc = node_process('rad_planner', 'allocation_node')
     client = wait_for_service(ros_node, Allocate, 'allocate', timeout=20.0)
     scene = generate_scene(GeneratorConfig(grid=4), 2)

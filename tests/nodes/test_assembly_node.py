@@ -11,13 +11,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 import rclpy
+from rad_core.domain.generator import GeneratorConfig, generate_scene
+from rad_core.domain.scene import Scene
 from rclpy.action import ActionClient
-
 from ros_harness import REPO_ROOT, call_service, ros_args, spin_until, wait_for_plant, wait_for_service
-from scenes import U, doc
 
-from rad_core.generator import GeneratorConfig, generate_scene
-from rad_core.scene import Scene
+from scenes import U, doc
 
 DEMO_SCENE = generate_scene(GeneratorConfig(grid=4), 8)      # the demo's default: builds completely
 SMALL = Scene.from_dict(doc())                                 # one region, a few cubes
@@ -121,7 +120,7 @@ def test_the_node_graph_and_the_in_process_planner_take_the_same_actions(graph):
     """/plan_assembly over DDS and `AgentPlanner` in process run one path (`plan_for_agent`): the
     graph here runs the sequencer with the mixed network and no search, the assembly node with its
     default agent, which together are the `greedy` preset."""
-    from rad_core.sequencing.agent_plan import AgentPlanner
+    from rad_core.sequencing.agent.agent_plan import AgentPlanner
     planner = AgentPlanner('greedy')
     try:
         for scene in (DEMO_SCENE, generate_scene(GeneratorConfig(grid=4), 3)):
@@ -138,7 +137,7 @@ def test_the_node_graph_and_the_in_process_planner_take_the_same_actions(graph):
 def test_the_papers_agent_plans_the_same_over_dds_and_in_process(node_process, ros_node, tmp_path):
     """The unverified paper agent (MCTS over the g = 3 network, no GAMP check): both paths take the
     same actions and stop on the same refused action, with the same reason."""
-    from rad_core.sequencing.agent_plan import AgentPlanner
+    from rad_core.sequencing.agent.agent_plan import AgentPlanner
     global SEQUENCER
     saved, SEQUENCER = SEQUENCER, {'agent': 'paper'}
     try:
@@ -248,7 +247,7 @@ def test_execute_builds_the_scene_and_reports_each_step(graph):
     assert [g['action'] for g in step['gripper']][-2:] == ['grasp', 'release']
 
     # ...and take it apart again over DDS (/take_apart): every block back on the table, motions verified.
-    from rad_core.sequencing.disassembly import to_take_apart
+    from rad_core.sequencing.execution.disassembly import to_take_apart
     from rad_msgs.action import TakeApart
     client = ActionClient(graph.node, TakeApart, 'take_apart')
     assert client.wait_for_server(timeout_sec=10.0)
@@ -381,7 +380,7 @@ def test_a_block_moved_during_execution_triggers_a_replan(graph):
              'r.pose.orientation.z, r.pose.orientation.w = map(float, sys.argv[5:7])\n'
              'f = c.call_async(r); rclpy.spin_until_future_complete(n, f, timeout_sec=20)\n'
              'print(f.result().success, f.result().reason)\n')
-    from rad_core.transforms import yaw_quaternion
+    from rad_core.domain.transforms import yaw_quaternion
     q = yaw_quaternion(block.yaw)
     started, phases = [], []
 
@@ -403,9 +402,9 @@ def test_a_block_moved_during_execution_triggers_a_replan(graph):
 
 def test_plan_assembly_needs_fresh_and_complete_joint_states(node_process, ros_node):
     """No twin: the test publishes joint_states. The joint check comes before any other service is asked."""
-    from rclpy.duration import Duration
-    from rad_core.sim.panda import HOME, JOINT_NAMES
+    from rad_core.cell.panda import HOME, JOINT_NAMES
     from rad_msgs.srv import PlanAssembly
+    from rclpy.duration import Duration
     from sensor_msgs.msg import JointState
     proc = node_process('rad_planner', 'assembly_node', *ros_args({'service_timeout_s': 3.0}))
     client = wait_for_service(ros_node, PlanAssembly, 'plan_assembly', timeout=30.0)
@@ -533,7 +532,7 @@ def test_cancelling_execution_cancels_the_arm_goal_and_the_arm_stops(node_proces
 def test_a_grasp_on_nothing_opens_the_hand_and_replans(node_process, ros_node, tmp_path):
     """The block about to be picked is moved away as execution starts: the hand closes on air, the run
     notices from the width the gripper reports, opens the hand, re-registers and replans."""
-    from rad_core.transforms import yaw_quaternion
+    from rad_core.domain.transforms import yaw_quaternion
     from rad_msgs.action import ExecuteAssembly
     from rad_msgs.srv import SetBlockPose
     g = start_graph(node_process, ros_node, tmp_path)

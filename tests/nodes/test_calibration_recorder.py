@@ -1,12 +1,10 @@
 """The calibration recorder node over real DDS: a pair recorded at rest, refusals with a reason."""
 
 import numpy as np
-
-from ros_harness import call_service, ros_args, spin_until, wait_for_service
-
-from rad_core.calibration import marker_in_base, read_pairs_csv
-from rad_core.sim.panda import HOME, JOINT_NAMES
+from rad_core.cell.calibration import marker_in_base, read_pairs_csv
+from rad_core.cell.panda import HOME, JOINT_NAMES
 from rad_core.sim.world import World
+from ros_harness import call_service, ros_args, spin_until, wait_for_service
 
 MARKER_TOPIC = 'cal_test/flange_marker/pose'
 OFFSET = [0.0, 0.02, 0.05]

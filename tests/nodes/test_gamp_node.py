@@ -4,16 +4,14 @@ import math
 
 import numpy as np
 import pytest
-
-from ros_harness import call_service, ros_args, wait_for_service
-
 from rad_core.allocation import solve
-from rad_core.generator import GeneratorConfig, generate_scene
-from rad_core.robot_model import PANDA
-from rad_core.sim.panda import ARM_JOINT_NAMES, HOME, LOWER, UPPER
-from rad_core.trajectory import limit_violation
-from rad_core.transforms import yaw_matrix, yaw_quaternion
+from rad_core.cell.panda import ARM_JOINT_NAMES, HOME, LOWER, UPPER
+from rad_core.cell.robot_model import PANDA
+from rad_core.cell.trajectory import limit_violation
+from rad_core.domain.generator import GeneratorConfig, generate_scene
+from rad_core.domain.transforms import yaw_matrix, yaw_quaternion
 from rad_ros.motion import pose_msg, trajectory_from_msg
+from ros_harness import call_service, ros_args, wait_for_service
 
 
 @pytest.fixture
@@ -120,6 +118,7 @@ def test_a_place_pose_puts_the_anchor_there_and_a_pose_no_scene_holds_is_refused
 
 def test_a_pick_blocked_by_a_neighbour_moves_it_aside_first_and_says_where(gamp):
     from rad_ros.motion import moved_aside_from_msgs
+
     from scenes import packed
     _, plan = gamp
     scene = packed()

@@ -11,14 +11,13 @@ import time
 
 import numpy as np
 import pytest
-
+from rad_core.cell.mocap import scene_to_bodies
+from rad_core.cell.mocap_input import BodyEntry, FrameTransform
+from rad_core.domain.scene import Scene
+from rad_core.domain.transforms import matrix_from_quaternion, yaw_quaternion
 from ros_harness import call_service, executable_path, ros_args, spin_until, wait_for_service
-from scenes import doc
 
-from rad_core.mocap_input import BodyEntry, FrameTransform
-from rad_core.scene import Scene
-from rad_core.sim.mocap import scene_to_bodies
-from rad_core.transforms import matrix_from_quaternion, yaw_quaternion
+from scenes import doc
 
 TASK = Scene.from_dict(doc())                                   # c0, c1 (cubes), i0 (I2 at yaw 90)
 CAL = FrameTransform((0.3, -0.1, 0.72), yaw_quaternion(90))   # mocap -> base

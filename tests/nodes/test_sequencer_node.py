@@ -6,15 +6,14 @@ import time
 
 import pytest
 import rclpy
-
-from ros_harness import call_service, ros_args, wait_for_service
-from scenes import U, doc
-
 from rad_core.allocation import solve
 from rad_core.allocation.placements import Placement
-from rad_core.generator import GeneratorConfig, generate_scene
-from rad_core.scene import Scene
-from rad_core.sim.panda import HOME
+from rad_core.cell.panda import HOME
+from rad_core.domain.generator import GeneratorConfig, generate_scene
+from rad_core.domain.scene import Scene
+from ros_harness import call_service, ros_args, wait_for_service
+
+from scenes import U, doc
 
 DEMO_SCENE = generate_scene(GeneratorConfig(grid=4), 8)
 

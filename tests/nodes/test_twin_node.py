@@ -7,16 +7,15 @@ import time
 import numpy as np
 import pytest
 import rclpy
-from rclpy.action import ActionClient
-
-from ros_harness import call_service, ros_args, spin_until, wait_for_service
-from scenes import doc
-
-from rad_core.generator import GeneratorConfig, generate_scene
+from rad_core.cell.panda import FINGER_OPEN, HOME, JOINT_NAMES
+from rad_core.cell.robot_model import PANDA
+from rad_core.domain.generator import GeneratorConfig, generate_scene
+from rad_core.domain.scene import Scene
 from rad_core.gamp.trajectory import retime
-from rad_core.robot_model import PANDA
-from rad_core.scene import Scene
-from rad_core.sim.panda import FINGER_OPEN, HOME, JOINT_NAMES
+from rclpy.action import ActionClient
+from ros_harness import call_service, ros_args, spin_until, wait_for_service
+
+from scenes import doc
 
 TRAJ_TOPIC = 'joint_trajectory_controller/joint_trajectory'
 ARM_ACTION = 'joint_trajectory_controller/follow_joint_trajectory'
@@ -372,7 +371,7 @@ def test_load_scene_refuses_blocks_outside_the_workspace(twin):
 
 
 def test_registration_rebuilds_the_scene_from_published_motion_capture(twin):
-    from rad_core.sim.mocap import RegistrationConfig, RigidBodyPose, body_map_for, register_scene
+    from rad_core.cell.mocap import RegistrationConfig, RigidBodyPose, body_map_for, register_scene
     from rad_ros.motion import pose_from_msg
     twin.seen['bodies'].clear()
     spin_until(twin.node, lambda: twin.seen['bodies'], timeout=5.0)
@@ -411,10 +410,10 @@ def test_faults_and_a_mocap_frame_shape_what_motion_capture_publishes(node_proce
     with mocap_frame; dropped frames leave gaps in the frame numbers; dropped bodies are untracked, at their
     last pose, and missing from their PoseStamped topic."""
     from geometry_msgs.msg import PoseStamped
+    from rad_core.domain.transforms import matrix_from_quaternion, yaw_quaternion
     from rad_msgs.msg import RigidBodies
     from rad_ros.motion import pose_from_msg
     from rclpy.qos import qos_profile_sensor_data
-    from rad_core.transforms import matrix_from_quaternion, yaw_quaternion
 
     scene = generate_scene(GeneratorConfig(grid=3), 5)
     (tmp_path / 'scene.json').write_text(scene.dumps())

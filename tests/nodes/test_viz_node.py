@@ -6,11 +6,9 @@ import subprocess
 import time
 
 import pytest
-
-from ros_harness import ros_args, spin_until
-
 from rad_core.allocation import AllocationParams, solve
-from rad_core.generator import GeneratorConfig, generate_scene
+from rad_core.domain.generator import GeneratorConfig, generate_scene
+from ros_harness import ros_args, spin_until
 
 
 def rrd(command: str, path) -> subprocess.CompletedProcess:

@@ -4,10 +4,10 @@ serves std_srvs/Trigger on `ping`. Written like rad's real nodes (Jazzy main()).
 
 import sys
 
+from rad_ros.node_main import run_node
 from rclpy.node import Node
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
-from rad_ros.node_main import run_node
 
 
 class ChatterNode(Node):

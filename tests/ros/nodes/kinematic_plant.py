@@ -21,22 +21,21 @@ import time
 
 import numpy as np
 from control_msgs.action import FollowJointTrajectory, GripperCommand
+from rad_core.cell import panda
+from rad_core.cell.mocap import RigidBodyPose
+from rad_core.domain.scene import Scene
+from rad_core.domain.transforms import matrix_from_quaternion, quaternion_from_matrix
+from rad_core.sim.world import World
+from rad_msgs.msg import RigidBodies
+from rad_ros.conversions import scene_to_msg
+from rad_ros.motion import rigid_bodies_msg, trajectory_from_msg
+from rad_ros.node_main import run_node
 from rclpy.action import ActionServer
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, qos_profile_sensor_data
 from sensor_msgs.msg import JointState
-
-from rad_core.scene import Scene
-from rad_core.sim import panda
-from rad_core.sim.mocap import RigidBodyPose
-from rad_core.sim.world import World
-from rad_core.transforms import matrix_from_quaternion, quaternion_from_matrix
-from rad_msgs.msg import RigidBodies
-from rad_ros.conversions import scene_to_msg
-from rad_ros.motion import rigid_bodies_msg, trajectory_from_msg
-from rad_ros.node_main import run_node
 
 
 class KinematicPlant(Node):

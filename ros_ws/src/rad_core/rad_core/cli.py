@@ -32,15 +32,15 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from rad_core import jsonfmt
-from rad_core.errors import RadError
+from rad_core.domain import jsonfmt
+from rad_core.domain.errors import RadError
 
 if TYPE_CHECKING:
-    from rad_core.scene import Scene
+    from rad_core.domain.scene import Scene
 
 
 def _read_scene(path: str) -> Scene:
-    from rad_core.scene import Scene   # numpy: not needed to parse arguments or print help
+    from rad_core.domain.scene import Scene  # numpy: not needed to parse arguments or print help
     if path == '-':
         return Scene.loads(sys.stdin.read())
     return Scene.load(path)
@@ -65,7 +65,7 @@ def _allocation_params(args):
 
 
 def cmd_scene_generate(args) -> int:
-    from rad_core.generator import GeneratorConfig, generate_scene
+    from rad_core.domain.generator import GeneratorConfig, generate_scene
     config = GeneratorConfig(grid=args.grid, sides=args.sides, unit=args.unit, clearance=args.clearance,
                              supply=args.supply, feeder_order=args.feeder_order, feeder_window=args.feeder_window)
     _write_text(generate_scene(config, args.seed).dumps(), args.output)
@@ -83,7 +83,7 @@ def cmd_scene_check(args) -> int:
 
 
 def cmd_scene_stats(args) -> int:
-    from rad_core.generator import GeneratorConfig, target_statistics
+    from rad_core.domain.generator import GeneratorConfig, target_statistics
     stats = target_statistics(GeneratorConfig(grid=args.grid, sides=args.sides), args.scenes, args.seed)
     print(jsonfmt.dumps(stats))
     return 0
@@ -91,7 +91,7 @@ def cmd_scene_stats(args) -> int:
 
 def cmd_scene_render(args) -> int:
     from rad_core.allocation import AllocationResult
-    from rad_core.render import save_scene_png
+    from rad_core.view.render import save_scene_png
     scene = _read_scene(args.scene)
     allocation = None
     if args.allocation:
@@ -101,7 +101,7 @@ def cmd_scene_render(args) -> int:
             raise RadError(f'cannot read allocation {args.allocation!r}: {e}') from None
     robot = None
     if args.robot:
-        from rad_core.sim.panda import HOME
+        from rad_core.cell.panda import HOME
         robot = HOME
     save_scene_png(scene, args.output, allocation=allocation, width=args.width, height=args.height, robot=robot)
     print(f'wrote {args.output}')
@@ -110,8 +110,8 @@ def cmd_scene_render(args) -> int:
 
 def _supply_types(args, scene=None) -> tuple[dict, dict | None, dict]:
     """The block types, the inventory (None: any number) and the costs the supply flags name."""
-    from rad_core.blocks import DEFAULT_LIBRARY
-    from rad_core.supply import library, parse_costs, pick_types, read_inventory
+    from rad_core.allocation.supply import library, parse_costs, pick_types, read_inventory
+    from rad_core.domain.blocks import DEFAULT_LIBRARY
     known = library(scene)
     if args.types and args.inventory:
         raise RadError('give --types or --inventory, not both (an inventory names its types)')
@@ -130,7 +130,7 @@ def _supply_types(args, scene=None) -> tuple[dict, dict | None, dict]:
 
 def _supply_and_write(args, targets, unit: float, clearance: float = 0.0, scene=None) -> int:
     """Choose and lay out the blocks (or none, with --no-supply), write the scene, say how well it covers."""
-    from rad_core.supply import SupplyParams, supply, target_only
+    from rad_core.allocation.supply import SupplyParams, supply, target_only
     types, inventory, costs = _supply_types(args, scene)
     clearance = clearance if args.clearance is None else args.clearance
     if getattr(args, 'no_supply', False):
@@ -159,20 +159,20 @@ def _say(args, line: str) -> None:
 
 
 def cmd_scene_from_mesh(args) -> int:
-    from rad_core.voxels import mesh_models, place_regions, region_names
+    from rad_core.domain.voxels import mesh_models, place_regions, region_names
     models = mesh_models(region_names(args.models), args.unit, size=args.size, scale=args.scale, up=args.up,
                          hollow=args.hollow)
     return _supply_and_write(args, place_regions(models, args.unit), args.unit)
 
 
 def cmd_scene_from_voxels(args) -> int:
-    from rad_core.voxels import place_regions, region_names, voxel_models
+    from rad_core.domain.voxels import place_regions, region_names, voxel_models
     models = voxel_models(region_names(args.files), args.unit, up=args.up, hollow=args.hollow)
     return _supply_and_write(args, place_regions(models, args.unit), args.unit)
 
 
 def cmd_scene_supply(args) -> int:
-    from rad_core.grid import Grid, blocks_on_grid
+    from rad_core.domain.grid import Grid, blocks_on_grid
     scene = _read_scene(args.scene)
     placed = blocks_on_grid(scene, Grid(scene))
     if placed:
@@ -218,9 +218,10 @@ def cmd_limits(args) -> int:
     (result.json of `rad demo` or /execute_assembly) or a plan (steps with trajectories), in order,
     each from where the previous one ended (HOME first), through `trajectory.limit_violation`."""
     import numpy as np
-    from rad_core.robot_model import robot_model
-    from rad_core.sim.panda import HOME
-    from rad_core.trajectory import limit_ratios, limit_violation
+
+    from rad_core.cell.panda import HOME
+    from rad_core.cell.robot_model import robot_model
+    from rad_core.cell.trajectory import limit_ratios, limit_violation
     model = robot_model(args.robot, args.joint_prefix)
     try:
         doc = json.loads(Path(args.result).read_text() if args.result != '-' else sys.stdin.read())
@@ -253,9 +254,9 @@ def cmd_limits(args) -> int:
 
 
 def cmd_calibrate(args) -> int:
-    """Fit the motion-capture frame to the robot's base from point pairs (rad_core.calibration); print
+    """Fit the motion-capture frame to the robot's base from point pairs (rad_core.cell.calibration); print
     the transform and its residuals as one JSON object; --out writes the assembly node's parameters."""
-    from rad_core.calibration import fit, parse_pairs_csv, read_pairs_csv
+    from rad_core.cell.calibration import fit, parse_pairs_csv, read_pairs_csv
     if not args.mocap_frame:
         raise RadError("--mocap-frame must name the motion-capture frame ('' means no calibration)")
     if args.out == '-':
@@ -274,9 +275,9 @@ def cmd_calibrate(args) -> int:
 
 
 def cmd_eval(args) -> int:
-    from rad_core.evaluation import evaluate, get_agent, uses_robot
-    from rad_core.progress import ProgressBar
-    from rad_core.scene_sources import generated_scenes, scene_dir
+    from rad_core.domain.scene_sources import generated_scenes, scene_dir
+    from rad_core.experiment.evaluation import evaluate, get_agent, uses_robot
+    from rad_core.view.progress import ProgressBar
     distributed = args.workers is not None or args.scheduler is not None
     if args.workers is not None and args.workers < 1:
         raise RadError(f'--workers must be at least 1, got {args.workers}')
@@ -300,7 +301,7 @@ def cmd_eval(args) -> int:
     allocation = AllocationParams(support=args.support) if args.support else None
     bar = ProgressBar(total, args.agent)
     if distributed:
-        from rad_core.distributed import AgentArgs, evaluate_distributed
+        from rad_core.experiment.distributed import AgentArgs, evaluate_distributed
         agent_args = AgentArgs(args.agent, args.checkpoint, args.verify, args.budget, args.reallocate)
         result = evaluate_distributed(agent_args, scenes, robot, args.seed, progress=bar, workers=args.workers,
                                       scheduler=args.scheduler, execution=args.execution, allocation=allocation,
@@ -323,8 +324,8 @@ def cmd_eval(args) -> int:
 
 
 def cmd_ceiling(args) -> int:
-    from rad_core.agents import SUPPORTS
-    from rad_core.sequencing.exact import robot_ceiling
+    from rad_core.sequencing.bounds.robot_ceiling import robot_ceiling
+    from rad_core.sequencing.decide.agents import SUPPORTS
     if not args.time_limit > 0:
         raise RadError(f'--time-limit must be a positive number of seconds, got {args.time_limit}')
     supports = tuple(s for s in args.support.split(',') if s)
@@ -334,7 +335,7 @@ def cmd_ceiling(args) -> int:
     scenes = [(Path(f).stem if f != '-' else 'stdin', _read_scene(f)) for f in args.scenes]
     agent = None
     if args.agent:
-        from rad_core.evaluation import evaluate, get_agent
+        from rad_core.experiment.evaluation import evaluate, get_agent
         agent = get_agent(args.agent)
     rows = []
     for k, (name, scene) in enumerate(scenes):
@@ -368,11 +369,11 @@ def cmd_ceiling(args) -> int:
 
 
 def cmd_dataset_build(args) -> int:
-    from rad_core.progress import ProgressBar
-    from rad_core.learning.dataset import build
+    from rad_core.training.dataset import build
+    from rad_core.view.progress import ProgressBar
     shapes = []
     if args.shapes:
-        from rad_core import shapes as shape_lib
+        from rad_core.domain import shapes as shape_lib
         names = shape_lib.SPLITS.get(args.shapes, None)
         if names is None:
             raise RadError(f'--shapes must be one of {", ".join(shape_lib.SPLITS)}, got {args.shapes!r}')
@@ -396,8 +397,9 @@ def cmd_dataset_build(args) -> int:
 
 def cmd_train(args) -> int:
     from dataclasses import fields
-    from rad_core.progress import ProgressBar
-    from rad_core.learning.dqn import TrainConfig, train
+
+    from rad_core.training.dqn import TrainConfig, train
+    from rad_core.view.progress import ProgressBar
     given = {f.name: getattr(args, f.name) for f in fields(TrainConfig) if getattr(args, f.name) is not None}
     if args.resume:
         extra = sorted(set(given) - {'total_steps'})
@@ -411,7 +413,7 @@ def cmd_train(args) -> int:
     seeds = _train_mode(args, given)
     total = given.get('total_steps', config.total_steps)
     if seeds is not None:
-        from rad_core.learning.actors import seed_folder, train_seeds
+        from rad_core.training.actors import seed_folder, train_seeds
 
         def finished(seed: int, result: dict) -> None:
             print(f'seed {seed}: {result["env_steps"]} environment steps, {result["grad_steps"]} gradient steps, '
@@ -428,7 +430,7 @@ def cmd_train(args) -> int:
         bar()
 
     if args.actors is not None:
-        from rad_core.learning.actors import ActorConfig, train_with_actors
+        from rad_core.training.actors import ActorConfig, train_with_actors
         actor = ActorConfig(args.actors, args.chunk_steps or ActorConfig.chunk_steps,
                             args.refresh_every or ActorConfig.refresh_every)
         result = train_with_actors(config, args.out, actor, resume=args.resume,
@@ -443,7 +445,8 @@ def cmd_train(args) -> int:
 
 def cmd_expert(args) -> int:
     from dataclasses import fields
-    from rad_core.learning.expert import ExpertConfig, ExpertIteration
+
+    from rad_core.training.expert import ExpertConfig, ExpertIteration
     given = {f.name: getattr(args, f.name) for f in fields(ExpertConfig) if getattr(args, f.name) is not None}
     out = Path(args.out)
     if args.resume and (out / 'config.json').exists():
@@ -493,7 +496,7 @@ def _add_train_args(p: argparse.ArgumentParser, config=None) -> None:
     """Every field of a training config (default: TrainConfig) as --field-name (default: the dataclass's)."""
     from dataclasses import MISSING, fields
     if config is None:
-        from rad_core.learning.dqn import TrainConfig as config
+        from rad_core.training.dqn import TrainConfig as config
     for f in fields(config):
         flag = '--' + f.name.replace('_', '-')
         default = f.default if f.default is not MISSING else None
@@ -532,7 +535,7 @@ def _add_supply_args(p: argparse.ArgumentParser, no_supply: bool = True) -> None
     p.add_argument('--time-limit', type=float, default=10.0, metavar='S', help='solver time limit, seconds')
     p.add_argument('--any-order', action='store_true',
                    help='take the best cover even where a top-down hand cannot place all of it in any order '
-                        '(default: rule out the pieces it cannot and solve again, rad_core.supply)')
+                        '(default: rule out the pieces it cannot and solve again, rad_core.allocation.supply)')
     p.add_argument('--report', metavar='FILE', help='write how well the blocks cover (JSON) here')
     p.add_argument('--clearance', type=float, metavar='C',
                    help="gap between neighbouring blocks, a fraction of the unit (0.2: the paper's 1 cm at 5 cm; "
@@ -650,7 +653,7 @@ def build_parser(command: str | None = 'train') -> argparse.ArgumentParser:
     p.add_argument('--agent', default='heur', metavar='AGENT',
                    help='the agent to evaluate (default: heur): a preset (default, greedy, paper, heur, heur-verified, '
                         'exact) or scorer+parts, e.g. milp-dqn-mixed+mcts:10+verify+realloc+support:stable '
-                        '(rad_core.agents); results record its canonical text')
+                        '(rad_core.sequencing.decide.agents); results record its canonical text')
     p.add_argument('--verify', action='store_true',
                    help='take the best-ranked action the planning copy finds feasible (GAMP with the robot, '
                         'the stability check without): no failures by construction')
@@ -744,7 +747,7 @@ def build_parser(command: str | None = 'train') -> argparse.ArgumentParser:
     p.add_argument('--out', required=True, help='run folder: demos/, rR.pt, model.pt, progress.jsonl, expert.log')
     p.add_argument('--resume', action='store_true', help='continue the run in --out (only --rounds may change)')
     if command == 'expert':
-        from rad_core.learning.expert import ExpertConfig
+        from rad_core.training.expert import ExpertConfig
         _add_train_args(p, ExpertConfig)
     p.set_defaults(func=cmd_expert)
     return parser

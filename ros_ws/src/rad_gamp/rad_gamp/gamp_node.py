@@ -22,20 +22,19 @@ import threading
 import time
 
 import numpy as np
-from rclpy.node import Node
-
-from rad_core.errors import RadError
+from rad_core.cell.motion import run_motion
+from rad_core.domain.errors import RadError
+from rad_core.domain.transforms import matrix_from_quaternion
 from rad_core.gamp.action import MotionPlanner, SceneAction
 from rad_core.gamp.planner import GampConfig, plan_action
 from rad_core.gamp.trajectory import TimingConfig
-from rad_core.motion import run_motion
 from rad_core.sim.workspace import Workspace
-from rad_core.transforms import matrix_from_quaternion
 from rad_msgs.srv import PlanAction
 from rad_ros.conversions import scene_from_request
-from rad_ros.motion import motion_to_msgs, pose_from_msg, moved_aside_to_msgs
-from rad_ros.plant import ActionPlant
+from rad_ros.motion import motion_to_msgs, moved_aside_to_msgs, pose_from_msg
 from rad_ros.node_main import main_for
+from rad_ros.plant import ActionPlant
+from rclpy.node import Node
 
 
 class GampNode(Node):

@@ -12,14 +12,13 @@ from __future__ import annotations
 
 import math
 
-from rclpy.node import Node
-
 from rad_core.allocation import AllocationParams, solve
 from rad_core.allocation.cpsat import PREFER_MODES, SUPPORT_MODES
-from rad_core.errors import RadError
+from rad_core.domain.errors import RadError
 from rad_msgs.srv import Allocate
 from rad_ros.conversions import fill_allocation_response, placement_from_msg, scene_from_request
 from rad_ros.node_main import main_for
+from rclpy.node import Node
 
 
 class AllocationNode(Node):

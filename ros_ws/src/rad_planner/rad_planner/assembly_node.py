@@ -5,8 +5,8 @@ request has none, registered from motion capture against the task (`task_file`
 parameter, else the latched `scene` topic); the robot from
 `joint_states`; allocation from `/allocate`; the order from the sequencer node
 (`/sequence`, asked at every step for a ranking of the next actions); motions from
-`/plan_action`. How is the `agent` parameter's (`rad_core.agents`, `default` like the
-sequencer node's; `rad_core.sequencing.agent_plan.plan_for_agent`, what `rad eval` and the
+`/plan_action`. How is the `agent` parameter's (`rad_core.sequencing.decide.agents`, `default` like the
+sequencer node's; `rad_core.sequencing.agent.agent_plan.plan_for_agent`, what `rad eval` and the
 benchmarks run in process): the first allocation with its support rule; verified, the
 first ranked action GAMP finds feasible is taken (unverified: the first ranked only); when
 nothing can be built next while allocated poses remain and it re-allocates, it re-solves
@@ -20,13 +20,13 @@ request with a reason naming it.
                          arm controller's FollowJointTrajectory action (<arm_controller>/
                          follow_joint_trajectory) and the hand's GripperCommand action
                          (<gripper_action>), re-register after each step, replan on deviation
-                         or a failed grasp (the loop is rad_core.sequencing.execute; this node
+                         or a failed grasp (the loop is rad_core.sequencing.execution.execute; this node
                          supplies the plant: rad_ros.plant.ActionPlant); cancelling it cancels
                          the running goal and the arm stops. After a fault, blocks no scene can
                          express (fallen over, pushed off their cells) are set aside as lost and
-                         the plan is repaired from the rest (rad_core.sim.mocap.register_world)
+                         the plan is repaired from the rest (rad_core.cell.mocap.register_world)
   act  take_apart        rad_msgs/TakeApart: the structure back onto the table, each motion verified
-                         (rad_planner.take_apart, rad_core.sequencing.disassembly)
+                         (rad_planner.take_apart, rad_core.sequencing.execution.disassembly)
   pub  plan_json         std_msgs/String (latched): the latest plan, for the visualizer
   pub  /tf_static        tf2_msgs/TFMessage (latched): the calibration frame_id -> mocap_frame, when
                          motion capture reports in a frame of its own
@@ -36,7 +36,7 @@ request with a reason naming it.
                          ('mocap4r2'); 'pose_stamped': one geometry_msgs/PoseStamped per body on
                          <pose_topic> with {body} replaced (natnet_ros2, vrpn_mocap)
 
-Motion capture (rad_core.mocap_input): poses arrive in mocap_frame ('' = frame_id) and are
+Motion capture (rad_core.cell.mocap_input): poses arrive in mocap_frame ('' = frame_id) and are
 taken into frame_id by the calibration mocap_to_base_translation / _quaternion (p_base = R p +
 t); a message in another frame is refused, naming both. Bodies are named by block id unless
 body_map_file maps them ({bodies: {NAME: {block: ID, pivot: [x, y, z]}}, ignore: [NAME]}, the
@@ -63,40 +63,46 @@ import threading
 import time
 
 import numpy as np
+import rclpy
+from rad_core.cell import panda
+from rad_core.cell.mocap import Registration, RegistrationConfig, register_scene, register_world
+from rad_core.cell.mocap_input import BodyMap, MocapFrames, MocapTracker, wait_for_bodies
+from rad_core.cell.robot_model import robot_model
+from rad_core.cell.trajectory import limit_violation
+from rad_core.domain.errors import RadError
+from rad_core.domain.scene import Scene
+from rad_core.sequencing.agent.agent_plan import IMPROVE_TIME_S, plan_for_agent
+from rad_core.sequencing.decide.agents import parse
+from rad_core.sequencing.decide.sequencer import Ranking
+from rad_core.sequencing.execution.execute import ExecuteConfig, execute_assembly
+from rad_core.sequencing.planning.plan import MotionPlan
+from rad_core.sequencing.planning.reallocation import reallocation_support
+from rad_msgs.action import ExecuteAssembly
+from rad_msgs.msg import Scene as SceneMsg
+from rad_msgs.srv import Allocate, PlanAction, PlanAssembly, PresentBlock, Sequence
+from rad_ros.conversions import (
+    allocation_from_response,
+    placement_to_msg,
+    scene_from_msg,
+    scene_from_request,
+    scene_msg_is_empty,
+)
+from rad_ros.mocap_input import MocapInput, calibration_tf
+from rad_ros.motion import motion_from_msgs, moved_aside_from_msgs
+from rad_ros.node_main import run_node
+from rad_ros.plan_msgs import fill_plan_response, plan_json
+from rad_ros.plant import ActionPlant
+from rad_ros.qos import LATCHED
+from rad_ros.sequencer_msgs import action_to_msg, ranking_from_response, sequence_request
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
-import rclpy
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor, SingleThreadedExecutor
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 from tf2_msgs.msg import TFMessage
 
-from rad_core.agents import parse
-from rad_core.errors import RadError
-from rad_core.scene import Scene
-from rad_core.sequencing.execute import ExecuteConfig, execute_assembly
-from rad_core.sequencing.agent_plan import IMPROVE_TIME_S, plan_for_agent, reallocation_support
-from rad_core.sequencing.plan import MotionPlan
-from rad_core.sequencing.sequencer import Ranking
-from rad_core.robot_model import robot_model
-from rad_core.sim import panda
-from rad_core.trajectory import limit_violation
-from rad_core.mocap_input import BodyMap, MocapFrames, MocapTracker, wait_for_bodies
-from rad_core.sim.mocap import Registration, RegistrationConfig, register_scene, register_world
-from rad_msgs.action import ExecuteAssembly
-from rad_msgs.msg import Scene as SceneMsg
-from rad_msgs.srv import Allocate, PlanAction, PlanAssembly, PresentBlock, Sequence
-from rad_ros.conversions import (allocation_from_response, placement_to_msg, scene_from_msg, scene_from_request,
-                                 scene_msg_is_empty)
-from rad_ros.node_main import run_node
-from rad_ros.plan_msgs import fill_plan_response, plan_json
-from rad_ros.sequencer_msgs import action_to_msg, ranking_from_response, sequence_request
-from rad_ros.mocap_input import MocapInput, calibration_tf
-from rad_ros.motion import motion_from_msgs, moved_aside_from_msgs
-from rad_ros.plant import ActionPlant
-from rad_ros.qos import LATCHED
 from rad_planner.take_apart import serve_take_apart
 
 
@@ -422,7 +428,7 @@ class AssemblyNode(Node):
 
     # ---- /execute_assembly -------------------------------------------------------------
     def execute_callback(self, goal_handle):
-        """Glue for rad_core.sequencing.execute: the plant is the arm controller's and the hand's
+        """Glue for rad_core.sequencing.execution.execute: the plant is the arm controller's and the hand's
         actions, joint states and motion capture; feedback and cancel go through the goal handle."""
         goal = goal_handle.request
         result = ExecuteAssembly.Result()

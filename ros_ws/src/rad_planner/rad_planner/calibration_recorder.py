@@ -29,16 +29,15 @@ from collections import deque
 
 import numpy as np
 from geometry_msgs.msg import PoseStamped
+from rad_core.cell.calibration import RestConfig, append_pair_row, marker_in_base, still_mean
+from rad_core.cell.robot_model import robot_model
+from rad_core.domain.errors import RadError
+from rad_core.sim.world import World
+from rad_ros.node_main import main_for
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
-
-from rad_core.calibration import RestConfig, append_pair_row, marker_in_base, still_mean
-from rad_core.errors import RadError
-from rad_core.robot_model import robot_model
-from rad_core.sim.world import World
-from rad_ros.node_main import main_for
 
 KEEP_S = 5.0
 """s of input history kept (at least the rest window)."""

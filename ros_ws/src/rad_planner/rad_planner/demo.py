@@ -5,7 +5,7 @@
 
 Writes DIR/scene.json, DIR/result.json (rad-result/1), pictures of the build and, when
 the Rerun visualizer is installed, DIR/recording.rrd; node logs in DIR/logs/. The pictures
-(rad_core.render.save_build_pictures) show the structure close up from two sides, target
+(rad_core.view.render.save_build_pictures) show the structure close up from two sides, target
 cells no block fills as translucent pink cubes and blocks on cells outside the target tinted
 red: DIR/before.png (the target and the heap at the start), DIR/after.png (what was built, as
 motion capture saw it at the end) and DIR/build.png, an animated PNG of the structure after
@@ -34,12 +34,12 @@ import time
 from pathlib import Path
 
 import rclpy
+from rad_core.domain.errors import RadError
+from rad_core.domain.generator import GeneratorConfig, generate_scene
+from rad_core.domain.scene import Scene
+from rad_core.sequencing.execution.result import final_scene
 from rclpy.action import ActionClient
 
-from rad_core.errors import RadError
-from rad_core.generator import GeneratorConfig, generate_scene
-from rad_core.scene import Scene
-from rad_core.sequencing.result import final_scene
 from rad_planner.graph import default_params, start_graph
 
 DEFAULT_SCENE = (GeneratorConfig(grid=4, sides=2), 8)
@@ -185,7 +185,7 @@ def run(scene: Scene, out: Path, rtf: float, time_limit: float, faults: str = 'n
     final = final_scene({**doc, 'scene': scene.to_dict()})
     # The last build's own start: with --cycles, the heap as motion capture saw it after a take-apart.
     start = Scene.from_dict(doc['scene']) if doc.get('scene') else scene
-    from rad_core.render import save_build_pictures
+    from rad_core.view.render import save_build_pictures
     save_build_pictures(start, final, doc.get('steps', []), out)
     return {'result': result, 'doc': doc, 'exit_codes': codes, 'final': final, 'cycles': rows}
 

@@ -1,4 +1,4 @@
-"""/sequence: the learned sequencer of the node graph (rad_core.sequencing.sequencer).
+"""/sequence: the learned sequencer of the node graph (rad_core.sequencing.decide.sequencer).
 
 Loads the policy once at start-up (a Q-network, or HEUR) and, for search, keeps its
 own in-process planning twin; for each request ranks the allocation's next actions
@@ -7,7 +7,7 @@ takes the first action GAMP finds feasible, so the policy never commands anythin
 
   srv  sequence  rad_msgs/Sequence
 
-Parameters: agent (an agent's text, `rad_core.agents`: a preset such as `default`, or
+Parameters: agent (an agent's text, `rad_core.sequencing.decide.agents`: a preset such as `default`, or
 scorer+search:budget...; the sequencer uses its scorer, search and budget), seed; and, on
 top of it, checkpoint (a model file replacing the agent's network, '' = none), budget
 (search simulations per decision, 0 = the agent's), search_time_s (bnb seconds per search,
@@ -25,13 +25,12 @@ from __future__ import annotations
 
 import time
 
-from rclpy.node import Node
-
-from rad_core.errors import RadError
-from rad_core.sequencing.sequencer import DEFAULT_AGENT, Sequencer, SequencerConfig
+from rad_core.domain.errors import RadError
+from rad_core.sequencing.decide.sequencer import DEFAULT_AGENT, Sequencer, SequencerConfig
 from rad_msgs.srv import Sequence
 from rad_ros.node_main import main_for
 from rad_ros.sequencer_msgs import fill_sequence_response, sequence_inputs
+from rclpy.node import Node
 
 
 class SequencerNode(Node):

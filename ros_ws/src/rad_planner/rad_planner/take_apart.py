@@ -1,7 +1,7 @@
 """/take_apart: take the built structure apart, back onto the table, on the assembly node.
 
   act  take_apart  rad_msgs/TakeApart: register the world from motion capture, plan the
-                   take-apart (rad_core.sequencing.disassembly: blocks with nothing on
+                   take-apart (rad_core.sequencing.execution.disassembly: blocks with nothing on
                    them first, each back to its pose in the goal's heap scene or the
                    nearest free table spot, every motion from /plan_action with a place
                    pose), run it through the arm controller's and the hand's actions,
@@ -19,17 +19,16 @@ from __future__ import annotations
 import json
 import time
 
-from rclpy.action import ActionServer, CancelResponse, GoalResponse
-from rclpy.callback_groups import ReentrantCallbackGroup
-
-from rad_core.errors import RadError
-from rad_core.scene import Scene
-from rad_core.sequencing.disassembly import TableConfig, take_apart
-from rad_core.sequencing.execute import ExecuteConfig
-from rad_core.sequencing.plan import MotionPlan
-from rad_core.transforms import yaw_quaternion
+from rad_core.domain.errors import RadError
+from rad_core.domain.scene import Scene
+from rad_core.domain.transforms import yaw_quaternion
+from rad_core.sequencing.execution.disassembly import TableConfig, take_apart
+from rad_core.sequencing.execution.execute import ExecuteConfig
+from rad_core.sequencing.planning.plan import MotionPlan
 from rad_msgs.action import TakeApart
 from rad_ros.motion import pose_msg
+from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.callback_groups import ReentrantCallbackGroup
 
 
 def place_planner(node):

@@ -3,19 +3,20 @@
 A scene message is turned into the rad-scene/1 document and parsed by the same
 validator the CLI uses, so a bad message gets the same field-naming errors.
 
-A scene's ``clearance`` (rad_core.scene) travels in rad_msgs/Scene's ``clearance``
+A scene's ``clearance`` (rad_core.domain.scene) travels in rad_msgs/Scene's ``clearance``
 field (0 = flush, as in a scene document without the key).
 """
 
 from __future__ import annotations
 
 from geometry_msgs.msg import Point
-from rad_msgs.msg import Block, BlockType, Cell, Feeder as FeederMsg, Placement, Scene as SceneMsg, TargetRegion
-
 from rad_core.allocation import AllocationResult
 from rad_core.allocation.placements import Placement as CorePlacement
-from rad_core.errors import RadError
-from rad_core.scene import FORMAT, Scene
+from rad_core.domain.errors import RadError
+from rad_core.domain.scene import FORMAT, Scene
+from rad_msgs.msg import Block, BlockType, Cell, Placement, TargetRegion
+from rad_msgs.msg import Feeder as FeederMsg
+from rad_msgs.msg import Scene as SceneMsg
 
 MAX_SCENE_JSON_BYTES = 10 * 1024 * 1024
 

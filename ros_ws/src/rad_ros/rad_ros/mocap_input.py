@@ -18,12 +18,12 @@ import threading
 from collections.abc import Iterable
 
 from geometry_msgs.msg import PoseStamped, TransformStamped
+from rad_core.cell.mocap import RigidBodyPose
+from rad_core.cell.mocap_input import MocapFrames, MocapTracker
+from rad_core.domain.errors import RadError
 from rclpy.qos import qos_profile_sensor_data
 from tf2_msgs.msg import TFMessage
 
-from rad_core.errors import RadError
-from rad_core.mocap_input import MocapFrames, MocapTracker
-from rad_core.sim.mocap import RigidBodyPose
 from rad_ros.motion import pose_from_msg
 
 MOCAP_INPUTS = ('rad', 'mocap4r2', 'pose_stamped')

@@ -2,7 +2,7 @@
 
 Trajectories travel inside rad_core as plain dicts of the result.json shape:
 {"joint_names": [...], "points": [{"positions", "velocities", "accelerations", "time_from_start"}]};
-a step's motion as {"trajectories": [...], "gripper": [...]} (`rad_core.motion.Motion`).
+a step's motion as {"trajectories": [...], "gripper": [...]} (`rad_core.cell.motion.Motion`).
 """
 
 from __future__ import annotations
@@ -10,13 +10,12 @@ from __future__ import annotations
 import math
 
 from builtin_interfaces.msg import Duration
-from geometry_msgs.msg import Point, Pose, PoseStamped, Quaternion
 from control_msgs.msg import GripperCommand
+from geometry_msgs.msg import Point, Pose, PoseStamped, Quaternion
+from rad_core.domain.errors import RadError
+from rad_core.domain.transforms import yaw_of_quaternion, yaw_quaternion
 from rad_msgs.msg import GripperStep, RigidBodies, RigidBody
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
-
-from rad_core.errors import RadError
-from rad_core.transforms import yaw_of_quaternion, yaw_quaternion
 
 
 def duration_to_s(d: Duration) -> float:
@@ -64,7 +63,7 @@ def motion_to_msgs(motion: dict, frame_id: str = '') -> tuple[list[JointTrajecto
 
 
 def motion_from_msgs(trajectories, gripper) -> dict:
-    """The inverse of `motion_to_msgs` (no validation: `rad_core.motion.Motion.from_dict` checks)."""
+    """The inverse of `motion_to_msgs` (no validation: `rad_core.cell.motion.Motion.from_dict` checks)."""
     steps = []
     for g in gripper:
         d = {'before': g.before, 'action': g.action, 'position': g.command.position,

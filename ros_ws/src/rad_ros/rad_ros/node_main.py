@@ -31,10 +31,9 @@ import threading
 from pathlib import Path
 
 import rclpy
+from rad_core.domain.errors import RadError
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.signals import SignalHandlerOptions
-
-from rad_core.errors import RadError
 
 TICK_S = 0.2
 SETTLE_S = 3.0

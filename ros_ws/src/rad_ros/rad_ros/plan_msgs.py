@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
+from rad_core.allocation import Placement
+from rad_core.domain.transforms import yaw_quaternion
+from rad_core.sequencing.planning.plan import AssemblyPlan
 from rad_msgs.msg import PlanStep, Reallocation, StageTiming
 
-from rad_core.sequencing.plan import AssemblyPlan
-from rad_core.transforms import yaw_quaternion
-from rad_core.allocation import Placement
 from rad_ros.conversions import cells_msg, placement_to_msg
-from rad_ros.motion import motion_to_msgs, pose_msg, moved_aside_to_msgs
+from rad_ros.motion import motion_to_msgs, moved_aside_to_msgs, pose_msg
 
 
 def step_to_msg(step, frame_id: str) -> PlanStep:

@@ -23,13 +23,15 @@ from typing import Callable
 from action_msgs.msg import GoalStatus
 from control_msgs.action import FollowJointTrajectory, GripperCommand
 from control_msgs.msg import JointTolerance
+from rad_core.cell.motion import GripperCommand as GripperStep
+from rad_core.cell.motion import GripperResult
+from rad_core.cell.robot_model import RobotModel
+from rad_core.cell.trajectory import GOAL_TOLERANCE_VIOLATED, PATH_TOLERANCE_VIOLATED, Trajectory, TrajectoryAborted
+from rad_core.domain.errors import RadError
 from rclpy.action import ActionClient as _ActionClient
 
-from rad_core.errors import RadError
-from rad_core.motion import GripperCommand as GripperStep, GripperResult
-from rad_core.robot_model import RobotModel
-from rad_core.trajectory import GOAL_TOLERANCE_VIOLATED, PATH_TOLERANCE_VIOLATED, Trajectory, TrajectoryAborted
 from rad_ros.motion import s_to_duration, trajectory_to_msg
+
 
 class ActionClient(_ActionClient):
     """rclpy's ActionClient, safe to send from one thread while an executor spins it on another.

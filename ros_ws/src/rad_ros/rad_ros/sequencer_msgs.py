@@ -1,4 +1,4 @@
-"""rad_msgs/Sequence <-> rad_core.sequencing.sequencer (Ranking), and AssemblyAction <-> SceneAction.
+"""rad_msgs/Sequence <-> rad_core.sequencing.decide.sequencer (Ranking), and AssemblyAction <-> SceneAction.
 
 Message types only, never rclpy: the sequencer node converts a request with
 `sequence_inputs` and answers with `fill_sequence_response`; its clients build the
@@ -9,13 +9,13 @@ from __future__ import annotations
 
 import math
 
+from rad_core.domain.errors import RadError
+from rad_core.domain.scene import Scene
+from rad_core.gamp.action import SceneAction
+from rad_core.sequencing.decide.sequencer import Ranking
 from rad_msgs.msg import AssemblyAction, StageTiming
 from rad_msgs.srv import Sequence
 
-from rad_core.errors import RadError
-from rad_core.gamp.action import SceneAction
-from rad_core.scene import Scene
-from rad_core.sequencing.sequencer import Ranking
 from rad_ros.conversions import placement_from_msg, placement_to_msg, scene_from_request
 
 

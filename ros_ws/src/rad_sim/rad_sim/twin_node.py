@@ -50,35 +50,34 @@ import math
 import time
 
 import numpy as np
-
-from geometry_msgs.msg import PoseStamped
 from control_msgs.action import FollowJointTrajectory, GripperCommand
-from rcl_interfaces.msg import ParameterDescriptor
-from rclpy.action import ActionServer, CancelResponse, GoalResponse
-from rclpy.node import Node
-from rclpy.task import Future
-from rclpy.qos import qos_profile_sensor_data
-from sensor_msgs.msg import JointState
-from std_msgs.msg import String
-from std_srvs.srv import Trigger
-from trajectory_msgs.msg import JointTrajectory
-
-from rad_core.errors import RadError
-from rad_core.motion import GripperResult
-from rad_core.scene import Scene
+from geometry_msgs.msg import PoseStamped
+from rad_core.cell.mocap import RigidBodyPose
+from rad_core.cell.motion import GripperResult
+from rad_core.cell.trajectory import TrajectoryRejected
+from rad_core.domain.errors import RadError
+from rad_core.domain.scene import Scene
+from rad_core.domain.transforms import matrix_from_quaternion
 from rad_core.sim.faults import FaultConfig
-from rad_core.sim.mocap import RigidBodyPose
 from rad_core.sim.twin import BLOCK_PLAY, Tolerances, Twin, TwinConfig, twin_world_config
-from rad_core.transforms import matrix_from_quaternion
-from rad_core.trajectory import TrajectoryRejected
 from rad_core.sim.workspace import Workspace
 from rad_core.sim.world import World
-from rad_msgs.msg import RigidBodies, Scene as SceneMsg
+from rad_msgs.msg import RigidBodies
+from rad_msgs.msg import Scene as SceneMsg
 from rad_msgs.srv import GetSceneState, LoadScene, PresentBlock, SetBlockPose
 from rad_ros.conversions import scene_from_request, scene_to_msg
 from rad_ros.motion import duration_to_s, pose_from_msg, pose_stamped, rigid_bodies_msg, trajectory_from_msg
 from rad_ros.node_main import main_for
 from rad_ros.qos import LATCHED
+from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.node import Node
+from rclpy.qos import qos_profile_sensor_data
+from rclpy.task import Future
+from sensor_msgs.msg import JointState
+from std_msgs.msg import String
+from std_srvs.srv import Trigger
+from trajectory_msgs.msg import JointTrajectory
 
 
 class TwinNode(Node):

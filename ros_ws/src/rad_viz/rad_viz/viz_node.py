@@ -1,4 +1,4 @@
-"""The visualizer: logs what the graph publishes to Rerun (see rad_core.viz for the entities).
+"""The visualizer: logs what the graph publishes to Rerun (see rad_core.view.viz for the entities).
 
 Endpoints (relative names, so namespaces and remaps work):
   sub  joint_states   sensor_msgs/JointState: the Panda's links move (at most log_rate_hz)
@@ -23,8 +23,8 @@ import time
 from urllib.parse import urlparse
 
 import rerun as rr
-from rad_core import viz
-from rad_core.errors import RadError
+from rad_core.domain.errors import RadError
+from rad_core.view import viz
 from rad_msgs.msg import RigidBodies
 from rad_msgs.msg import Scene as SceneMsg
 from rad_ros.conversions import scene_from_msg

@@ -54,7 +54,7 @@ still checks.
 `exclude` (no-goods) removes (block type, pose) pairs from the model: poses
 the robot or physics already failed to build from the current state, when
 sequencing stalled and the allocation is solved again over the cells still
-free (`rad_core.sequencing.reallocation`). Blocks already in target cells of
+free (`rad_core.sequencing.planning.reallocation`). Blocks already in target cells of
 the scene are fixed: their cells are occupied and they are not available.
 """
 
@@ -64,18 +64,18 @@ import math
 import time
 from collections import defaultdict
 from dataclasses import dataclass
-from functools import lru_cache
 
 import numpy as np
 from ortools.sat.python import cp_model
 
-from rad_core import support
+from rad_core.allocation.arm import arm_filter, finger_costs
+from rad_core.allocation.constraints import cp_solver, support_options
+from rad_core.allocation.order import hand_order
 from rad_core.allocation.placements import Candidate, enumerate_candidates
 from rad_core.allocation.result import AllocationResult
-from rad_core.errors import RadError
-from rad_core.grid import Grid, blocks_on_grid
-from rad_core.scene import Scene
-
+from rad_core.domain.errors import RadError
+from rad_core.domain.grid import Grid, blocks_on_grid
+from rad_core.domain.scene import Scene
 
 SUPPORT_MODES = ('none', 'stable', 'arm', 'hand')
 HAND_ROUNDS = 6
@@ -171,20 +171,6 @@ def build_model(candidates: list[Candidate], counts: dict[str, int], support: st
     return model, w, scale
 
 
-def cp_solver(time_limit_s: float, num_workers: int = 1, seed: int | None = None) -> cp_model.CpSolver:
-    """A CP-SAT solver with a wall-time limit and `num_workers` workers (and `seed`, where given),
-    that leaves SIGINT alone: CP-SAT would install its own handler for the solve and leave SIGINT
-    at the default action afterwards, so a node would die by the signal instead of shutting down.
-    Signals belong to the process owner, not to a library call."""
-    solver = cp_model.CpSolver()
-    solver.parameters.max_time_in_seconds = float(time_limit_s)
-    solver.parameters.num_workers = num_workers
-    if seed is not None:
-        solver.parameters.random_seed = seed
-    solver.parameters.catch_sigint_signal = False
-    return solver
-
-
 def _pose_cost(cand: Candidate, grid: Grid, prefer: str) -> int:
     if prefer == 'fewer':
         return 1
@@ -207,48 +193,6 @@ def _add_support(model, candidates, w, by_cell, grid: Grid, occupied) -> None:
                 model.add(z <= sum(u))
             options.append(z)
         model.add(sum(options) >= w[n])
-
-
-def support_options(grid: Grid, ids: list[int], occupied, holders: dict) -> list[list[list]] | None:
-    """How a pose (its cell ids) can stand, as the 'stable' rule asks: None where it stands on the
-    table or built cells whatever else is chosen; else, per sufficient support set that can be held
-    up, per unit of it not resting already, `holders` of the cell below it (holders: cell -> what
-    may fill it, e.g. the poses covering it). Sets with a unit nothing can hold up are left out."""
-    below, sets, trivial = _support_sets(grid, ids, occupied)
-    if any(set(S) <= trivial for S in sets):
-        return None
-    out = []
-    for S in sets:
-        unders = [holders.get(below[i], []) if below[i] >= 0 else [] for i in S if i not in trivial]
-        if all(unders):
-            out.append(unders)
-    return out
-
-
-def _support_sets(grid: Grid, ids: list[int], occupied):
-    """(cell below each unit, the sufficient support sets of the pose's bottom units,
-    the bottom units already resting on the table or an occupied cell)."""
-    own = set(ids)
-    below = [int(grid.below_idx[c]) for c in ids]
-    bottom = [i for i, b in enumerate(below) if b not in own]
-    trivial = {i for i in bottom if grid.on_table[ids[i]] or (below[i] >= 0 and occupied[below[i]])}
-    return below, _sufficient_supports(grid.ijk[ids].tobytes(), tuple(bottom)), trivial
-
-
-@lru_cache(maxsize=65536)
-def _sufficient_supports(ijk: bytes, bottom: tuple[int, ...]) -> tuple[tuple[int, ...], ...]:
-    """`support.sufficient_supports` of the pose with these cells (ijk, bytes of a [k, 3] int64
-    array, as `Grid.ijk` holds them): the same candidate poses come back in every re-allocation of
-    a scene, so it is remembered."""
-    cells = np.frombuffer(ijk, dtype=np.int64).reshape(-1, 3)
-    return tuple(support.sufficient_supports(cells, list(bottom)))
-
-
-def rests_now(grid: Grid, ids, occupied) -> bool:
-    """Whether a pose (its cell ids) would stand on what is there now: some sufficient set
-    of its bottom units rests on the table or on occupied cells (the 'stable' rule)."""
-    _, sets, trivial = _support_sets(grid, [int(i) for i in ids], occupied)
-    return any(set(S) <= trivial for S in sets)
 
 
 def greedy(candidates: list[Candidate], counts: dict[str, int]) -> list[int]:
@@ -298,7 +242,6 @@ def solve(scene: Scene, params: AllocationParams = AllocationParams(), exclude=(
     counts = available_counts(scene, grid)
     arm = None
     if params.support in ('arm', 'hand'):
-        from rad_core.allocation.arm import arm_filter
         candidates, counts, arm = arm_filter(scene, grid, candidates)
     occupied = None
     if params.support != 'none':
@@ -307,7 +250,6 @@ def solve(scene: Scene, params: AllocationParams = AllocationParams(), exclude=(
             occupied[cells] = True
     costs = None
     if params.prefer == 'open':
-        from rad_core.allocation.arm import finger_costs
         costs = finger_costs(scene, grid, candidates)
     model, w, scale = build_model(candidates, counts, params.support, grid, occupied, params.prefer, costs)
     incumbent = set(greedy(candidates, counts)) if params.support == 'none' else set()
@@ -361,7 +303,7 @@ def solve_rounds(model, w, candidates: list[Candidate], scene: Scene, rounds: in
     less). Yields (solver, status, picked candidate indices, indices into picked the hand cannot
     place) per solve; ends after a solve with no answer (picked empty), or with nothing to rule
     out. One round: the plain solve, the hand not asked. The support rule 'hand' and
-    `rad_core.supply` choose among the answers, each by its own measure."""
+    `rad_core.allocation.supply` choose among the answers, each by its own measure."""
     for round_ in range(rounds):
         left = time_limit_s - (time.perf_counter() - start)
         if round_ and left <= 0.05:
@@ -383,8 +325,7 @@ def solve_rounds(model, w, candidates: list[Candidate], scene: Scene, rounds: in
 def hand_unplaced(scene: Scene, placements) -> list[int]:
     """The indices of the `placements` (allocation.Placement, of the scene's free cells) that no
     order `sequencing.hand_order` finds places beside the others (the support rule 'hand' and
-    `rad_core.supply` rule them out and solve again)."""
-    from rad_core.sequencing.hand_order import hand_order
+    `rad_core.allocation.supply` rule them out and solve again)."""
     placements = list(placements)
     placed = set(hand_order(scene, placements).order)
     grid = Grid(scene)

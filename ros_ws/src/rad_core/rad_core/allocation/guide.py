@@ -7,7 +7,7 @@ are offered. A pose whose cells are no longer all free (it was filled, or anothe
 block took one of its cells) offers nothing: after a placement, the actions that
 would fill the same pose are gone.
 
-Blocks in a feeder (`rad_core.scene.Feeder`): a queue feeder offers only the blocks it
+Blocks in a feeder (`rad_core.domain.scene.Feeder`): a queue feeder offers only the blocks it
 presents next; a request feeder presents every block of a type at the same pose, so
 they are interchangeable and only the first of each type waiting is offered (the
 others would repeat its actions; for 40 blocks in a feeder, ten times fewer).
@@ -24,11 +24,11 @@ from functools import lru_cache
 import numpy as np
 
 from rad_core.allocation.placements import Placement
-from rad_core.blocks import BlockType, canonical_shape
-from rad_core.errors import RadError
-from rad_core.grid import Grid
-from rad_core.mdp import Action, AssemblyState, feeder_blocks
-from rad_core.scene import Scene
+from rad_core.domain.blocks import BlockType, canonical_shape
+from rad_core.domain.errors import RadError
+from rad_core.domain.grid import Grid
+from rad_core.domain.scene import Scene
+from rad_core.env.mdp import Action, AssemblyState, feeder_blocks
 
 
 class AllocationGuide:

@@ -13,8 +13,8 @@ import numpy as np
 from rad_core.allocation.cpsat import available_counts
 from rad_core.allocation.placements import enumerate_candidates
 from rad_core.allocation.result import AllocationResult
-from rad_core.grid import Grid
-from rad_core.scene import Scene
+from rad_core.domain.grid import Grid
+from rad_core.domain.scene import Scene
 
 
 def solve_highs(scene: Scene, time_limit_s: float = 60.0) -> AllocationResult:

@@ -6,9 +6,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rad_core.blocks import BlockType
-from rad_core.grid import Grid, blocks_on_grid
-from rad_core.scene import Scene
+from rad_core.domain.blocks import BlockType
+from rad_core.domain.grid import Grid, blocks_on_grid
+from rad_core.domain.scene import Scene
 
 
 @dataclass(frozen=True)

@@ -7,9 +7,9 @@ from collections import Counter
 import numpy as np
 
 from rad_core.allocation.result import AllocationResult
-from rad_core.blocks import YAWS, canonical_shape
-from rad_core.grid import Grid, blocks_on_grid
-from rad_core.scene import Scene
+from rad_core.domain.blocks import YAWS, canonical_shape
+from rad_core.domain.grid import Grid, blocks_on_grid
+from rad_core.domain.scene import Scene
 
 
 def validate_allocation(scene: Scene, result: AllocationResult, tol: float = 1e-6) -> list[str]:

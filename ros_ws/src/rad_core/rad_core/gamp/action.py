@@ -13,13 +13,13 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from rad_core.errors import RadError
+from rad_core.cell import panda
+from rad_core.domain.errors import RadError
+from rad_core.domain.scene import Scene
+from rad_core.domain.shapes import LayoutConfig, footprint, move_aside_spot
+from rad_core.domain.transforms import yaw_quaternion
 from rad_core.gamp.planner import GampConfig, GampResult, placement_pose, plan_action
-from rad_core.scene import Scene
-from rad_core.shapes import LayoutConfig, footprint, move_aside_spot
-from rad_core.sim import panda
 from rad_core.sim.world import World
-from rad_core.transforms import yaw_quaternion
 
 
 @dataclass(frozen=True)

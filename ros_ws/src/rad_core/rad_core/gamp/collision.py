@@ -23,12 +23,12 @@ from __future__ import annotations
 
 import math
 import weakref
-from dataclasses import dataclass
 from collections.abc import Callable, Iterable
+from dataclasses import dataclass
 
 import numpy as np
 
-from rad_core.sim import panda
+from rad_core.cell import panda
 from rad_core.sim.world import World
 
 CollisionFn = Callable[[np.ndarray], str]

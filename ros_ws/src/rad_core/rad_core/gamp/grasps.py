@@ -34,8 +34,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rad_core.blocks import BlockType
-from rad_core.sim import panda
+from rad_core.cell import panda
+from rad_core.domain.blocks import BlockType
 
 MAX_GRASP_WIDTH = panda.MAX_OPENING - 2 * 0.005
 """Widest unit (m) the open hand can take: 0.08 m opening less 5 mm clearance per side."""

@@ -31,7 +31,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from rad_core.sim import panda
+from rad_core.cell import panda
 
 DEPTH = 0.004
 """How far (m) a neighbour's cube must sink into the hand for the offset to count as blocking."""
@@ -49,9 +49,10 @@ def blocking_offsets(unit: float, clearance: float, finger_open: float, hand_yaw
     open `finger_open` each, or panda_link7 enters by more than `DEPTH`, the hand pointing down at
     `hand_yaw_deg` (a multiple of 90) with its grasp target `lift` (m) over the held unit's centre."""
     import pybullet as p
-    from rad_core.errors import RadError
-    from rad_core.physics import PhysicsConfig
-    from rad_core.transforms import matrix_from_quaternion, quaternion_from_matrix
+
+    from rad_core.domain.errors import RadError
+    from rad_core.domain.transforms import matrix_from_quaternion, quaternion_from_matrix
+    from rad_core.sim.physics import PhysicsConfig
     if hand_yaw_deg % 90:
         raise RadError(f'blocking_offsets: hand yaw must be a multiple of 90 deg, got {hand_yaw_deg}')
     cid = p.connect(p.DIRECT)

@@ -44,16 +44,15 @@ from __future__ import annotations
 import math
 import time
 import weakref
-from dataclasses import dataclass, replace
 from collections.abc import Sequence
+from dataclasses import dataclass, replace
 
 import numpy as np
 
+from rad_core.cell import panda
+from rad_core.domain.transforms import matrix_from_quaternion
 from rad_core.gamp.kinematics import kinematics, newton
-from rad_core.sim import panda
 from rad_core.sim.world import World
-from rad_core.transforms import matrix_from_quaternion
-
 
 SHOULDER = np.array([0.0, 0.0, 0.333])
 

@@ -23,9 +23,9 @@ import weakref
 
 import numpy as np
 
-from rad_core.errors import RadError
+from rad_core.domain.errors import RadError
+from rad_core.domain.transforms import matrix_from_quaternion
 from rad_core.sim.world import World
-from rad_core.transforms import matrix_from_quaternion
 
 # World -> (the robot's base pose when read, PandaKinematics).
 _KINEMATICS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()

@@ -38,17 +38,16 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from rad_core.errors import RadError
-from rad_core.gamp.collision import (CollisionConfig, attachment_from_world, check_path,
-                                     make_collision_fn, world_key)
+from rad_core.cell import panda
+from rad_core.cell.motion import Motion
+from rad_core.domain.errors import RadError
+from rad_core.domain.scene import Scene
+from rad_core.domain.transforms import matrix_from_quaternion, yaw_matrix, yaw_of_quaternion, yaw_quaternion
+from rad_core.gamp.collision import CollisionConfig, attachment_from_world, check_path, make_collision_fn, world_key
 from rad_core.gamp.grasps import Grasp, block_grasps, grasp_lift, grasp_width, no_grasp_reason
 from rad_core.gamp.ik import IkConfig, hand_yaw_options, solve_top_down
 from rad_core.gamp.trajectory import TimingConfig, plan_motion
-from rad_core.motion import Motion
-from rad_core.scene import Scene
-from rad_core.sim import panda
 from rad_core.sim.world import World
-from rad_core.transforms import matrix_from_quaternion, yaw_matrix, yaw_of_quaternion, yaw_quaternion
 
 
 @dataclass(frozen=True)
@@ -97,7 +96,7 @@ class GampResult:
     """What GAMP says about one action.
 
     motion: the arm trajectories (7 joints, timed within the robot model's limits)
-    and gripper commands that do it, in order (`rad_core.motion.Motion`). It is timed
+    and gripper commands that do it, in order (`rad_core.cell.motion.Motion`). It is timed
     when first read (`trajectory.plan_motion` over the plan's waypoints, about 1 ms): a
     planning-twin step that teleports needs only where the motion ends (`final_joints`),
     and a search asks GAMP thousands of times. Timings in seconds (the motion's timing

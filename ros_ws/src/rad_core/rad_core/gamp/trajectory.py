@@ -1,4 +1,4 @@
-"""Timing GAMP's waypoints within a Franka's limits, into a `rad_core.motion.Motion`.
+"""Timing GAMP's waypoints within a Franka's limits, into a `rad_core.cell.motion.Motion`.
 
 GAMP plans configurations (9 joints: arm and fingers) and checks the straight
 joint-space segments between them for collisions. `plan_motion` turns that path
@@ -27,15 +27,15 @@ along the motion the robot actually makes, not only at the points.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
-from rad_core.errors import RadError
-from rad_core.motion import GripperCommand, Motion
-from rad_core.robot_model import RobotModel, envelope, robot_model
-from rad_core.trajectory import Trajectory, TrajectoryPoint
+from rad_core.cell.motion import GripperCommand, Motion
+from rad_core.cell.robot_model import RobotModel, envelope, robot_model
+from rad_core.cell.trajectory import Trajectory, TrajectoryPoint
+from rad_core.domain.errors import RadError
 
 _MIN_PHASE = 1e-6     # s: ruckig phases shorter than this add no point
 _MARGIN = 1e-3

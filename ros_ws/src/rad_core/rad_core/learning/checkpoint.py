@@ -25,7 +25,7 @@ from typing import Any
 
 import torch
 
-from rad_core.errors import RadError
+from rad_core.domain.errors import RadError
 
 MODEL_FORMAT = 'rad-qnet/1'
 TRAIN_FORMAT = 'rad-train/1'

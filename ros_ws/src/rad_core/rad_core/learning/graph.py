@@ -23,7 +23,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from rad_core.mdp import Action, AssemblyEnv
+from rad_core.env.mdp import Action, AssemblyEnv
 
 UNPLACED, PLACED, TARGET, NON_TARGET = 0, 1, 2, 3
 NODE_KINDS = ('unplaced unit', 'placed unit', 'target cell', 'non-target cell')

@@ -13,10 +13,10 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from rad_core.env.mdp import Action, AssemblyEnv
 from rad_core.learning import checkpoint as ckpt
 from rad_core.learning.graph import Observer
 from rad_core.learning.network import NetConfig, QNetwork, collate
-from rad_core.mdp import Action, AssemblyEnv
 
 
 class QPolicy:

@@ -20,7 +20,7 @@ import math
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
-from rad_core.errors import RadError
+from rad_core.domain.errors import RadError
 
 KINDS = ('noise', 'drop_body', 'drop_frame', 'placement', 'slip', 'miss', 'nudge')
 """The fault kinds, each with its own random stream (index = stream number)."""

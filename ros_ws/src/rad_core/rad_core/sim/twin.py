@@ -8,7 +8,7 @@ the interpolated motion from where the arm is, sampled at 1 kHz, within the
 model's velocity, acceleration and jerk limits (`limit_violation`): a trajectory
 a real Franka would stop on is refused with the controller's error code
 (`TrajectoryRejected`). It is followed by the controller's interpolation
-(`rad_core.trajectory.Spline`: quintic with accelerations), with path and goal
+(`rad_core.cell.trajectory.Spline`: quintic with accelerations), with path and goal
 tolerances; the report carries the FollowJointTrajectory error code. A new
 trajectory replaces the running one; `cancel` stops the arm where it is.
 
@@ -67,19 +67,27 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from rad_core.errors import RadError
-from rad_core.motion import GripperCommand, GripperResult, Motion, run_motion
-from rad_core.robot_model import RobotModel, robot_model
-from rad_core.scene import Scene
-from rad_core.sim import panda
+from rad_core.cell import panda
+from rad_core.cell.mocap import Registration, RegistrationConfig, RigidBodyPose, register_scene, register_world
+from rad_core.cell.motion import GripperCommand, GripperResult, Motion, run_motion
+from rad_core.cell.robot_model import RobotModel, robot_model
+from rad_core.cell.trajectory import (
+    GOAL_TOLERANCE_VIOLATED,
+    INVALID_GOAL,
+    PATH_TOLERANCE_VIOLATED,
+    SUCCESSFUL,
+    Spline,
+    Trajectory,
+    TrajectoryAborted,
+    TrajectoryRejected,
+    limit_violation,
+    parse_trajectory,
+)
+from rad_core.domain.errors import RadError
+from rad_core.domain.scene import Scene
+from rad_core.domain.transforms import yaw_quaternion
 from rad_core.sim.faults import KINDS, FaultConfig
-from rad_core.sim.mocap import Registration, RegistrationConfig, RigidBodyPose, register_scene, register_world
 from rad_core.sim.world import World, WorldConfig
-from rad_core.transforms import yaw_quaternion
-from rad_core.trajectory import (GOAL_TOLERANCE_VIOLATED, INVALID_GOAL, PATH_TOLERANCE_VIOLATED, SUCCESSFUL,
-                                 Spline, Trajectory, TrajectoryAborted, TrajectoryRejected, limit_violation,
-                                 parse_trajectory)
-
 
 BLOCK_PLAY = 0.01
 """Play of a block between its neighbours in the twin (fraction of a unit per side face: 0.5 mm at
@@ -420,7 +428,7 @@ class Twin:
 
     def registration(self, template: Scene | None = None, config: RegistrationConfig | None = None) -> Registration:
         """As `current_scene`, but blocks a scene cannot express are set aside with the reason
-        (`rad_core.sim.mocap.register_world`)."""
+        (`rad_core.cell.mocap.register_world`)."""
         template = template or self.world.scene
         if template is None:
             raise RadError('no scene loaded')
@@ -554,7 +562,7 @@ class Twin:
         return self.gripper_result
 
     def execute_motion(self, motion: Motion, callback=None, real_time_factor: float | None = None) -> str:
-        """Run a step's commands in order (`rad_core.motion.run_motion`); '' when all went through, else
+        """Run a step's commands in order (`rad_core.cell.motion.run_motion`); '' when all went through, else
         why the step stopped: a refused or aborted trajectory, or a grasp that holds nothing."""
         def move_arm(trajectory):
             report = self.execute(trajectory, callback, real_time_factor=real_time_factor)

@@ -6,8 +6,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rad_core.errors import RadError
-from rad_core.scene import Scene
+from rad_core.domain.errors import RadError
+from rad_core.domain.scene import Scene
 
 
 @dataclass(frozen=True)

@@ -15,12 +15,12 @@ Frames and conventions:
   bounding box's). PyBullet's base pose calls talk about the inertial frame;
   this module converts, so nobody else has to.
 - Collision boxes are a hair narrower than a unit on the side faces and a hair
-  taller (the same choice and reasons as `rad_core.physics`, whose
+  taller (the same choice and reasons as `rad_core.sim.physics`, whose
   `block_shape` and `add_block_body` build the block bodies of both):
   side-by-side neighbours start apart, stacked layers start in contact instead
   of falling into each other. A scene's ``clearance`` sets the blocks' outer
   side faces back by half of it (collision and visual boxes alike, see
-  `rad_core.scene`), so GAMP's probes and the twin see the gaps.
+  `rad_core.domain.scene`), so GAMP's probes and the twin see the gaps.
 
 Cost (measured, see tests/core/test_world.py): `preserved()` snapshots and
 restores by hand what can change (joint states, block poses and velocities,
@@ -29,7 +29,7 @@ constraint ids): about 0.07 ms for a 6-block scene. saveState costs about
 ``preserved(exact=True)``, which also restores Bullet's contact cache so a
 simulation replays bit-identically.
 
-A scene's feeder (`rad_core.scene.Feeder`): its blocks are bodies too, but parked: static
+A scene's feeder (`rad_core.domain.scene.Feeder`): its blocks are bodies too, but parked: static
 (mass 0) and far below the table, so they cost the physics nothing (100 resting blocks
 would make every step 20 times slower) and no probe meets them. `present` is the feeder
 at work: it puts one at its station pose, a body like any other from then on, and parks
@@ -39,19 +39,19 @@ again a presented block the robot did not take. What is parked is part of every 
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
-from collections.abc import Iterator
 
 import numpy as np
 
-from rad_core.colours import TABLE, type_colour
-from rad_core.errors import RadError
-from rad_core.physics import BlockShape, PhysicsConfig, add_block_body, block_shape, direct_client
-from rad_core.scene import Scene
-from rad_core.sim import panda
-from rad_core.sim.panda import JOINT_NAMES
-from rad_core.transforms import yaw_quaternion
+from rad_core.cell import panda
+from rad_core.cell.panda import JOINT_NAMES
+from rad_core.domain.colours import TABLE, type_colour
+from rad_core.domain.errors import RadError
+from rad_core.domain.scene import Scene
+from rad_core.domain.transforms import yaw_quaternion
+from rad_core.sim.physics import BlockShape, PhysicsConfig, add_block_body, block_shape, direct_client
 
 PARK_Z = -20.0
 """Where parked feeder blocks wait (m below the table top), one metre apart along x."""
@@ -63,7 +63,7 @@ class WorldConfig:
 
     physics: PhysicsConfig = field(default_factory=PhysicsConfig)
     """Gravity, time step, cube mass, friction, the collision-box hairs and the solver
-    iterations: the same material the stability check simulates (rad_core.physics)."""
+    iterations: the same material the stability check simulates (rad_core.sim.physics)."""
     table_half_extents: tuple[float, float, float] = (1.2, 1.2, 0.025)
     """Half size of the static table box (m); its top is z = 0, centred under `table_centre`."""
     table_centre: tuple[float, float] = (0.3, 0.0)

@@ -1,0 +1,284 @@
+"""An order of an allocation's poses in which a top-down hand can place each one: order repair's
+second chain; the same model over every candidate pose, for order repair's fourth chain
+(`ordered_cover`) and the robot ceiling's bound (`allocation.arm.ArmCoverageBound`, `ordered`).
+
+Order repair (`agent_plan.plan_for_agent`) learns precedences from GAMP's refusals: a pose refused
+because the hand hit a placed block is tried before that block's pose next time. A refusal names
+one block, the first the planner found in the way of the last grasp it tried, while a pose needs
+only one way of being held to be free. So repair can learn that a comes before b in one plan and
+that b comes before a in the next (held-out spire_cup: two tall blocks side by side, each taken
+from above only while the other is not yet there, or from the side the other region's wall is
+built against). Where its rounds leave cells unfilled, a second chain starts from this order
+(`agent_plan.plan_for_agent`).
+
+`hand_order` asks the whole question at once, for the allocation's poses: an order in which each
+pose, when its turn comes, has a way of being held (a grasp at a hand yaw, as
+`allocation.arm.HandBlocked.cells` gives them) none of whose blocking cells is built, and rests
+on something (the table, a built cell or a pose before it under one of its units: the MDP
+refuses a block that would rest on nothing). CP-SAT finds the order placing the most target
+cells (all of them where it can). Its answer as precedences: each placed pose before every pose
+that fills a blocking cell of the way it is held. The blocking cells are those the hand, its
+fingers or panda_link7 always enter (`gamp.hand_cells`); the arm's other links, the carried
+block and the pick are left to GAMP, so the order is a guess that a plan still checks step by
+step.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from rad_core.domain.grid import Grid, blocks_on_grid
+from rad_core.domain.scene import Scene
+
+
+@dataclass(frozen=True)
+class Precedence:
+    """Fill the grid cells `first` before putting a block on any of the cells `then`: a plan's
+    action on `first` was refused because the arm or the held block hit the block that plan had
+    placed on `then`, and `first` stayed unfilled."""
+
+    first: tuple[int, ...]
+    then: tuple[int, ...]
+    reason: str = field(default='', compare=False)
+
+
+@dataclass
+class HandOrder:
+    """What `hand_order` found: the poses it can place (grid cells, sorted), in its order, and the
+    precedences that order keeps to (`plan.Precedence`: each pose before the poses filling the
+    blocking cells of the way it is held). Both empty where CP-SAT found no order in time."""
+
+    order: list[tuple[int, ...]] = field(default_factory=list)
+    precedences: list[Precedence] = field(default_factory=list)
+    coverage: float = 0.0
+    """The target's coverage once the order is placed (cells built before it included)."""
+    placements: list = field(default_factory=list)
+    """The poses of `order` as the allocation's `Placement`s, in the same order."""
+    value: int = 0
+    """c^T g of those poses: target cells less non-target ones (fillers)."""
+
+
+def hand_ways(grid: Grid, hand, occupied: np.ndarray, type_name: str, yaw: int, ids) -> list[np.ndarray] | None:
+    """The ways a pose can still be held (the blocking cells of each grasp at each hand yaw, none
+    of them built), or None where every way is blocked already (`HandBlocked.blocked`); [] for a
+    type without a top-down grasp (GAMP says why)."""
+    if hand.blocked(type_name, yaw, ids, occupied):
+        return None
+    return [w for pair in hand.cells(type_name, yaw, ids) for w in pair if not occupied[w].any()]
+
+
+def order_model(grid: Grid, occupied: np.ndarray, poses: list[tuple], counts: dict[str, int] | None = None,
+                cover: bool = False, rest: bool = True):
+    """The CP-SAT model of an order of poses: which are placed (`placed[n]`), their positions
+    (`order[n]`), and per pose the ways it is held (`held_by[n]`: (variable, blocking cells)).
+
+    poses: (cells sorted, ways from `hand_ways`, target cells it fills, type name) of free poses.
+    Each placed pose, when its turn comes, has a way of being held none of whose blocking cells a
+    pose before it fills, and rests on the table, a built cell or a pose before it under one of its
+    units (the MDP refuses a block that would rest on nothing). Where poses overlap (candidates,
+    not an allocation), at most one fills a cell, and counts caps the poses of each type.
+    Maximizes the target cells placed.
+
+    cover: `ordered_cover`'s stricter rules for a plan (the bound keeps the MDP's): each pose
+    stands as the allocation's support='stable' asks (`allocation.cpsat.support_options`: its
+    centre of mass over units resting on the table, built cells or poses placed before it), and
+    among the best, the fewest cells outside the target (fillers), as c^T g would. rest=False: no
+    rule on what a pose rests on (`courses.course_bound`'s relaxation)."""
+    from ortools.sat.python import cp_model
+    owners: dict[int, list[int]] = {}
+    for n, (cells, *_) in enumerate(poses):
+        for c in cells:
+            owners.setdefault(c, []).append(n)
+    model = cp_model.CpModel()
+    placed = [model.new_bool_var(f'x{n}') for n in range(len(poses))]
+    order = [model.new_int_var(0, len(poses) - 1, f't{n}') for n in range(len(poses))]
+    for ns in owners.values():
+        if len(ns) > 1:
+            model.add_at_most_one([placed[n] for n in ns])
+    if counts is not None:
+        by_type: dict[str, list] = {}
+        for n, pose in enumerate(poses):
+            by_type.setdefault(pose[3], []).append(placed[n])
+        for name, vars_ in by_type.items():
+            if counts.get(name, 0) < len(vars_):
+                model.add(sum(vars_) <= counts.get(name, 0))
+    held_by: list[list] = []
+    for n, (cells, ways, *_) in enumerate(poses):
+        used = []
+        for w, blocking in enumerate(ways):
+            var = model.new_bool_var(f'w{n}_{w}')
+            model.add_implication(var, placed[n])
+            for m in sorted({m for c in blocking.tolist() for m in owners.get(c, ())} - {n}):
+                model.add(order[n] < order[m]).only_enforce_if([var, placed[m]])
+            used.append((var, blocking))
+        if used:          # none for a type without a top-down grasp: GAMP says why
+            model.add_bool_or([v for v, _ in used]).only_enforce_if(placed[n])
+        held_by.append(used)
+        if cover:
+            _stands(model, grid, occupied, cells, n, placed, order, owners)
+            continue
+        if not rest:
+            continue
+        # Resting on something: the table, a built cell, or a pose placed before it.
+        ids = np.asarray(cells)
+        if grid.on_table[ids].any():
+            continue
+        below = grid.below_idx[ids]
+        below = below[(below >= 0) & ~np.isin(below, ids)]
+        if occupied[below].any():
+            continue
+        under = sorted({m for c in below.tolist() for m in owners.get(int(c), ())})
+        if not under:
+            model.add(placed[n] == 0)
+            continue
+        rests = [model.new_bool_var(f's{n}_{m}') for m in under]
+        model.add_bool_or(rests).only_enforce_if(placed[n])
+        for var, m in zip(rests, under):
+            model.add_implication(var, placed[m])
+            model.add(order[m] < order[n]).only_enforce_if(var)
+    filled = sum(pose[2] * placed[n] for n, pose in enumerate(poses))
+    if cover:
+        outside = [len(pose[0]) - pose[2] for pose in poses]
+        model.maximize((sum(outside) + 1) * filled - sum(k * placed[n] for n, k in enumerate(outside) if k))
+    else:
+        model.maximize(filled)
+    return model, placed, order, held_by
+
+
+def _stands(model, grid: Grid, occupied: np.ndarray, cells, n: int, placed, order, owners) -> None:
+    """Pose n, where placed, stands on one of its sufficient support sets
+    (`allocation.cpsat.support_options`): every unit of the set on the table, a built cell, or a
+    pose placed before it."""
+    from rad_core.allocation.constraints import support_options
+    sets = support_options(grid, list(cells), occupied, owners)
+    if sets is None:
+        return                                   # stands whatever else is placed
+    options = []
+    for unders in sets:
+        z = model.new_bool_var(f'z{n}_{len(options)}')
+        for under in unders:
+            rests = [model.new_bool_var(f'r{n}_{len(options)}_{m}') for m in under]
+            for var, m in zip(rests, under):
+                model.add_implication(var, placed[m])
+                model.add(order[m] < order[n]).only_enforce_if(var)
+            model.add_bool_or(rests).only_enforce_if(z)
+        options.append(z)
+    if options:
+        model.add_bool_or(options).only_enforce_if(placed[n])
+    else:
+        model.add(placed[n] == 0)
+
+
+def hand_order(scene: Scene, placements, time_limit_s: float = 1.0, gamp=None) -> HandOrder:
+    """An order in which the hand can place the most target cells of `placements` (the allocation's
+    poses of the scene's free cells; module docstring), with its precedences."""
+    from rad_core.allocation.arm import HandBlocked
+    grid, occupied = scene_state(scene)
+    regions = [t.name for t in scene.targets]
+    hand = HandBlocked(scene, grid, gamp)
+    poses, items = [], []
+    for p in placements:
+        ids = [grid.index(regions.index(p.target), c) for c in p.cells]
+        if None in ids or occupied[ids].any():
+            continue
+        ways = hand_ways(grid, hand, occupied, p.type, p.yaw, ids)
+        if ways is None:
+            continue                      # every way of holding it is blocked already
+        poses.append((tuple(sorted(int(c) for c in ids)), ways, int(grid.is_target[ids].sum()), p.type))
+        items.append(p)
+    return solve_order(grid, occupied, poses, items, None, time_limit_s)
+
+
+def ordered_cover(scene: Scene, time_limit_s: float = 2.0, gamp=None, avoid=()) -> HandOrder:
+    """The allocation and its order at once: among every pose an arm-aware allocation may propose
+    (`allocation.arm.ArmCoverageBound.candidates`: fillers worth 0 included, the arm's filter
+    applied) and the blocks the arm can pick, the disjoint ones with an order in which the hand
+    can place the most target cells (`order_model` with counts), with that order's precedences
+    and the poses as `placements`. What the robot ceiling's ordered bound solves, kept as a plan:
+    where an allocation's cover has no such order (a cantilever's end the hand can only reach
+    before its neighbour is there, which needs another block below it), this one picks a cover
+    that has. CP-SAT's best within `time_limit_s` (deterministic time); empty where it found none.
+    avoid: covers found before (their `order`s), not to be found again as they were."""
+    grid, occupied = scene_state(scene)
+    candidates, counts, hand, _ = cover_candidates(scene, grid, gamp)
+    poses, items = candidate_poses(grid, hand, occupied, candidates, counts)
+    return solve_order(grid, occupied, poses, items, counts, time_limit_s, cover=True, avoid=avoid)
+
+
+def cover_candidates(scene: Scene, grid: Grid, gamp=None):
+    """What an ordered cover chooses from: every pose an arm-aware allocation may propose
+    (`allocation.arm.ArmCoverageBound.candidates`: fillers worth 0 included, the arm's filter
+    applied), the blocks per type the arm can pick, the hand's blocking cells (`HandBlocked`) and
+    the indices of the blocks it cannot pick where they lie."""
+    from rad_core.allocation.arm import HandBlocked, arm_filter
+    from rad_core.allocation.placements import enumerate_candidates
+    fillers = [c for c in enumerate_candidates(scene, grid, positive_only=False) if c.value >= 0]
+    candidates, counts, report = arm_filter(scene, grid, fillers)
+    unpickable = {b for b, block in enumerate(scene.blocks) if block.id in report.blocks}
+    return candidates, counts, HandBlocked(scene, grid, gamp), unpickable
+
+
+def candidate_poses(grid: Grid, hand, occupied: np.ndarray, candidates, counts: dict[str, int]):
+    """`order_model`'s poses of free candidates (`allocation.placements.Candidate`) that fill a
+    target cell, have a block of their type left and a way of being held; and their placements."""
+    poses, items = [], []
+    for c in candidates:
+        ids = list(c.cell_ids)
+        k = int(grid.is_target[ids].sum())
+        if k and counts.get(c.placement.type, 0) and not occupied[ids].any():
+            ways = hand_ways(grid, hand, occupied, c.placement.type, c.placement.yaw, ids)
+            if ways is not None:
+                poses.append((tuple(sorted(ids)), ways, k, c.placement.type))
+                items.append(c.placement)
+    return poses, items
+
+
+def scene_state(scene: Scene) -> tuple[Grid, np.ndarray]:
+    """The scene's grid and the cells its blocks fill now."""
+    grid = Grid(scene)
+    occupied = np.zeros(grid.num_cells, dtype=bool)
+    for cells in blocks_on_grid(scene, grid).values():
+        occupied[cells] = True
+    return grid, occupied
+
+
+def solve_order(grid: Grid, occupied: np.ndarray, poses: list[tuple], items: list, counts, time_limit_s: float,
+           cover: bool = False, avoid=()) -> HandOrder:
+    """`order_model` solved: the poses it places in its order, their precedences (each before the
+    poses filling the blocking cells of the way it is held), the coverage, the items of those poses.
+    cover: `ordered_cover`'s solve: `order_model`'s cover rules, and CP-SAT's deterministic time
+    (about seconds of one core), so that the answer does not depend on how busy the machine is
+    (wall time only as a backstop). avoid: sets of poses (cells sorted) not to be placed all together."""
+    from ortools.sat.python import cp_model
+
+    from rad_core.allocation.constraints import cp_solver
+    if not poses:
+        return HandOrder()
+    model, placed, order, held_by = order_model(grid, occupied, poses, counts, cover=cover)
+    index = {pose[0]: n for n, pose in enumerate(poses)}
+    for before in avoid:
+        ns = [index[cells] for cells in before if cells in index]
+        if len(ns) == len(before) and ns:
+            model.add(sum(placed[n] for n in ns) <= len(ns) - 1)
+    solver = cp_solver(3.0 * time_limit_s if cover else time_limit_s)
+    if cover:
+        solver.parameters.max_deterministic_time = float(time_limit_s)
+    if solver.solve(model) not in (cp_model.OPTIMAL, cp_model.FEASIBLE):
+        return HandOrder()
+    chosen = sorted((n for n in range(len(poses)) if solver.boolean_value(placed[n])),
+                    key=lambda n: (solver.value(order[n]), n))
+    owner = {c: n for n in chosen for c in poses[n][0]}
+    out = []
+    for n in chosen:
+        for var, blocking in held_by[n]:
+            if solver.boolean_value(var):
+                for m in sorted({owner[c] for c in blocking.tolist() if c in owner} - {n}):
+                    out.append(Precedence(poses[n][0], poses[m][0], 'hand order'))
+                break
+    total = int(grid.is_target.sum())
+    filled = int((grid.is_target & occupied).sum()) + sum(poses[n][2] for n in chosen)
+    value = sum(2 * poses[n][2] - len(poses[n][0]) for n in chosen)
+    return HandOrder([poses[n][0] for n in chosen], out, filled / total if total else 1.0,
+                     [items[n] for n in chosen], value)

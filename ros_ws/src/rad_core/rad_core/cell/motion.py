@@ -1,0 +1,181 @@
+"""One step's motion as a real cell runs it: arm trajectories and gripper commands, in order.
+
+A franka_ros2 cell moves the arm through a FollowJointTrajectory action (the 7
+arm joints only) and the hand through a GripperCommand action, so a pick and
+place is a program of both:
+
+    gripper open (pre-grasp width) -> arm: approach and descend -> gripper grasp
+    -> arm: lift, carry, descend -> gripper release -> arm: retreat
+
+(A first step whose hand is wider than the approach opening closes the empty hand
+before it opens: franka_gripper's gripper_action moves only when opening; a command
+to a narrower width is a grasp, which on air closes fully and fails.)
+
+`Motion` holds the arm trajectories in execution order and the gripper commands,
+each placed before the arm trajectory with index `before` (len(trajectories):
+after the last). Its dict form is what plans and rad-result documents carry:
+``{"trajectories": [...], "gripper": [{"before", "action", "position",
+"max_effort", "expected_position"}, ...]}``.
+
+Gripper positions are per finger (m), the unit of the Panda's finger joints and
+of control_msgs/GripperCommand as a Franka hand's gripper action takes it: the
+hand's opening is twice the position. A grasp commands a position a little inside
+the block and a force (`max_effort`, N); the hand stalls on the block's faces, and
+the width it reports tells whether the block is held (`grasp_problem`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from rad_core.cell.panda import FINGER_OPEN
+from rad_core.cell.trajectory import Trajectory, reversed_trajectory
+from rad_core.domain.errors import RadError
+
+GRIPPER_ACTIONS = ('close', 'open', 'grasp', 'release')
+
+
+@dataclass(frozen=True)
+class GripperCommand:
+    """One command to the hand."""
+
+    action: str                  # 'close' (the empty hand) | 'open' (before a grasp) | 'grasp' | 'release'
+    position: float              # per finger (m)
+    max_effort: float            # N; the grasp force
+    before: int                  # runs before trajectories[before]
+    expected_position: float = float('nan')
+    """For a grasp: where the fingers stop when they hold the block (its faces, per finger)."""
+
+    def to_dict(self) -> dict:
+        d = {'before': self.before, 'action': self.action, 'position': float(self.position),
+             'max_effort': float(self.max_effort)}
+        if np.isfinite(self.expected_position):
+            d['expected_position'] = float(self.expected_position)
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict) -> GripperCommand:
+        try:
+            cmd = cls(str(d['action']), float(d['position']), float(d['max_effort']), int(d['before']),
+                      float(d.get('expected_position', float('nan'))))
+        except (KeyError, TypeError, ValueError) as e:
+            raise RadError(f'not a gripper command: {e}') from None
+        if cmd.action not in GRIPPER_ACTIONS:
+            raise RadError(f'gripper command: action {cmd.action!r} is not one of {", ".join(GRIPPER_ACTIONS)}')
+        return cmd
+
+
+@dataclass
+class Motion:
+    """A step's arm trajectories and gripper commands (see the module docstring)."""
+
+    trajectories: list[Trajectory] = field(default_factory=list)
+    gripper: list[GripperCommand] = field(default_factory=list)
+
+    def sequence(self) -> Iterator[Trajectory | GripperCommand]:
+        """Every command in execution order."""
+        for k in range(len(self.trajectories) + 1):
+            yield from (g for g in self.gripper if g.before == k)
+            if k < len(self.trajectories):
+                yield self.trajectories[k]
+
+    @property
+    def final_arm(self) -> np.ndarray:
+        """The arm's 7 joints at the end (robot model order)."""
+        return np.asarray(self.trajectories[-1].points[-1].positions, dtype=float)
+
+    def final_joints(self) -> np.ndarray:
+        """The 9 joints (arm in model order, then both fingers) where the motion leaves the robot;
+        the fingers as the last gripper command left them (open when there is none)."""
+        fingers = self.gripper[-1].position if self.gripper else FINGER_OPEN
+        return np.concatenate([self.final_arm, [fingers, fingers]])
+
+    @property
+    def opening(self) -> float:
+        """The hand's opening (per finger) on the approach: what it opens to before a grasp."""
+        return next((g.position for g in self.gripper if g.action in ('open', 'release')), FINGER_OPEN)
+
+    @property
+    def duration(self) -> float:
+        """Seconds of arm motion (gripper moves come on top)."""
+        return float(sum(t.duration for t in self.trajectories))
+
+    def then(self, other: Motion) -> Motion:
+        """This motion followed by `other` (which starts where this one ends)."""
+        n = len(self.trajectories)
+        return Motion(self.trajectories + other.trajectories,
+                      self.gripper + [GripperCommand(g.action, g.position, g.max_effort, g.before + n,
+                                                     g.expected_position) for g in other.gripper])
+
+    def to_dict(self) -> dict:
+        return {'trajectories': [t.to_dict() for t in self.trajectories],
+                'gripper': [g.to_dict() for g in self.gripper]}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> Motion:
+        if not isinstance(d, dict) or not isinstance(d.get('trajectories'), list):
+            raise RadError('not a motion: expected {"trajectories": [...], "gripper": [...]}')
+        motion = cls([Trajectory.from_dict(t) for t in d['trajectories']],
+                     [GripperCommand.from_dict(g) for g in d.get('gripper') or []])
+        for g in motion.gripper:
+            if not 0 <= g.before <= len(motion.trajectories):
+                raise RadError(f'gripper command before trajectory {g.before}: there are '
+                               f'{len(motion.trajectories)}')
+        return motion
+
+
+@dataclass(frozen=True)
+class GripperResult:
+    """What a GripperCommand action answers."""
+
+    position: float              # per finger (m), where the fingers stopped
+    effort: float = 0.0
+    stalled: bool = False
+    reached_goal: bool = False
+
+
+def grasp_problem(command: GripperCommand, result: GripperResult, tol: float = 0.003) -> str:
+    """Why a grasp did not end holding the block, or '' (a real hand's width check).
+
+    Closed past the block's faces: nothing between the fingers (a miss, or the block
+    slipped out); stopped short of them: something else in the way.
+    """
+    if command.action != 'grasp' or not np.isfinite(command.expected_position):
+        return ''
+    width, expected = 2 * result.position, 2 * command.expected_position
+    if result.position < command.expected_position - tol:
+        return (f'the gripper closed to {width * 1000:.1f} mm, past the block\'s {expected * 1000:.1f} mm: '
+                'nothing is held')
+    if result.position > command.expected_position + tol:
+        return (f'the gripper stopped at {width * 1000:.1f} mm, short of the block\'s {expected * 1000:.1f} mm: '
+                'something is in the way')
+    return ''
+
+
+def run_motion(motion: Motion, move_arm, move_gripper, start=None) -> str:
+    """Run a step's commands in order through a plant's two actions.
+
+    move_arm(trajectory) runs an arm trajectory to its end and raises RadError when
+    the controller refuses or aborts it (a fault to stop on); move_gripper(command)
+    returns the gripper's `GripperResult`. Returns '' when the step went through, or
+    why its grasp failed (a fault to re-register and replan on). After a failed grasp
+    the hand opens again and, given `start` (the arm's 7 joints when the step began),
+    the arm backs out along the approach it came down (the checked path, reversed)
+    to where the step began.
+    """
+    done: list[Trajectory] = []
+    for command in motion.sequence():
+        if isinstance(command, GripperCommand):
+            problem = grasp_problem(command, move_gripper(command))
+            if problem:
+                move_gripper(GripperCommand('open', motion.opening, 0.0, command.before))
+                if start is not None and len(done) == 1:
+                    move_arm(reversed_trajectory(done[0], start))
+                return f'grasp failed: {problem}'
+        else:
+            move_arm(command)
+            done.append(command)
+    return ''

@@ -1,0 +1,178 @@
+"""The Franka Panda of pybullet_data (franka_panda/panda.urdf) as rad uses it.
+
+One change to that model: the fingers collide as Franka's own robot description models them
+(`FINGER_BOXES`), not as pybullet_data's convex hull of the finger mesh. The hull spans the
+whole finger, so at a block's height it is about 25 mm thick where the real finger (a 15 mm
+rubber tip under a thin slanted web) is not: it refuses grasps between blocks 2.5 cm apart
+that the real hand makes. `urdf_path` writes the changed URDF once (meshes by absolute path)
+into a per-user temporary folder; `source_urdf_path` is pybullet_data's own file.
+
+Fixed base at the world origin, standing on the table top (z = 0). Joint
+position limits: the arm's are Franka's published ranges, narrower than the
+URDF's by about 0.07 rad (`rad_core.cell.robot_model.PLANNING_LOWER`/`UPPER`: valid on
+the Panda and the FR3); the fingers' and the velocity limits are read from the URDF
+itself (plain XML, no pybullet import).
+
+Geometry worth knowing (measured in pybullet):
+- link indices: arm joints 0-6, fixed panda_joint8 (7) and panda_hand_joint (8),
+  fingers 9 and 10 (prismatic, 0..0.04 m each, so the hand opens 0.08 m),
+  panda_grasptarget 11, a frame 0.105 m below the hand between the fingertips;
+  it has no collision shape.
+- The fingers close along the hand's y axis. With the hand pointing straight
+  down (hand z = world -z) and hand yaw theta (hand x = (cos theta, sin theta)),
+  the closing axis points along theta - 90 deg: see `closing_yaw_to_hand_yaw`.
+- The hand is mounted 45 deg off the flange, so at HOME (joint 7 = 2.356 rad)
+  the fingers close along world x.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import os
+import tempfile
+import xml.etree.ElementTree as ET
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+
+from rad_core.cell.robot_model import PLANNING_LOWER, PLANNING_UPPER
+
+URDF_RELATIVE = 'franka_panda/panda.urdf'
+
+JOINT_NAMES = (
+    'panda_joint1', 'panda_joint2', 'panda_joint3', 'panda_joint4',
+    'panda_joint5', 'panda_joint6', 'panda_joint7',
+    'panda_finger_joint1', 'panda_finger_joint2',
+)
+ARM_JOINT_NAMES = JOINT_NAMES[:7]
+FINGER_JOINT_NAMES = JOINT_NAMES[7:]
+
+GRASP_TARGET_LINK = 'panda_grasptarget'
+HAND_LINK = 'panda_hand'
+FINGER_LINKS = ('panda_leftfinger', 'panda_rightfinger')
+
+FINGER_OPEN = 0.04
+"""Each finger's travel when open (m): the hand opens FINGER_OPEN * 2 = 0.08 m."""
+MAX_OPENING = 2 * FINGER_OPEN
+
+HOME = np.array([0.0, -0.215, 0.0, -2.57, 0.0, 2.356, 2.356, FINGER_OPEN, FINGER_OPEN])
+"""The predecessor's home pose, fingers open: hand above the table in front of the robot."""
+
+HAND_YAW_AT_HOME_OFFSET = math.pi / 4
+"""Top-down hand yaw ~= joint1 - joint7 + this (hand mounted 45 deg off the flange);
+used to predict joint 7 for a requested hand yaw."""
+
+
+FINGER_BOXES = (
+    # (centre x, y, z; roll about x (rad); size x, y, z) in the left finger's frame (m): the
+    # finger joint's frame, y the closing axis pointing away from the other finger, z down the
+    # finger. Franka's franka_description (end_effectors/common/franka_hand.xacro) models the
+    # finger's collision with these four boxes; the right finger mirrors them in y.
+    ((0.0, 0.0185, 0.011), 0.0, (0.022, 0.015, 0.020)),           # screw mount
+    ((0.0, 0.0068, 0.0022), 0.0, (0.022, 0.0088, 0.0038)),        # carriage sledge
+    ((0.0, 0.0159, 0.02835), math.pi / 6, (0.0175, 0.007, 0.0235)),  # slanted web
+    ((0.0, 0.00758, 0.04525), 0.0, (0.0175, 0.0152, 0.0185)),     # rubber tip, the grasping pad
+)
+
+
+def source_urdf_path() -> Path:
+    """pybullet_data's franka_panda/panda.urdf (finger collision: the hull of the finger mesh)."""
+    import pybullet_data  # a plain data package: no banner, unlike pybullet itself
+    return Path(pybullet_data.getDataPath()) / URDF_RELATIVE
+
+
+def urdf_path() -> Path:
+    """The URDF rad loads: pybullet_data's with the fingers' collision as `FINGER_BOXES`.
+
+    Written per content and pybullet_data folder (its meshes are named by absolute path) into a
+    per-user temporary folder, atomically, so processes starting together are safe; written again
+    whenever it is gone (a temporary folder's cleaner may take it from a long-running node)."""
+    path, source, text = _urdf_name()
+    if not path.exists():
+        _write_urdf(path, source, text)
+    return path
+
+
+@lru_cache(maxsize=1)
+def _urdf_name() -> tuple[Path, Path, bytes]:
+    """(where the URDF goes, pybullet_data's URDF, its text)."""
+    source = source_urdf_path()
+    text = source.read_bytes()
+    digest = hashlib.sha256(text + repr((FINGER_BOXES, str(source.parent))).encode()).hexdigest()[:12]
+    return Path(tempfile.gettempdir()) / f'rad-{os.getuid()}' / f'panda-{digest}.urdf', source, text
+
+
+def _write_urdf(path: Path, source: Path, text: bytes) -> None:
+    root = ET.fromstring(text)
+    for mesh in root.iter('mesh'):
+        name = mesh.get('filename', '')
+        if name.startswith('package://'):
+            mesh.set('filename', str(source.parent / name[len('package://'):]))
+    for link in root.iter('link'):
+        side = {'panda_leftfinger': 1, 'panda_rightfinger': -1}.get(link.get('name'))
+        if side is None:
+            continue
+        for old in link.findall('collision'):
+            link.remove(old)
+        for (x, y, z), roll, size in FINGER_BOXES:
+            collision = ET.SubElement(link, 'collision')
+            ET.SubElement(collision, 'origin', xyz=f'{x} {side * y} {z}', rpy=f'{side * roll} 0 0')
+            ET.SubElement(ET.SubElement(collision, 'geometry'), 'box', size=' '.join(map(str, size)))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with tempfile.NamedTemporaryFile('wb', dir=path.parent, suffix='.tmp', delete=False) as f:
+        f.write(ET.tostring(root))
+    os.replace(f.name, path)
+
+
+@lru_cache(maxsize=1)
+def _limits() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    root = ET.parse(source_urdf_path()).getroot()
+    by_name = {j.get('name'): j for j in root.iter('joint')}
+    lower, upper, velocity = [], [], []
+    for name in JOINT_NAMES:
+        limit = by_name[name].find('limit')
+        lower.append(float(limit.get('lower')))
+        upper.append(float(limit.get('upper')))
+        velocity.append(float(limit.get('velocity')))
+    return np.array(lower), np.array(upper), np.array(velocity)
+
+
+URDF_LOWER, URDF_UPPER, VELOCITY_LIMITS = (a.copy() for a in _limits())
+"""The URDF's joint limits (rad, or m for the fingers) and velocity limits, (9,) in JOINT_NAMES order."""
+LOWER = np.concatenate([np.maximum(PLANNING_LOWER, URDF_LOWER[:7]), URDF_LOWER[7:]])
+UPPER = np.concatenate([np.minimum(PLANNING_UPPER, URDF_UPPER[:7]), URDF_UPPER[7:]])
+"""The joint range every plan keeps to, (9,) in JOINT_NAMES order: Franka's published arm limits."""
+for _a in (URDF_LOWER, URDF_UPPER, LOWER, UPPER, VELOCITY_LIMITS):
+    _a.setflags(write=False)
+
+
+def within_limits(q, tol: float = 1e-6) -> bool:
+    """True when every joint of a (9,) or (7,) vector is inside the planning range (LOWER, UPPER)."""
+    q = np.asarray(q, dtype=float)
+    n = len(q)
+    return bool(np.all(q >= LOWER[:n] - tol) and np.all(q <= UPPER[:n] + tol))
+
+
+def closing_yaw_to_hand_yaw(closing_yaw: float) -> float:
+    """Hand yaw (rad) of a top-down hand whose fingers close along `closing_yaw`."""
+    return closing_yaw + math.pi / 2
+
+
+def top_down_quaternion(hand_yaw: float) -> np.ndarray:
+    """Quaternion (x, y, z, w) of the hand pointing down (z = world -z), x at hand_yaw.
+
+    R = Rz(hand_yaw) Rx(pi).
+    """
+    h = hand_yaw / 2
+    # Rz(a) = (0, 0, sin a/2, cos a/2); Rx(pi) = (1, 0, 0, 0); product Rz * Rx:
+    return np.array([math.cos(h), math.sin(h), 0.0, 0.0])
+
+
+def load_panda(client: int, base_position=(0.0, 0.0, 0.0)) -> int:
+    """Load the Panda into a client (fixed base, self-collision on); returns the body id."""
+    import pybullet as p
+    flags = p.URDF_USE_SELF_COLLISION | p.URDF_USE_SELF_COLLISION_EXCLUDE_ALL_PARENTS
+    return p.loadURDF(str(urdf_path()), basePosition=list(base_position), useFixedBase=True,
+                      flags=flags, physicsClientId=client)

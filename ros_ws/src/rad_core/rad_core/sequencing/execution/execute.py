@@ -1,0 +1,397 @@
+"""Execute an assembly on a plant: plan, run each step, verify it, replan on deviation.
+
+`execute_assembly` knows nothing of ROS: the plant and the planner come in as
+callables, so /execute_assembly passes DDS glue (the arm controller's
+FollowJointTrajectory and the hand's GripperCommand actions, joint states, motion
+capture) and tests pass an in-process `rad_core.sim.twin.Twin`.
+
+A step runs its arm trajectories and gripper commands in order
+(`rad_core.cell.motion.run_motion`). A trajectory the controller refuses or aborts ends
+the run with the controller's reason. A grasp that holds nothing (the width the
+hand reports after closing) ends the step like a deviation: the hand opens, the arm
+backs out along its approach to where the step began, the world is registered and,
+with `replan`, a new plan starts from it.
+
+After each step the world is registered again and compared with what the plan
+expected (`result.deviation`). A step that left the world other than planned (a
+block nudged, a block that slid) ends that plan: with `replan`, a new plan starts
+from the measured world, at most `max_replans` times; without, the run fails with
+the deviation as its reason. Every executed step is kept in the result, including
+the one that deviated, so the rad-result/1 document says what the robot did.
+
+The faults of a real cell (`rad_core.sim.faults`) all end up as one of these:
+- a block left a few millimetres off (placement error, a nudge, motion-capture
+  noise) that registration still snaps to its cell, or that stays within the
+  deviation tolerance on the table: it counts as where the plan put it. The
+  registration keeps how far off its cell it was seen (`Scene.measured_offsets`),
+  and with `plan_motion` each later step's motion is planned again from the world
+  as measured just before it runs: the motion planning world puts those blocks
+  where they were seen, and the next block is set down clear of them
+  (`rad_core.gamp.action.seat_shift`), not onto the edge of a neighbour that
+  landed 2 mm into its cell. A step that cannot be planned again so is a
+  deviation (below). The tolerance follows the tracker's noise
+  (`ExecuteConfig.mocap_noise`), so noise alone does not look like a fault;
+- a block farther off, or fallen (a slip): a deviation; the plan is repaired by
+  replanning from what is seen, where a block lying flat on the table is just a
+  block to pick again;
+- a grasp on nothing (a miss): the step fails, the hand opens and backs out, and
+  the loop replans;
+- a block a scene cannot express (on its side, on an edge, turned, off its grid
+  in a region): `register` may return a `rad_core.cell.mocap.Registration`
+  (`register_world`), which sets such blocks aside instead of failing the whole
+  frame. A set-aside block is reported lost and left out of later plans: it can
+  neither be picked nor counted. It is still there, so the cells of the targets it
+  occupies are left out of the plans too (`Registration.plannable`): no block is
+  planned into it, and coverage, measured against the real targets, shows the
+  loss. Known limit: GAMP does not see a set-aside block as an obstacle to the arm's
+  paths (one lying on the table far from the structure rarely is one).
+Nothing is counted as built that registration does not see on its cells: the
+coverage is measured from the last registration, and a run whose last plan
+finished but whose coverage is below what the first plan set out to build (lost
+blocks, cells left out) is not a success; its reason says what was lost. The
+result counts replans, every fault the loop met (`faults`, with whether a new
+plan recovered from it) and the lost blocks.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field, replace
+from typing import Callable
+
+import numpy as np
+
+from rad_core.allocation.result import AllocationResult
+from rad_core.cell.mocap import Registration
+from rad_core.cell.motion import GripperCommand, GripperResult, Motion, run_motion
+from rad_core.cell.panda import HOME
+from rad_core.cell.robot_model import PANDA, envelope
+from rad_core.cell.trajectory import Trajectory, TrajectoryAborted
+from rad_core.domain.coverage import measured_coverage
+from rad_core.domain.errors import RadError
+from rad_core.domain.scene import Scene
+from rad_core.gamp.action import SceneAction
+from rad_core.gamp.trajectory import retime
+from rad_core.sequencing.execution.result import deviation, result_document
+from rad_core.sequencing.planning.plan import AssemblyPlan, PlanMotion
+
+
+@dataclass(frozen=True)
+class ExecuteConfig:
+    """How execution checks its steps."""
+
+    settle_s: float = 0.5
+    """Wait this long (s) after a step before registering the world (blocks come to rest)."""
+    position_tol: float = 0.005
+    """A block farther than this (m) from where the plan put it is a deviation."""
+    max_replans: int = 3
+    """At most this many new plans after deviations."""
+    replan: bool = True
+    """Replan on a deviation (else the run fails with it)."""
+    mocap_noise: float = 0.0
+    """Std dev (m) per axis of motion capture's positions: a block counts as off only when it is
+    off by more than 6 sigma of the difference of two measurements as well as position_tol."""
+    recover_aborts: bool = True
+    """A trajectory the controller aborted after it started (the arm held back by contact): open the
+    hand, back out along the path it came, re-register and replan (False: the abort ends the run)."""
+    back_out_speed: float = 0.3
+    """Fraction of the Franka limits (velocity, acceleration, jerk) the back-out moves at."""
+
+    @property
+    def deviation_tol(self) -> float:
+        """How far (m) a block may be from where the plan put it and still count as there."""
+        return max(self.position_tol, 6 * math.sqrt(2) * self.mocap_noise)
+
+    def validate(self) -> None:
+        if not (self.settle_s >= 0 and np.isfinite(self.settle_s)):
+            raise RadError(f'settle_s must be finite and >= 0, got {self.settle_s}')
+        if not (self.position_tol > 0 and np.isfinite(self.position_tol)):
+            raise RadError(f'position_tol must be positive, got {self.position_tol}')
+        if not (self.mocap_noise >= 0 and np.isfinite(self.mocap_noise)):
+            raise RadError(f'mocap_noise must be finite and >= 0, got {self.mocap_noise}')
+        if not (0 < self.back_out_speed <= 1):
+            raise RadError(f'back_out_speed must be in (0, 1], got {self.back_out_speed}')
+        if self.max_replans < 0:
+            raise RadError(f'max_replans must be >= 0, got {self.max_replans}')
+
+
+@dataclass
+class ExecutionResult:
+    success: bool
+    reason: str
+    scene: Scene                                   # the world the run started from
+    steps: list[dict] = field(default_factory=list)   # PlanStep.to_dict() of every executed step
+    replans: int = 0
+    final_scene: Scene | None = None               # registered at the end (or the last one known)
+    allocation: AllocationResult | None = None     # the first plan's
+    reallocations: list[dict] = field(default_factory=list)   # of every plan, Reallocation.to_dict()
+    faults: list[dict] = field(default_factory=list)
+    """Every problem a step met, in order: {'step' (index into steps), 'block', 'problem', 'recovered'
+    (a new plan was made from the measured world)}."""
+    lost_blocks: dict[str, str] = field(default_factory=dict)
+    """Blocks the last registration could not express (block id -> why): not planned for, not counted."""
+    blocked_cells: dict[str, list] = field(default_factory=dict)
+    """Region name -> target cells the lost blocks occupy (left out of the plans)."""
+    planned_coverage: float | None = None
+    """The coverage the first plan set out to build (its steps applied to the scene)."""
+
+    @property
+    def coverage(self) -> float:
+        return measured_coverage(self.final_scene) if self.final_scene is not None else 0.0
+
+    @property
+    def recovered_faults(self) -> int:
+        return sum(f['recovered'] for f in self.faults)
+
+    def execution(self) -> dict:
+        """The run's recovery figures, as the rad-result/1 document's `execution` holds them."""
+        return {'replans': self.replans, 'faults': [dict(f) for f in self.faults],
+                'recovered_faults': self.recovered_faults, 'lost_blocks': dict(self.lost_blocks),
+                'planned_coverage': self.planned_coverage,
+                'blocked_cells': {k: [list(c) for c in v] for k, v in self.blocked_cells.items()}}
+
+    def document(self, timings: dict) -> dict:
+        """The rad-result/1 document of the run."""
+        return result_document(self.scene, self.allocation, self.steps, self.final_scene, timings,
+                               self.reallocations, self.execution())
+
+
+Plan = Callable[[Scene, 'np.ndarray | None'], AssemblyPlan]   # scene, start joints (None: home)
+MoveArm = Callable[[dict], None]     # run an arm trajectory to its end; RadError if refused or aborted
+MoveGripper = Callable[[GripperCommand], GripperResult]   # run a gripper command, return what the hand says
+Register = Callable[[], 'Scene | Registration']   # the world as measured now; RadError if it cannot be
+Report = Callable[[int, int, str, str, str], None]   # (steps done, steps planned, block, phase, message)
+
+
+def execute_assembly(scene: Scene, plan: Plan, move_arm: MoveArm, move_gripper: MoveGripper, register: Register,
+                     config: ExecuteConfig = ExecuteConfig(), joints: Callable[[], 'np.ndarray | None'] | None = None,
+                     cancelled: Callable[[], bool] = lambda: False, report: Report | None = None,
+                     settle: Callable[[float], None] = time.sleep,
+                     plan_motion: PlanMotion | None = None,
+                     present: Callable[[str], object] | None = None) -> ExecutionResult:
+    """Build `scene` on the plant; never raises RadError (it becomes the result's reason).
+
+    joints: the robot's joints now (arm and fingers), for each plan's start (None: home); without
+    it, every plan starts where the last executed motion ended (home at first).
+    settle(seconds): let the plant come to rest (a real plant: wait; a twin: step it).
+    plan_motion: the planner's motion planner (scene, action, start joints), to plan a step's motion
+    again from the measured world when registration saw blocks off their cells (None: never).
+    present(block id): the scene's feeder puts that block at its station (None: the plant has no
+    feeder; a scene with one then fails at its first block from it, with that reason).
+    Phases reported: planning, executing, verifying, replanning, done.
+    """
+    config.validate()
+    report = report or (lambda *_: None)
+    result = ExecutionResult(False, '', scene, final_scene=scene)
+    last_q = None
+    current = scene
+
+    def measure() -> Scene:
+        """The world as registered now (final_scene, lost_blocks), and the scene to plan from."""
+        got = register()
+        reg = got if isinstance(got, Registration) else Registration(got)
+        result.final_scene, result.lost_blocks = reg.scene, dict(reg.set_aside)
+        result.blocked_cells = {name: [list(c) for c in cells] for name, cells in reg.blocked.items()}
+        return reg.plannable()
+
+    try:
+        while True:
+            report(len(result.steps), 0, '', 'planning', '')
+            start = joints() if joints is not None else last_q
+            last_q = None if start is None else np.asarray(start, dtype=float)
+            assembly = plan(current, start)
+            if result.faults and result.replans:
+                result.faults[-1]['recovered'] = True     # a new plan from the measured world
+            if result.allocation is None:
+                result.allocation = assembly.allocation
+                promised = current
+                for step in assembly.steps:
+                    promised = step.scene_after(promised)
+                result.planned_coverage = measured_coverage(promised)
+            result.reallocations += [e.to_dict() for e in assembly.reallocations]
+            problem = None
+            for k, step in enumerate(assembly.steps):
+                if cancelled():
+                    raise RadError('cancelled')
+                report(len(result.steps), len(assembly.steps), step.block, 'executing', '')
+                step_start = HOME if last_q is None else last_q
+                if plan_motion is not None and k > 0 and (current.measured_offsets
+                                                          or not _starts_at(step.motion, step_start)):
+                    # Blocks were seen off their cells since the plan was made, or the step before was
+                    # planned again and left the arm elsewhere: plan this motion again from the world as
+                    # measured (the first step's was planned from it).
+                    fresh = plan_motion(current, SceneAction(step.block, step.unit, step.target, tuple(step.cell),
+                                                             step.rotation), step_start,
+                                        **({'move_aside': True} if step.moved_aside else {}))
+                    if not fresh.success:
+                        problem = (f'block {step.block}: planned again against the blocks where motion capture '
+                                   f'sees them, it cannot be placed ({fresh.reason})')
+                        result.faults.append({'step': len(result.steps), 'block': step.block, 'problem': problem,
+                                              'recovered': False})
+                        break
+                    step = replace(step, motion=fresh.motion, grasp=tuple(fresh.grasp),
+                                   moved_aside=list(fresh.moved_aside))
+                if current.in_feeder(step.block):
+                    if present is None:
+                        raise RadError(f'block {step.block} is in the feeder, and this plant has no feeder '
+                                       f'to present it')
+                    present(step.block)
+                motion = Motion.from_dict(step.motion)
+                failed = _run_step(motion, move_arm, move_gripper, step_start, joints, config)
+                # A failed grasp, or a trajectory the controller aborted (something held the arm back), has
+                # opened the hand and backed the arm out to where the step began.
+                last_q = motion.final_joints() if not failed else np.concatenate(
+                    [step_start[:7], [motion.opening] * 2])
+                settle(config.settle_s)
+                report(len(result.steps), len(assembly.steps), step.block, 'verifying', failed)
+                expected = step.scene_after(current)
+                result.steps.append({**step.to_dict(), **({'failure': failed} if failed else {})})
+                try:
+                    current = measure()
+                except RadError as e:
+                    result.faults.append({'step': len(result.steps) - 1, 'block': step.block,
+                                          'problem': str(e), 'recovered': False})
+                    raise
+                problem = failed or deviation(expected, current, config.deviation_tol, result.lost_blocks)
+                if problem is not None:
+                    result.faults.append({'step': len(result.steps) - 1, 'block': step.block, 'problem': problem,
+                                          'recovered': False})
+                    break
+            if problem is None:
+                result.success, result.reason = assembly.success, assembly.reason
+                break
+            if not config.replan or result.replans >= config.max_replans:
+                raise RadError(f'the world differs from the plan: {problem}')
+            result.replans += 1
+            report(len(result.steps), len(assembly.steps), '', 'replanning', problem)
+    except RadError as e:
+        result.success, result.reason = False, str(e)
+    try:
+        measure()
+    except RadError:
+        pass   # the plant is gone, or a block is where no plan can go: keep what was measured last
+    lost = '; '.join(f'{b} ({why})' for b, why in sorted(result.lost_blocks.items()))
+    if result.success and result.planned_coverage is not None and result.coverage < result.planned_coverage - 1e-9:
+        result.success = False
+        result.reason = (f'coverage {result.coverage:.3f} is below the {result.planned_coverage:.3f} the first plan '
+                         f'set out to build' + (f'; lost blocks: {lost}' if lost else ''))
+    elif result.success and lost and not result.reason:
+        result.reason = f'built without {len(result.lost_blocks)} lost block(s): {lost}'
+    elif not result.success and lost:
+        result.reason = f'{result.reason}; lost blocks: {lost}'
+    report(len(result.steps), len(result.steps), '', 'done', result.reason)
+    return result
+
+
+def _starts_at(motion: dict | None, q: np.ndarray) -> bool:
+    """Whether a motion's first arm trajectory starts where the arm is (q)."""
+    trajectories = (motion or {}).get('trajectories') or []
+    if not trajectories:
+        return True
+    first = trajectories[0]
+    first = first if isinstance(first, Trajectory) else Trajectory.from_dict(first)
+    start = np.asarray(first.points[0].positions, dtype=float)
+    return bool(np.abs(start - np.asarray(q, dtype=float)[:7]).max() < 1e-6)
+
+
+def _run_step(motion: Motion, move_arm: MoveArm, move_gripper: MoveGripper, step_start: np.ndarray,
+              joints, config: ExecuteConfig) -> str:
+    """run_motion, and when the controller aborts a trajectory it had started (the arm or the held
+    block met something: PATH_TOLERANCE_VIOLATED), recover as a cell's operator would script it: back
+    the arm out along the path it came (the checked straight joint segments between the motion's
+    rest points, reversed) to where the step began. A block in the hand is carried back to where it
+    was picked and put down there (its spot is free: it came from there), then the arm goes on
+    backing out with the hand open; the loop then re-registers and replans. Needs `joints` (where
+    the arm stopped); without it, or with config.recover_aborts false, the abort ends the run. A
+    refused trajectory (TrajectoryRejected) never moved: it ends the run (a plan the controller
+    refuses is a bug to see, not a fault of the world)."""
+    sent: list = []
+    grips: list[GripperCommand] = []
+
+    def tracked_arm(trajectory):
+        sent.append(trajectory)
+        move_arm(trajectory)
+
+    def tracked_gripper(command):
+        grips.append(command)
+        return move_gripper(command)
+
+    try:
+        return run_motion(motion, tracked_arm, tracked_gripper, start=step_start[:7])
+    except TrajectoryAborted as e:
+        if joints is None or not config.recover_aborts:
+            raise
+        aborted = e
+    q_now = joints()
+    if q_now is None:
+        raise aborted
+    held = next((g for g in reversed(grips) if g.action in ('grasp', 'release')), None)
+    held = held if held is not None and held.action == 'grasp' else None
+    try:
+        path = back_out_path(sent, np.asarray(q_now, dtype=float)[:7], np.asarray(step_start, dtype=float)[:7])
+        first = sent[0] if isinstance(sent[0], Trajectory) else Trajectory.from_dict(sent[0])
+        names = first.joint_names
+        if held is None:
+            move_gripper(GripperCommand('open', motion.opening, 0.0, 0))
+            legs = [path]
+        else:
+            # Where the hand closed on the block: the end of the trajectory before the grasp.
+            before = sent[held.before - 1] if held.before > 0 else None
+            picked = np.asarray((before if isinstance(before, Trajectory) else Trajectory.from_dict(before))
+                                .points[-1].positions if before is not None else step_start[:7], dtype=float)
+            cut = next((i for i, q in enumerate(path) if np.abs(q - picked).max() < 1e-6), len(path) - 1)
+            legs = [path[:cut + 1], path[cut:]]
+        let_go = False
+        for k, leg in enumerate(legs):
+            if len(leg) > 1:
+                try:
+                    move_arm(retime(leg, envelope(PANDA), config.back_out_speed, joint_names=names))
+                except TrajectoryAborted:
+                    if k > 0 or held is None:
+                        raise
+                    # The held block is wedged and does not come back out with the hand: let go of it
+                    # where it is and back out empty from where the arm stopped.
+                    move_gripper(GripperCommand('open', motion.opening, 0.0, held.before))
+                    let_go = True
+                    q_here = np.asarray(joints(), dtype=float)[:7]
+                    rest = back_out_path(sent, q_here, np.asarray(step_start, dtype=float)[:7])
+                    if len(rest) > 1:
+                        move_arm(retime(rest, envelope(PANDA), config.back_out_speed, joint_names=names))
+                    break
+            if k == 0 and held is not None:
+                move_gripper(GripperCommand('release', motion.opening, 0.0, held.before))
+    except RadError as e:
+        raise RadError(f'{aborted}; backing out failed: {e}') from None
+    where = '' if held is None else (', let go of the wedged block' if let_go
+                                     else ', put the block back where it was picked')
+    return f'trajectory aborted: {aborted}; the arm backed out{where} and the hand opened'
+
+
+def back_out_path(sent: list, q_now: np.ndarray, step_start: np.ndarray) -> list[np.ndarray]:
+    """Arm waypoints from where an aborted trajectory left the arm (q_now) back to where the step
+    began: the rest points (zero velocity: the planner's waypoints, joined by straight joint segments)
+    of the trajectories sent so far, in reverse, entering the last one's path on the segment q_now is
+    nearest to."""
+    trajs = [t if isinstance(t, Trajectory) else Trajectory.from_dict(t) for t in sent]
+    rests: list[np.ndarray] = [np.asarray(step_start, dtype=float)]
+    for k, traj in enumerate(trajs):
+        pts = [np.asarray(p.positions, dtype=float) for p in traj.points
+               if not p.velocities or max(abs(v) for v in p.velocities) < 1e-9]
+        if k == len(trajs) - 1:
+            # Keep the rest points up to the segment the arm stopped on.
+            chain = [rests[-1]] + pts
+            j = min(range(len(chain) - 1), key=lambda i: _to_segment(q_now, chain[i], chain[i + 1]))
+            pts = pts[:j]
+        rests += pts
+    path = [np.asarray(q_now, dtype=float)]
+    for q in reversed(rests):
+        if np.abs(q - path[-1]).max() > 1e-6:
+            path.append(q)
+    return path
+
+
+def _to_segment(q: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
+    d = b - a
+    t = 0.0 if not d.any() else float(np.clip(np.dot(q - a, d) / np.dot(d, d), 0.0, 1.0))
+    return float(np.linalg.norm(q - (a + t * d)))

@@ -1,0 +1,1 @@
+"""Pictures and progress: PNG/APNG renders, Rerun views, the terminal progress bar."""
