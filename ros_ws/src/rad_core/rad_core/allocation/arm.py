@@ -32,8 +32,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from rad_core.allocation.placements import Candidate
+from rad_core.domain.blocks import rotation_z
 from rad_core.domain.grid import Grid, blocks_on_grid
 from rad_core.domain.scene import Scene
+from rad_core.gamp.grasps import block_grasps, grasp_lift, grasp_width, no_grasp_reason
+from rad_core.gamp.hand_cells import blocking_offsets
+from rad_core.gamp.ik import out_of_workspace
+from rad_core.gamp.planner import GampConfig, grasp_styles
 
 
 @dataclass
@@ -60,19 +65,16 @@ class ArmFilter:
 
 def type_grasps(scene: Scene) -> dict[str, tuple]:
     """Every block type's top-down grasps at the scene's unit and clearance (as GAMP offers them)."""
-    from rad_core.gamp.grasps import block_grasps, grasp_width
     width = grasp_width(scene.unit, scene.clearance)
     return {name: block_grasps(btype, width) for name, btype in scene.block_types.items()}
 
 
 def _no_grasp_reason(scene: Scene, name: str) -> str:
-    from rad_core.gamp.grasps import grasp_width, no_grasp_reason
     return 'no top-down grasp: ' + no_grasp_reason(scene.block_types[name], grasp_width(scene.unit, scene.clearance))
 
 
 def _unreachable(points: np.ndarray) -> str:
     """'' if any of the grasp targets can be reached, else the first one's reason."""
-    from rad_core.gamp.ik import out_of_workspace
     first = ''
     for p in points:
         why = out_of_workspace(np.asarray(p, dtype=float))
@@ -98,7 +100,6 @@ def arm_filter(scene: Scene, grid: Grid, candidates: list[Candidate]) -> tuple[l
     """(the candidates the arm could build, blocks available per type, what was ruled out and why).
 
     Blocks already on the grid are not counted (as `cpsat.available_counts`)."""
-    from rad_core.gamp.grasps import grasp_lift
     grasps = type_grasps(scene)
     lift = grasp_lift(scene.unit)      # a tight grasp's target, over the unit's centre
     report = ArmFilter()
@@ -138,7 +139,6 @@ def finger_costs(scene: Scene, grid: Grid, candidates: list[Candidate]) -> list[
     closes with both fingers beside cells no block will ever fill; 2: every grasp has target
     cells on both sides, so whichever neighbour is built first blocks it). `prefer='open'`
     minimizes the sum among equally good allocations (`cpsat.build_model`)."""
-    from rad_core.domain.blocks import rotation_z
     grasps = type_grasps(scene)
     out = []
     for cand in candidates:
@@ -178,9 +178,6 @@ class HandBlocked:
     (`planner.grasp_styles`): an offset blocks only where it blocks in every way."""
 
     def __init__(self, scene: Scene, grid: Grid, gamp=None):
-        from rad_core.gamp.grasps import grasp_width
-        from rad_core.gamp.hand_cells import blocking_offsets
-        from rad_core.gamp.planner import GampConfig, grasp_styles
         self.grid = grid
         self.grasps = type_grasps(scene)
         styles = grasp_styles(grasp_width(scene.unit, scene.clearance), scene.unit, gamp or GampConfig())

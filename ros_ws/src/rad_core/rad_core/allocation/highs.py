@@ -18,8 +18,8 @@ from rad_core.domain.scene import Scene
 
 
 def solve_highs(scene: Scene, time_limit_s: float = 60.0) -> AllocationResult:
-    from scipy.optimize import Bounds, LinearConstraint, milp
-    from scipy.sparse import lil_matrix
+    from scipy.optimize import Bounds, LinearConstraint, milp  # scipy: only the HiGHS cross-check pays for its import
+    from scipy.sparse import lil_matrix  # scipy: only the HiGHS cross-check pays for its import
 
     start = time.perf_counter()
     grid = Grid(scene)

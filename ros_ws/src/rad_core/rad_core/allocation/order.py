@@ -28,7 +28,11 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from ortools.sat.python import cp_model
 
+from rad_core.allocation.arm import HandBlocked, arm_filter
+from rad_core.allocation.constraints import cp_solver, support_options
+from rad_core.allocation.placements import enumerate_candidates
 from rad_core.domain.grid import Grid, blocks_on_grid
 from rad_core.domain.scene import Scene
 
@@ -86,7 +90,6 @@ def order_model(grid: Grid, occupied: np.ndarray, poses: list[tuple], counts: di
     centre of mass over units resting on the table, built cells or poses placed before it), and
     among the best, the fewest cells outside the target (fillers), as c^T g would. rest=False: no
     rule on what a pose rests on (`courses.course_bound`'s relaxation)."""
-    from ortools.sat.python import cp_model
     owners: dict[int, list[int]] = {}
     for n, (cells, *_) in enumerate(poses):
         for c in cells:
@@ -151,7 +154,6 @@ def _stands(model, grid: Grid, occupied: np.ndarray, cells, n: int, placed, orde
     """Pose n, where placed, stands on one of its sufficient support sets
     (`allocation.cpsat.support_options`): every unit of the set on the table, a built cell, or a
     pose placed before it."""
-    from rad_core.allocation.constraints import support_options
     sets = support_options(grid, list(cells), occupied, owners)
     if sets is None:
         return                                   # stands whatever else is placed
@@ -174,7 +176,6 @@ def _stands(model, grid: Grid, occupied: np.ndarray, cells, n: int, placed, orde
 def hand_order(scene: Scene, placements, time_limit_s: float = 1.0, gamp=None) -> HandOrder:
     """An order in which the hand can place the most target cells of `placements` (the allocation's
     poses of the scene's free cells; module docstring), with its precedences."""
-    from rad_core.allocation.arm import HandBlocked
     grid, occupied = scene_state(scene)
     regions = [t.name for t in scene.targets]
     hand = HandBlocked(scene, grid, gamp)
@@ -212,8 +213,6 @@ def cover_candidates(scene: Scene, grid: Grid, gamp=None):
     (`allocation.arm.ArmCoverageBound.candidates`: fillers worth 0 included, the arm's filter
     applied), the blocks per type the arm can pick, the hand's blocking cells (`HandBlocked`) and
     the indices of the blocks it cannot pick where they lie."""
-    from rad_core.allocation.arm import HandBlocked, arm_filter
-    from rad_core.allocation.placements import enumerate_candidates
     fillers = [c for c in enumerate_candidates(scene, grid, positive_only=False) if c.value >= 0]
     candidates, counts, report = arm_filter(scene, grid, fillers)
     unpickable = {b for b, block in enumerate(scene.blocks) if block.id in report.blocks}
@@ -251,9 +250,7 @@ def solve_order(grid: Grid, occupied: np.ndarray, poses: list[tuple], items: lis
     cover: `ordered_cover`'s solve: `order_model`'s cover rules, and CP-SAT's deterministic time
     (about seconds of one core), so that the answer does not depend on how busy the machine is
     (wall time only as a backstop). avoid: sets of poses (cells sorted) not to be placed all together."""
-    from ortools.sat.python import cp_model
 
-    from rad_core.allocation.constraints import cp_solver
     if not poses:
         return HandOrder()
     model, placed, order, held_by = order_model(grid, occupied, poses, counts, cover=cover)

@@ -41,10 +41,14 @@ from pathlib import Path
 from typing import Mapping, Sequence
 
 import numpy as np
+from ortools.sat.python import cp_model
 
+from rad_core.allocation.cpsat import build_model, solve_rounds
+from rad_core.allocation.placements import enumerate_candidates
 from rad_core.domain import shapes
 from rad_core.domain.blocks import BlockType
 from rad_core.domain.errors import RadError
+from rad_core.domain.grid import Grid
 from rad_core.domain.scene import MAX_BLOCKS, Block, Scene, TargetRegion
 from rad_core.domain.voxels import MAX_UNIT
 
@@ -215,11 +219,7 @@ def choose_blocks(targets: Sequence[TargetRegion], unit: float, types: Mapping[s
     """The placements (allocation.Placement) of the blocks to lay out, and how well they cover.
 
     clearance: the scene's (`rad_core.domain.scene`), which gives the hand's fingers room between blocks."""
-    from ortools.sat.python import cp_model
 
-    from rad_core.allocation.cpsat import build_model, solve_rounds
-    from rad_core.allocation.placements import enumerate_candidates
-    from rad_core.domain.grid import Grid
 
     params.validate(types)
     start = time.perf_counter()

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import csv
 import io
+import json
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -32,7 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from rad_core.domain.errors import RadError
-from rad_core.domain.transforms import quaternion_from_matrix, rotation_angle_deg
+from rad_core.domain.transforms import matrix_from_quaternion, quaternion_from_matrix, rotation_angle_deg
 
 PAIR_COLUMNS = ('x_base', 'y_base', 'z_base', 'x_mocap', 'y_mocap', 'z_mocap')
 DEFAULT_MAX_RMS = 0.005
@@ -115,7 +116,6 @@ def _yaml_float(value: float) -> str:
 
 def _yaml_string(text: str) -> str:
     """A YAML double-quoted scalar (JSON's string syntax is valid YAML)."""
-    import json
     return json.dumps(text)
 
 
@@ -294,7 +294,6 @@ def marker_in_base(world, arm_q, offset=(0.0, 0.0, 0.0), link: str = FLANGE_LINK
         raise RadError(f'expected 7 finite arm joint positions, got {q.tolist()}')
     if link not in world.link_index:
         raise RadError(f'the robot has no link {link!r}')
-    from rad_core.domain.transforms import matrix_from_quaternion
     with world.preserved():
         world.set_joint_positions(q, hold=False)
         position, orientation = world.link_pose(world.link_index[link])

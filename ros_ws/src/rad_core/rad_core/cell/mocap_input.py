@@ -37,6 +37,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+import yaml
 
 from rad_core.cell.mocap import RigidBodyPose
 from rad_core.domain.errors import RadError
@@ -272,7 +273,6 @@ class BodyMap:
         kind = 'YAML' if path.suffix.lower() in ('.yaml', '.yml') else 'JSON'
         try:
             if kind == 'YAML':
-                import yaml
                 doc = yaml.safe_load(text)
             else:
                 doc = json.loads(text)

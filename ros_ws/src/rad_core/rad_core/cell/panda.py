@@ -172,7 +172,7 @@ def top_down_quaternion(hand_yaw: float) -> np.ndarray:
 
 def load_panda(client: int, base_position=(0.0, 0.0, 0.0)) -> int:
     """Load the Panda into a client (fixed base, self-collision on); returns the body id."""
-    import pybullet as p
+    import pybullet as p  # pybullet: importing it prints a banner on stdout
     flags = p.URDF_USE_SELF_COLLISION | p.URDF_USE_SELF_COLLISION_EXCLUDE_ALL_PARENTS
     return p.loadURDF(str(urdf_path()), basePosition=list(base_position), useFixedBase=True,
                       flags=flags, physicsClientId=client)

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from rad_core.domain.grid import Grid, blocks_on_grid
+
 
 def fraction_filled(filled: np.ndarray, is_target: np.ndarray) -> float:
     """Target cells that `filled` (a boolean per grid cell) covers, over all target cells."""
@@ -22,7 +24,6 @@ def state_coverage(env) -> float:
 
 def measured_coverage(scene) -> float:
     """The coverage of a registered scene: target cells its blocks fill where they lie."""
-    from rad_core.domain.grid import Grid, blocks_on_grid
     grid = Grid(scene)
     filled = np.zeros(grid.num_cells, dtype=bool)
     for cells in blocks_on_grid(scene, grid).values():

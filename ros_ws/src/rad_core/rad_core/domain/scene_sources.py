@@ -6,12 +6,12 @@ from collections.abc import Iterator
 from pathlib import Path
 
 from rad_core.domain.errors import RadError
+from rad_core.domain.generator import GeneratorConfig, generate_scene
 from rad_core.domain.scene import Scene
 
 
 def generated_scenes(grid: int, sides: int, n: int, seed: int) -> Iterator[tuple[str, Scene]]:
     """n generator scenes with seeds seed .. seed + n - 1, made as they are needed."""
-    from rad_core.domain.generator import GeneratorConfig, generate_scene
     config = GeneratorConfig(grid=grid, sides=sides)
     config.validate()
     for s in range(seed, seed + n):

@@ -119,7 +119,7 @@ def _suffix(path: str, formats: Sequence[str], kind: str) -> str:
 
 def load_mesh(path: str):
     """The file's triangles as one trimesh.Trimesh; RadError naming the problem otherwise."""
-    import trimesh
+    import trimesh  # trimesh: only a mesh import pays for its import
     suffix = _suffix(path, MESH_FORMATS, 'mesh')
     try:
         mesh = trimesh.load(path, file_type=suffix[1:], force='mesh', process=True)
@@ -138,7 +138,7 @@ def load_mesh(path: str):
 
 def open_edges(mesh) -> int:
     """Edges with one triangle on them (0 for a closed surface)."""
-    from trimesh import grouping
+    from trimesh import grouping  # trimesh: only a mesh import pays for its import
     return len(grouping.group_rows(mesh.edges_sorted, require_count=1))
 
 
@@ -146,7 +146,7 @@ def load_voxel_grid(path: str) -> np.ndarray:
     """A .npy boolean (or integer, nonzero = filled) 3D array [x, y, z], or a binvox file's grid."""
     suffix = _suffix(path, VOXEL_FORMATS, 'voxel')
     if suffix == '.binvox':
-        from trimesh.exchange.binvox import load_binvox
+        from trimesh.exchange.binvox import load_binvox  # trimesh: only a mesh import pays for its import
         try:
             with open(path, 'rb') as f:
                 grid = np.asarray(load_binvox(f).matrix)
@@ -235,7 +235,7 @@ def voxelize(mesh, pitch: float, hollow: bool = False, where: str = 'mesh') -> n
 
 def _surface_cells(mesh, corner: np.ndarray, counts: np.ndarray, pitch: float) -> np.ndarray:
     """Cells the surface passes through: points every quarter cell on every triangle."""
-    from trimesh import remesh
+    from trimesh import remesh  # trimesh: only a mesh import pays for its import
     vertices, _ = remesh.subdivide_to_size(mesh.vertices, mesh.faces, max_edge=pitch / 4, max_iter=20)
     idx = np.floor((vertices - corner) / pitch).astype(int)
     idx = np.clip(idx, 0, counts - 1)
@@ -251,7 +251,7 @@ def cells_to_mesh(grid: np.ndarray, pitch: float = 1.0):
     It is watertight where no two cells meet along an edge only. Tests and scripts/make_meshes.py
     use it to make meshes whose cells are known.
     """
-    import trimesh
+    import trimesh  # trimesh: only a mesh import pays for its import
     padded = np.pad(np.asarray(grid, dtype=bool), 1)
     quads = []
     for axis in range(3):

@@ -20,9 +20,11 @@ from typing import NamedTuple, Protocol
 import numpy as np
 
 from rad_core.domain import support
+from rad_core.domain.coverage import state_coverage
 from rad_core.domain.errors import RadError
 from rad_core.domain.grid import Grid, blocks_on_grid
 from rad_core.domain.scene import Scene
+from rad_core.sim.physics import PhysicsStability
 
 
 class Action(NamedTuple):
@@ -184,7 +186,6 @@ class AssemblyEnv:
 
     def coverage(self) -> float:
         """Fraction of target cells filled (the paper's a-bar)."""
-        from rad_core.domain.coverage import state_coverage
         return state_coverage(self)
 
     def num_actions(self) -> int:
@@ -329,5 +330,4 @@ class AssemblyEnv:
 def _default_stability(mode: str) -> StabilityCheck | None:
     if mode != 'physics':
         return None
-    from rad_core.sim.physics import PhysicsStability
     return PhysicsStability()

@@ -47,11 +47,13 @@ no dashboard unless asked for, then on 127.0.0.1 too. Code that starts one must 
 
 from __future__ import annotations
 
+import asyncio
 import dataclasses
 import importlib.util
 import json
 import sys
 import threading
+import time
 import uuid
 from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
@@ -60,8 +62,12 @@ from pathlib import Path
 
 from distributed.diagnostics.plugin import WorkerPlugin
 
+from rad_core.allocation import AllocationParams
 from rad_core.domain.errors import RadError
 from rad_core.domain.scene import Scene
+from rad_core.experiment.evaluation import get_agent, robot_planner, scene_episode, summarize, uses_robot
+from rad_core.sequencing.planning.reallocation import ReallocationConfig
+from rad_core.sim.physics import PhysicsStability
 
 LOOPBACK = '127.0.0.1'
 DASHBOARD_ADDRESS = f'{LOOPBACK}:8787'
@@ -86,7 +92,6 @@ class AgentArgs:
     reallocate: bool = False
 
     def build(self):
-        from rad_core.experiment.evaluation import get_agent
         return get_agent(self.agent, self.checkpoint, self.verify, self.budget, self.reallocate)
 
     def portable(self) -> 'AgentArgs':
@@ -138,7 +143,6 @@ def _planner(args: AgentArgs, allocation: dict | None, reallocation: dict | None
     planners = _worker_state().setdefault('planners', {})
     key = (args, json.dumps(allocation, sort_keys=True), json.dumps(reallocation, sort_keys=True))
     if key not in planners:
-        from rad_core.experiment.evaluation import robot_planner
         planners[key] = robot_planner(_agent_and_policy(args)[0], _allocation_params(allocation),
                                       _reallocation_config(reallocation))
     return planners[key]
@@ -147,7 +151,6 @@ def _planner(args: AgentArgs, allocation: dict | None, reallocation: dict | None
 def _stability():
     state = _worker_state()
     if state['stability'] is None:
-        from rad_core.sim.physics import PhysicsStability
         state['stability'] = PhysicsStability()
     return state['stability']
 
@@ -155,14 +158,12 @@ def _stability():
 def _allocation_params(doc: dict | None):
     if doc is None:
         return None
-    from rad_core.allocation import AllocationParams
     return AllocationParams(**doc)
 
 
 def _reallocation_config(doc: dict | None):
     if doc is None:
         return None
-    from rad_core.sequencing.planning.reallocation import ReallocationConfig
     return ReallocationConfig(**{**doc, 'params': _allocation_params(doc['params'])})
 
 
@@ -171,9 +172,7 @@ def warm(agent_args: AgentArgs, robot: bool, allocation: dict | None = None,
     """Build in this worker thread what `run_scene` needs for the agent and settings (the agent,
     its policy, with the robot the planner and its worlds, else the stability check) and keep
     it; return the seconds it took (0 when it was built already)."""
-    import time
 
-    from rad_core.experiment.evaluation import uses_robot
     t0 = time.perf_counter()
     agent, _ = _agent_and_policy(agent_args)
     if uses_robot(agent, robot):
@@ -198,7 +197,6 @@ class WarmUp(WorkerPlugin):
         self.name = f'rad-warm-up-{uuid.uuid5(uuid.NAMESPACE_OID, doc).hex[:12]}'
 
     async def setup(self, worker) -> None:
-        import asyncio
         executor = worker.executors.get('default')
         if executor is None:   # no thread pool to warm: the first scenes warm it
             return
@@ -221,7 +219,6 @@ def warm_up(client, agent_args: AgentArgs, robot: bool, allocation: dict | None 
 def run_scene(name: str, scene_doc: dict, agent_args: AgentArgs, robot: bool, seed: int, execution: str,
               allocation: dict | None = None, reallocation: dict | None = None) -> dict:
     """One scene's row, exactly as `evaluation.evaluate` makes it (the task every worker runs)."""
-    from rad_core.experiment.evaluation import scene_episode, uses_robot
     try:
         agent, policy = _agent_and_policy(agent_args)
         with_robot = uses_robot(agent, robot)
@@ -271,7 +268,7 @@ def dask_client(workers: int | None = None, scheduler: str | None = None, dashbo
         raise RadError('--scheduler needs an address, e.g. tcp://127.0.0.1:8786')
     if scheduler is None and workers is None:
         raise RadError('give --workers N (a local cluster) or --scheduler ADDR (an existing one)')
-    from distributed import Client, LocalCluster
+    from distributed import Client, LocalCluster  # dask: only a scale-out run pays for its import
     if scheduler is not None:
         if dashboard:
             raise RadError('--dashboard applies to the cluster rad starts, not to an existing --scheduler')
@@ -299,7 +296,7 @@ def dask_client(workers: int | None = None, scheduler: str | None = None, dashbo
         raise RadError('--dashboard needs bokeh (pip install bokeh), or run without --dashboard')
     if start_method not in (None, 'fork', 'spawn', 'forkserver'):
         raise RadError(f"start_method must be 'fork', 'spawn' or 'forkserver', got {start_method!r}")
-    import dask
+    import dask  # dask: only a scale-out run pays for its import
     config = {'distributed.scheduler.worker-saturation': 1.0, 'distributed.worker.preload': [__name__],
               **QUIET_WORKER}
     if dashboard:
@@ -323,9 +320,8 @@ def _probe_scheduler(address: str, timeout_s: float) -> None:
     `Client(address, timeout=...)` alone is not enough: its timeout covers the TCP connect
     but not Dask's handshake after it (distributed 2026.8), so a peer that accepts the
     connection and never answers would hang it for good."""
-    import asyncio
 
-    from distributed.comm import connect
+    from distributed.comm import connect  # dask: only a scale-out run pays for its import
 
     async def identity() -> dict:
         comm = await connect(address, timeout=timeout_s)
@@ -374,7 +370,6 @@ def evaluate_distributed(agent_args: AgentArgs, scenes: Iterable[tuple[str, Scen
     episode is deterministic and would raise again (worker deaths are the scheduler's
     business, see the module docstring).
     """
-    from rad_core.experiment.evaluation import summarize
     if workers is not None and (not isinstance(workers, int) or workers < 1):
         raise RadError(f'--workers must be a whole number of at least 1, got {workers!r}')
     agent_args = agent_args.portable()
@@ -407,8 +402,8 @@ def scene_cost(scene: Scene) -> int:
 def _run(client, agent_args, scenes, robot, seed, progress, execution, alloc_doc, realloc_doc, retries) -> list:
     """Warm every worker, submit one task per scene (the costliest first), collect the rows as
     they finish, return them in scene order."""
-    from distributed import as_completed
-    from distributed.scheduler import KilledWorker
+    from distributed import as_completed  # dask: only a scale-out run pays for its import
+    from distributed.scheduler import KilledWorker  # dask: only a scale-out run pays for its import
     try:
         plugin = warm_up(client, agent_args, robot, alloc_doc, realloc_doc)
     except RadError as e:

@@ -32,15 +32,19 @@ import numpy as np
 
 from rad_core.allocation import AllocationParams, solve
 from rad_core.allocation.guide import AllocationGuide
-from rad_core.domain.coverage import optimum_coverage
+from rad_core.domain.coverage import measured_coverage, optimum_coverage
 from rad_core.domain.errors import RadError
 from rad_core.domain.scene import Scene
 from rad_core.env.mdp import AssemblyEnv, EnvConfig, Outcome
+from rad_core.sequencing.agent.agent_plan import AgentPlanner
 from rad_core.sequencing.decide.actions import action_space
-from rad_core.sequencing.decide.agents import SIMULATION_SEARCHES, AgentSpec, label, parse_with_robot
+from rad_core.sequencing.decide.agents import SIMULATION_SEARCHES, AgentSpec, label, parse, parse_with_robot
 from rad_core.sequencing.decide.deciders import policy_decider, search_decider, stability_check, with_fallbacks
 from rad_core.sequencing.decide.episode import Episode, run_episode
 from rad_core.sequencing.decide.policy import Policy
+from rad_core.sequencing.execution.twin_build import build_simulated, build_teleported
+from rad_core.sequencing.planning.reallocation import ReallocationConfig, Reallocator, with_reallocation
+from rad_core.sim.physics import PhysicsStability
 
 KEYS = ('agent', 'R', 'R_std', 'd', 'e', 'f', 'f_g', 'f_p', 'coverage', 'coverage_rel', 'n', 'scenes')
 FAIL_GRASP = (Outcome.INVALID_GRASP,)
@@ -71,7 +75,6 @@ class Agent:
 
     @property
     def spec(self) -> AgentSpec:
-        from rad_core.sequencing.decide.agents import parse
         return parse(self.name)
 
 
@@ -135,7 +138,6 @@ PLAN_TIME_LIMIT_S = 600.0
 def robot_planner(agent: str | Agent, allocation: AllocationParams | None = None, reallocation=None):
     """The in-process planner of the agent's robot episodes (`AgentPlanner`: what /plan_assembly
     runs); allocation and reallocation as `scene_episode` takes them. Close it when done."""
-    from rad_core.sequencing.agent.agent_plan import AgentPlanner
     agent = get_agent(agent)
     return AgentPlanner(agent.spec, time_limit_s=PLAN_TIME_LIMIT_S, allocation=allocation, reallocation=reallocation,
                         policy=agent.make_policy())     # the network get_agent loaded, not a second copy
@@ -165,7 +167,6 @@ def scene_episode(agent: str | Agent, scene: Scene, robot: bool, seed: int, exec
     placements = solve(scene, allocation or AllocationParams(support=agent.support)).placements
     own_stability = None
     if stability is None:
-        from rad_core.sim.physics import PhysicsStability
         stability = own_stability = PhysicsStability()
     env = AssemblyEnv(scene, EnvConfig(stability='physics'), stability=stability)
     try:
@@ -179,7 +180,6 @@ def scene_episode(agent: str | Agent, scene: Scene, robot: bool, seed: int, exec
             decide = policy_decider(policy, space, check)
         reallocator, decided = None, decide
         if agent.reallocate:
-            from rad_core.sequencing.planning.reallocation import ReallocationConfig, Reallocator, with_reallocation
             reallocator = Reallocator(space, stability_check(env), reallocation or ReallocationConfig())
             decided = with_reallocation(decide, reallocator)
         if check is not None:
@@ -200,8 +200,6 @@ def robot_episode(planner, scene: Scene, seed: int, execution: str = 'teleport')
     twin (`execution`: 'teleport' or 'simulate'). return, outcome: the plan's MDP episode;
     coverage: what the twin's registration finds built; predicted_coverage: what the plan
     expected; reason: why an invalid action failed; stop_reason: why the plan stopped short."""
-    from rad_core.domain.coverage import measured_coverage
-    from rad_core.sequencing.execution.twin_build import build_simulated, build_teleported
     if execution == 'teleport':
         plan = planner(scene, None, seed)
         registered = build_teleported(scene, plan.steps)
@@ -297,7 +295,6 @@ def evaluate(agent: str | Agent, scenes: Iterable[tuple[str, Scene]], robot: boo
         if trained_on != agent.actions:
             raise RadError(f'{getattr(policy, "source", agent.name)} was trained on the {trained_on!r} action space; '
                            f'agent {agent.name!r} chooses among {agent.actions!r} (pick the agent of that method)')
-        from rad_core.sim.physics import PhysicsStability
         stability = PhysicsStability()
     rows = []
     try:

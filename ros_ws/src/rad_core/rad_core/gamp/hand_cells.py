@@ -32,6 +32,9 @@ from functools import lru_cache
 import numpy as np
 
 from rad_core.cell import panda
+from rad_core.domain.errors import RadError
+from rad_core.domain.transforms import matrix_from_quaternion, quaternion_from_matrix
+from rad_core.sim.physics import PhysicsConfig
 
 DEPTH = 0.004
 """How far (m) a neighbour's cube must sink into the hand for the offset to count as blocking."""
@@ -48,11 +51,8 @@ def blocking_offsets(unit: float, clearance: float, finger_open: float, hand_yaw
     """The integer cell offsets (di, dj, dk) from a held unit whose built cube the hand, its fingers
     open `finger_open` each, or panda_link7 enters by more than `DEPTH`, the hand pointing down at
     `hand_yaw_deg` (a multiple of 90) with its grasp target `lift` (m) over the held unit's centre."""
-    import pybullet as p
+    import pybullet as p  # pybullet: importing it prints a banner on stdout
 
-    from rad_core.domain.errors import RadError
-    from rad_core.domain.transforms import matrix_from_quaternion, quaternion_from_matrix
-    from rad_core.sim.physics import PhysicsConfig
     if hand_yaw_deg % 90:
         raise RadError(f'blocking_offsets: hand yaw must be a multiple of 90 deg, got {hand_yaw_deg}')
     cid = p.connect(p.DIRECT)

@@ -31,6 +31,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from ruckig import InputParameter, Result, Ruckig
+from ruckig import Trajectory as RuckigTrajectory
 
 from rad_core.cell.motion import GripperCommand, Motion
 from rad_core.cell.robot_model import RobotModel, envelope, robot_model
@@ -90,8 +92,6 @@ def retime(waypoints: Sequence[np.ndarray], model: RobotModel, speed_scale: floa
     """A trajectory through (7,) waypoints from waypoints[0] (not a point: where the arm is), at rest at each;
     velocities within speed_scale x the model's limits, accelerations and jerks within acceleration_scale x
     theirs (default: speed_scale)."""
-    from ruckig import InputParameter, Result, Ruckig
-    from ruckig import Trajectory as RuckigTrajectory
     qs = [np.asarray(w, dtype=float)[:7] for w in waypoints]
     if len(qs) < 2:
         raise RadError('retime needs a start and at least one waypoint')

@@ -20,6 +20,8 @@ import math
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
+import yaml
+
 from rad_core.domain.errors import RadError
 
 KINDS = ('noise', 'drop_body', 'drop_frame', 'placement', 'slip', 'miss', 'nudge')
@@ -106,11 +108,6 @@ class FaultConfig:
         except UnicodeDecodeError:
             raise RadError(f'faults file {str(path)!r} is not UTF-8 text') from None
         if path.suffix.lower() in ('.yaml', '.yml'):
-            try:
-                import yaml
-            except ImportError:
-                raise RadError(f'faults file {str(path)!r}: reading YAML needs PyYAML (pip install pyyaml); '
-                               f'or give the settings as JSON') from None
             try:
                 doc = yaml.safe_load(text)
             except yaml.YAMLError as e:

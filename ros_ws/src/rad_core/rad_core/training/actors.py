@@ -52,9 +52,18 @@ import numpy as np
 import torch
 
 from rad_core.domain.errors import RadError
+from rad_core.env.mdp import TERMINATE, AssemblyEnv, EnvConfig
+from rad_core.experiment.distributed import dask_client
 from rad_core.learning import checkpoint as ckpt
+from rad_core.learning.graph import Observer
+from rad_core.learning.network import QNetwork, collate, graph_max
 from rad_core.learning.replay import Transition
-from rad_core.training.dqn import METHODS, TrainConfig, Trainer
+from rad_core.sequencing.decide.actions import action_space
+from rad_core.sequencing.decide.episode import Decision, run_episode
+from rad_core.sim.physics import PhysicsStability
+from rad_core.training.curves import plot_progress
+from rad_core.training.dataset import Dataset
+from rad_core.training.dqn import METHODS, TrainConfig, Trainer, train
 
 
 @dataclass
@@ -85,9 +94,6 @@ def _actor_state(config: dict) -> dict:
     if states is None:
         states = _local.states = {}
     if key not in states:
-        from rad_core.learning.network import QNetwork
-        from rad_core.sim.physics import PhysicsStability
-        from rad_core.training.dataset import Dataset
         cfg = TrainConfig.from_dict(config)
         torch.set_num_threads(1)
         states[key] = {'cfg': cfg, 'dataset': Dataset.load(cfg.dataset), 'q': QNetwork(cfg.net).eval(),
@@ -100,11 +106,6 @@ def collect(config: dict, weights: dict, seed: int, epsilon: float, chunk_steps:
 
     weights: {'run', 'version', 'state'} as the learner published them. Returns the
     transitions in play order, the episodes' (return, coverage) and the version used."""
-    from rad_core.env.mdp import TERMINATE, AssemblyEnv, EnvConfig
-    from rad_core.learning.graph import Observer
-    from rad_core.learning.network import collate, graph_max
-    from rad_core.sequencing.decide.actions import action_space
-    from rad_core.sequencing.decide.episode import Decision, run_episode
     try:
         state = _actor_state(config)
         cfg, q = state['cfg'], state['q']
@@ -172,7 +173,7 @@ class DistributedTrainer(Trainer):
     def run(self, progress=None, client=None) -> dict:
         if client is None:
             raise RadError('DistributedTrainer.run needs a Dask client')
-        from distributed import as_completed
+        from distributed import as_completed  # dask: only a scale-out run pays for its import
         c, a = self.cfg, self.actor
         self.pos.setdefault('tasks', 0)
         self.out.mkdir(parents=True, exist_ok=True)
@@ -238,7 +239,6 @@ class DistributedTrainer(Trainer):
                 self._writer.close()
         if interrupted:
             return {'interrupted': True, **self.pos, 'received': self.received}
-        from rad_core.training.curves import plot_progress
         plot_progress(self.out / 'progress.csv', self.out / 'curves.png',
                       title=f'{c.method} seed {c.seed}, {a.actors} actors')
         return {'interrupted': False, **self.pos, 'received': self.received}
@@ -252,7 +252,7 @@ class DistributedTrainer(Trainer):
                               broadcast=True)[0]
 
     def _receive(self, future, version: int) -> None:
-        from distributed.scheduler import KilledWorker
+        from distributed.scheduler import KilledWorker  # dask: only a scale-out run pays for its import
         try:
             result = future.result()
         except KilledWorker as e:
@@ -276,7 +276,6 @@ def train_with_actors(cfg: TrainConfig, out: str | Path, actor: ActorConfig, res
     """`dqn.train` with experience from actors: a LocalCluster of `actor.actors` workers on
     127.0.0.1 unless `scheduler` (or an open `client`) is given. Same run folder, same
     checkpoint and model files; resume continues a serial or distributed checkpoint."""
-    from rad_core.experiment.distributed import dask_client
     actor.validate()
     out = Path(out)
     if resume:
@@ -301,7 +300,6 @@ def train_with_actors(cfg: TrainConfig, out: str | Path, actor: ActorConfig, res
 # ---- several seeds at once ---------------------------------------------------------
 def _train_seed(config: dict, out: str, resume: bool, total_steps: int | None) -> dict:
     """One seed's serial run (the task of --seeds): exactly `rad train --seed S --out out`."""
-    from rad_core.training.dqn import train
     try:
         return train(TrainConfig.from_dict(config), out, resume=resume, total_steps=total_steps)
     except RadError as e:
@@ -322,10 +320,9 @@ def train_seeds(cfg: TrainConfig, out: str | Path, seeds: list[int], resume: boo
     --threads 1 sets). A LocalCluster of min(len(seeds), workers or len(seeds)) workers on
     127.0.0.1 unless `scheduler`/`client` is given. With resume each folder's checkpoint
     config wins. progress(seed, result) as runs finish. Returns {seed: result}."""
-    from distributed import as_completed
-    from distributed.scheduler import KilledWorker
+    from distributed import as_completed  # dask: only a scale-out run pays for its import
+    from distributed.scheduler import KilledWorker  # dask: only a scale-out run pays for its import
 
-    from rad_core.experiment.distributed import dask_client
     if not seeds:
         raise RadError('--seeds needs at least one seed, e.g. --seeds 1,2,3')
     if len(set(seeds)) != len(seeds):

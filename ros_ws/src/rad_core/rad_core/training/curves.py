@@ -17,9 +17,9 @@ def read_progress(path: str | Path) -> list[dict]:
 
 def plot_progress(paths, out: str | Path, title: str = '', labels=None) -> None:
     """One panel per PANELS entry, one line per progress.csv (x: environment steps)."""
-    import matplotlib
+    import matplotlib  # matplotlib: only plotting pays for its import
     matplotlib.use('Agg')
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # matplotlib: only plotting pays for its import
     paths = [paths] if isinstance(paths, (str, Path)) else list(paths)
     labels = labels or [Path(p).parent.name for p in paths]
     fig, axes = plt.subplots(2, 2, figsize=(10, 6.5))

@@ -44,14 +44,19 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from rad_core.allocation import AllocationParams, solve
 from rad_core.domain.errors import RadError
+from rad_core.domain.generator import GeneratorConfig, generate_scene
 from rad_core.env.mdp import TERMINATE, AssemblyEnv, EnvConfig
+from rad_core.env.robot_env import RobotAssemblyEnv, RobotEnvConfig, StepCache
 from rad_core.learning import checkpoint as ckpt
 from rad_core.learning.graph import GraphObs, Observer
 from rad_core.learning.network import NetConfig, QNetwork, collate, graph_max, pick
 from rad_core.learning.replay import ReplayBuffer, Transition
 from rad_core.sequencing.decide.actions import action_space
 from rad_core.sequencing.decide.episode import Decision, run_episode
+from rad_core.sim.physics import PhysicsStability
+from rad_core.training.curves import plot_progress
 from rad_core.training.dataset import Dataset
 
 METHODS = {'milp-dqn': 'milp', 'dqn': 'all', 'dqn-rel': 'rel'}
@@ -165,10 +170,8 @@ class Trainer:
         self.dataset = Dataset.load(cfg.dataset)
         self.stability = self.robot = self.step_cache = None
         if cfg.robot:
-            from rad_core.env.robot_env import StepCache
             self.step_cache = StepCache()
         else:
-            from rad_core.sim.physics import PhysicsStability
             self.stability = PhysicsStability()
         self._validation = None
         self._writer = None
@@ -206,7 +209,6 @@ class Trainer:
         if not self.cfg.robot:
             return AssemblyEnv(scene, EnvConfig(stability='physics', gamma=self.cfg.gamma), stability=self.stability)
         if self.robot is None:
-            from rad_core.env.robot_env import RobotAssemblyEnv, RobotEnvConfig
             config = RobotEnvConfig(env=EnvConfig(stability='none', gamma=self.cfg.gamma), execution='teleport',
                                     settle_s=self.cfg.robot_settle_s, markov=True, cache=True)
             self.robot = RobotAssemblyEnv(scene, config, cache=self.step_cache)
@@ -295,8 +297,6 @@ class Trainer:
     # ---- evaluation ------------------------------------------------------------------
     def validation(self):
         if self._validation is None:
-            from rad_core.allocation import AllocationParams, solve
-            from rad_core.domain.generator import GeneratorConfig, generate_scene
             config = GeneratorConfig(grid=self.cfg.eval_grid)
             scenes = [generate_scene(config, VALIDATION_SEED_BASE + i) for i in range(self.cfg.eval_scenes)]
             # Validate with the allocation the training data was made with.
@@ -337,7 +337,7 @@ class Trainer:
                 w.writeheader()
             w.writerow(row)
         if self._writer is None:
-            from tensorboardX import SummaryWriter
+            from tensorboardX import SummaryWriter  # tensorboardX: only a run that logs to it pays for its import
             self._writer = SummaryWriter(str(self.out / 'tb'))
         for key, value in row.items():
             if key != 'env_steps' and isinstance(value, (int, float)) and math.isfinite(value):
@@ -412,7 +412,6 @@ class Trainer:
             if self._writer is not None:
                 self._writer.close()
         if not interrupted:
-            from rad_core.training.curves import plot_progress
             title = f'{c.method} seed {c.seed}' + (' (robot)' if c.robot else '')
             plot_progress(self.out / 'progress.csv', self.out / 'curves.png', title=title)
         return {'interrupted': interrupted, **self.pos}

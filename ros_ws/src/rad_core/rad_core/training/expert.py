@@ -33,18 +33,27 @@ import json
 import os
 import pickle
 import time
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
 
 import numpy as np
 import torch
 import torch.nn.functional as F
 
+from rad_core.domain import hard_shapes, shapes
 from rad_core.domain.errors import RadError
+from rad_core.domain.generator import GeneratorConfig, generate_scene
+from rad_core.domain.scene import Scene
 from rad_core.env.mdp import TERMINATE, AssemblyEnv, EnvConfig
+from rad_core.experiment.distributed import dask_client, dask_setup
+from rad_core.gamp.action import SceneAction
 from rad_core.learning import checkpoint as ckpt
 from rad_core.learning.network import NetConfig, QNetwork, collate, graph_max, pick
+from rad_core.learning.policy import QPolicy
 from rad_core.learning.replay import Transition
+from rad_core.sequencing.agent.agent_plan import AgentPlanner
+from rad_core.sequencing.decide.actions import mdp_actions
+from rad_core.sequencing.decide.agents import parse
 from rad_core.training.dqn import _f
 
 TRAIN_SEED_BASE = 3_000_000
@@ -94,7 +103,6 @@ class ExpertConfig:
         if not 0 <= self.holdout < 1:
             raise RadError(f'holdout must be in [0, 1), got {self.holdout}')
         self.grid_sizes()
-        from rad_core.sequencing.decide.agents import parse
         spec = parse(self.agent)
         if not spec.learned or not spec.verify:
             raise RadError(f'the expert must be a learned, verified agent (a network with +verify), '
@@ -141,8 +149,6 @@ def demonstrations(scene, plan, records: dict) -> list[Transition]:
     MDP's reward and the next world's observation; then 'terminate' where the plan stopped short
     of the target. A world nobody scored (none, when the recorder ranked every step) ends the line
     there (its last transition then has neither a next observation nor done: no TD target)."""
-    from rad_core.gamp.action import SceneAction
-    from rad_core.sequencing.decide.actions import mdp_actions
     if plan.allocation is None:
         return []
     env = AssemblyEnv(scene, EnvConfig(stability='none'))   # the rewards (every step was judged by the plan)
@@ -187,12 +193,7 @@ _PLANNERS: dict = {}
 
 def _planner(agent: str, model: str, time_limit_s: float):
     """This process's expert (an `AgentPlanner` with a recording network), one per model file."""
-    from dataclasses import replace
 
-    from rad_core.experiment.distributed import dask_setup
-    from rad_core.learning.policy import QPolicy
-    from rad_core.sequencing.agent.agent_plan import AgentPlanner
-    from rad_core.sequencing.decide.agents import parse
     key = (agent, model, os.path.getmtime(model), time_limit_s)
     if key not in _PLANNERS:
         dask_setup()
@@ -207,7 +208,6 @@ def _planner(agent: str, model: str, time_limit_s: float):
 
 def plan_scene(name: str, scene_doc: dict, agent: str, model: str, time_limit_s: float, seed: int = 0) -> dict:
     """Plan one scene with the expert; its demonstrations and what the plan reached."""
-    from rad_core.domain.scene import Scene
     scene = Scene.from_dict(scene_doc)
     planner = _planner(agent, model, time_limit_s)
     planner.sequencer.policy.records = {}
@@ -301,7 +301,6 @@ class ExpertIteration:
         return self._scenes[r]
 
     def _make_scenes(self, r: int) -> list[tuple[str, dict, bool]]:
-        from rad_core.domain.generator import GeneratorConfig, generate_scene
         c = self.cfg
         out = []
         for g in c.grid_sizes():
@@ -309,7 +308,6 @@ class ExpertIteration:
                 seed = TRAIN_SEED_BASE + 100_000 * g + r * c.scenes + i
                 out.append((f'g{g}-s{seed}', generate_scene(GeneratorConfig(grid=g), seed).to_dict()))
         if c.shapes:
-            from rad_core.domain import hard_shapes, shapes
             for name in shapes.SPLITS['train']:
                 out.append((f'shape-{name}-r{r}', _first_layout(shapes.shape_scene, name, r)))
             for name in hard_shapes.HARD_SPLITS['train']:
@@ -352,9 +350,8 @@ class ExpertIteration:
             for n, d, h in todo:
                 keep(plan_scene(n, d, c.agent, model, c.time_limit_s), h)
         elif todo:
-            from distributed import as_completed
+            from distributed import as_completed  # dask: only a scale-out run pays for its import
 
-            from rad_core.experiment.distributed import dask_client
             # Spawned workers (Dask's default): this process has run torch by the second round,
             # and a process forked after that may hang in OpenMP.
             with dask_client(c.workers) as client:

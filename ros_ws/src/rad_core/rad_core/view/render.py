@@ -31,6 +31,7 @@ from typing import Iterable
 
 import numpy as np
 
+from rad_core.cell import panda
 from rad_core.domain.blocks import unit_boxes
 from rad_core.domain.colours import GREEN, PINK, TABLE, type_colour
 from rad_core.domain.errors import RadError
@@ -154,7 +155,6 @@ ROBOT_BOX = (np.array([-0.25, -0.25, 0.0]), np.array([0.45, 0.25, 0.9]))
 
 
 def _add_robot(p, cid: int, joints) -> None:
-    from rad_core.cell import panda
     joints = np.asarray(joints, dtype=float)
     if joints.shape != (len(panda.JOINT_NAMES),) or not np.all(np.isfinite(joints)):
         raise RadError(f'robot joints: expected {len(panda.JOINT_NAMES)} finite values')

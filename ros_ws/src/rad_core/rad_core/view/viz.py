@@ -38,12 +38,14 @@ import numpy as np
 
 from rad_core.allocation.placements import Placement
 from rad_core.allocation.result import AllocationResult
+from rad_core.cell.panda import source_urdf_path
 from rad_core.domain.blocks import unit_boxes
 from rad_core.domain.colours import GREEN, PINK, TABLE, type_colour
 from rad_core.domain.errors import RadError
 from rad_core.domain.scene import Scene
 from rad_core.domain.transforms import matrix_from_quaternion, yaw_quaternion
 from rad_core.sequencing.planning.plan import PlanStep
+from rad_core.sim.world import WorldConfig
 from rad_core.view.render import BLOCK_SIZE, OTHER_CELL_SIZE, PLAN_SIZE, TARGET_SIZE
 
 WORLD = 'world'
@@ -170,7 +172,6 @@ def placement_boxes(scene: Scene, placement, size: float = PLAN_SIZE, alpha: flo
 
 def table_box(scene: Scene | None = None) -> BoxSet:
     """The twin's table (rad_core.sim.world defaults: top at z = 0), grown to hold the scene."""
-    from rad_core.sim.world import WorldConfig
     cfg = WorldConfig()
     (cx, cy), (hx, hy, hz) = cfg.table_centre, cfg.table_half_extents
     lo, hi = np.array([cx - hx, cy - hy]), np.array([cx + hx, cy + hy])
@@ -308,18 +309,18 @@ def plan_summary(plan: PlanDoc) -> str:
 
 def entity_part(name: str) -> str:
     """A block id or region name as one entity path part (escaped if it has '/' or spaces)."""
-    import rerun as rr
+    import rerun as rr  # rerun: only a viewer pays for its import
     return rr.escape_entity_path_part(name)
 
 
 def _boxes(boxes: BoxSet, fill: str = 'solid'):
-    import rerun as rr
+    import rerun as rr  # rerun: only a viewer pays for its import
     return rr.Boxes3D(centers=boxes.centers, half_sizes=boxes.half_sizes, colors=boxes.colors, fill_mode=fill)
 
 
 def default_blueprint():
     """A 3D view of /world (collision meshes hidden), the step log, timings and the plan summary."""
-    import rerun.blueprint as rrb
+    import rerun.blueprint as rrb  # rerun: only a viewer pays for its import
     return rrb.Blueprint(
         rrb.Horizontal(
             rrb.Spatial3DView(origin='/world', name='cell',
@@ -349,7 +350,7 @@ def set_ros_time(rec, seconds: float) -> None:
 
 def log_world(rec) -> None:
     """Static: z up, and the table."""
-    import rerun as rr
+    import rerun as rr  # rerun: only a viewer pays for its import
     rec.log(WORLD, rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
     rec.log(f'{WORLD}/table', _boxes(table_box()), static=True)
 
@@ -361,7 +362,7 @@ def log_scene(rec, scene: Scene, previous: Scene | None = None) -> None:
     cleared that is logged anew: a Clear and new data at the same time stamp is
     ambiguous in Rerun (measured: the new data may stay hidden).
     """
-    import rerun as rr
+    import rerun as rr  # rerun: only a viewer pays for its import
     if previous is not None:
         for block_id in {b.id for b in previous.blocks} - {b.id for b in scene.blocks}:
             rec.log(f'{WORLD}/blocks/{entity_part(block_id)}', rr.Clear(recursive=True))
@@ -381,7 +382,7 @@ def log_scene(rec, scene: Scene, previous: Scene | None = None) -> None:
 
 def log_block_poses(rec, poses: Iterable[tuple[str, Sequence[float], Sequence[float]]], known: set[str]) -> int:
     """One Transform3D per tracked block: (name, position, quaternion xyzw). Returns how many were logged."""
-    import rerun as rr
+    import rerun as rr  # rerun: only a viewer pays for its import
     n = 0
     for name, position, quaternion in poses:
         if name in known:
@@ -402,7 +403,7 @@ def log_plan(rec, scene: Scene, plan: PlanDoc, stamp_s: float, previous: PlanDoc
     shows the finished plan. Parts of a `previous` plan this one does not
     overwrite are cleared. Returns problems (parts not drawn, with the reason).
     """
-    import rerun as rr
+    import rerun as rr  # rerun: only a viewer pays for its import
     problems = []
     set_ros_time(rec, stamp_s)
     placements = plan.allocation.placements if plan.allocation is not None else ()
@@ -464,9 +465,8 @@ class PandaModel:
     """The Panda of pybullet_data as a rerun.urdf tree: meshes logged once, joints driven by joint states."""
 
     def __init__(self, urdf: str | Path | None = None):
-        import rerun.urdf as ru
+        import rerun.urdf as ru  # rerun: only a viewer pays for its import
 
-        from rad_core.cell.panda import source_urdf_path
         path = Path(urdf) if urdf is not None else source_urdf_path()     # what is drawn: its visual meshes
         # panda.urdf names its meshes package://meshes/...: the package root is the URDF's folder.
         packages = os.environ.get('ROS_PACKAGE_PATH', '')
@@ -481,7 +481,7 @@ class PandaModel:
         return [self.tree.root_link().name] + [j.child_link for j in self.tree.joints()]
 
     def log_model(self, rec) -> None:
-        import rerun as rr
+        import rerun as rr  # rerun: only a viewer pays for its import
         self.tree.log_urdf_to_recording(rec)
         # The URDF's root link stands at the world origin (the robot base frame is the scene frame).
         rec.log(f'{ROBOT_ROOT}/base', rr.Transform3D(parent_frame=f'tf#/{WORLD}', child_frame=self.root_frame),

@@ -17,14 +17,21 @@ from dataclasses import is_dataclass, replace
 
 import numpy as np
 
-from rad_core.allocation.order import hand_order, ordered_cover
+from rad_core.allocation.cpsat import AllocationParams, solve
+from rad_core.allocation.order import Precedence, hand_order, ordered_cover
+from rad_core.allocation.placements import Placement
+from rad_core.allocation.result import AllocationResult
 from rad_core.domain.errors import RadError
 from rad_core.domain.scene import Scene
+from rad_core.env.mdp import AssemblyEnv
+from rad_core.gamp.action import MotionPlanner
+from rad_core.sequencing.bounds.robot_ceiling import robot_ceiling
 from rad_core.sequencing.decide.agents import AgentSpec, label, parse
 from rad_core.sequencing.decide.policy import LinePolicy
+from rad_core.sequencing.decide.sequencer import Sequencer, SequencerConfig
 from rad_core.sequencing.planning.courses import course_line
-from rad_core.sequencing.planning.plan import AssemblyPlan, plan_assembly
-from rad_core.sequencing.planning.reallocation import reallocation_support
+from rad_core.sequencing.planning.plan import AssemblyPlan, local_motion_planner, plan_assembly
+from rad_core.sequencing.planning.reallocation import ReallocationConfig, reallocation_support
 
 IMPROVE_TIME_S = 2.0
 """Anytime planning's least budget (s) for improving on the first plan with the search (`plan_for_agent`:
@@ -73,7 +80,6 @@ def plan_for_agent(spec: AgentSpec, scene: Scene, allocate, plan_motion, rank, r
     `AssemblyPlan.anytime` records each plan's time and coverage, and the answer's `timings` the
     stages of all of them. Otherwise one plan, the agent's own (its one entry in `anytime`:
     'scorer', or 'search' for an agent that searches)."""
-    from rad_core.sequencing.planning.reallocation import ReallocationConfig
     support = support or spec.resolved_support()
     if spec.realloc:
         reallocation = reallocation or ReallocationConfig(max_reallocations=max_reallocations)
@@ -235,7 +241,6 @@ order (`ordered_cover`)."""
 
 def cover_allocation(cover, seconds: float):
     """An `AllocationResult` of an `ordered_cover`'s poses (FEASIBLE, its c^T g), solved in `seconds`."""
-    from rad_core.allocation.result import AllocationResult
     return AllocationResult('FEASIBLE', float(cover.value), float(cover.value), seconds, tuple(cover.placements),
                             solver='ordered cover')
 
@@ -244,7 +249,6 @@ def ceiling_line(scene: Scene, incumbent: float, seconds: float):
     """The line of the robot-feasible ceiling's search (`sequencing.exact.robot_ceiling`, at most
     `seconds`) from the scene's state, where it beats `incumbent`: (an `AllocationResult` of its
     poses, the `Precedence`s that put them in its order); None where it found nothing better."""
-    from rad_core.sequencing.bounds.robot_ceiling import robot_ceiling
     t0 = time.perf_counter()
     found = robot_ceiling(scene, seconds, incumbent=incumbent)
     if not found.actions or found.coverage <= incumbent + 1e-9:
@@ -256,10 +260,6 @@ def line_allocation(scene: Scene, actions, solver: str, why: str, seconds: float
     """A line of actions from the scene's state as (an `AllocationResult` of its poses, named
     `solver`, the `Precedence`s (`why`) that put them in the line's order, the poses (cells) in
     that order)."""
-    from rad_core.allocation.order import Precedence
-    from rad_core.allocation.placements import Placement
-    from rad_core.allocation.result import AllocationResult
-    from rad_core.env.mdp import AssemblyEnv
     env = AssemblyEnv(scene)
     env.reset()
     placements, poses = [], []
@@ -333,9 +333,6 @@ class AgentPlanner:
     def __init__(self, agent: str | AgentSpec = 'default', allocation_time_limit_s: float = 10.0,
                  time_limit_s: float = 120.0, allocation=None, reallocation=None, policy=None,
                  improve_time_s: float = IMPROVE_TIME_S):
-        from rad_core.gamp.action import MotionPlanner
-        from rad_core.sequencing.decide.sequencer import Sequencer, SequencerConfig
-        from rad_core.sequencing.planning.plan import local_motion_planner
         self.spec = parse(agent) if isinstance(agent, str) else agent
         self.agent = label(self.spec)
         self.sequencer = Sequencer(SequencerConfig(agent=self.agent), policy)
@@ -349,9 +346,7 @@ class AgentPlanner:
 
     def allocate(self, scene: Scene, exclude=(), time_limit_s: float | None = None, support: str | None = None,
                  params=None):
-        from dataclasses import replace
 
-        from rad_core.allocation.cpsat import AllocationParams, solve
         params = params or self.allocation or AllocationParams(time_limit_s=self.allocation_time_limit_s)
         cap = params.time_limit_s
         limit = cap if time_limit_s is None else max(1e-3, min(cap, float(time_limit_s)))

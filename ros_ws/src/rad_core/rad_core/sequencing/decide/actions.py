@@ -21,9 +21,10 @@ import numpy as np
 from rad_core.allocation.guide import AllocationGuide
 from rad_core.allocation.placements import Placement
 from rad_core.env.mdp import Action, AssemblyEnv
+from rad_core.gamp.action import SceneAction
 
 if TYPE_CHECKING:
-    from rad_core.gamp.action import SceneAction
+    from rad_core.gamp.action import SceneAction  # pybullet: GAMP loads the simulator, only a robot space needs it
 
 METHODS = ('milp', 'all', 'rel')
 
@@ -77,7 +78,6 @@ def action_space(method: str, env: AssemblyEnv, placements=None) -> ActionSpace:
 
 def scene_action(env: AssemblyEnv, action: Action) -> SceneAction:
     """An MDP action named the way messages name it (block id, target, region cell)."""
-    from rad_core.gamp.action import SceneAction  # here: GAMP's module loads the simulator
     region = int(env.grid.region_of[action.cell])
     cell = tuple(int(v) for v in env.grid.ijk[action.cell])
     return SceneAction(env.scene.blocks[action.block].id, int(action.unit), env.scene.targets[region].name, cell,

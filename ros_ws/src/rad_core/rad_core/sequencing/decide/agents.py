@@ -46,6 +46,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from rad_core.domain.errors import RadError
+from rad_core.sequencing.decide.policy import HeurPolicy
 
 SEARCHES = ('mcts', 'halving', 'lookahead', 'bnb')
 SIMULATION_SEARCHES = ('mcts', 'halving', 'lookahead')
@@ -116,9 +117,8 @@ class AgentSpec:
     def make_policy(self):
         """The scorer as a `Policy` (a network is loaded here; a bad file is a RadError naming it)."""
         if not self.learned:
-            from rad_core.sequencing.decide.policy import HeurPolicy
             return HeurPolicy()
-        from rad_core.learning.policy import QPolicy
+        from rad_core.learning.policy import QPolicy  # torch: only a learned scorer needs it
         return QPolicy.load(self.scorer)
 
     def resolved_support(self, policy=None) -> str:

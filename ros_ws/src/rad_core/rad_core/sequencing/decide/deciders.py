@@ -16,6 +16,7 @@ from rad_core.sequencing.decide import policy as ranking_rules
 from rad_core.sequencing.decide.actions import ActionSpace
 from rad_core.sequencing.decide.episode import Decide, Decision, stop
 from rad_core.sequencing.decide.policy import Policy, first_feasible, ranked_actions, standing_fallbacks
+from rad_core.sequencing.decide.search import SEARCHES, EnvModel
 
 
 class Check(NamedTuple):
@@ -60,7 +61,6 @@ def search_decider(policy: Policy, actions: ActionSpace, stepper, search_name: s
     simulating it (`simulated_check`); failed children are never taken.
     decide(env, rng, fallbacks=True): among the search's fallbacks instead (`with_fallbacks`),
     from the search already run in this state with these actions."""
-    from rad_core.sequencing.decide.search import SEARCHES, EnvModel
     search = SEARCHES[search_name]
     kwargs = {} if epsilon is None else {'epsilon': epsilon}
     check = simulated_check(stepper) if verify is not None else None

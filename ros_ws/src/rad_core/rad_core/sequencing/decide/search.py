@@ -58,6 +58,7 @@ from typing import Any, Callable, Protocol
 import numpy as np
 
 from rad_core.env.mdp import TERMINATE, Action
+from rad_core.sequencing.decide.exact import exact_search
 
 
 class Model(Protocol):
@@ -391,7 +392,6 @@ def bnb(model: Model, rng: np.random.Generator, budget: float = 10.0, epsilon: f
     fallbacks; with no line it lists nothing. `line` is the whole line; `info` has the
     line's coverage, whether the search was complete and how it ended (`ExactResult.proof`), its
     bound, states and why it stopped short. rng and epsilon are unused (the search is deterministic)."""
-    from rad_core.sequencing.decide.exact import exact_search
     if not budget > 0:
         raise ValueError(f'bnb: budget must be a positive number of seconds, got {budget}')
     actions, q_all, _, _ = _root(model)

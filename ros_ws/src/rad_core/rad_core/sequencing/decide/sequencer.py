@@ -28,10 +28,12 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from rad_core.allocation.cpsat import pose_key
 from rad_core.allocation.guide import AllocationGuide
 from rad_core.domain.errors import RadError
 from rad_core.domain.scene import Scene
 from rad_core.env.mdp import AssemblyEnv, EnvConfig
+from rad_core.env.robot_env import RobotAssemblyEnv, RobotEnvConfig
 from rad_core.gamp.action import SceneAction, start_joints
 from rad_core.sequencing.decide import policy as ranking_rules
 from rad_core.sequencing.decide.actions import AllocationActions, mdp_actions, scene_action
@@ -280,7 +282,6 @@ class Sequencer:
     def _twin(self, scene: Scene):
         """The planning twin, one PyBullet world reused across requests."""
         if self._renv is None:
-            from rad_core.env.robot_env import RobotAssemblyEnv, RobotEnvConfig
             self._renv = RobotAssemblyEnv(scene, RobotEnvConfig(execution='teleport'))
         else:
             self._renv.load(scene)
@@ -290,7 +291,6 @@ class Sequencer:
 def _line_key(env: AssemblyEnv, placements) -> tuple:
     """What a best line depends on: the allocation, what is placed where, and where the
     blocks still on the table lie."""
-    from rad_core.allocation.cpsat import pose_key
     placed = env.state.placed
     return (frozenset(pose_key(p.type, p.target, p.cells) for p in placements),
             frozenset((env.scene.blocks[b].id, tuple(sorted(int(c) for c in cells)))

@@ -36,6 +36,7 @@ from rad_core.cell.mocap import Registration
 from rad_core.domain.coverage import measured_coverage
 from rad_core.domain.errors import RadError
 from rad_core.domain.scene import Scene
+from rad_core.gamp.planner import plan_action
 from rad_core.sequencing.execution.execute import ExecuteConfig, ExecutionResult, Report, execute_assembly
 from rad_core.sequencing.planning.plan import AssemblyPlan, MotionPlan, PlanStep, moved
 
@@ -298,7 +299,6 @@ def _is_home(heap: Scene, block_id: str, pose) -> bool:
 
 def local_place_planner(planner) -> PlacePlanner:
     """Adapt an in-process `gamp.action.MotionPlanner` (its world and config) to PlacePlanner."""
-    from rad_core.gamp.planner import plan_action
 
     def plan_place(scene: Scene, block_id: str, position, yaw: int, start) -> MotionPlan:
         q = planner.load(scene, start)

@@ -18,7 +18,12 @@ from __future__ import annotations
 from collections import Counter
 from dataclasses import dataclass, field
 
+from rad_core.cell.trajectory import TrajectoryAborted
 from rad_core.domain.scene import Scene
+from rad_core.domain.transforms import yaw_quaternion
+from rad_core.sequencing.execution.execute import ExecuteConfig, execute_assembly
+from rad_core.sim.twin import Tolerances, Twin, TwinConfig, twin_world_config
+from rad_core.sim.world import World
 
 
 @dataclass
@@ -35,9 +40,6 @@ def build_teleported(scene: Scene, steps, settle_s: float = 0.5):
     the way, `moved_aside`) where the plan says and the arm where its motion ends, settle
     `settle_s` simulated seconds after each, and register the world: a `sim.mocap.Registration`
     (its scene: where every block is; set_aside: blocks no scene can express, with why)."""
-    from rad_core.domain.transforms import yaw_quaternion
-    from rad_core.sim.twin import Twin, twin_world_config
-    from rad_core.sim.world import World
     with World(scene, twin_world_config()) as world:
         twin = Twin(world)
         for step in steps:
@@ -62,10 +64,6 @@ def build_simulated(scene: Scene, plan, plan_motion, twin_config=None, execute_c
     execute_config: an `ExecuteConfig` (default: settle 0.5 s, 3 replans). Trajectories run with
     the tolerances the assembly node sends with every goal, so contact aborts them as on a cell.
     """
-    from rad_core.cell.trajectory import TrajectoryAborted
-    from rad_core.sequencing.execution.execute import ExecuteConfig, execute_assembly
-    from rad_core.sim.twin import Tolerances, Twin, TwinConfig, twin_world_config
-    from rad_core.sim.world import World
     with World(scene, twin_world_config()) as world:
         twin = Twin(world, twin_config or TwinConfig())
         sim0 = twin.time

@@ -26,12 +26,18 @@ The line is the twin's successful steps; the agent plans it as an allocation wit
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from rad_core.allocation.bounds import blocks_left
+from rad_core.allocation.constraints import cp_solver
+from rad_core.allocation.guide import AllocationGuide
+from rad_core.allocation.order import candidate_poses, cover_candidates, order_model, scene_state, solve_order
 from rad_core.domain.scene import Scene
+from rad_core.env.robot_env import RobotAssemblyEnv, RobotEnvConfig
 
 COURSES_ABOVE = 200
 """`course_line` plans where a scene has more candidate poses than this (`hand_order.candidate_poses`):
@@ -69,10 +75,6 @@ def course_line(scene: Scene, time_limit_s: float, least_poses: int | None = Non
     `time_limit_s` (the line so far where it ends first); None where the scene has at most
     `least_poses` candidate poses (default `COURSES_ABOVE`: one ordered cover takes those), and
     where a queue feeder dictates the blocks' order (the line chooses its blocks)."""
-    from rad_core.allocation.bounds import blocks_left
-    from rad_core.allocation.guide import AllocationGuide
-    from rad_core.allocation.order import candidate_poses, cover_candidates, scene_state, solve_order
-    from rad_core.env.robot_env import RobotAssemblyEnv, RobotEnvConfig
     if scene.feeder is not None and scene.feeder.order == 'queue':
         return None
     t0 = time.perf_counter()
@@ -158,10 +160,7 @@ def course_bound(scene: Scene, time_limit_s: float = 10.0) -> float:
     course's maximum bounds what any build fills of it. CP-SAT's proven bound per course within
     an equal share of `time_limit_s`. On the flush walls it says what `large_shapes.FLUSH_LIMIT`
     says (each full course loses a cell) and no more."""
-    import math
 
-    from rad_core.allocation.constraints import cp_solver
-    from rad_core.allocation.order import candidate_poses, cover_candidates, order_model, scene_state
     grid, occupied = scene_state(scene)
     candidates, counts, hand, _ = cover_candidates(scene, grid)
     poses, _ = candidate_poses(grid, hand, occupied, candidates, counts)

@@ -37,12 +37,14 @@ from rad_core.allocation.order import Precedence
 from rad_core.allocation.result import AllocationResult
 from rad_core.cell.motion import Motion
 from rad_core.domain.scene import Block, Scene
-from rad_core.env.mdp import AssemblyEnv, EnvConfig
+from rad_core.env.mdp import AssemblyEnv, EnvConfig, Outcome
 from rad_core.gamp.action import SceneAction, blocks_named
 from rad_core.sequencing.decide.actions import AllocationActions, mdp_actions, scene_action
 from rad_core.sequencing.decide.deciders import with_fallbacks
 from rad_core.sequencing.decide.episode import Decision, Episode, run_episode, stop
 from rad_core.sequencing.decide.policy import Policy, first_feasible, ranked_actions
+from rad_core.sequencing.planning.reallocation import ReallocationConfig, Reallocator, with_reallocation
+from rad_core.sim.physics import PhysicsStability
 
 
 @dataclass
@@ -288,7 +290,6 @@ def plan_assembly(scene: Scene, allocate: Allocate, plan_motion: PlanMotion, seq
 
     reallocator = None
     if reallocate is not None:
-        from rad_core.sequencing.planning.reallocation import ReallocationConfig, Reallocator, with_reallocation
 
         def pose_check(action) -> MotionPlan:
             """What the plan's own steps are held to (`_checked_motion`): a pose whose block would
@@ -332,7 +333,6 @@ class _SharedStability:
     def __call__(self, *args, **kw):
         with self._lock:
             if self._judge is None:
-                from rad_core.sim.physics import PhysicsStability
                 self._judge = PhysicsStability()
             return self._judge(*args, **kw)
 
@@ -459,7 +459,6 @@ def _first_feasible(env: AssemblyEnv, scene: Scene, ranked, check_motion, q, boo
 def _book_failure(env: AssemblyEnv, action, motion: MotionPlan):
     """The MDP step of an action that cannot be done, as the robot env books it: the stability
     check's own outcome, else a failed grasp (f_g) or a failed placement motion (f_p)."""
-    from rad_core.env.mdp import Outcome
     if motion.failure == 'stability':
         return env.step(action)
     cells, _ = env.resulting_cells(action)
