@@ -3,7 +3,7 @@
     python benchmarks/bench_agents.py [--scenes 200] [--grids 4 5] [--execution teleport] [--json FILE]
 
 Each agent runs on the same generated two-sided scenes (seeds 0..N-1) through
-`rad_core.evaluation.evaluate`, the code behind `rad eval`: heur and
+`rad_core.experiment.evaluation.evaluate`, the code behind `rad eval`: heur and
 heur-verified with the robot in the loop, heur-norobot on the MDP with physical
 stability. The paper reports only a-bar for its oracle, and R's spread there is
 over 5 training seeds, not over episodes as R_std here; its d and f for HEUR
@@ -23,10 +23,10 @@ from __future__ import annotations
 import argparse
 import time
 
-from rad_core import jsonfmt
-from rad_core.evaluation import evaluate
-from rad_core.progress import ProgressBar
-from rad_core.scene_sources import generated_scenes
+from rad_core.domain import jsonfmt
+from rad_core.domain.scene_sources import generated_scenes
+from rad_core.experiment.evaluation import evaluate
+from rad_core.view.progress import ProgressBar
 
 # Table II of the paper (two-sided, robot in the loop); absent: not reported. The
 # table has no d or f; for HEUR they follow from it (the text's "40 % ... upon an

@@ -13,10 +13,9 @@ import argparse
 import json
 
 import numpy as np
-
 from rad_core.allocation import AllocationParams, solve, validate_allocation
 from rad_core.allocation.highs import solve_highs
-from rad_core.generator import GeneratorConfig, generate_scene
+from rad_core.domain.generator import GeneratorConfig, generate_scene
 
 
 def run(grids, n_scenes, seed):

@@ -32,27 +32,14 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from bench_planning_step import _HARD, candidates  # noqa: E402
-
+from common import candidates, wide_scenes  # noqa: E402
 from rad_core.allocation import solve  # noqa: E402
 from rad_core.allocation.guide import AllocationGuide  # noqa: E402
-from rad_core.generator import GeneratorConfig, generate_scene  # noqa: E402
-from rad_core.robot_env import RobotAssemblyEnv, RobotEnvConfig  # noqa: E402
-from rad_core.shapes import SPECS, build_scene  # noqa: E402
-
-GENERATED = [('g4', dict(grid=4)), ('g5', dict(grid=5)), ('g6', dict(grid=6)), ('g5-tight', dict(grid=5, **_HARD)),
-             ('g5-u4', dict(grid=5, unit=0.04, gap=0.01)),
-             ('g4-far', dict(grid=4, structure_x=0.84, reach=0.9, table_x=(0.3, 0.9)))]
+from rad_core.env.robot_env import RobotAssemblyEnv, RobotEnvConfig  # noqa: E402
 
 
 def scenes(n_seeds: int) -> list[tuple[str, object]]:
-    out = []
-    for label, kw in GENERATED:
-        for s in range(6000, 6000 + n_seeds):
-            out.append((f'{label}-seed{s}', generate_scene(GeneratorConfig(**kw), s)))
-    for name in sorted(SPECS):
-        out.append((f'shape-{name}', build_scene(SPECS[name], 0)))
-    return out
+    return wide_scenes(n_seeds)
 
 
 def verdict(result) -> tuple[str, str]:

@@ -1,14 +1,14 @@
 """How well `rad calibrate` recovers the motion-capture frame, against the marker's noise.
 
     python benchmarks/bench_calibration.py [--transforms 40] [--draws 10] [--points 8,15,30]
-        [--noise-mm 0,0.1,0.5,1,2] [--seed 0] [--out docs/results/calibration.md]
+        [--noise-mm 0,0.1,0.5,1,2] [--seed 0] [--results docs/results] [--rows FILE]
 
 Synthetic pairs with a known transform: for each of --transforms random transforms mocap -> base
 (a uniformly random rotation, the motion-capture origin uniform in a 6 m cube around the robot)
 and --draws draws each, n marker positions uniform in the arm's workspace in front of the robot
 (x 0.25..0.75 m, y -0.4..0.4 m, z 0.05..0.6 m above the table: where a flange marker goes), seen by
 motion capture with Gaussian noise of sigma per axis. Each set is fitted by
-`rad_core.calibration.fit` (no residual bound, so every draw counts; how many the default 5 mm bound
+`rad_core.cell.calibration.fit` (no residual bound, so every draw counts; how many the default 5 mm bound
 would refuse is counted beside) and compared with the truth:
 - rotation error: the angle of R_fit R_true^T, degrees;
 - translation error: |t_fit - t_true|, mm (where the motion-capture origin lands: the rotation error
@@ -18,8 +18,9 @@ would refuse is counted beside) and compared with the truth:
   registration makes there;
 - the fit's rms residual, mm.
 Printed and written per (n, sigma): median and 95th percentile, and the ratio of the error at the
-table point to sigma (the noise's gain). Writes the tables as Markdown (--out) and beside it
-one compact JSON line per (n, sigma) with every statistic (<out>.rows.jsonl, floats to 6
+table point to sigma (the noise's gain). Writes the page, docs/results/calibration.md
+(`common.write_page`: its table has a line per (n, sigma)), and one compact JSON line per (n, sigma)
+with every statistic to --rows (out/cache/calibration/rows.jsonl by default; floats to 6
 significant digits: `write_rows`'s 4 decimals would flatten the noise-free rows' 1e-14 errors
 to 0 and move the table's third digit).
 """
@@ -29,27 +30,26 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
-from common import RESULTS, command_line
+from common import CACHE, RESULTS, split_table, write_page
 
 WORKSPACE = (np.array([0.25, -0.4, 0.05]), np.array([0.75, 0.4, 0.6]))
 ORIGIN_RANGE = 3.0
 
 
 def random_rotation(rng: np.random.Generator) -> np.ndarray:
-    from rad_core.transforms import matrix_from_quaternion
+    from rad_core.domain.transforms import matrix_from_quaternion
     q = rng.normal(size=4)
     return matrix_from_quaternion(q / np.linalg.norm(q))
 
 
 def trial(rng: np.random.Generator, rotation: np.ndarray, translation: np.ndarray, n: int, sigma: float,
           point: np.ndarray) -> dict:
-    from rad_core.calibration import DEFAULT_MAX_RMS, PointPairs, fit
+    from rad_core.cell.calibration import DEFAULT_MAX_RMS, PointPairs, fit
     base = rng.uniform(*WORKSPACE, size=(n, 3))
     mocap = (base - translation) @ rotation + rng.normal(0.0, sigma, size=(n, 3))
     c = fit(PointPairs(base, mocap), max_rms=math.inf)
@@ -109,6 +109,7 @@ def significant(value, digits: int = 6):
 
 def write_rows(path: Path, rows: list[dict]) -> Path:
     """One JSON line per row, floats to 6 significant digits (`significant`)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(''.join(json.dumps(significant(r), separators=(',', ':')) + '\n' for r in rows))
     return path
 
@@ -127,31 +128,26 @@ def main() -> int:
     p.add_argument('--points', default='8,15,30', help='pairs per set, comma-separated')
     p.add_argument('--noise-mm', default='0,0.1,0.5,1,2', help='marker noise sigma per axis, mm, comma-separated')
     p.add_argument('--seed', type=int, default=0)
-    p.add_argument('--out', default=str(RESULTS / 'calibration.md'), help='the table; the rows go beside it')
+    p.add_argument('--results', default=str(RESULTS), help='folder of the page, calibration.md')
+    p.add_argument('--rows', default=str(CACHE / 'calibration' / 'rows.jsonl'),
+                   help="every row's statistics (the page's table holds every row)")
     args = p.parse_args()
     points, noise = _floats(args.points, int), _floats(args.noise_mm)
     t0 = time.perf_counter()
     rows = run(args.transforms, args.draws, points, noise, args.seed)
     wall = time.perf_counter() - t0
-    command = command_line()
     lines = table(rows)
     print('\n'.join(lines))
     print(f'wall time {wall:.1f} s')
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    rows_file = write_rows(out.with_suffix('.rows.jsonl'), rows)
-    head = ['# Calibration of the motion-capture frame: error of the fitted transform against the marker noise', '',
-            f'`{command}` ({wall:.1f} s wall on {os.cpu_count()} cores; see the script\'s docstring). '
-            f'{args.transforms} random transforms x {args.draws} point sets per row; marker positions uniform in '
-            'x 0.25..0.75, y -0.4..0.4, z 0.05..0.6 m; Gaussian noise of sigma per axis on the motion-capture '
-            'positions; the motion-capture origin up to 3 m from the robot in each axis. "Error at table centre": '
-            'a point on the table top at its centre, mapped by the fit and by the truth. "/ sigma": its median '
-            'over sigma. "Refused at 5 mm": fits `rad calibrate` would refuse with its default bound. The translation '
-            'error is where the motion-capture origin lands, metres from the points, so the rotation error\'s lever '
-            'adds to it; the error at the table centre is what registration of a block sees. '
-            f'Every row\'s statistics: [{rows_file.name}]({rows_file.name}).', '']
-    out.write_text('\n'.join(head + lines) + '\n')
-    print(f'wrote {out} and {rows_file}')
+    rows_file = write_rows(Path(args.rows), rows)
+    headers, cells = split_table(lines)
+    note = (f'{args.transforms} random transforms x {args.draws} point sets per row; markers uniform in x 0.25..0.75, '
+            'y -0.4..0.4, z 0.05..0.6 m; Gaussian noise of sigma per axis; the motion-capture origin up to 3 m '
+            'away. "Error at table centre" is what registration of a block sees; "/ sigma" its median over sigma. '
+            '"Refused at 5 mm": fits `rad calibrate` would refuse with its default bound.')
+    page = write_page('calibration', 'Calibration of the motion-capture frame against marker noise', headers, cells,
+                      note, results=args.results)
+    print(f'wrote {page} and {rows_file}')
     return 0
 
 

@@ -3,7 +3,7 @@
 The same generated scenes, once flush (clearance 0, rad's default) and once with
 each --clearance (a fraction of the unit: 0.2 is 1 cm between neighbouring 5 cm
 cells), evaluated by HEUR and verified HEUR with GAMP and the twin
-(`rad_core.evaluation.evaluate`, robot=True). Prints one row per agent and
+(`rad_core.experiment.evaluation.evaluate`, robot=True). Prints one row per agent and
 geometry: completion d, failures f (grasp f_g, placement f_p), coverage a-bar
 and corrected coverage, and the wall time.
 
@@ -15,8 +15,8 @@ from __future__ import annotations
 import argparse
 import time
 
-from rad_core.evaluation import evaluate
-from rad_core.scene_sources import generated_scenes
+from rad_core.domain.scene_sources import generated_scenes
+from rad_core.experiment.evaluation import evaluate
 
 AGENTS = ('heur', 'heur-verified')
 

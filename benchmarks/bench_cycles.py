@@ -1,15 +1,16 @@
 """Build, take apart, build again: N cycles on a few scenes with no reset and nothing touched by hand.
 
-    python benchmarks/bench_cycles.py [--cycles 10] [--faults none|realistic] [--out docs/results/cycles]
+    python benchmarks/bench_cycles.py [--cycles 10] [--faults none|realistic] [--results docs/results] [--rows FILE]
 
 Each cycle builds the target with the execute / verify / replan loop /execute_assembly runs and
-takes it apart onto the table with the loop /take_apart runs (rad_core.sequencing.disassembly),
+takes it apart onto the table with the loop /take_apart runs (rad_core.sequencing.execution.disassembly),
 in-process on one `Twin` built as the twin node builds it (the whole arm motion simulated, the
 node's path and goal tolerances); the next cycle builds from what motion capture sees. Plans:
 the agent as the node graph runs it (`sequencing.agent_plan.AgentPlanner`, `default`).
 Per cycle: build coverage, steps, replans, take-apart success, blocks lost, drift from the
-heap (mm, mean and max), wall time. Results: OUT.md (the table) and OUT.rows.jsonl (one compact
-line per cycle); the per-scene summary is printed.
+heap (mm, mean and max), wall time. Results: docs/results/cycles.md (`common.write_page`, a line per
+cycle) and --rows (one compact line per cycle, out/cache/cycles/rows.jsonl by default); the per-scene
+summary is printed.
 """
 
 from __future__ import annotations
@@ -19,23 +20,22 @@ import time
 from pathlib import Path
 
 import numpy as np
-from common import RESULTS, command_line, write_rows
-
+from common import CACHE, RESULTS, write_page, write_rows
 
 SCENES = (('default g4 seed 8', ('generated', 4, 8)), ('g5 seed 503', ('generated', 5, 503)),
           ('pillars (held out)', ('shape', 'pillars')))
 
 
 def scene_of(spec):
-    from rad_core.generator import GeneratorConfig, generate_scene
-    from rad_core.shapes import shape_scene
+    from rad_core.domain.generator import GeneratorConfig, generate_scene
+    from rad_core.domain.shapes import shape_scene
     return generate_scene(GeneratorConfig(grid=spec[1]), spec[2]) if spec[0] == 'generated' else shape_scene(spec[1])
 
 
 def run_cycles(name, scene, planner, cycles: int, faults: str, seed: int) -> list[dict]:
-    from rad_core.trajectory import TrajectoryAborted
-    from rad_core.sequencing.disassembly import local_place_planner, take_apart
-    from rad_core.sequencing.execute import ExecuteConfig, execute_assembly
+    from rad_core.cell.trajectory import TrajectoryAborted
+    from rad_core.sequencing.execution.disassembly import local_place_planner, take_apart
+    from rad_core.sequencing.execution.execute import ExecuteConfig, execute_assembly
     from rad_core.sim.faults import FaultConfig
     from rad_core.sim.twin import Tolerances, Twin, TwinConfig, twin_world_config
     from rad_core.sim.world import World
@@ -82,15 +82,17 @@ def main() -> None:
     p.add_argument('--cycles', type=int, default=10)
     p.add_argument('--faults', default='none')
     p.add_argument('--seed', type=int, default=0)
-    p.add_argument('--agent', default='default', help='the agent (rad_core.agents), as the node graph runs it')
-    p.add_argument('--out', type=Path, default=RESULTS / 'cycles', help='OUT.md and OUT.rows.jsonl')
+    p.add_argument('--agent', default='default',
+                   help='the agent (rad_core.sequencing.decide.agents), as the node graph runs it')
+    p.add_argument('--results', type=Path, default=RESULTS, help='folder of the page, cycles.md')
+    p.add_argument('--rows', default=str(CACHE / 'cycles' / 'rows.jsonl'),
+                   help="every cycle's row (the page's table holds every row)")
     args = p.parse_args()
-    from rad_core.sequencing.agent_plan import AgentPlanner
+    from rad_core.sequencing.agent.agent_plan import AgentPlanner
     planner = AgentPlanner(args.agent)
     rows = []
     for name, spec in SCENES:
         rows += run_cycles(name, scene_of(spec), planner, args.cycles, args.faults, args.seed)
-    command = command_line()
     summary = {}
     for name, _ in SCENES:
         rs = [r for r in rows if r['scene'] == name]
@@ -100,21 +102,16 @@ def main() -> None:
                          'take_apart_failures': sum(not r['take_apart_success'] for r in rs),
                          'lost': sorted({b for r in rs for b in r['lost']}),
                          'drift_max_mm': float(max(r['drift_max_mm'] for r in rs)) if rs else None}
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    rows_file = write_rows(args.out.with_suffix('.rows.jsonl'), rows)
-    lines = ['# Build, take apart, build again', '',
-             f'Made by `{command}` ({time.strftime("%Y-%m-%d")}; agent {planner.agent}; faults {args.faults}; '
-             'in-process loops of /execute_assembly and /take_apart on one twin, no reset). '
-             f'Every cycle\'s row: [{rows_file.name}]({rows_file.name}).', '',
-             '| scene | cycle | coverage | steps (build + take apart) | replans | take-apart | lost | '
-             'drift mean / max mm | wall s |', '|---|---|---|---|---|---|---|---|---|']
-    for r in rows:
-        verdict = 'ok' if r['take_apart_success'] else 'failed'
-        lines.append(f'| {r["scene"]} | {r["cycle"]} | {r["coverage"]:.3f} | {r["build_steps"]} + '
-                     f'{r["take_apart_steps"]} | {r["build_replans"]} | {verdict} '
-                     f'| {", ".join(r["lost"]) or "-"} | {r["drift_mean_mm"]:.1f} / {r["drift_max_mm"]:.1f} | '
-                     f'{r["wall_s"]:.0f} |')
-    args.out.with_suffix('.md').write_text('\n'.join(lines) + '\n')
+    rows_file = write_rows(Path(args.rows), rows)
+    headers = ['scene', 'cycle', 'coverage', 'steps (build + take apart)', 'replans', 'take-apart', 'lost',
+               'drift mean / max mm', 'wall s']
+    table = [[r['scene'], r['cycle'], f'{r["coverage"]:.3f}', f'{r["build_steps"]} + {r["take_apart_steps"]}',
+              r['build_replans'], 'ok' if r['take_apart_success'] else 'failed', ', '.join(r['lost']) or '-',
+              f'{r["drift_mean_mm"]:.1f} / {r["drift_max_mm"]:.1f}', f'{r["wall_s"]:.0f}'] for r in rows]
+    note = (f'Agent `{planner.agent}`, faults {args.faults}: in-process loops of /execute_assembly and /take_apart on '
+            'one twin, no reset. The drift is how far the blocks end from where they started on the table.')
+    page = write_page('cycles', 'Build, take apart, build again', headers, table, note, results=args.results)
+    print(f'wrote {page} and {rows_file}')
     for name, s in summary.items():
         print(f'{name}: {s}')
 

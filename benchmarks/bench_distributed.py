@@ -79,9 +79,16 @@ def main() -> int:
         subprocess.run([sys.executable, __file__, '--cold-child', '--agent', args.agent, '--grid', str(args.grid),
                         '--seed', str(args.seed)] + ['--verify'] * args.verify, check=True)
 
-    from rad_core.distributed import START_METHOD, AgentArgs, dask_client, evaluate_distributed, scene_cost, warm_up
-    from rad_core.evaluation import evaluate, uses_robot
-    from rad_core.scene_sources import generated_scenes
+    from rad_core.domain.scene_sources import generated_scenes
+    from rad_core.experiment.distributed import (
+        START_METHOD,
+        AgentArgs,
+        dask_client,
+        evaluate_distributed,
+        scene_cost,
+        warm_up,
+    )
+    from rad_core.experiment.evaluation import evaluate, uses_robot
     args.start_method = args.start_method or START_METHOD
     agent_args = AgentArgs(args.agent, verify=args.verify)
     agent = agent_args.build()
@@ -249,9 +256,9 @@ def cold_child(args) -> int:
     step('import pybullet')
     import distributed  # noqa: F401
     step('import distributed')
-    from rad_core.distributed import AgentArgs, scene_cost, warm
-    from rad_core.scene_sources import generated_scenes
-    from rad_core.evaluation import robot_planner, scene_episode, uses_robot  # noqa: F401
+    from rad_core.domain.scene_sources import generated_scenes
+    from rad_core.experiment.distributed import AgentArgs, scene_cost, warm
+    from rad_core.experiment.evaluation import robot_planner, scene_episode, uses_robot  # noqa: F401
     step('import rad_core (evaluation, distributed)')
     agent_args = AgentArgs(args.agent, verify=args.verify)
     agent = agent_args.build()
@@ -259,7 +266,7 @@ def cold_child(args) -> int:
     robot = uses_robot(agent, True)
     warm(agent_args, robot)
     step('the planner (GAMP world, planning twin)' if robot else 'the stability check')
-    from rad_core.distributed import _agent_and_policy, _planner, _stability
+    from rad_core.experiment.distributed import _agent_and_policy, _planner, _stability
     planner = _planner(agent_args, None, None) if robot else None
     stability = None if robot else _stability()
     scenes = list(generated_scenes(args.grid, 2, 3, args.seed))
@@ -275,10 +282,10 @@ def bench_train(args) -> int:
     import tempfile
     from pathlib import Path
 
-    from rad_core.distributed import dask_client
-    from rad_core.learning.actors import ActorConfig, train_with_actors
-    from rad_core.learning.dataset import build
-    from rad_core.learning.dqn import TrainConfig, train
+    from rad_core.experiment.distributed import dask_client
+    from rad_core.training.actors import ActorConfig, train_with_actors
+    from rad_core.training.dataset import build
+    from rad_core.training.dqn import TrainConfig, train
 
     with tempfile.TemporaryDirectory() as tmp:
         dataset = args.dataset

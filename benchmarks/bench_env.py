@@ -16,11 +16,10 @@ import argparse
 import time
 
 import numpy as np
-
 from rad_core.allocation import solve
 from rad_core.allocation.guide import AllocationGuide
-from rad_core.generator import GeneratorConfig, generate_scene
-from rad_core.mdp import TERMINATE, AssemblyEnv, EnvConfig
+from rad_core.domain.generator import GeneratorConfig, generate_scene
+from rad_core.env.mdp import TERMINATE, AssemblyEnv, EnvConfig
 from rad_core.sequencing import supported_actions
 
 

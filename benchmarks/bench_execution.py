@@ -2,10 +2,10 @@
 
     python benchmarks/bench_execution.py [--grids 4 5] [--scenes 5] [--shapes holdout|train|tight ...]
         [--faults none mocap placement slip miss nudge drops realistic] [--agent default]
-        [--runs out/cache/execution/runs.jsonl] [--out docs/results/execution]
+        [--runs out/cache/execution/runs.jsonl] [--results docs/results]
 
 What /execute_assembly runs, in-process: the execute / verify / replan loop
-(`rad_core.sequencing.execute.execute_assembly`, the function the assembly node calls),
+(`rad_core.sequencing.execution.execute.execute_assembly`, the function the assembly node calls),
 plans from the agent as the node graph runs it (`sequencing.agent_plan.AgentPlanner`: CP-SAT,
 the sequencer, in-process GAMP; `default`: stable allocation, re-allocation on), the plant a
 real `Twin` as the twin node builds it (`twin_world_config`: blocks with 0.5 mm of play per side; PyBullet: the
@@ -22,8 +22,8 @@ raw per-step success (steps that went as planned / steps), recovered per-step su
 (blocks whose placement was attempted that end on a target cell / such blocks), faults
 injected (the twin's fault events), wall and simulated time. Every run is appended to
 --runs (a cache, not committed) as one JSON line and skipped when run again (the benchmark
-resumes); the summary goes to OUT.md, the runs it summarises to OUT.rows.jsonl (one compact
-line per run).
+resumes); the summary goes to <results>/execution.md (`common.write_page`: a line per scene set
+and run kind), the runs it summarises to execution.rows.jsonl (one compact line per run).
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ from collections import Counter
 from pathlib import Path
 
 import numpy as np
-from common import RESULTS, cache_dir, command_line, shape_scenes, write_rows
+from common import RESULTS, cache_dir, shape_scenes, write_page
 
 FAULT_LEVELS = {
     # One fault at a realistic level each, then all together (FaultConfig.realistic()).
@@ -50,18 +50,27 @@ FAULT_LEVELS = {
 }
 
 
-def scenes(grids, count, seed, shapes):
-    from rad_core.generator import GeneratorConfig, generate_scene
+SET_NAMES = {'train': 'training shapes', 'holdout': 'held-out shapes', 'tight': 'tight layouts'}
+
+
+def scenes(grids, count, seed, shapes, sets: dict | None = None):
+    """(name, scene) of the generated scenes and the shape splits; sets, if given, gets each name's set."""
+    from rad_core.domain.generator import GeneratorConfig, generate_scene
     out = []
     for g in grids:
         out += [(f'g{g}-s{seed + i}', generate_scene(GeneratorConfig(grid=g), seed + i)) for i in range(count)]
     for split in shapes:
         out += shape_scenes(split)
+    if sets is not None:
+        sets.update({name: f'generated g = {name[1:].split("-")[0]}' if name[0] == 'g' and name[1].isdigit()
+                     else '' for name, _ in out})
+        for split in shapes:
+            sets.update({name: SET_NAMES[split] for name, _ in shape_scenes(split)})
     return out
 
 
 def attempted_and_placed(steps, final_scene) -> tuple[int, int]:
-    from rad_core.grid import Grid, blocks_on_grid
+    from rad_core.domain.grid import Grid, blocks_on_grid
     attempted = {s['block'] for s in steps}
     on_grid = {final_scene.blocks[i].id for i in blocks_on_grid(final_scene, Grid(final_scene))} \
         if final_scene is not None else set()
@@ -69,8 +78,8 @@ def attempted_and_placed(steps, final_scene) -> tuple[int, int]:
 
 
 def run_teleport(name, scene, planner) -> dict:
-    from rad_core.coverage import measured_coverage
-    from rad_core.sequencing.twin_build import build_teleported
+    from rad_core.domain.coverage import measured_coverage
+    from rad_core.sequencing.execution.twin_build import build_teleported
     t0 = time.perf_counter()
     plan = planner(scene, None)
     registered = build_teleported(scene, plan.steps)     # a block that fell over is set aside, not counted
@@ -86,8 +95,8 @@ def run_teleport(name, scene, planner) -> dict:
 
 
 def run_simulated(name, scene, planner, faults: str, seed: int, max_replans: int) -> dict:
-    from rad_core.sequencing.execute import ExecuteConfig
-    from rad_core.sequencing.twin_build import build_simulated
+    from rad_core.sequencing.execution.execute import ExecuteConfig
+    from rad_core.sequencing.execution.twin_build import build_simulated
     from rad_core.sim.twin import TwinConfig
     level = FAULT_LEVELS[faults]
     twin_config = TwinConfig()
@@ -137,22 +146,23 @@ def summarise(rows: list[dict]) -> dict:
     return out
 
 
-def write_markdown(path: Path, summary: dict, args, command: str, agent: str, rows: str) -> None:
-    lines = ['# Execution: the whole arm motion simulated, against teleporting, and under faults', '',
-             f'Made by `{command}` ({time.strftime("%Y-%m-%d")}; agent {agent}; '
-             'the in-process execute / verify / replan loop of /execute_assembly, a real PyBullet twin). '
-             f'Every run\'s row: [{rows}]({rows}).', '',
-             '| run | runs | coverage | delta vs reference | steps | replans | raw step success '
-             '| recovered step success | failed runs | faults injected | wall s |',
-             '|---|---|---|---|---|---|---|---|---|---|---|']
-    for key, s in summary.items():
-        delta = '' if s['coverage_delta_vs_reference'] is None or not s['reference'] else \
-            f'{s["coverage_delta_vs_reference"]:+.3f} ({s["reference"]})'
-        injected = ', '.join(f'{k} {v}' for k, v in sorted(s['injected'].items())) or '-'
-        lines.append(f'| {key} | {s["runs"]} | {s["coverage"]:.3f} | {delta} | {s["steps"]:.1f} | '
-                     f'{s["replans"]:.2f} | {s["raw_step_success"]:.3f} | {s["recovered_step_success"]:.3f} | '
-                     f'{s["failed_runs"]} | {injected} | {s["wall_s"]:.0f} |')
-    path.write_text('\n'.join(lines) + '\n')
+HEADERS = ('scene set', 'run', 'runs', 'coverage', 'delta vs reference', 'steps', 'replans', 'raw step success',
+           'recovered step success', 'failed runs', 'faults injected', 'wall s')
+
+
+def table(rows: list[dict]) -> list[list]:
+    """A line per (scene set, mode/faults), from the rows (`summarise` within each set)."""
+    out = []
+    for name in dict.fromkeys(r['set'] for r in rows):
+        for key, s in summarise([r for r in rows if r['set'] == name]).items():
+            delta = '' if s['coverage_delta_vs_reference'] is None or not s['reference'] else \
+                f'{s["coverage_delta_vs_reference"]:+.3f} ({s["reference"]})'
+            injected = ', '.join(f'{k} {v}' for k, v in sorted(s['injected'].items())) or '-'
+            out.append([name, key, s['runs'], f'{s["coverage"]:.3f}', delta, f'{s["steps"]:.1f}',
+                        f'{s["replans"]:.2f}', f'{s["raw_step_success"]:.3f}', f'{s["recovered_step_success"]:.3f}',
+                        s['failed_runs'],
+                        injected, f'{s["wall_s"]:.0f}'])
+    return out
 
 
 def main() -> None:
@@ -162,11 +172,12 @@ def main() -> None:
     p.add_argument('--seed', type=int, default=500, help='first generator seed (training uses >= 1e6)')
     p.add_argument('--shapes', nargs='*', default=['holdout'], choices=['train', 'holdout', 'tight'])
     p.add_argument('--faults', nargs='*', default=list(FAULT_LEVELS), choices=list(FAULT_LEVELS))
-    p.add_argument('--agent', default='default', help='the agent (rad_core.agents), as the node graph runs it')
+    p.add_argument('--agent', default='default',
+                   help='the agent (rad_core.sequencing.decide.agents), as the node graph runs it')
     p.add_argument('--max-replans', type=int, default=10)
     p.add_argument('--runs', type=Path, default=None, help='the resumable cache of runs '
                    '(default out/cache/execution/runs.jsonl)')
-    p.add_argument('--out', type=Path, default=RESULTS / 'execution', help='OUT.md and OUT.rows.jsonl')
+    p.add_argument('--results', type=Path, default=RESULTS, help='folder of execution.md and execution.rows.jsonl')
     args = p.parse_args()
     args.runs = args.runs or cache_dir('execution') / 'runs.jsonl'
     args.runs.parent.mkdir(parents=True, exist_ok=True)
@@ -175,9 +186,10 @@ def main() -> None:
         for line in args.runs.read_text().splitlines():
             r = json.loads(line)
             done[(r['scene'], r['mode'], r['faults'])] = r
-    from rad_core.sequencing.agent_plan import AgentPlanner
+    from rad_core.sequencing.agent.agent_plan import AgentPlanner
     planner = AgentPlanner(args.agent)
-    todo = scenes(args.grids, args.scenes, args.seed, args.shapes)
+    sets = {}
+    todo = scenes(args.grids, args.scenes, args.seed, args.shapes, sets)
     for i, (name, scene) in enumerate(todo):
         jobs = [('teleport', 'none')] + [('simulate', f) for f in args.faults]
         for mode, faults in jobs:
@@ -193,16 +205,22 @@ def main() -> None:
                   f'{row["wall_s"]:.0f} s' + (f' ({row["reason"][:100]})' if not row['success'] else ''),
                   flush=True)
     names = {n for n, _ in todo}
-    rows = [r for (n, _, f), r in done.items() if n in names and (f in args.faults or r['mode'] == 'teleport')]
+    rows = [{'set': sets[n], **r} for (n, _, f), r in done.items()
+            if n in names and (f in args.faults or r['mode'] == 'teleport')]
     summary = summarise(rows)
     for key, s in summary.items():
         delta = s['coverage_delta_vs_reference']
         versus = f' ({delta:+.3f} vs {s["reference"]})' if delta is not None and s['reference'] else ''
         print(f'{key:>22}: coverage {s["coverage"]:.3f}{versus}'
               + f', recovered step success {s["recovered_step_success"]:.3f}, failed runs {s["failed_runs"]}')
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    rows_file = write_rows(args.out.with_suffix('.rows.jsonl'), rows)
-    write_markdown(args.out.with_suffix('.md'), summary, args, command_line(), planner.agent, rows_file.name)
+    note = (f'Agent `{planner.agent}`; the execute / verify / replan loop of /execute_assembly on a twin that '
+            'simulates the whole arm motion (simulate) or puts each block at its pose (teleport), without faults and '
+            'under the '
+            'fault levels named (seeded per scene). The delta compares each scene with its run without the arm '
+            '(teleport) or without faults (simulate/none).')
+    page = write_page('execution', 'Execution with the whole arm motion simulated, and under faults', HEADERS,
+                      table(rows), note, rows, results=args.results)
+    print(f'wrote {page}')
 
 
 if __name__ == '__main__':

@@ -23,7 +23,7 @@ import time
 from pathlib import Path
 
 from rad_core.learning import checkpoint as ckpt
-from rad_core.learning.expert import ExpertConfig, ExpertIteration, agreement
+from rad_core.training.expert import ExpertConfig, ExpertIteration, agreement
 
 
 def demos(run: Path, last_round: int) -> tuple[list, list]:

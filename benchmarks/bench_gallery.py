@@ -4,7 +4,7 @@
         [--clearances 0 0.2]
 
 For every mesh of data/meshes/meshes.json (scripts/make_meshes.py), as a user would do it:
-`rad scene from-mesh FILE --unit U --size N --up A` (rad_core.voxels, then rad_core.supply:
+`rad scene from-mesh FILE --unit U --size N --up A` (rad_core.domain.voxels, then rad_core.allocation.supply:
 the fewest blocks of the default set that cover the target, laid out within reach); the
 plan of the agent as the node graph runs it (`AgentPlanner`: CP-SAT, the sequencer, GAMP in
 process); its blocks put at their planned poses in a real PyBullet twin, each left to settle
@@ -13,10 +13,11 @@ registering the world (`coverage.measured_coverage`: a block that fell counts no
 
 Each shape is run once per clearance (the scenes' gap between neighbouring blocks: 0 is
 from-mesh's default, flush; 0.2 the paper's 1 cm). Writes docs/gallery/<shape>/ (scene.json,
-target.png, before.png, after.png, build.png) for the first clearance, docs/gallery.md (the
-pictures), docs/results/gallery.md (the table, with this command) and docs/results/gallery.rows.jsonl
-(one line per shape and clearance). Finished runs are cached in out/cache/gallery/ and skipped
-when run again (their pictures are not redrawn: clear the cache to redraw them).
+target.png, before.png, after.png, build.png) for the first clearance, docs/gallery.md (its page:
+the command, commit and date, the pictures and figures, the mean coverage per clearance) and
+docs/gallery/gallery.rows.jsonl (one line per shape and clearance). Finished runs are cached in
+out/cache/gallery/ and skipped when run again (their pictures are not redrawn: clear the cache to
+redraw them).
 """
 
 from __future__ import annotations
@@ -25,7 +26,7 @@ import argparse
 import json
 import time
 
-from common import ROOT, RESULTS, cache_dir, command_line, read_rows, write_rows
+from common import ROOT, cache_dir, command_line, git_commit, read_rows, write_rows
 
 MESHES = ROOT / 'data' / 'meshes'
 GALLERY = ROOT / 'docs' / 'gallery'
@@ -34,9 +35,9 @@ PICTURE = {'width': 320, 'height': 260}
 
 def make_scene(name: str, entry: dict, unit: float, clearance: float):
     """The scene `rad scene from-mesh` writes for the mesh (with --clearance), and the supply's report."""
-    from rad_core.blocks import DEFAULT_LIBRARY
-    from rad_core.supply import supply
-    from rad_core.voxels import mesh_models, place_regions
+    from rad_core.allocation.supply import supply
+    from rad_core.domain.blocks import DEFAULT_LIBRARY
+    from rad_core.domain.voxels import mesh_models, place_regions
     models = mesh_models([(name, str(MESHES / entry['file']))], unit, size=entry['size'], up=entry['up'])
     return supply(place_regions(models, unit), unit, dict(DEFAULT_LIBRARY), clearance=clearance)
 
@@ -44,10 +45,10 @@ def make_scene(name: str, entry: dict, unit: float, clearance: float):
 def build(scene, planner) -> tuple[dict, object, list]:
     """Plan, then put every planned block in place in the twin and let it settle (as
     bench_execution.run_teleport); the measured figures, the registered end state, the steps."""
-    from rad_core.coverage import measured_coverage
+    from rad_core.domain.coverage import measured_coverage
+    from rad_core.domain.transforms import yaw_quaternion
     from rad_core.sim.twin import Twin, twin_world_config
     from rad_core.sim.world import World
-    from rad_core.transforms import yaw_quaternion
     t0 = time.perf_counter()
     plan = planner(scene, None)
     planning_s = time.perf_counter() - t0
@@ -68,7 +69,7 @@ def build(scene, planner) -> tuple[dict, object, list]:
 
 
 def run_shape(name: str, entry: dict, unit: float, clearance: float, planner, pictures: bool) -> dict:
-    from rad_core.render import save_build_pictures, save_scene_png
+    from rad_core.view.render import save_build_pictures, save_scene_png
     t0 = time.perf_counter()
     scene, report = make_scene(name, entry, unit, clearance)
     out = GALLERY / name
@@ -85,37 +86,30 @@ def run_shape(name: str, entry: dict, unit: float, clearance: float, planner, pi
             'supply_coverage': report.coverage, **figures, 'wall_s': time.perf_counter() - t0}
 
 
+ROWS = ROOT / 'docs' / 'gallery' / 'gallery.rows.jsonl'
+
+
 def write_tables(rows: list[dict], agent: str, command: str) -> None:
     # The reason a plan stopped names every action tried: its first 200 characters are enough here.
-    write_rows(RESULTS / 'gallery.rows.jsonl', [{**r, 'reason': r['reason'][:200]} for r in rows])
-    lines = ['# Gallery: shapes from mesh files, built in the twin', '',
-             f'Made by `{command}` ({time.strftime("%Y-%m-%d")}; agent {agent}; teleporting execution in the '
-             'PyBullet twin, coverage measured by registration; planning s is the plan\'s own total, wall time '
-             'on a shared 2-core machine). Supply: how the chosen blocks cover the target (exact, or with '
-             'cells off the target holding blocks up). Pictures: [the gallery](../gallery.md).']
+    write_rows(ROWS, [{**r, 'reason': r['reason'][:200]} for r in rows])
+    first = rows[0]['clearance'] if rows else 0.0
+    write_gallery_page([r for r in rows if r['clearance'] == first], agent, command, means(rows))
+
+
+def means(rows: list[dict]) -> str:
+    """One sentence: mean coverage and complete builds per clearance."""
+    parts = []
     for clearance in dict.fromkeys(r['clearance'] for r in rows):
         part = [r for r in rows if r['clearance'] == clearance]
-        lines += ['', f'## clearance {clearance:g}' + (' (flush)' if clearance == 0 else ''), '',
-                  '| shape | file | cells (box) | blocks | supply | steps | re-allocations | coverage | planning s |',
-                  '|---|---|---|---|---|---|---|---|---|']
-        for r in part:
-            supply = 'exact' if r['supply_exact'] else 'all + fillers' if r['supply_coverage'] == 1 \
-                else f'{r["supply_coverage"]:.2f}'
-            lines.append(f'| {r["shape"]} | {r["file"]} (--size {r["size"]}, --up {r["up"]}) | {r["cells"]} '
-                         f'({" x ".join(map(str, r["box"]))}) | {r["blocks"]} | {supply} | {r["steps"]} | '
-                         f'{r.get("reallocations", "")} | {r["coverage"]:.2f} | {r["planning_s"]:.1f} |')
-        n = len(part)
-        lines += ['', f'Mean over {n} shapes: coverage {sum(r["coverage"] for r in part) / n:.3f}, '
-                      f'{sum(r["coverage"] >= 1 for r in part)} built completely, planning '
-                      f'{sum(r["planning_s"] for r in part) / n:.1f} s.']
-    (RESULTS / 'gallery.md').write_text('\n'.join(lines) + '\n')
-    first = rows[0]['clearance'] if rows else 0.0
-    write_gallery_page([r for r in rows if r['clearance'] == first], agent, command)
+        parts.append(f'{sum(r["coverage"] for r in part) / len(part):.3f} '
+                     + ('flush' if clearance == 0 else f'at clearance {clearance:g}')
+                     + f' ({sum(r["coverage"] >= 1 for r in part)} of {len(part)} built completely)')
+    return 'Mean coverage: ' + ', '.join(parts) + '.'
 
 
 INTRO = '''# Gallery: your own shapes, built
 
-[README](../README.md) · [formats](formats.md) · [results](results/gallery.md)
+[README](../README.md) · [formats](formats.md) · [every row](gallery/gallery.rows.jsonl)
 
 Shapes from mesh files (self-made, in [data/meshes](../data/meshes/meshes.json), drawn by
 `scripts/make_meshes.py`), each made into a scene as a user would with
@@ -134,10 +128,11 @@ whole node graph.
 '''
 
 
-def write_gallery_page(rows: list[dict], agent: str, command: str) -> None:
-    """docs/gallery.md: the pictures and figures of every shape."""
-    lines = [INTRO, f'Made by `{command}` (agent `{agent}`); the figures are in '
-             '[results/gallery.md](results/gallery.md).', '',
+def write_gallery_page(rows: list[dict], agent: str, command: str, summary: str = '') -> None:
+    """docs/gallery.md: the pictures and figures of every shape (the first clearance's), with the
+    command, the commit and the date, and the mean coverage of every clearance."""
+    lines = [INTRO, f'- command: `{command}`', f'- commit: {git_commit()}',
+             f'- date: {time.strftime("%Y-%m-%d", time.gmtime())}', f'- agent: `{agent}`', '', summary, '',
              '| shape | target | built | coverage | steps | planning s |', '|---|---|---|---|---|---|']
     for r in rows:
         name = r['shape']
@@ -152,13 +147,14 @@ def main() -> None:
     manifest = json.loads((MESHES / 'meshes.json').read_text())
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument('--shapes', nargs='*', default=list(manifest), choices=list(manifest))
-    p.add_argument('--agent', default='default', help='the agent (rad_core.agents), as the node graph runs it')
+    p.add_argument('--agent', default='default',
+                   help='the agent (rad_core.sequencing.decide.agents), as the node graph runs it')
     p.add_argument('--unit', type=float, default=0.05)
     p.add_argument('--clearances', type=float, nargs='+', default=[0.0],
                    help="the scenes' gap between neighbouring blocks, a fraction of the unit (0.2: the paper's 1 cm); "
                         "the pictures are the first's")
     args = p.parse_args()
-    from rad_core.sequencing.agent_plan import AgentPlanner
+    from rad_core.sequencing.agent.agent_plan import AgentPlanner
     planner = AgentPlanner(args.agent)
     rows = []
     try:
@@ -178,7 +174,7 @@ def main() -> None:
     finally:
         planner.close()
     write_tables(rows, planner.agent, command_line())
-    print(f'wrote {RESULTS / "gallery.md"}')
+    print(f'wrote {ROOT / "docs" / "gallery.md"} and {ROWS}')
 
 
 if __name__ == '__main__':

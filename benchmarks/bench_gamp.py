@@ -19,10 +19,9 @@ import time
 from collections import Counter
 
 import numpy as np
-
 from rad_core.allocation import AllocationParams, solve
+from rad_core.domain.generator import GeneratorConfig, generate_scene
 from rad_core.gamp import GampConfig, allocated_pose, plan_action, solve_top_down
-from rad_core.generator import GeneratorConfig, generate_scene
 from rad_core.sim.world import World
 
 

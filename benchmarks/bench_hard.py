@@ -1,10 +1,10 @@
-"""The hard hand-made cases (rad_core.hard_shapes), robot in the loop: issue 17's shape target.
+"""The hard hand-made cases (rad_core.domain.hard_shapes), robot in the loop: issue 17's shape target.
 
     python benchmarks/bench_hard.py [--agents TEXT,...] [--split holdout|train|all] [--limit N]
         [--seed 0] [--results DIR] [--force | --cached-only]
 
-Every agent (a preset or an agent text, `rad_core.agents`) runs through
-`rad_core.evaluation.evaluate` with the robot, the code behind `rad eval --robot`: it plans
+Every agent (a preset or an agent text, `rad_core.sequencing.decide.agents`) runs through
+`rad_core.experiment.evaluation.evaluate` with the robot, the code behind `rad eval --robot`: it plans
 each scene as /plan_assembly does and the plan is built in a fresh twin (teleporting
 execution). The scenes are the split's cases at layout seed --seed (held-out cases by
 default: the ones reported); --limit N takes the split's first N, for a smoke run.
@@ -22,15 +22,11 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
-from pathlib import Path
 
 import numpy as np
-
-from rad_core import hard_shapes
-from rad_core.agents import parse
-
-from common import RESULTS, cache_path, cached_evaluation, command_line, fmt, write_rows
+from common import RESULTS, cache_path, cached_evaluation, fmt, write_page
+from rad_core.domain import hard_shapes
+from rad_core.sequencing.decide.agents import parse
 
 DEFAULT_AGENTS = ('default', 'milp-dqn-mixed+verify+realloc+support:stable', 'greedy', 'heur-verified')
 ROW_KEYS = ('name', 'return', 'outcome', 'coverage', 'coverage_opt', 'steps', 'stop_reason')
@@ -60,18 +56,6 @@ def run(agent: str, split: str, seed: int, limit: int | None, force: bool, prefe
 def cache_set(split: str, seed: int, limit: int | None, prefer: str) -> str:
     """The cache's name for the set and the first allocation's tie-break."""
     return ('' if prefer == 'none' else f'prefer-{prefer}-') + set_name(split, seed, limit)
-
-
-def case_table(names: list[str]) -> list[str]:
-    """What each measured case is, so the table can be read without the module."""
-    lines = ['| case | unit | cells | blocks (decoys) | layout gap, reach | target reaches | why hard |',
-             '|---|---|---|---|---|---|---|']
-    for name in names:
-        case, scene = hard_shapes.CASES[name], hard_shapes.hard_scene(name)
-        lines.append(f'| {name} | {case.unit * 100:.0f} cm | {scene.num_target_cells} | {len(scene.blocks)} '
-                     f'({len(case.spec.decoys)}) | {case.layout.gap * 100:.0f} cm, {case.layout.reach[1]:.2f} m '
-                     f'| {hard_shapes.edge_distance(case):.2f} m | {case.hard} |')
-    return lines
 
 
 def main() -> int:
@@ -104,30 +88,23 @@ def main() -> int:
         per = ' '.join(f'{row["name"]}={row["coverage"]:.2f}' for row in r['scenes'])
         print(f'{agent:52s} {cell} cov={r["coverage"]:.3f} f={r["f"]:.2f} {r["seconds"] / r["n"]:.0f} s/scene  {per}',
               flush=True)
-    lines = ['# Hard hand-made shapes, robot in the loop', '',
-             f'Made by `{command_line()}` ({time.strftime("%Y-%m-%d")}). The {args.split} cases of '
-             f'`rad_core.hard_shapes` ({len(names)} scenes, layout seed {args.seed}); each agent plans as '
-             '/plan_assembly does and the plan is built in a fresh twin (teleporting execution). a-bar: coverage of '
-             'the whole target; f: episodes ended on an invalid action; d: completed. s/scene: wall time on the '
-             f'shared 2-core machine. Per-scene rows: [{stem}.rows.jsonl]({stem}.rows.jsonl).', '',
-             '| agent | canonical text | a-bar | f | d | re-alloc/scene | s/scene | '
-             + ' | '.join(names) + ' |',
-             '|---|---|---|---|---|---|---|' + '---|' * len(names)]
-    rows = []
+    headers = ['agent', 'canonical text', 'a-bar', 'f', 'd', 're-alloc/scene', 's/scene', *names]
+    table, rows = [], []
     for agent, r in results:
         by_name = {row['name']: row for row in r['scenes']}
         events = np.mean([len(row.get('reallocations', ())) for row in r['scenes']])
-        lines.append(f'| {agent} | `{r["agent"]}` | {r["coverage"]:.3f} | {fmt(r["f"])} | {fmt(r["d"])} '
-                     f'| {events:.1f} | {r["seconds"] / r["n"]:.0f} | '
-                     + ' | '.join(fmt(by_name[n]['coverage']) if n in by_name else '' for n in names) + ' |')
+        table.append([agent, f'`{r["agent"]}`', f'{r["coverage"]:.3f}', fmt(r['f']), fmt(r['d']), f'{events:.1f}',
+                      f'{r["seconds"] / r["n"]:.0f}', *(fmt(by_name[n]['coverage']) if n in by_name else ''
+                                                        for n in names)])
         rows += [{'agent': r['agent'], 'set': cell, **{k: row[k] for k in ROW_KEYS if k in row},
                   'reallocations': len(row.get('reallocations', ()))} for row in r['scenes']]
-    lines += ['', '## The cases', ''] + case_table(names) + ['']
-    out = Path(args.results)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / f'{stem}.md').write_text('\n'.join(lines) + '\n')
-    write_rows(out / f'{stem}.rows.jsonl', rows)
-    print(f'wrote {out / f"{stem}.md"}')
+    note = (f'The {args.split} cases of `rad_core.domain.hard_shapes` ({len(names)} scenes, layout seed {args.seed}, '
+            'what makes each hard: its docstrings); each agent plans as /plan_assembly does and the plan is built in '
+            'a fresh twin (teleporting execution). a-bar: coverage of the whole target; f: episodes ended on a '
+            'failed action; d: completed. s/scene: wall time on 2 shared cores.')
+    page = write_page(stem, 'Hard hand-made shapes, robot in the loop', headers, table, note, rows,
+                      results=args.results)
+    print(f'wrote {page}')
     return 0
 
 

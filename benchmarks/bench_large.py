@@ -5,7 +5,7 @@
 
 For each generated two-sided scene (g in --grids, seeds --seed.., unseen by training; from
 g = 7 or 8 on the generator puts the blocks in a feeder, the table within reach being too
-small) and each large hand-made target (`rad_core.large_shapes`, 45 to 100 blocks, all in a
+small) and each large hand-made target (`rad_core.domain.large_shapes`, 45 to 100 blocks, all in a
 feeder; the two-deep flush walls, which a parallel gripper cannot fill (`large_shapes.FLUSH_LIMIT`),
 as a group of their own), the agent plans with the robot in the loop in process (`AgentPlanner`: CP-SAT, the
 sequencer, GAMP on the planning twin, re-allocation), then the twin builds the plan
@@ -13,31 +13,28 @@ sequencer, GAMP on the planning twin, re-allocation), then the twin builds the p
 Per structure it records the blocks in the scene, the blocks placed, the planning time and
 its stages, the predicted and the built coverage, the failures (blocks the build lost) and, after
 planning, an upper bound on what any top-down build reaches (`sequencing.courses.course_bound`);
-it writes <out>/large.md, <out>/large.rows.jsonl and <out>/large.png (planning time per
+it writes <out>/large.md and <out>/large.rows.jsonl (`common.write_page`) and docs/img/large.png (planning time per
 placed block against the blocks in the scene: the issue asks that it grow no faster than
 linearly, i.e. that the time per block stay flat or grow at most linearly). While it runs,
 <out>/large.partial.jsonl holds the rows measured so far (removed once the results are written).
 
-Measured on the 2-core machine; the command and the date are written into the results file.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import platform
 import statistics
 import sys
 import time
-from datetime import date
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+from common import RESULTS, ROOT, write_page
 
 
 def cases(grids, seeds: int, seed0: int, large: list[str]):
-    from rad_core.generator import GeneratorConfig, generate_scene
-    from rad_core.large_shapes import FLUSH, large_scene
+    from rad_core.domain.generator import GeneratorConfig, generate_scene
+    from rad_core.domain.large_shapes import FLUSH, large_scene
     for g in grids:
         for s in range(seed0, seed0 + seeds):
             yield f'g{g}-s{s}', f'generated g={g}', generate_scene(GeneratorConfig(grid=g, sides=2), s)
@@ -46,14 +43,14 @@ def cases(grids, seeds: int, seed0: int, large: list[str]):
 
 
 def measure(planner, name: str, kind: str, scene) -> dict:
-    from rad_core.coverage import measured_coverage
-    from rad_core.sequencing.twin_build import build_teleported
+    from rad_core.domain.coverage import measured_coverage
+    from rad_core.sequencing.execution.twin_build import build_teleported
     t0 = time.perf_counter()
     plan = planner(scene, None, 0)
     planning = time.perf_counter() - t0
     registered = build_teleported(scene, plan.steps)
     placed = len(plan.steps)
-    from rad_core.sequencing.courses import course_bound
+    from rad_core.sequencing.planning.courses import course_bound
     return {'case': name, 'kind': kind, 'blocks': len(scene.blocks), 'cells': scene.num_target_cells,
             'feeder': scene.feeder is not None, 'placed': placed, 'planning_s': round(planning, 2),
             's_per_block': round(planning / max(placed, 1), 3),
@@ -88,29 +85,31 @@ def plot(rows: list[dict], out: Path, agent: str) -> None:
     fig.savefig(out, dpi=90)
 
 
-def write(rows: list[dict], out: Path, command: str, agent: str) -> None:
-    out.mkdir(parents=True, exist_ok=True)
-    (out / 'large.rows.jsonl').write_text(''.join(json.dumps(r) + '\n' for r in rows))
-    plot(rows, out / 'large.png', agent)
-    lines = [f'# Planning against structure size, up to {max(r["blocks"] for r in rows)} blocks', '',
-             f'`{command}` ({date.today()}, {platform.node() or "this machine"}, 2 shared cores; agent `{agent}`, '
-             'robot in the loop, teleporting twin build).', '',
-             '![planning time per block and coverage against size](large.png)', '',
-             '| case | blocks | feeder | target cells | placed | planning (s) | s / block | predicted | built '
-             '| bound | lost |',
-             '|---|---|---|---|---|---|---|---|---|---|---|']
-    for r in rows:
-        lines.append(f"| {r['case']} | {r['blocks']} | {'yes' if r['feeder'] else 'no'} | {r['cells']} | {r['placed']} "
-                     f"| {r['planning_s']:.1f} | {r['s_per_block']:.2f} | {r['predicted']:.3f} | {r['built']:.3f} "
-                     f"| {r['course_bound']:.3f} | {len(r['lost'])} |")
-    lines += ['', '| group | structures | mean built coverage | median planning (s) | max planning (s) |',
-              '|---|---|---|---|---|']
+HEADERS = ('case', 'blocks', 'feeder', 'target cells', 'placed', 'planning (s)', 's / block', 'predicted', 'built',
+           'bound', 'lost')
+
+
+def table(rows: list[dict]) -> list[list]:
+    return [[r['case'], r['blocks'], 'yes' if r['feeder'] else 'no', r['cells'], r['placed'], f"{r['planning_s']:.1f}",
+             f"{r['s_per_block']:.2f}", f"{r['predicted']:.3f}", f"{r['built']:.3f}", f"{r['course_bound']:.3f}",
+             len(r['lost'])] for r in rows]
+
+
+def note(rows: list[dict], agent: str) -> str:
+    groups = []
     for kind in dict.fromkeys(r['kind'] for r in rows):
         sel = [r for r in rows if r['kind'] == kind]
-        times = [r['planning_s'] for r in sel]
-        lines.append(f"| {kind} | {len(sel)} | {statistics.mean(r['built'] for r in sel):.3f} "
-                     f"| {statistics.median(times):.1f} | {max(times):.1f} |")
-    (out / 'large.md').write_text('\n'.join(lines) + '\n')
+        groups.append(f"{kind} {statistics.mean(r['built'] for r in sel):.3f}")
+    return (f'Agent `{agent}`, robot in the loop, the plan built by the teleporting twin. "bound": '
+            '`course_bound`, the most any top-down build reaches. Mean built coverage: ' + '; '.join(groups) +
+            f". Slowest plan {max(r['planning_s'] for r in rows):.1f} s. "
+            '![planning time per block and coverage against size](../img/large.png)')
+
+
+def write(rows: list[dict], out: Path, command: str, agent: str, **meta) -> Path:
+    plot(rows, ROOT / 'docs' / 'img' / 'large.png', agent)
+    return write_page('large', f'Planning against structure size, up to {max(r["blocks"] for r in rows)} blocks',
+                      HEADERS, table(rows), note(rows, agent), rows, command=command, results=out, **meta)
 
 
 def main(argv=None) -> int:
@@ -125,10 +124,10 @@ def main(argv=None) -> int:
     ap.add_argument('--improve-time-s', type=float, default=None,
                     help="anytime planning's budget after the first plan (default: the assembly node's, "
                          "agent_plan.IMPROVE_TIME_S)")
-    ap.add_argument('--out', default=str(ROOT / 'docs' / 'results'))
+    ap.add_argument('--out', default=str(RESULTS))
     args = ap.parse_args(argv)
-    from rad_core.large_shapes import LARGE_SPECS
-    from rad_core.sequencing.agent_plan import IMPROVE_TIME_S, AgentPlanner
+    from rad_core.domain.large_shapes import LARGE_SPECS
+    from rad_core.sequencing.agent.agent_plan import IMPROVE_TIME_S, AgentPlanner
     grids = [int(g) for g in args.grids.split(',') if g]
     large = list(LARGE_SPECS) if args.large == 'all' else [n for n in args.large.split(',') if n and n != 'none']
     improve = IMPROVE_TIME_S if args.improve_time_s is None else args.improve_time_s

@@ -2,14 +2,14 @@
 
     python benchmarks/bench_limits.py --before-src /tmp/rad_before/ros_ws/src/rad_core
         [--grids 4,5] [--seeds 5] [--first-seed 1000] [--shapes arch,tower,stairs,tee,window]
-        [--jobs 2] [--quick] [--out docs/results/limits.md]
+        [--jobs 2] [--quick] [--results docs/results]
 
 `--before-src` is rad_core of the old code (a worktree of commit ca41401:
 ``git worktree add /tmp/rad_before ca41401``); without it only the new code runs.
 
 Scenes: generated two-sided scenes of grid 4 and 5 (`generate_scene(GeneratorConfig(grid=g), seed)`,
 seeds 1000.. by default: neither the evaluation seeds 0.. nor training's 1 000 000..) and a few of the
-hand-made shapes (`rad_core.shapes.shape_scene`).
+hand-made shapes (`rad_core.domain.shapes.shape_scene`).
 
 For each scene and each variant (after-panda: the current code's default timing,
 `TimingConfig(robot='panda')`, within the Panda's and the FR3's limits at once; after-fr3:
@@ -23,10 +23,10 @@ on its side, fills nothing and is counted as dropped).
 Every arm trajectory, in execution order (the first from HOME, each from the previous
 one's last point, at rest), is sampled at 1 kHz as a joint_trajectory_controller
 interpolates it and its peak |v|, |a|, |jerk| are compared with the Panda's and the
-FR3's published limits (`rad_core.robot_model`): after, with
-`rad_core.trajectory.limit_ratios` (quintic; the joints renamed for the other robot);
+FR3's published limits (`rad_core.cell.robot_model`): after, with
+`rad_core.cell.trajectory.limit_ratios` (quintic; the joints renamed for the other robot);
 before, the old 9-joint trajectories' arm columns, cubic with velocities
-(`rad_core.trajectory.Spline`), with the acceleration at rest before t = 0 (the step
+(`rad_core.cell.trajectory.Spline`), with the acceleration at rest before t = 0 (the step
 into the first cubic is a jerk the robot sees). A trajectory is over when any ratio
 exceeds 1 (the twin's rule, `limit_violation`); "over 1.001" counts those over by more than
 rounding.
@@ -34,9 +34,9 @@ rounding.
 Motion time per build: after, the arm trajectories' durations plus the gripper's moves
 (|travel| at 0.05 m/s per finger, at least 0.1 s each); before, the trajectories'
 durations (the fingers moved inside them). Prints per scene set the worst ratios, the
-trajectories over the limits, motion time and coverage before / after; writes the tables as
-Markdown (`--out`) and beside it one compact JSON line per (scene, variant) (`limits.rows.jsonl`,
-each with the sha256 of the rad_core it ran, `source_digest`).
+trajectories over the limits, motion time and coverage before / after; writes the page,
+<results>/limits.md (`common.write_page`, one table), and one compact JSON line per (scene, variant)
+(limits.rows.jsonl, each with the sha256 of the rad_core it ran, `source_digest`).
 """
 
 from __future__ import annotations
@@ -53,7 +53,7 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
-from common import RESULTS, command_line, write_rows
+from common import RESULTS, write_page
 
 VARIANTS = ('before', 'panda', 'fr3')
 MODELS = ('panda', 'fr3')
@@ -68,9 +68,9 @@ DEFAULT_SHAPES = 'arch,tower,stairs,tee,window'
 
 def _coverage(twin) -> tuple[float, list[str]]:
     """measured_coverage of the twin's registered scene; bodies registration refuses are left out."""
-    from rad_core.errors import RadError
-    from rad_core.coverage import measured_coverage
-    from rad_core.sim.mocap import RegistrationConfig, register_scene
+    from rad_core.cell.mocap import RegistrationConfig, register_scene
+    from rad_core.domain.coverage import measured_coverage
+    from rad_core.domain.errors import RadError
     try:
         return measured_coverage(twin.current_scene()), []
     except RadError:
@@ -95,17 +95,17 @@ def worker(variant: str, scenes_file: str, out_file: str) -> None:
     """Plan and execute every scene of scenes_file with the importable rad_core; write the raw results."""
     import rad_core
     from rad_core.allocation import solve
+    from rad_core.domain.scene import Scene
     from rad_core.gamp.action import MotionPlanner
-    from rad_core.scene import Scene
     from rad_core.sequencing import HeurPolicy
-    from rad_core.sequencing.plan import local_motion_planner, plan_assembly
+    from rad_core.sequencing.planning.plan import local_motion_planner, plan_assembly
     from rad_core.sim.twin import Twin
     from rad_core.sim.world import World
     new = variant != 'before'
     if new:
+        from rad_core.cell.motion import Motion
         from rad_core.gamp.planner import GampConfig
         from rad_core.gamp.trajectory import TimingConfig
-        from rad_core.motion import Motion
         from rad_core.sim.twin import TwinConfig
         # panda: the default timing (within both robots' limits); fr3: the FR3's own limits only.
         timing = TimingConfig(robot=variant, limits='both' if variant == 'panda' else 'robot')
@@ -163,7 +163,7 @@ def _renamed(doc: dict, model) -> dict:
 
 def _old_arm(doc: dict, model):
     """The arm part (7 columns, model order) of an old 9-joint trajectory, cubic with velocities."""
-    from rad_core.trajectory import Trajectory, TrajectoryPoint
+    from rad_core.cell.trajectory import Trajectory, TrajectoryPoint
     names = list(doc['joint_names'])
     idx = [names.index(f'panda_joint{k}') for k in range(1, 8)]
     pts = [TrajectoryPoint([p['positions'][i] for i in idx],
@@ -175,7 +175,7 @@ def _old_arm(doc: dict, model):
 def _spline_ratios(traj, start, model, dt: float = 1e-3) -> dict[str, float]:
     """limit_ratios without the controller's parse (the old trajectories may leave a model's range), and
     with the arm at rest (a = 0) before t = 0."""
-    from rad_core.trajectory import Spline
+    from rad_core.cell.trajectory import Spline
     spline = Spline(traj, np.asarray(start, dtype=float)[:7])
     ts = np.arange(0.0, spline.duration + dt / 2, dt)
     _, v, a = spline(ts)
@@ -203,9 +203,9 @@ def gripper_time(motion: dict, fingers: float) -> tuple[float, float]:
 
 def analyse(row: dict) -> dict:
     """Limit ratios per model and motion time of a worker's row (the raw motions dropped)."""
-    from rad_core.robot_model import robot_model
-    from rad_core.sim.panda import FINGER_OPEN, HOME
-    from rad_core.trajectory import Trajectory, limit_ratios
+    from rad_core.cell.panda import FINGER_OPEN, HOME
+    from rad_core.cell.robot_model import robot_model
+    from rad_core.cell.trajectory import Trajectory, limit_ratios
     motions = row.pop('motions', None)
     if motions is None:
         return row
@@ -246,8 +246,8 @@ def analyse(row: dict) -> dict:
 # ---- driver -----------------------------------------------------------------------------------------
 
 def scene_sets(args) -> dict[str, list[tuple[str, object]]]:
-    from rad_core import shapes
-    from rad_core.generator import GeneratorConfig, generate_scene
+    from rad_core.domain import shapes
+    from rad_core.domain.generator import GeneratorConfig, generate_scene
     n = 2 if args.quick else args.seeds
     sets = {}
     for g in (int(x) for x in args.grids.split(',') if x):
@@ -336,36 +336,24 @@ def summarize(rows: list[dict], sets: list[str]) -> dict:
     return out
 
 
-def tables(summary: dict) -> list[str]:
-    lines = []
+HEADERS = ('scenes', 'timed for', 'checked on', 'trajectories', 'v', 'a', 'jerk', 'over 1.0', 'over 1.001',
+           'outside q range', 'motion s/build', 'coverage')
+
+
+def table(summary: dict) -> list[list]:
+    """A line per (scene set, timing, robot checked on): peak ratios to the limits, and per timing the motion
+    time and coverage of its builds."""
+    out = []
     for s, summ in summary.items():
-        lines.append(f'### {s}' + (f' ({summ["errors"]} runs with errors, left out)' if summ['errors'] else ''))
-        lines.append('')
-        lines.append('| timed for | checked on | trajectories | v | a | jerk | over 1.0 | over 1.001 '
-                     '| outside q range |')
-        lines.append('|---|---|---|---|---|---|---|---|---|')
         for v, e in summ['variants'].items():
             for m in ((v,) + tuple(x for x in MODELS if x != v) if v != 'before' else MODELS):
                 lim = e['limits'][m]
-                label = 'before (velocity rule)' if v == 'before' else f'after ({v})'
-                lines.append(f'| {label} | {m} | {e["trajectories"]} | {lim["velocity"]:.3f} | '
-                             f'{lim["acceleration"]:.3f} | {lim["jerk"]:.3f} | {lim["over"]} | '
-                             f'{lim["over_material"]} | {lim["out_of_range"]} |')
-        lines.append('')
-        lines.append('| variant | scenes | steps/build | motion s/build | after / before | '
-                     'same steps: mean ratio | coverage | coverage before | max abs diff | exec failures | '
-                     'fallen blocks |')
-        lines.append('|---|---|---|---|---|---|---|---|---|---|---|')
-        for v, e in summ['variants'].items():
-            def f(k, p=3, e=e):
-                return f'{e[k]:.{p}f}' if k in e and np.isfinite(e[k]) else ''
-            lines.append(f'| {v} | {e["scenes"]} | {e["steps"]:.1f} | {e["motion_s"]:.1f} | {f("motion_ratio", 2)}'
-                         f' | {f("motion_ratio_same_steps", 2)}'
-                         + (f' ({e["same_steps"]}/{e["common_scenes"]})' if 'same_steps' in e else '')
-                         + f' | {e["coverage"]:.3f} | {f("coverage_before")} | {f("coverage_max_diff")} | '
-                         f'{e["exec_failures"]} | {e["dropped"]} |')
-        lines.append('')
-    return lines
+                out.append([s + (f' ({summ["errors"]} runs with errors, left out)' if summ['errors'] else ''),
+                            'before (velocity rule)' if v == 'before' else f'after ({v})', m, e['trajectories'],
+                            f'{lim["velocity"]:.3f}', f'{lim["acceleration"]:.3f}', f'{lim["jerk"]:.3f}',
+                            lim['over'], lim['over_material'], lim['out_of_range'], f'{e["motion_s"]:.1f}',
+                            f'{e["coverage"]:.3f}'])
+    return out
 
 
 def main() -> int:
@@ -374,10 +362,10 @@ def main() -> int:
     p.add_argument('--grids', default='4,5')
     p.add_argument('--seeds', type=int, default=5, help='generated scenes per grid')
     p.add_argument('--first-seed', type=int, default=1000)
-    p.add_argument('--shapes', default=DEFAULT_SHAPES, help='hand-made shapes (rad_core.shapes.SPECS names)')
+    p.add_argument('--shapes', default=DEFAULT_SHAPES, help='hand-made shapes (rad_core.domain.shapes.SPECS names)')
     p.add_argument('--jobs', type=int, default=2, help='worker processes at once')
     p.add_argument('--quick', action='store_true', help='2 scenes per set (a smoke run)')
-    p.add_argument('--out', default=str(RESULTS / 'limits.md'), help='the tables; the rows go beside them')
+    p.add_argument('--results', default=str(RESULTS), help='folder of limits.md and limits.rows.jsonl')
     p.add_argument('--worker', choices=VARIANTS, help=argparse.SUPPRESS)
     p.add_argument('--worker-in', help=argparse.SUPPRESS)
     p.add_argument('--worker-out', help=argparse.SUPPRESS)
@@ -403,10 +391,9 @@ def main() -> int:
             rows.extend(result)
     wall = time.perf_counter() - t0
     summary = summarize(rows, list(sets))
-    command = command_line()
-    lines = tables(summary)
+    lines = table(summary)
     print()
-    print('\n'.join(lines))
+    print('\n'.join(' | '.join(map(str, line)) for line in lines))
     errors = [r for r in rows if 'error' in r]
     for r in errors:
         print(f'ERROR {r["variant"]} {r["scene"]}:\n{r["error"]}')
@@ -414,22 +401,16 @@ def main() -> int:
         for f in r.get('exec_failures', []):
             print(f'execution stopped: {r["variant"]} {r["scene"]} step {f["step"]} ({f["block"]}): {f["problem"]}')
     print(f'wall time {wall:.0f} s')
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
     for r in rows:   # which code the row came from: its digest, not the path it was imported from
         r.pop('rad_core', None)
         r['rad_core_sha256'] = digests['before' if r['variant'] == 'before' else 'after']
-    rows_file = write_rows(out.with_suffix('.rows.jsonl'), rows)
-    head = ['# Franka limits of planned motions: before (velocity rule, 9 joints) and after (ruckig, 7 arm joints)',
-            '', f'`{command}` ({wall:.0f} s wall on {os.cpu_count()} cores; see the script\'s docstring for what '
-            'is measured). Ratios: peak over all trajectories of |v|, |a|, |jerk| over the robot\'s published '
-            'limit, sampled at 1 kHz as the controller interpolates; "over 1.0": trajectories a real Franka would '
-            'stop on (the twin\'s strict rule), "over 1.001": over by more than rounding. Motion time: arm '
-            'trajectories plus gripper moves (after), trajectory durations (before). '
-            'Coverage measured on the twin after executing the plan; "fallen blocks" are left out of it. '
-            f'Every (scene, variant) row: [{rows_file.name}]({rows_file.name}).', '']
-    out.write_text('\n'.join(head + lines) + '\n')
-    print(f'wrote {out} and {rows_file}')
+    note = ('Peak |v|, |a| and |jerk| over all trajectories, sampled at 1 kHz as the controller interpolates, over '
+            'the robot\'s published limit; "over 1.0": trajectories a real Franka would stop on, "over 1.001": over '
+            'by more than rounding. "before": the old velocity rule over 9 joints (--before-src); "after": ruckig '
+            'over the 7 arm joints, timed for the Panda or the FR3. Motion time: arm trajectories plus gripper moves; '
+            'coverage measured on the twin after executing the plan.')
+    page = write_page('limits', 'Franka limits of planned motions', HEADERS, lines, note, rows, results=args.results)
+    print(f'wrote {page}')
     return 1 if errors else 0
 
 

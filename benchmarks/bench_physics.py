@@ -18,9 +18,8 @@ import argparse
 import time
 
 import numpy as np
-
-from rad_core.blocks import DEFAULT_LIBRARY
-from rad_core.physics import PhysicsConfig, PhysicsStability
+from rad_core.domain.blocks import DEFAULT_LIBRARY
+from rad_core.sim.physics import PhysicsConfig, PhysicsStability
 
 UNIT = 0.05
 BOX = np.array([6, 6, 5])

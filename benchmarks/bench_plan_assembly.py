@@ -6,7 +6,7 @@
 Starts the allocation, gamp, sequencer and assembly nodes (real processes, loopback DDS, the
 agent given to both the sequencer and the assembly node), calls /plan_assembly on generated
 two-sided scenes the project never trained or tuned on (seeds from --seed on), and prints and
-writes (docs/results/plan_assembly.md and .rows.jsonl) the end-to-end time (median, p95, max),
+writes (docs/results/plan_assembly.md and .rows.jsonl, `common.write_page`) the end-to-end time (median, p95, max),
 the time to the anytime planner's first complete plan, the predicted coverage and how often a
 later plan (order repair's, a search's) replaced the first. Plans start at home; no robot runs.
 """
@@ -19,9 +19,8 @@ import time
 
 import numpy as np
 import rclpy
-
-from common import RESULTS, command_line, write_rows
-from rad_core.generator import GeneratorConfig, generate_scene
+from common import RESULTS, write_page
+from rad_core.domain.generator import GeneratorConfig, generate_scene
 from rad_planner.graph import executable
 
 HOME9 = [0.0, -0.215, 0.0, -2.57, 0.0, 2.356, 2.356, 0.04, 0.04]
@@ -104,37 +103,28 @@ def stage_lines(rows) -> list[str]:
             *(f'| {name} | {seconds:.2f} | {100 * seconds / total:.0f} % | |' for name, seconds in parts)]
 
 
-def write(rows, args) -> None:
-    from pathlib import Path
+def table(rows) -> list[list]:
     t = np.array([r['seconds'] for r in rows])
     first = np.array([r['first_plan_s'] for r in rows])
     cov = np.array([r['coverage'] for r in rows])
-    improved = sum(1 for r in rows if len(r['plans']) > 1)
-    kept = {kind: sum(1 for r in rows if r['plans'][-1:] == [kind]) for kind in ('repair', 'search')}
-    lines = [f'| end to end (s) | median {np.median(t):.2f} | p95 {np.percentile(t, 95):.2f} | max {t.max():.2f} |',
-             f'| first complete plan (s) | median {np.median(first):.2f} | p95 {np.percentile(first, 95):.2f} '
-             f'| max {first.max():.2f} |',
-             f'| predicted coverage | mean {cov.mean():.3f} '
-             f'| complete {int((cov >= 1 - 1e-9).sum())} of {len(rows)} | |',
-             f'| improved after the first plan (order repair, search) | {improved} of {len(rows)} '
-             f'| kept: a repair plan {kept["repair"]}, a searched plan {kept["search"]} | |',
-             *stage_lines(rows)]
-    for line in lines:
+    return [['end to end (s)', f'{np.median(t):.2f}', f'{np.percentile(t, 95):.2f}', f'{t.max():.2f}'],
+            ['first complete plan (s)', f'{np.median(first):.2f}', f'{np.percentile(first, 95):.2f}',
+             f'{first.max():.2f}'],
+            ['predicted coverage', f'mean {cov.mean():.3f}', f'complete {int((cov >= 1 - 1e-4).sum())} of {len(rows)}',
+             ''],
+            [f'all {len(rows)} requests (s)', f'{t.sum():.2f}', '', '']]
+
+
+def write(rows, args) -> None:
+    for line in stage_lines(rows):
         print(line)
-    out = Path(args.results)
-    out.mkdir(parents=True, exist_ok=True)
-    doc = [f'# /plan_assembly over DDS, g = {args.grid}', '',
-           f'Made by `{command_line()}` ({time.strftime("%Y-%m-%d")}). The allocation, gamp, sequencer and '
-           f'assembly nodes as real processes on loopback DDS, agent `{args.agent}` in both nodes, '
-           f'improve_time_s {args.improve_time_s:g}, the sequencer on {args.torch_threads} torch thread(s); '
-           f'{len(rows)} generated two-sided g = {args.grid} scenes, seeds '
-           f'{args.seed}..{args.seed + len(rows) - 1} (never used in training); plans start at home. Times are the '
-           f"client's wall clock on the shared 2-core machine. Per-scene rows: "
-           f'[plan_assembly.rows.jsonl](plan_assembly.rows.jsonl).', '',
-           '| | | | |', '|---|---|---|---|', *lines, '']
-    (out / 'plan_assembly.md').write_text('\n'.join(doc))
-    write_rows(out / 'plan_assembly.rows.jsonl', rows)
-    print(f'wrote {out / "plan_assembly.md"}')
+    note = (f'The allocation, gamp, sequencer and assembly nodes as real processes on loopback DDS, agent '
+            f'`{args.agent}`, improve_time_s {args.improve_time_s:g}; {len(rows)} generated two-sided g = {args.grid} '
+            f'scenes, seeds {args.seed}..{args.seed + len(rows) - 1} (never used in training); the client\'s wall '
+            'clock. Where each request\'s time went is in its row (`stages`).')
+    page = write_page('plan_assembly', f'/plan_assembly over DDS, g = {args.grid}', ['', 'median', 'p95', 'max'],
+                      table(rows), note, rows, results=args.results)
+    print(f'wrote {page}')
 
 
 if __name__ == '__main__':

@@ -41,21 +41,19 @@ import time
 from pathlib import Path
 
 import numpy as np
-
+from common import HARD_TABLE, candidates, wide_scenes
 from rad_core.allocation import solve
 from rad_core.allocation.guide import AllocationGuide
+from rad_core.domain.generator import GeneratorConfig, generate_scene
+from rad_core.domain.shapes import SPECS, build_scene
+from rad_core.env.robot_env import RobotAssemblyEnv, RobotEnvConfig
 from rad_core.gamp.action import MotionPlanner, SceneAction
-from rad_core.generator import GeneratorConfig, generate_scene
-from rad_core.robot_env import RobotAssemblyEnv, RobotEnvConfig
-from rad_core.sequencing import supported_actions
-from rad_core.shapes import SPECS, build_scene
 
 # (name, generator settings, seed): the generator's defaults, and harder tables (blocks packed 5 mm
 # apart out to the edge of reach and a structure farther out; 4 cm units) where grasps and reach fail.
-_HARD = dict(gap=0.005, reach=0.86, table_x=(0.3, 0.86), structure_x=0.6)
 GENERATED = [('g4', dict(grid=4), 500), ('g4', dict(grid=4), 501), ('g5', dict(grid=5), 500),
-             ('g5', dict(grid=5), 501), ('g5-tight', dict(grid=5, **_HARD), 502),
-             ('g5-tight', dict(grid=5, **_HARD), 503), ('g5-u4', dict(grid=5, unit=0.04, gap=0.01), 504),
+             ('g5', dict(grid=5), 501), ('g5-tight', dict(grid=5, **HARD_TABLE), 502),
+             ('g5-tight', dict(grid=5, **HARD_TABLE), 503), ('g5-u4', dict(grid=5, unit=0.04, gap=0.01), 504),
              ('g4-far', dict(grid=4, structure_x=0.84, reach=0.9, table_x=(0.3, 0.9)), 505)]
 # (held-out shape, unit in m)
 SHAPES = [('tee', 0.05), ('overhangs', 0.05), ('pillars', 0.05), ('corbel_arch', 0.05), ('window', 0.04)]
@@ -63,27 +61,14 @@ SHAPES = [('tee', 0.05), ('overhangs', 0.05), ('pillars', 0.05), ('corbel_arch',
 
 def fixed_scenes(quick: bool = False, wide: int = 0) -> list[tuple[str, object]]:
     """The benchmark's scenes, by name (quick: one generated and one hand-made). wide: instead, the
-    settling benchmark's wider set (`bench_at_rest.scenes`: six kinds of generated scene, `wide` seeds
+    settling benchmark's wider set (`common.wide_scenes`: six kinds of generated scene, `wide` seeds
     each from 6000, and every hand-made shape), for checks of verdicts beyond the fixed set."""
     if wide:
-        sys.path.insert(0, str(Path(__file__).resolve().parent))
-        from bench_at_rest import scenes
-        return scenes(wide)
+        return wide_scenes(wide)
     gen = GENERATED[:1] if quick else GENERATED
     shapes = SHAPES[:1] if quick else SHAPES
     out = [(f'{label}-seed{s}', generate_scene(GeneratorConfig(**kw), s)) for label, kw, s in gen]
     return out + [(f'shape-{name}-u{unit * 100:g}', build_scene(SPECS[name], 0, unit)) for name, unit in shapes]
-
-
-def candidates(env, guide, rng: np.random.Generator, k: int) -> list:
-    """Up to k allocation actions: a seeded draw among the fully supported ones, then one that is not."""
-    allowed = guide.allowed_actions(env.state)
-    supported = supported_actions(env, allowed)
-    unsupported = [a for a in allowed if a not in set(supported)]
-    picked = [supported[i] for i in rng.permutation(len(supported))[:max(0, k - 1)]]
-    if unsupported:
-        picked.append(unsupported[int(rng.integers(len(unsupported)))])
-    return picked
 
 
 def world_digest(world) -> dict:

@@ -3,8 +3,8 @@
     python benchmarks/bench_reallocation.py [--scenes 30] [--grids 4,5] [--clearances 0]
         [--shapes holdout,tight] [--agents TEXT,...] [--ceiling-s 60] [--force | --cached-only]
 
-Every agent (a preset or an agent text, `rad_core.agents`) runs through
-`rad_core.evaluation.evaluate` with the robot, the code behind `rad eval --robot`: it plans
+Every agent (a preset or an agent text, `rad_core.sequencing.decide.agents`) runs through
+`rad_core.experiment.evaluation.evaluate` with the robot, the code behind `rad eval --robot`: it plans
 each scene as /plan_assembly does and the plan is built in a fresh twin (teleporting
 execution). Scenes: generated two-sided scenes, seeds 0..N-1, and hand-made shape sets
 ('train', 'holdout', or 'tight': the held-out shapes with their blocks packed at least 2 cm apart,
@@ -20,13 +20,14 @@ from the best coverage the agents' plans built on the scene (the incumbent: the 
 reach it, moving blocks aside included, which the search's own steps do not do), so it prunes from
 the start and ends at once where an agent reached the bound; --no-incumbent searches from nothing.
 
-Columns: the paper's metrics, a-bar (coverage of the whole target), 'of paper' (coverage
-over what the paper's unconstrained allocation fills), 'to ceiling' (the ceiling's
-coverage minus the agent's, on the scenes where the ceiling's search is complete), re-allocations
-per scene and the share of episode time spent re-allocating (checks + CP-SAT).
+Columns: coverage of the whole target, f (episodes ended on a failed action), how many ceilings
+are known and cut, the ceiling minus the agent on the scenes where it is known, re-allocations per
+scene.
 
-Writes docs/results/reallocation.md and docs/results/reallocation.rows.jsonl; results are
-cached per (agent, scene set) under out/cache/reallocation/; --force recomputes.
+Writes one page, docs/results/<--name>.md (ceiling by default), and its rows (`common.write_page`):
+one table, a line per (scene set, agent) and one for the ceiling, made from the rows, so
+`--from-rows` rebuilds the page from a rows file without running anything. Results are cached per
+(agent, scene set) under out/cache/reallocation/; --force recomputes.
 """
 
 from __future__ import annotations
@@ -34,15 +35,20 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
-
-from rad_core.allocation import AllocationParams, solve
-
-from common import (RESULTS, agent_legend, cache_dir, cache_path, cached_evaluation, command_line, fmt, scenes,
-                    shape_scenes, write_rows)
+from common import (
+    RESULTS,
+    cache_dir,
+    cache_path,
+    cached_evaluation,
+    page_meta,
+    read_rows,
+    scenes,
+    shape_scenes,
+    write_page,
+)
 
 DEFAULT_AGENTS = ('heur-verified', 'heur+verify+support:stable', 'heur+verify+realloc', 'milp-dqn+mcts:5+verify',
                   'milp-dqn+mcts:5+verify+realloc', 'milp-dqn-mixed+verify+support:stable', 'greedy',
@@ -74,7 +80,7 @@ def run(agent: str, grid, n: int, clearance: float, force: bool) -> dict:
 def ceiling(grid, n: int, clearance: float, seconds: float, force: bool, incumbents=None) -> list[dict]:
     """Per scene: the robot-feasible ceiling's coverage, whether it is proven, its states and time.
     incumbents: per scene, the best coverage an agent built there (the search's incumbent)."""
-    from rad_core.sequencing.exact import robot_ceiling
+    from rad_core.sequencing.bounds.robot_ceiling import robot_ceiling
     tag = ('-inc' if incumbents is not None else '') + '-proof2'   # rows with 'proof' and 'bound', every pose searched
     path = cache_dir('reallocation') / f'ceiling-{seconds:g}s{tag}-{cell_name(grid, n, clearance)}.json'
     if path.exists() and not force:
@@ -92,15 +98,35 @@ def ceiling(grid, n: int, clearance: float, seconds: float, force: bool, incumbe
     return out
 
 
-def paper_fill(grid, n: int, clearance: float) -> list[float]:
-    """Per scene: the target fraction the paper's unconstrained allocation fills."""
-    path = cache_dir('reallocation') / f'paper-fill-{cell_name(grid, n, clearance)}.json'
-    if path.exists():
-        return json.loads(path.read_text())
-    from rad_core.coverage import placements_coverage
-    out = [placements_coverage(scene, solve(scene, AllocationParams()).placements)
-           for _, scene in cell_scenes(grid, n, clearance)]
-    path.write_text(json.dumps(out))
+HEADERS = ('scene set', 'agent', 'scenes', 'coverage', 'f', 'ceiling known', 'cut', 'below the known ceiling',
+           're-alloc/scene')
+NOTE = ('Each agent plans as /plan_assembly does and the plan is built in a fresh twin (teleporting execution); '
+        'f: episodes ended on a failed action. The ceiling (`robot_ceiling`: the allocations\' orders, then every '
+        'pose, bounded by what a cover with an order the hand can keep could fill) is known where its search '
+        'ended; "below the known ceiling" is its mean lead over the agent on those scenes. A search cut by the '
+        'time limit is a lower bound, left out.')
+FAILED = ('invalid_placement', 'invalid_grasp', 'invalid_unstable')
+
+
+def table(rows: list[dict]) -> list[list]:
+    """The page's table from the rows: per scene set, a line per agent, then the ceiling's."""
+    sets = list(dict.fromkeys(r['set'] for r in rows))
+    out = []
+    for cell in sets:
+        here = [r for r in rows if r['set'] == cell]
+        roof = {r['name']: r for r in here if r['agent'] == 'ceiling'}
+        known = {n: c for n, c in roof.items() if c.get('complete')}
+        for agent in dict.fromkeys(r['agent'] for r in here if r['agent'] != 'ceiling'):
+            mine = [r for r in here if r['agent'] == agent]
+            gaps = [known[r['name']]['coverage'] - r['coverage'] for r in mine if r['name'] in known]
+            out.append([cell, f'`{agent}`', len(mine), f'{np.mean([r["coverage"] for r in mine]):.3f}',
+                        f'{np.mean([r.get("outcome") in FAILED for r in mine]):.2f}', '', '',
+                        f'{np.mean(gaps):.4f}' if gaps else '',
+                        f'{np.mean([r.get("reallocations", 0) for r in mine]):.1f}'])
+        if roof:
+            cut = sum(1 for c in roof.values() if not c.get('proof'))
+            out.append([cell, 'ceiling', len(roof), f'{np.mean([c["coverage"] for c in roof.values()]):.3f}', '',
+                        f'{len(known)} of {len(roof)}', cut, '', ''])
     return out
 
 
@@ -115,34 +141,31 @@ def main() -> int:
     p.add_argument('--no-incumbent', dest='incumbent', action='store_false',
                    help="the ceiling's search starts from nothing, not from the agents' best built coverage")
     p.add_argument('--force', action='store_true')
-    p.add_argument('--results', default=str(RESULTS),
-                   help='folder of reallocation.md and its rows (a run of a few agents elsewhere keeps the full table)')
+    p.add_argument('--results', default=str(RESULTS), help='folder of the page and its rows')
+    p.add_argument('--name', default='ceiling', help='the page: <results>/<name>.md and <name>.rows.jsonl')
     p.add_argument('--cached-only', action='store_true', help='only write the table from results already cached')
+    p.add_argument('--from-rows', type=Path, help='rebuild the page from this rows file, running nothing')
+    p.add_argument('--command', help='with --from-rows: the command that measured them (default: the page says)')
+    p.add_argument('--commit', help='with --from-rows: the commit that measured them (default: the page says)')
+    p.add_argument('--date', help='with --from-rows: the date of that run (default: what the page states)')
     args = p.parse_args()
     out = Path(args.results)
+    if args.from_rows:
+        rows = read_rows(args.from_rows)
+        meta = page_meta(out / f'{args.name}.md')
+        page = write_page(args.name, TITLE, HEADERS, table(rows), NOTE, rows, results=out,
+                          **{k: getattr(args, k) or meta.get(k) for k in ('command', 'commit', 'date')})
+        print(f'wrote {page}')
+        return 0
     grids = [int(g) for g in args.grids.split(',') if g] + [s for s in args.shapes.split(',') if s]
     clearances = [float(c) for c in args.clearances.split(',')]
     agents = [a for a in args.agents.split(',') if a]
-    lines = ['# Re-allocation on stall, the branch and bound and the robot-feasible ceiling', '',
-             f'Made by `{command_line()}` ({time.strftime("%Y-%m-%d")}). Generated two-sided scenes, seeds '
-             f'0..{args.scenes - 1}, and hand-made shapes; each agent plans as /plan_assembly does and the plan is '
-             'built in a fresh twin (teleporting execution); see the benchmark\'s docstring for the columns. '
-             's/scene: wall time on the shared 2-core machine. Per-scene rows: '
-             '[reallocation.rows.jsonl](reallocation.rows.jsonl).', ''] + agent_legend(agents)
     rows = []
     for clearance in clearances:
         for grid in grids:
             if not isinstance(grid, int) and clearance != clearances[0]:
                 continue   # the shapes are flush
             cell = cell_name(grid, args.scenes, clearance)
-            fill = paper_fill(grid, args.scenes, clearance)
-            title = (f'## g = {grid}, clearance {clearance:g}' + (' (flush)' if not clearance else '')
-                     if isinstance(grid, int) else f'## shapes: {grid}')
-            lines += [title, '',
-                      f'The paper\'s allocation fills {np.mean(fill):.3f} of the target on average.', '',
-                      '| agent | R | e | f | a-bar | of paper | to ceiling | re-alloc/scene | re-alloc time '
-                      '| s/scene |',
-                      '|---|---|---|---|---|---|---|---|---|---|']
             results = []
             for agent in agents:
                 if args.cached_only and not cache_path('reallocation', agent, cell).exists():
@@ -161,41 +184,17 @@ def main() -> int:
                                   for k in range(len(results[0][1]['scenes']))]
                 roof = ceiling(grid, args.scenes, clearance, args.ceiling_s, args.force, incumbents)
             for agent, r in results:
-                scene_rows = r['scenes']
                 rows += [{'agent': r['agent'], 'set': cell, **{k: row[k] for k in ROW_KEYS if k in row},
-                          'reallocations': len(row.get('reallocations', ()))} for row in scene_rows]
-                of_paper = np.mean([row['coverage'] / f if f > 0 else 1.0 for row, f in zip(scene_rows, fill)])
-                gap = None
-                if roof is not None:
-                    done = [(c['coverage'], row['coverage']) for c, row in zip(roof, scene_rows) if c['complete']]
-                    gap = float(np.mean([a - b for a, b in done])) if done else None
-                events = [len(row.get('reallocations', ())) for row in scene_rows]
-                share = sum(row.get('reallocation_s', 0.0) for row in scene_rows) / max(r['seconds'], 1e-9)
-                lines.append(f'| {agent} | {fmt(r["R"])} | {fmt(r["e"])} | {fmt(r["f"])} | {fmt(r["coverage"])} '
-                             f'| {of_paper:.3f} | {fmt(gap)} | {np.mean(events):.1f} | {share:.0%} '
-                             f'| {r["seconds"] / r["n"]:.1f} |')
-                print(f'{agent:52s} {cell} cov={r["coverage"]:.3f} of_paper={of_paper:.3f} '
-                      f'gap={fmt(gap)} realloc={np.mean(events):.1f} share={share:.0%}', flush=True)
+                          'reallocations': len(row.get('reallocations', ()))} for row in r['scenes']]
+                print(f'{agent:52s} {cell} cov={r["coverage"]:.3f}', flush=True)
             if roof is not None:
-                ended = {k: sum(1 for c in roof if c.get('proof', '') == k) for k in ENDED}
-                lines.append(f'| ceiling ({args.ceiling_s:g} s) | | | | {fmt(np.mean([c["coverage"] for c in roof]))} '
-                             f'| | | | | {np.mean([c["seconds"] for c in roof]):.1f} |')
-                lines += ['', f'Of {len(roof)} scenes, the ceiling is at its bound on {ended["bound"]} and '
-                          f'exhausted over every pose on {ended["all poses"]} (the true ceiling, both); exhausted '
-                          f'below its bound on {ended["exhausted"]} (the best found: not a proof over others), cut '
-                          f'on {ended[""]} (lower bounds, left out of "to ceiling").']
-                if any(c.get('incumbent') for c in roof):
-                    better = sum(1 for c in roof if c['coverage'] > c['incumbent'] + 1e-9)
-                    lines += ['', f'Its search started from the best agent\'s built coverage on each scene (the '
-                              f'incumbent); it found a better line on {better} of them.']
                 rows += [{'agent': 'ceiling', 'set': cell, **c} for c in roof]
-            lines.append('')
-            out.mkdir(parents=True, exist_ok=True)
-            (out / 'reallocation.md').write_text('\n'.join(lines) + '\n')
-            write_rows(out / 'reallocation.rows.jsonl', rows)
-    print(f'wrote {out / "reallocation.md"}')
+            page = write_page(args.name, TITLE, HEADERS, table(rows), NOTE, rows, results=out)
+    print(f'wrote {page}')
     return 0
 
+
+TITLE = 'The robot-feasible ceiling and re-allocation, robot in the loop'
 
 if __name__ == '__main__':
     raise SystemExit(main())

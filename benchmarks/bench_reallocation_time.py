@@ -18,13 +18,12 @@ import argparse
 import time
 
 import numpy as np
-
 from rad_core.allocation import AllocationParams, solve
+from rad_core.domain.generator import GeneratorConfig, generate_scene
 from rad_core.gamp.action import MotionPlanner
-from rad_core.generator import GeneratorConfig, generate_scene
-from rad_core.sequencing.plan import local_motion_planner, plan_assembly
-from rad_core.sequencing.reallocation import local_allocate
-from rad_core.sequencing.sequencer import POLICIES, Sequencer, SequencerConfig
+from rad_core.sequencing.decide.sequencer import POLICIES, Sequencer, SequencerConfig
+from rad_core.sequencing.planning.plan import local_motion_planner, plan_assembly
+from rad_core.sequencing.planning.reallocation import local_allocate
 
 
 def main() -> int:

@@ -16,13 +16,12 @@ import time
 from collections import Counter
 
 import numpy as np
-
-from rad_core.sequencing import supported_actions
 from rad_core.allocation import solve
 from rad_core.allocation.guide import AllocationGuide
-from rad_core.generator import GeneratorConfig, generate_scene
-from rad_core.mdp import TERMINATE
-from rad_core.robot_env import RobotAssemblyEnv, RobotEnvConfig, outcome_class
+from rad_core.domain.generator import GeneratorConfig, generate_scene
+from rad_core.env.mdp import TERMINATE
+from rad_core.env.robot_env import RobotAssemblyEnv, RobotEnvConfig, outcome_class
+from rad_core.sequencing import supported_actions
 
 
 def run(execution: str, grid: int, scenes: int, seed: int) -> dict:

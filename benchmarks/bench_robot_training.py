@@ -17,11 +17,11 @@ stays what 0.5 s (the default) says, over many exploratory placements.
 
     python benchmarks/bench_robot_training.py eval --model runs/milp-dqn-robot/model.pt [--grids 4,5]
 
-eval: `rad_core.evaluation.evaluate` with the robot (its default execution and
+eval: `rad_core.experiment.evaluation.evaluate` with the robot (its default execution and
 settling, a fresh world per scene, no markov, no cache: the evaluation's own
 setting, not the training's) for the model and the no-robot network it started
 from, on evaluation scenes 0.. with the stable allocation; --rows (default
-docs/results/robot_training.rows.jsonl, '' for none) gets one compact line per (run, grid):
+out/cache/robot_training/rows.jsonl, '' for none) gets one compact line per (run, grid):
 its figures and its scenes' rows.
 
 A benchmark, not a test: figures depend on the machine and its load.
@@ -38,14 +38,13 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from common import RESULTS, write_rows
-
+from common import CACHE, write_rows
 from rad_core.allocation import AllocationParams, solve
-from rad_core.generator import GeneratorConfig, generate_scene
+from rad_core.domain.generator import GeneratorConfig, generate_scene
+from rad_core.env.mdp import TERMINATE
+from rad_core.env.robot_env import RobotAssemblyEnv, RobotEnvConfig
 from rad_core.learning.policy import QPolicy
-from rad_core.mdp import TERMINATE
-from rad_core.robot_env import RobotAssemblyEnv, RobotEnvConfig
-from rad_core.sequencing.actions import action_space
+from rad_core.sequencing.decide.actions import action_space
 
 SCENE_SEED = 2_000_000   # neither evaluation (0..), validation (500000..) nor training (1e6..) seeds
 
@@ -119,7 +118,7 @@ PARTS = [  # (label, function name as cProfile shows it, file fragment)
     ('world set-up (World.__init__)', '__init__', 'sim/world.py'),
     ('scene load (World.load_scene)', 'load_scene', 'sim/world.py'),
     ('support check (any_support)', 'any_support', 'support.py'),
-    ('MDP bookkeeping (AssemblyEnv.step)', 'step', 'rad_core/mdp.py'),
+    ('MDP bookkeeping (AssemblyEnv.step)', 'step', 'rad_core/env/mdp.py'),
     ('allocation solve (CP-SAT, per scene)', 'solve', 'allocation/__init__.py'),
 ]
 
@@ -184,7 +183,8 @@ def cmd_settle(args) -> None:
     tried from it and undone (`RobotAssemblyEnv.restore`), then the walk goes on
     with 0.5 s."""
     from dataclasses import replace
-    from rad_core.robot_env import outcome_class
+
+    from rad_core.env.robot_env import outcome_class
     lengths = [0.3, 0.2, 0.15, 0.1, 0.05]
     rng = np.random.default_rng(args.seed)
     data = scenes(args.grid, args.scenes)
@@ -223,8 +223,8 @@ def cmd_settle(args) -> None:
 
 
 def cmd_eval(args) -> None:
-    from rad_core.evaluation import evaluate, get_agent
-    from rad_core.scene_sources import generated_scenes
+    from rad_core.domain.scene_sources import generated_scenes
+    from rad_core.experiment.evaluation import evaluate, get_agent
     out = []
     runs = [('trained with the robot', args.model, False), ('start (no robot)', args.baseline, False)]
     if args.verify:
@@ -271,7 +271,7 @@ def main(argv=None) -> int:
     p.add_argument('--baseline', default='milp-dqn-mixed')
     p.add_argument('--grids', default='4,5')
     p.add_argument('--scenes', type=int, default=30)
-    p.add_argument('--rows', default=str(RESULTS / 'robot_training.rows.jsonl'),
+    p.add_argument('--rows', default=str(CACHE / 'robot_training' / 'rows.jsonl'),
                    help="one line per (run, grid): figures and per-scene rows ('' for none)")
     p.add_argument('--verify', action='store_true', help='also the model taking the best GAMP-feasible action')
     p.set_defaults(func=cmd_eval)

@@ -24,15 +24,14 @@ from pathlib import Path
 
 import numpy as np
 import torch
-
 from rad_core.allocation import solve
-from rad_core.generator import GeneratorConfig, generate_scene
-from rad_core.learning import dqn
-from rad_core.learning.dataset import build
+from rad_core.domain.generator import GeneratorConfig, generate_scene
+from rad_core.env.mdp import AssemblyEnv, EnvConfig
 from rad_core.learning.graph import Observer
 from rad_core.learning.policy import QPolicy
-from rad_core.mdp import AssemblyEnv, EnvConfig
-from rad_core.sequencing.actions import action_space
+from rad_core.sequencing.decide.actions import action_space
+from rad_core.training import dqn
+from rad_core.training.dataset import build
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -2,10 +2,10 @@
 
     python benchmarks/bench_supply.py [--agent default] [--city 12] [--seed 2026] [--rows FILE]
 
-`rad scene from-mesh` / `from-voxels` choose the blocks for a target (`rad_core.supply`). Since
+`rad scene from-mesh` / `from-voxels` choose the blocks for a target (`rad_core.allocation.supply`). Since
 2026-12-04 the cover must be one a top-down hand can place in some order (`SupplyParams.hand`);
 `--any-order` gives the cover chosen before. Here every shape is made into a scene both ways
-and planned and built by the agent with the robot in the loop (`rad_core.evaluation.evaluate`,
+and planned and built by the agent with the robot in the loop (`rad_core.experiment.evaluation.evaluate`,
 the code of `rad eval --robot`, teleporting execution).
 
 The shapes, none from the generator and none used in training:
@@ -29,7 +29,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-
 from common import ROOT, command_line, write_rows
 
 MESHES = ROOT / 'data' / 'meshes'
@@ -96,16 +95,16 @@ def city(n: int, seed: int) -> dict[str, np.ndarray]:
 
 
 def make(models, unit: float, clearance: float, hand: bool):
-    from rad_core.blocks import DEFAULT_LIBRARY
-    from rad_core.supply import SupplyParams, supply
-    from rad_core.voxels import place_regions
+    from rad_core.allocation.supply import SupplyParams, supply
+    from rad_core.domain.blocks import DEFAULT_LIBRARY
+    from rad_core.domain.voxels import place_regions
     return supply(place_regions(models, unit), unit, dict(DEFAULT_LIBRARY), params=SupplyParams(hand=hand),
                   clearance=clearance)
 
 
 def shape_sets(args) -> dict[str, list[tuple[str, list, float, float]]]:
     """Set name -> [(scene name, voxels.Model list, unit, clearance)]."""
-    from rad_core.voxels import Model, crop, mesh_models
+    from rad_core.domain.voxels import Model, crop, mesh_models
     meshes = json.loads((MESHES / 'meshes.json').read_text())
     sets = {'gallery meshes': [], 'drawn voxels': [], 'city voxels': []}
     for name, entry in meshes.items():
@@ -121,13 +120,13 @@ def shape_sets(args) -> dict[str, list[tuple[str, list, float, float]]]:
 
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument('--agent', default='default', help='the agent (rad_core.agents)')
+    p.add_argument('--agent', default='default', help='the agent (rad_core.sequencing.decide.agents)')
     p.add_argument('--city', type=int, default=12, help='random city-block shapes')
     p.add_argument('--seed', type=int, default=2026, help='seed of the city-block shapes')
     p.add_argument('--rows', type=Path, help='write one row per scene here')
     args = p.parse_args()
 
-    from rad_core.evaluation import evaluate
+    from rad_core.experiment.evaluation import evaluate
     rows, t0 = [], time.perf_counter()
     print(command_line())
     for label, entries in shape_sets(args).items():

@@ -20,8 +20,8 @@ training, which uses seeds from 1,000,000, nor in validation, 500,000..):
   (exhaustive search, `sequencing.ceiling`), the most a sequencer can do with
   this allocation.
 
-Also the hand-made shapes (`rad_core.shapes`), training and held-out splits
-separately. Every number comes from `rad_core.evaluation.evaluate`, the code behind
+Also the hand-made shapes (`rad_core.domain.shapes`), training and held-out splits
+separately. Every number comes from `rad_core.experiment.evaluation.evaluate`, the code behind
 `rad eval`. Each (agent, allocation, scene set) run is cached as JSON under
 out/cache/table1/ so an interrupted run resumes (--force recomputes); the per-scene
 rows of all of them go to docs/results/table1.rows.jsonl (`run_rows`), from which
@@ -33,28 +33,27 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
-from common import RESULTS, ROOT, cache_dir, command_line, read_rows, write_rows
-
-from rad_core import jsonfmt
+from common import RESULTS, ROOT, cache_dir, page_meta, read_rows, write_page
 from rad_core.allocation import AllocationParams, solve
-from rad_core.errors import RadError
-from rad_core.evaluation import evaluate, get_agent, summarize
-from rad_core.mdp import AssemblyEnv, EnvConfig
-from rad_core.physics import PhysicsStability
-from rad_core.progress import ProgressBar
-from rad_core.scene_sources import generated_scenes
-from rad_core.sequencing.actions import AllocationActions
-from rad_core.sequencing.ceiling import coverage_ceiling
+from rad_core.domain import jsonfmt
+from rad_core.domain.errors import RadError
+from rad_core.domain.scene_sources import generated_scenes
+from rad_core.env.mdp import AssemblyEnv, EnvConfig
+from rad_core.experiment.evaluation import evaluate, get_agent, summarize
+from rad_core.sequencing.bounds.ceiling import coverage_ceiling
+from rad_core.sequencing.decide.actions import AllocationActions
+from rad_core.sim.physics import PhysicsStability
+from rad_core.view.progress import ProgressBar
 
 NAME = 'table1'
 ROWS = RESULTS / f'{NAME}.rows.jsonl'
+TRAINING = ROOT / 'data' / 'training'   # each run's progress.csv, copied there by scripts/ship_weights.sh
 PAPER = {  # Table I of the paper: R (std), e, d, coverage
     3: {'DQN': (0.63, 0.02, 0.59, 0.27, 0.71), 'DQN-REL': (0.67, 0.01, 0.70, 0.23, 0.68),
         'MILP-DQN': (1.22, 0.01, 0.31, 0.53, 0.87)},
@@ -184,29 +183,8 @@ class FromRows:
         return ceiling_result(rows)
 
 
-def ceiling_rel(result: dict, ceiling: dict) -> float | None:
-    """Mean over scenes of coverage / ceiling (scenes with a known, non-zero ceiling)."""
-    by_name = {r['name']: r['ceiling'] for r in ceiling['scenes']}
-    vals = [r['coverage'] / by_name[r['name']] for r in result['scenes'] if by_name.get(r['name'])]
-    return float(np.mean(vals)) if vals else None
-
-
 def fmt(v, digits=2) -> str:
     return '-' if v is None else f'{v:.{digits}f}'
-
-
-def table(rows: list[tuple[str, dict | None, dict]], ceiling: dict) -> list[str]:
-    out = ['| agent | R (std over seeds) | e | d | f | coverage | coverage / allocation | coverage / ceiling |',
-           '|---|---|---|---|---|---|---|---|']
-    for label, r, extra in rows:
-        if r is None:
-            continue
-        std = extra.get('R_seed_std')
-        rtxt = f'{r["R"]:.2f}' + (f' ({std:.2f})' if std is not None else '')
-        out.append(f'| {label} | {rtxt} | {r["e"]:.2f} | {r["d"]:.2f} | {r["f"]:.2f} | {r["coverage"]:.2f} | '
-                   f'{r["coverage_rel"]:.2f} | {fmt(ceiling_rel(r, ceiling))} |')
-    out.append(f'| best order of the allocation (ceiling) | | | | | {fmt(ceiling["ceiling"])} | | 1.00 |')
-    return out
 
 
 def mean_of_seeds(results: list[dict]) -> tuple[dict, dict]:
@@ -255,7 +233,7 @@ def conditions(args) -> list[tuple[str, Callable, int | None]]:
     """(scene set, its scenes' factory, g) to measure: the grids, then the shapes' splits."""
     grids = [int(g) for g in args.grids.split(',')]
     out = [(f'g{g}', lambda g=g: generated_scenes(g, 2, args.scenes, 0), g) for g in grids]
-    from rad_core import shapes
+    from rad_core.domain import shapes
     for split in () if args.skip_shapes else ('train', 'holdout'):
         names = shapes.SPLITS[split]
         out.append((f'shapes-{split}', lambda names=names: [(f'{n}-seed{s}', shapes.shape_scene(n, s))
@@ -291,11 +269,12 @@ def main() -> int:
         print(f'--- {cond}', file=sys.stderr)
         report[cond] = ([(support, section(source, cond, make, g, support, seeds), source.ceiling(support, cond, make))
                          for support in ('none', 'stable')], g)
-    if not args.from_rows:
-        write_rows(args.rows, source.rows)
-        print(f'wrote {args.rows}')
-    write_markdown(report, args.out, args.rows, args.from_rows)
-    print(f'wrote {args.out}')
+    if args.from_rows:   # the rows stay as they are; the page keeps what it states of the run that measured them
+        page = write_markdown(report, args.out, None, **page_meta(args.out))
+    else:
+        plot_curves(TRAINING, ROOT / 'docs' / 'img')
+        page = write_markdown(report, args.out, source.rows)
+    print(f'wrote {page}')
     return 0
 
 
@@ -305,83 +284,39 @@ def scenes_per_grid(report: dict) -> int:
     return len(grids[0][0][2]['scenes']) if grids else 0
 
 
-def link(path: Path, page: Path) -> str:
-    """path relative to the folder of page, as a Markdown link target."""
-    return Path(os.path.relpath(path, page.parent)).as_posix()
-
-
-def write_markdown(report: dict, out: Path, rows: Path, from_rows: bool) -> None:
-    n = scenes_per_grid(report)
-    made = (f'Rebuilt by `{command_line()}` from the per-scene rows in [{rows.name}]({link(rows, out)}) (written by '
-            'the run that measured them, `python benchmarks/bench_table1.py` without `--from-rows`).'
-            if from_rows else f'Made by `{command_line()}`; every scene\'s row is in [{rows.name}]({link(rows, out)}).')
-    lines = ['# Table I: the agents without the robot', '', made,
-             'Two-sided scenes, no robot, physics decides stability.',
-             f'{n} generated scenes per grid size (generator seeds 0..{n - 1}, never used in',
-             'training or validation); agents trained at g = 3 only (the paper\'s * condition), on',
-             '`data/train-g3.jsonl.gz` (50,000 scenes with their CP-SAT allocations).', '']
-    for cond, (sections, g) in report.items():
-        star = '*' if g == 3 else ''
-        title = f'g = {g}{star}' if g is not None else f'hand-made shapes, {cond.split("-")[1]} split'
-        lines += [f'## {title}', '']
+def page_table(report: dict) -> tuple[list[str], list[list]]:
+    """One table: a line per (allocation, agent), a column of coverage per scene set."""
+    conds = list(report)
+    headers = ['allocation', 'agent'] + [(f'g = {g}' + ('*' if g == 3 else '') if g is not None
+                                          else f'shapes, {cond.split("-")[1]}') for cond, (_, g) in report.items()]
+    lines: dict[tuple[str, str], dict[str, str]] = {}
+    for cond, (sections, _) in report.items():
         for support, rows_, ceiling in sections:
-            head = ("The paper's allocation (MILP, `--support none`)" if support == 'none' else
-                    "rad's stability-aware allocation (`--support stable`)")
-            lines += [f'{head}:', ''] + table(rows_, ceiling) + ['']
-        ceiling = sections[0][2]
-        if g in PAPER:
-            lines += ['', 'The paper, same grid size: ' + '; '.join(
-                f'{m} R {v[0]:.2f} ({v[1]:.2f}), e {v[2]:.2f}, d {v[3]:.2f}, coverage {v[4]:.2f}'
-                for m, v in PAPER[g].items()) + (f'; MILP-DQN coverage corrected for the allocation '
-                                                  f'{PAPER_CORRECTED[g]:.2f}.' if g in PAPER_CORRECTED else '.')]
-        if ceiling.get('unknown'):
-            lines.append(f'\nThe ceiling search gave up on {ceiling["unknown"]} scenes (too many orders); '
-                         'they are left out of "coverage / ceiling".')
-        lines.append('')
-    training = RESULTS / 'training'
-    lines += training_cost(training)
-    curves = plot_curves(training, ROOT / 'docs' / 'img', redraw=not from_rows)
-    if curves:
-        lines += ['## Learning curves', '', 'Greedy validation return and coverage (50 scenes at g = 3, seeds from '
-                  '500,000), training return and TD loss, against environment steps; from each run\'s progress.csv.',
-                  ''] + [f'![{name}]({link(path, out)})' for name, path in curves] + ['']
-    notes = RESULTS / 'notes.md'
-    if notes.exists():
-        lines += [notes.read_text().rstrip(), '']
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text('\n'.join(lines) + '\n')
+            alloc = 'paper (MILP)' if support == 'none' else 'stable'
+            for label, r, _ in rows_:
+                lines.setdefault((alloc, label), {})[cond] = f'{r["coverage"]:.2f}'
+            lines.setdefault((alloc, 'best order of the allocation (ceiling)'), {})[cond] = fmt(ceiling['ceiling'])
+    return headers, [[alloc, label, *(cells.get(c, '') for c in conds)] for (alloc, label), cells in lines.items()]
 
 
-def training_cost(training: Path) -> list[str]:
-    """Per run of this table (`CURVES`; the robot's runs have their own table,
-    robot_training.md): budget, wall time, throughput, memory, and when the greedy validation
-    first reached the paper's Table I level at g = 3 (R >= 1.22 and coverage >= 0.87)."""
-    from rad_core.learning.curves import read_progress
-    out = ['## Training cost', '',
-           'Each run on one torch thread, two runs at a time on the 2-core machine (so each had about one core; '
-           'other work ran beside them at times). "Paper level": the first validation (greedy, 50 scenes at '
-           'g = 3) with R >= 1.22 and coverage >= 0.87, the paper\'s Table I MILP-DQN at g = 3*.', '',
-           '| run | env steps | gradient steps | wall | env steps/s | gradient steps/s | peak RSS | paper level at |',
-           '|---|---|---|---|---|---|---|---|']
-    runs = sorted({run for group in CURVES.values() for run in group})
-    for progress in [training / f'{run}.csv' for run in runs if (training / f'{run}.csv').exists()]:
-        rows = read_progress(progress)
-        if not rows:
-            continue
-        last = rows[-1]
-        hit = next((r for r in rows if r['eval_return'] >= 1.22 and r['eval_coverage'] >= 0.87), None)
-        when = f'{hit["env_steps"]:.0f} steps, {hit["wall_s"] / 60:.1f} min' if hit else 'not reached'
-        out.append(f'| {progress.stem} | {last["env_steps"]:.0f} | {last["grad_steps"]:.0f} | '
-                   f'{last["wall_s"] / 60:.1f} min | {last["env_steps"] / last["wall_s"]:.1f} | '
-                   f'{last["grad_steps"] / last["wall_s"]:.1f} | {last["peak_rss_mb"]:.0f} MB | {when} |')
-    return out + ['']
+NOTE = ('Coverage without the robot (physics decides stability), two-sided scenes: {n} generated scenes per grid '
+        'size (seeds 0..{last}, never used in training) and the hand-made shapes; agents trained at g = 3 only (the '
+        'paper\'s * condition) unless named mixed. The paper\'s Table I MILP-DQN: 0.87 at g = 3, 4 and 0.85 at g = 5. '
+        'R, e, d and f of every run are in the rows; learning curves: docs/img/curves_*.png.')
+
+
+def write_markdown(report: dict, out: Path, rows: list[dict] | None, **meta) -> Path:
+    n = scenes_per_grid(report)
+    headers, lines = page_table(report)
+    return write_page(NAME, 'Table I: the agents without the robot', headers, lines,
+                      NOTE.format(n=n, last=n - 1), rows, results=out.parent, **meta)
 
 
 def plot_curves(training: Path, img: Path, redraw: bool = True) -> list[tuple[str, Path]]:
-    """Learning curves from docs/results/training/<run>.csv (copied there from
+    """Learning curves from data/training/<run>.csv (copied there from
     runs/<run>/progress.csv by scripts/ship_weights.sh); redraw False draws only the
     missing pictures (a table rebuilt from its rows leaves the committed ones as they are)."""
-    from rad_core.learning.curves import plot_progress
+    from rad_core.training.curves import plot_progress
     out = []
     for name, runs in CURVES.items():
         paths = [training / f'{r}.csv' for r in runs if (training / f'{r}.csv').exists()]

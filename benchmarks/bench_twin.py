@@ -21,10 +21,9 @@ import argparse
 import time
 
 import numpy as np
-
-from rad_core.blocks import DEFAULT_LIBRARY
-from rad_core.scene import Block, Scene, TargetRegion
-from rad_core.sim import panda
+from rad_core.cell import panda
+from rad_core.domain.blocks import DEFAULT_LIBRARY
+from rad_core.domain.scene import Block, Scene, TargetRegion
 from rad_core.sim.twin import Twin
 from rad_core.sim.world import World
 

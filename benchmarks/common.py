@@ -1,18 +1,22 @@
 """What more than one benchmark uses: the generated scenes of Table II, the hand-made shape sets,
-the number format of the tables, and where results go.
+the number format of the tables, the planning-step scene sets, and the results page.
 
-Every benchmark writes two committed files under docs/results/: `<name>.md`, the table with the
-command that made it, and `<name>.rows.jsonl`, one compact JSON line per measured row (per scene
-and agent), so a figure can be traced to its scenes. Caches that let an interrupted run resume
-live under out/cache/<name>/ (not committed: the benchmark regenerates them).
+A benchmark that publishes writes one page through `write_page`: docs/results/<name>.md (the
+command, the commit, the date, one table and a short note) and docs/results/<name>.rows.jsonl (one
+compact JSON line per measured row, so a figure can be traced to its scenes). A new run replaces
+both; history lives in git. Caches that let an interrupted run resume live under out/cache/<name>/
+(not committed: the benchmark regenerates them).
 
-Benchmarks import it as `from common import ...` (each script runs from benchmarks/).
+Benchmarks import it as `from common import ...` (each script runs from benchmarks/); they never
+import each other.
 """
 
 from __future__ import annotations
 
 import json
+import subprocess
 import sys
+import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -21,7 +25,7 @@ CACHE = ROOT / 'out' / 'cache'
 
 
 def scenes(grid: int, n: int, clearance: float):
-    from rad_core.generator import GeneratorConfig, generate_scene
+    from rad_core.domain.generator import GeneratorConfig, generate_scene
     kw = {'clearance': clearance} if clearance else {}
     config = GeneratorConfig(grid=grid, sides=2, **kw)
     for s in range(n):
@@ -29,10 +33,10 @@ def scenes(grid: int, n: int, clearance: float):
 
 
 def shape_scenes(split: str):
-    """Hand-made shapes (rad_core.shapes): 'train', 'holdout', or 'tight' (the held-out shapes
+    """Hand-made shapes (rad_core.domain.shapes): 'train', 'holdout', or 'tight' (the held-out shapes
     with their blocks packed at least 2 cm apart on the table instead of 5 cm: only the fingers'
     rubber tips fit between them)."""
-    from rad_core import shapes
+    from rad_core.domain import shapes
     if split == 'tight':
         return [(f'{name}-tight', shapes.build_scene(shapes.SPECS[name], 0, config=shapes.LayoutConfig(gap=0.02)))
                 for name in shapes.SPLITS['holdout']]
@@ -75,13 +79,25 @@ def write_rows(path: Path, rows, digits: int = 4) -> Path:
 
 
 def read_rows(path: Path) -> list[dict]:
-    return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+    return [json.loads(line) for line in Path(path).read_text().splitlines() if line.strip()]
+
+
+def page_meta(path: Path) -> dict:
+    """The command, commit and date a results page states ({} for a page without them): what a page
+    rebuilt from its rows keeps."""
+    meta = {}
+    if Path(path).exists():
+        for line in Path(path).read_text().splitlines():
+            for key in ('command', 'commit', 'date'):
+                if line.startswith(f'- {key}: '):
+                    meta[key] = line[len(f'- {key}: '):].strip().strip('`')
+    return meta
 
 
 def cache_path(bench: str, agent: str, set_name: str) -> Path:
     """Where a benchmark keeps one agent's evaluation of one scene set (keyed by the agent's
     canonical text, so a preset and its spelled-out text share it)."""
-    from rad_core.agents import label, parse
+    from rad_core.sequencing.decide.agents import label, parse
     return cache_dir(bench) / f'{label(parse(agent))}-{set_name}.json'
 
 
@@ -91,9 +107,9 @@ def cached_evaluation(bench: str, agent: str, set_name: str, make_scenes, force:
     kw: further arguments of evaluate (allocation, reallocation)."""
     import time
 
-    from rad_core import jsonfmt
-    from rad_core.evaluation import evaluate
-    from rad_core.progress import ProgressBar
+    from rad_core.domain import jsonfmt
+    from rad_core.experiment.evaluation import evaluate
+    from rad_core.view.progress import ProgressBar
     path = cache_path(bench, agent, set_name)
     if path.exists() and not force:
         return json.loads(path.read_text())
@@ -108,5 +124,101 @@ def cached_evaluation(bench: str, agent: str, set_name: str, make_scenes, force:
 
 def agent_legend(agents) -> list[str]:
     """Markdown lines: each agent as given and its canonical text."""
-    from rad_core.agents import label, parse
+    from rad_core.sequencing.decide.agents import label, parse
     return ['| agent | canonical text |', '|---|---|'] + [f'| {a} | `{label(parse(a))}` |' for a in agents] + ['']
+
+
+def git_commit() -> str:
+    """The short hash of HEAD, with '+dirty' when tracked files differ from it ('unknown' outside git)."""
+    def git(*args):
+        return subprocess.run(['git', *args], cwd=ROOT, capture_output=True, text=True, check=False)
+    head = git('rev-parse', '--short', 'HEAD')
+    if head.returncode != 0:
+        return 'unknown'
+    dirty = git('status', '--porcelain', '--untracked-files=no', '--', 'ros_ws', 'benchmarks').stdout.strip()
+    return head.stdout.strip() + ('+dirty' if dirty else '')
+
+
+def cell(value) -> str:
+    """A table cell: None empty, floats as given by the caller (format them first), '|' escaped."""
+    return '' if value is None else str(value).replace('|', '\\|')
+
+
+def split_table(lines: list[str]) -> tuple[list[str], list[list[str]]]:
+    """A Markdown table's lines (header, rule, rows) as headers and rows of cells, for `write_page`."""
+    def cells(line):
+        return [c.strip() for c in line.strip().strip('|').split('|')]
+    body = [line for line in lines if line.strip().startswith('|')]
+    return cells(body[0]), [cells(line) for line in body[2:]]
+
+
+def page_text(title: str, command: str, commit: str, date: str, headers, table_rows, note: str,
+              rows_name: str | None) -> str:
+    """The results page: a title, the command, commit and date, one table, a short note."""
+    lines = [f'# {title}', '', f'- command: `{command}`', f'- commit: {commit}', f'- date: {date}']
+    if rows_name:
+        lines.append(f'- rows: [{rows_name}]({rows_name})')
+    lines += ['', '| ' + ' | '.join(headers) + ' |', '|' + '---|' * len(headers)]
+    lines += ['| ' + ' | '.join(cell(v) for v in row) + ' |' for row in table_rows]
+    lines += ['', note.strip(), '']
+    return '\n'.join(lines)
+
+
+def write_page(name: str, title: str, headers, table_rows, note: str, rows=None, *, command: str | None = None,
+               commit: str | None = None, date: str | None = None, results: Path | str = RESULTS,
+               digits: int = 4) -> Path:
+    """Write <results>/<name>.md, the benchmark's one page, and <results>/<name>.rows.jsonl (`write_rows`)
+    when rows are given (without them, an existing rows file stays and is linked). The page states
+    `command` (default: this process's `command_line()`), the commit (default `git_commit()`) and the
+    UTC date (default today), then one table (headers, then table_rows, lists of cells already
+    formatted) and the note, a few lines on what the table shows.
+    A page rebuilt from a rows file passes the command, commit and date of the run that measured them.
+    Returns the page."""
+    out = Path(results)
+    out.mkdir(parents=True, exist_ok=True)
+    rows_file = out / f'{name}.rows.jsonl'
+    if rows is not None:
+        write_rows(rows_file, rows, digits)
+    rows_name = rows_file.name if rows_file.exists() else None   # rows=None: a rows file already there stays
+    text = page_text(title, command or command_line(), commit or git_commit(),
+                     date or time.strftime('%Y-%m-%d', time.gmtime()), headers, table_rows, note, rows_name)
+    page = out / f'{name}.md'
+    page.write_text(text)
+    return page
+
+
+# The planning-twin step's scenes, shared by bench_planning_step.py and bench_at_rest.py.
+
+# Generator settings of a harder table: blocks packed 5 mm apart out to the edge of reach, the
+# structure farther out, where grasps and reach fail.
+HARD_TABLE = dict(gap=0.005, reach=0.86, table_x=(0.3, 0.86), structure_x=0.6)
+# The wider set's generated kinds: (label, generator settings).
+WIDE_GENERATED = [('g4', dict(grid=4)), ('g5', dict(grid=5)), ('g6', dict(grid=6)),
+                  ('g5-tight', dict(grid=5, **HARD_TABLE)), ('g5-u4', dict(grid=5, unit=0.04, gap=0.01)),
+                  ('g4-far', dict(grid=4, structure_x=0.84, reach=0.9, table_x=(0.3, 0.9)))]
+
+
+def wide_scenes(n_seeds: int) -> list[tuple[str, object]]:
+    """The settling benchmark's wider set: six kinds of generated scene, n_seeds seeds each from 6000,
+    and every hand-made shape (layout seed 0)."""
+    from rad_core.domain.generator import GeneratorConfig, generate_scene
+    from rad_core.domain.shapes import SPECS, build_scene
+    out = []
+    for label, kw in WIDE_GENERATED:
+        for s in range(6000, 6000 + n_seeds):
+            out.append((f'{label}-seed{s}', generate_scene(GeneratorConfig(**kw), s)))
+    for name in sorted(SPECS):
+        out.append((f'shape-{name}', build_scene(SPECS[name], 0)))
+    return out
+
+
+def candidates(env, guide, rng, k: int) -> list:
+    """Up to k allocation actions: a seeded draw among the fully supported ones, then one that is not."""
+    from rad_core.sequencing import supported_actions
+    allowed = guide.allowed_actions(env.state)
+    supported = supported_actions(env, allowed)
+    unsupported = [a for a in allowed if a not in set(supported)]
+    picked = [supported[i] for i in rng.permutation(len(supported))[:max(0, k - 1)]]
+    if unsupported:
+        picked.append(unsupported[int(rng.integers(len(unsupported)))])
+    return picked

@@ -1,4 +1,4 @@
-"""Write scenes/hard/<name>.json, the hard hand-made cases of rad_core.hard_shapes (seed 0).
+"""Write scenes/hard/<name>.json, the hard hand-made cases of rad_core.domain.hard_shapes (seed 0).
 
     .venv/bin/python scripts/make_hard_shapes.py [--out DIR] [--check] [--time-limit S] [--no-solve]
 
@@ -23,9 +23,9 @@ try:
 except ImportError:   # run without scripts/env.sh: the core is pure Python
     sys.path.insert(0, str(ROOT / 'ros_ws' / 'src' / 'rad_core'))
 
-from rad_core import hard_shapes  # noqa: E402
 from rad_core.allocation import AllocationParams, solve  # noqa: E402
-from rad_core.coverage import placements_coverage  # noqa: E402
+from rad_core.domain import hard_shapes  # noqa: E402
+from rad_core.domain.coverage import placements_coverage  # noqa: E402
 
 
 def allocation(scene, support: str, time_limit: float) -> str:

@@ -4,7 +4,7 @@
 
 Each shape is drawn here, without booleans: an outline in the x-z plane extruded along y
 (the arch with its round opening, the house's gable, letters, stairs, a bridge), a set of
-cells' closed surface (`rad_core.voxels.cells_to_mesh`: the chair, the step pyramid), or
+cells' closed surface (`rad_core.domain.voxels.cells_to_mesh`: the chair, the step pyramid), or
 a trimesh primitive (the ring, the column, the spire). Files are written in the units a user's
 would be in (millimetres for some, so --scale 0.001 reads them in metres) and some with y up,
 as OBJ files often are. meshes.json beside them lists each file with the `rad scene from-mesh`
@@ -20,8 +20,7 @@ from pathlib import Path
 
 import numpy as np
 import trimesh
-
-from rad_core.voxels import _UP, cells_to_mesh
+from rad_core.domain.voxels import _UP, cells_to_mesh
 
 
 def triangulate(outline: np.ndarray) -> np.ndarray:

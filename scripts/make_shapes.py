@@ -1,4 +1,4 @@
-"""Write scenes/shapes/<name>.json, the hand-designed shapes of rad_core.shapes (seed 0).
+"""Write scenes/shapes/<name>.json, the hand-designed shapes of rad_core.domain.shapes (seed 0).
 
     .venv/bin/python scripts/make_shapes.py [--out DIR] [--check] [--time-limit S]
 
@@ -24,9 +24,9 @@ try:
 except ImportError:   # run without scripts/env.sh: the core is pure Python
     sys.path.insert(0, str(ROOT / 'ros_ws' / 'src' / 'rad_core'))
 
-from rad_core.coverage import placements_coverage  # noqa: E402
-from rad_core import shapes  # noqa: E402
 from rad_core.allocation import AllocationParams, solve, validate_allocation  # noqa: E402
+from rad_core.domain import shapes  # noqa: E402
+from rad_core.domain.coverage import placements_coverage  # noqa: E402
 
 
 def fully_supported_order(pieces) -> bool:

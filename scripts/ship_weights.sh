@@ -24,9 +24,9 @@ cp runs/milp-dqn-mixed-s0/model.pt "$W/milp-dqn-mixed.pt"
 echo "shipped: milp-dqn <- $best, dqn <- dqn-s0, dqn-rel <- dqn-rel-s0, milp-dqn-mixed <- milp-dqn-mixed-s0"
 ls -la "$W"
 # The runs' learning curves travel with the weights (bench_table1.py plots them).
-mkdir -p docs/results/training
+mkdir -p data/training
 for r in runs/*/; do
     name=$(basename "$r")
-    [ -f "$r/curves.png" ] && [ "$name" != smoke ] && cp "$r/progress.csv" "docs/results/training/$name.csv"
+    [ -f "$r/curves.png" ] && [ "$name" != smoke ] && cp "$r/progress.csv" "data/training/$name.csv"
 done
-echo "copied progress.csv of the finished runs to docs/results/training/"
+echo "copied progress.csv of the finished runs to data/training/"
