@@ -33,7 +33,7 @@ equal in c^T g and coverage, 'fewer' takes the one with fewer poses (fewer
 placements for the robot to get right, larger blocks), 'flat' the one whose
 blocks span fewer levels (a top-down hand places a block beside lower or equal
 neighbours, not beside taller ones: its palm passes 14 mm above the block's top).
-Ablated in docs/results/reallocation.md.
+Compared by `benchmarks/bench_reallocation.py` (its rows, under out/cache, name the preference).
 
 `support='arm'` (rad's, stable as above) first rules out what the arm can never do,
 whatever the order (`allocation.arm`): block types the open hand cannot take from above,

@@ -1,4 +1,4 @@
-"""Hard hand-made scenes: the shapes issue 17's targets are measured on.
+"""Hard hand-made scenes: the shapes the hard-shape figures are measured on.
 
 `rad_core.domain.shapes` draws targets unlike the generator's, but at one unit (5 cm), one
 place (0.5 m in front of the robot), with blocks 5 cm apart on the table and only

@@ -97,7 +97,7 @@ between them only; over those joints' URDF ranges on a 0.02 rad grid they are ne
 between grid points nothing moves more than 0.6 m/rad x 0.01 rad per joint: 1.2 cm at most, and
 the pairs stay 1.6 cm apart or more
 (tests/core/test_gamp.py::test_never_touching_pairs_stay_apart_over_their_joints_ranges). Their
-boxes overlap in most probes of a plan, so each was measured there before 2026-12-05."""
+boxes overlap in most probes of a plan, so skipping them saves a measurement each."""
 
 
 def self_collision_pairs(world: World) -> list[tuple[int, int]]:
@@ -211,9 +211,9 @@ def _make_probe(world: World, exclude, attached: Attachment | None, config: Coll
     m, s = config.robot_margin, config.self_margin
     # The obstacles in rank order with their bounding boxes, read once: they stay put while fn is used.
     # A body whose box (which holds its collision shape) does not come within the margin of a link's
-    # box cannot be within it of the link, so only those that do are measured, in rank order (as
-    # Bullet's broadphase queries found them before 2026-12-05, which also returned bodies whose box
-    # only came near: measuring those found nothing).
+    # box cannot be within it of the link, so only those that do are measured, in rank order (the order
+    # Bullet's broadphase queries return; those also return bodies whose box only comes near, and
+    # measuring those finds nothing).
     order = sorted(obstacles, key=rank.__getitem__)
     obstacle_box = np.array([p.getAABB(body, -1, physicsClientId=cid) for body in order]).reshape(len(order), 2, 3)
     low_m, high_m = obstacle_box[:, 0] - m, obstacle_box[:, 1] + m      # grown by the margin

@@ -19,13 +19,11 @@ up to six calls to come within 0.2 mm. So each attempt, from a seed
 3. the answer is accepted only when the residual (position and orientation)
    is within tolerance and every joint is within the URDF limits.
 
-Until 2026-12-05 step 2 was the null-space call of a hundred iterations and
-plain calls of a hundred after it, three times the cost of a solve now. The
-answers are other ones: 0.018 rad apart (median over 1,940 solves of the
-planning-step benchmark, the same inputs), and a plan's vertical paths keep the
-branch of the waypoint below where each waypoint was pulled towards the rest
-pose, so a plan ends 0.23 rad apart (median); every planning step measured
-decides the same (docs/results/planning_step.md).
+Why Newton finishes: pybullet's calls alone of a hundred iterations each cost
+three times as much a solve for the same accuracy; the answers of the two differ
+by milliradians (Newton keeps the branch of the waypoint below on a vertical
+path), and every planning step `benchmarks/bench_planning_step.py --compare`
+replays decides the same (docs/results/planning_step.md).
 
 Attempts are seeded in turn from the caller's seeds (e.g. the previous
 waypoint, so a path stays on one branch), from HOME turned towards the target,
@@ -70,8 +68,8 @@ class IkConfig:
     orientation_tol_deg: float = 2.0
     """Accepted FK orientation residual (deg, angle of the relative rotation)."""
     solver_iterations: int = 20
-    """maxNumIterations of the null-space pybullet call that picks an attempt's branch (until
-    2026-12-05 a hundred, and plain calls of a hundred after it; Newton steps finish it now)."""
+    """maxNumIterations of the null-space pybullet call that picks an attempt's branch; Newton
+    steps finish it."""
     newton_steps: int = 8
     """Newton steps after the null-space call, per attempt (two or three reach 1e-6 m)."""
     near_seed_m: float = 0.05
