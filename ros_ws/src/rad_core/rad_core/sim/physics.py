@@ -62,6 +62,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, fields
+from typing import Self
 
 import numpy as np
 
@@ -169,6 +170,34 @@ def direct_client(config: PhysicsConfig):
     return p, cid
 
 
+class ClientOwner:
+    """The lifetime of an object that owns one PyBullet client (`direct_client`), kept as the
+    pybullet module ``_p`` and the client id ``client`` (-1: none): `close` disconnects it. A
+    context manager that closes on exit, and closed when collected. Shared by the stability check
+    and the twin's `World`."""
+
+    _p = None
+    client = -1     # until connected (also for an instance whose __init__ failed: close has nothing to do)
+
+    def close(self) -> None:
+        """Disconnect the client."""
+        if self.client >= 0:
+            self._p.disconnect(physicsClientId=self.client)
+        self.client = -1
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def __del__(self):
+        try:
+            self.close()
+        except Exception:         # at interpreter exit pybullet may be gone already
+            pass
+
+
 @dataclass(frozen=True)
 class BlockShape:
     """The PyBullet shapes of one polycube block, and its mass properties, to create bodies from.
@@ -254,7 +283,7 @@ def add_block_body(p, client: int, shape: BlockShape, position, orientation, con
     return body
 
 
-class PhysicsStability:
+class PhysicsStability(ClientOwner):
     """The MDP's `StabilityCheck`, backed by PyBullet (see the module docstring).
 
     ``check(unit, placed, new, clearance=0.0)`` returns (True, '') when the
@@ -267,35 +296,21 @@ class PhysicsStability:
     def __init__(self, config: PhysicsConfig = PhysicsConfig()):
         self.config = config
         self._p = None            # the pybullet module, imported on first use
-        self._client = -1
+        self.client = -1          # connected on first use
         self._shapes: dict[tuple, BlockShape] = {}
         self._bodies: list[int] = []
 
     # ---- lifetime --------------------------------------------------------
-    def __enter__(self) -> 'PhysicsStability':
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()
-
-    def __del__(self):
-        try:
-            self.close()
-        except Exception:         # at interpreter exit pybullet may be gone already
-            pass
-
     def close(self) -> None:
         """Disconnect the client; the next check connects a fresh one."""
-        if self._client >= 0:
-            self._p.disconnect(physicsClientId=self._client)
-        self._client = -1
+        super().close()
         self._shapes.clear()
         self._bodies.clear()
 
     def _connect(self) -> None:
         cfg = self.config
         p, cid = direct_client(cfg)
-        self._p, self._client = p, cid
+        self._p, self.client = p, cid
         half = 100.0 * cfg.sim_unit
         table = p.createCollisionShape(p.GEOM_BOX, halfExtents=[half, half, half], physicsClientId=cid)
         ground = p.createMultiBody(0, table, basePosition=[0, 0, -half], physicsClientId=cid)
@@ -312,7 +327,7 @@ class PhysicsStability:
         blocks.append(np.asarray(new, dtype=float).reshape(-1, 3))
         if any(len(b) == 0 for b in blocks):
             raise RadError('every block needs at least one unit cube')
-        if self._client < 0:
+        if self.client < 0:
             self._connect()
         cubes = [b * (self.config.sim_unit / unit) for b in blocks]
         try:
@@ -321,14 +336,14 @@ class PhysicsStability:
             return self._simulate(cubes, unit)
         finally:
             for body in self._bodies:
-                self._p.removeBody(body, physicsClientId=self._client)
+                self._p.removeBody(body, physicsClientId=self.client)
             self._bodies.clear()
 
     def _shape(self, offsets: np.ndarray, clearance: float) -> BlockShape:
         key = (tuple(map(tuple, offsets.tolist())), clearance)
         shape = self._shapes.get(key)
         if shape is None:
-            shape = block_shape(self._p, self._client, offsets, self.config.sim_unit, self.config,
+            shape = block_shape(self._p, self.client, offsets, self.config.sim_unit, self.config,
                                 clearance=clearance)
             self._shapes[key] = shape
         return shape
@@ -337,11 +352,11 @@ class PhysicsStability:
         """A block whose unit cubes have these world centres (simulation scale)."""
         cfg = self.config
         shape = self._shape(np.round((cubes - cubes[0]) / cfg.sim_unit).astype(np.int64), clearance)
-        return add_block_body(self._p, self._client, shape, (cubes[0] + shape.com).tolist(), shape.axes, cfg,
+        return add_block_body(self._p, self.client, shape, (cubes[0] + shape.com).tolist(), shape.axes, cfg,
                               maximal_coordinates=True, damping=0.0)
 
     def _simulate(self, cubes: list[np.ndarray], unit: float) -> tuple[bool, str]:
-        p, cid, cfg = self._p, self._client, self.config
+        p, cid, cfg = self._p, self.client, self.config
         u, bodies = cfg.sim_unit, self._bodies
         new = len(bodies) - 1
         start = [p.getBasePositionAndOrientation(b, physicsClientId=cid) for b in bodies]

@@ -51,7 +51,8 @@ from rad_core.domain.colours import TABLE, type_colour
 from rad_core.domain.errors import RadError
 from rad_core.domain.scene import Scene
 from rad_core.domain.transforms import yaw_quaternion
-from rad_core.sim.physics import BlockShape, PhysicsConfig, add_block_body, block_shape, direct_client
+from rad_core.sim.physics import (BlockShape, ClientOwner, PhysicsConfig, add_block_body, block_shape,
+                                  direct_client)
 
 PARK_Z = -20.0
 """Where parked feeder blocks wait (m below the table top), one metre apart along x."""
@@ -74,16 +75,15 @@ class WorldConfig:
             raise RadError(f'world config table_half_extents: expected positive sizes, got {self.table_half_extents!r}')
 
 
-class World:
+class World(ClientOwner):
     """Table, robot and blocks in a private DIRECT client.
 
     Not thread-safe; one World per thread or process. Use as a context manager
-    or call `close`.
+    or call `close` (`ClientOwner`).
     """
 
     def __init__(self, scene: Scene | None = None, config: WorldConfig = WorldConfig()):
         self.config = config
-        self.client = -1          # until connected: close() has nothing to do
         p, cid = direct_client(config.physics)    # imports pybullet here: importing it prints a banner
         self._p, self.client = p, cid
         self.scene: Scene | None = None
@@ -124,24 +124,6 @@ class World:
         """The pybullet module, for calls this class has no method for: pass
         ``physicsClientId=world.client`` with each (there is no global client)."""
         return self._p
-
-    # ---- lifetime --------------------------------------------------------
-    def close(self) -> None:
-        if self.client >= 0:
-            self._p.disconnect(physicsClientId=self.client)
-        self.client = -1
-
-    def __enter__(self) -> World:
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()
-
-    def __del__(self):
-        try:
-            self.close()
-        except Exception:         # at interpreter exit pybullet may be gone already
-            pass
 
     # ---- building --------------------------------------------------------
     def _make_table(self, centre, half) -> None:

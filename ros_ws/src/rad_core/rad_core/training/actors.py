@@ -52,18 +52,15 @@ import numpy as np
 import torch
 
 from rad_core.domain.errors import RadError
-from rad_core.env.mdp import TERMINATE, AssemblyEnv, EnvConfig
+from rad_core.env.mdp import AssemblyEnv, EnvConfig
 from rad_core.experiment.distributed import dask_client
-from rad_core.learning import checkpoint as ckpt
-from rad_core.learning.graph import Observer
 from rad_core.learning.network import QNetwork, collate, graph_max
 from rad_core.learning.replay import Transition
 from rad_core.sequencing.decide.actions import action_space
-from rad_core.sequencing.decide.episode import Decision, run_episode
 from rad_core.sim.physics import PhysicsStability
 from rad_core.training.curves import plot_progress
 from rad_core.training.dataset import Dataset
-from rad_core.training.dqn import METHODS, TrainConfig, Trainer, train
+from rad_core.training.dqn import METHODS, TrainConfig, Trainer, explore, open_run, train
 
 
 @dataclass
@@ -115,41 +112,20 @@ def collect(config: dict, weights: dict, seed: int, epsilon: float, chunk_steps:
             state['version'] = tag
         rng = np.random.default_rng(seed)
         actions_kind = METHODS[cfg.method]
+
+        @torch.no_grad()
+        def greedy(obs) -> int:
+            batch = collate([obs], torch.device('cpu'))
+            return int(graph_max(*q(batch), batch)[1][0])
+
         transitions: list[Transition] = []
         episodes: list[tuple[float, float]] = []
         while len(transitions) < chunk_steps:
             entry = state['dataset'].entries[int(rng.integers(len(state['dataset'])))]
             env = AssemblyEnv(entry.scene(), EnvConfig(stability='physics', gamma=cfg.gamma),
                               stability=state['stability'])
-            space = action_space(actions_kind, env, entry.placements)
-            observe = Observer(env)
-            current: dict = {}
-
-            def decide(env, rng):
-                if 'obs' not in current:
-                    actions = space(env)
-                    current.update(obs=observe(env, actions), actions=actions)
-                actions = current['actions']
-                if rng.random() < epsilon:
-                    k = int(rng.integers(len(actions) + 1)) - 1
-                else:
-                    with torch.no_grad():
-                        batch = collate([current['obs']], torch.device('cpu'))
-                        k = int(graph_max(*q(batch), batch)[1][0])
-                current['k'] = k
-                return Decision(actions[k] if k >= 0 else TERMINATE)
-
-            def on_step(decision, result):
-                nxt = {}
-                if not result.done:
-                    actions = space(env)
-                    nxt = {'obs': observe(env, actions), 'actions': actions}
-                transitions.append(Transition(current['obs'], current['k'], float(result.reward),
-                                              bool(result.done), nxt.get('obs')))
-                current.clear()
-                current.update(nxt)
-
-            ep = run_episode(env, decide, rng, on_step=on_step)
+            ep = explore(env, action_space(actions_kind, env, entry.placements), rng, lambda: epsilon, greedy,
+                         transitions.append)
             episodes.append((ep.ret, ep.coverage))
     except RadError as e:
         raise RadError(str(e)) from None   # subclasses with their own __init__ do not unpickle
@@ -277,20 +253,7 @@ def train_with_actors(cfg: TrainConfig, out: str | Path, actor: ActorConfig, res
     127.0.0.1 unless `scheduler` (or an open `client`) is given. Same run folder, same
     checkpoint and model files; resume continues a serial or distributed checkpoint."""
     actor.validate()
-    out = Path(out)
-    if resume:
-        path = out / 'checkpoint.pt'
-        doc = ckpt.read(path, ckpt.TRAIN_FORMAT, weights_only=False)
-        cfg = TrainConfig.from_dict(doc['train']['config'])
-        if total_steps is not None:
-            cfg.total_steps = total_steps
-        trainer = DistributedTrainer(cfg, out, actor)
-        trainer.restore(path)
-    else:
-        if (out / 'checkpoint.pt').exists():
-            raise RadError(f'{str(out)!r} already holds a training run; use --resume to continue it, '
-                           f'or another --out')
-        trainer = DistributedTrainer(cfg, out, actor)
+    trainer = open_run(cfg, out, resume, total_steps, make=lambda c, o: DistributedTrainer(c, o, actor))
     if client is not None:
         return trainer.run(progress, client)
     with dask_client(workers=actor.actors if scheduler is None else None, scheduler=scheduler) as own:

@@ -1,10 +1,10 @@
 """DQN for the sequencing level, guided by the allocation (the paper's MILP-DQN).
 
-Read top to bottom: `TrainConfig` (every knob, documented), `Trainer` (one
-training run: networks, replay, the episode loop with epsilon-greedy
-exploration among the method's action space plus terminate, the TD update
-against a target network, evaluation, logs, checkpoints), `train()` (the entry
-point behind `rad train`).
+Read top to bottom: `TrainConfig` (every knob, documented; those it shares with
+`rad expert` are in `training.config`), `Trainer` (one training run: networks,
+replay, the episode loop with epsilon-greedy exploration among the method's
+action space plus terminate, the TD update against a target network,
+evaluation, logs, checkpoints), `train()` (the entry point behind `rad train`).
 
 Methods (the paper's Table I):
 - milp-dqn: actions are the allocation's proposals (`AllocationActions`);
@@ -37,8 +37,9 @@ import resource
 import signal
 import threading
 import time
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 import torch
@@ -54,8 +55,9 @@ from rad_core.learning.graph import GraphObs, Observer
 from rad_core.learning.network import NetConfig, QNetwork, collate, graph_max, pick
 from rad_core.learning.replay import ReplayBuffer, Transition
 from rad_core.sequencing.decide.actions import action_space
-from rad_core.sequencing.decide.episode import Decision, run_episode
+from rad_core.sequencing.decide.episode import Decision, Episode, run_episode
 from rad_core.sim.physics import PhysicsStability
+from rad_core.training.config import LearnerConfig, knob
 from rad_core.training.curves import plot_progress
 from rad_core.training.dataset import Dataset
 
@@ -63,62 +65,47 @@ METHODS = {'milp-dqn': 'milp', 'dqn': 'all', 'dqn-rel': 'rel'}
 VALIDATION_SEED_BASE = 500_000   # validation scenes: neither evaluation (0..) nor training (1e6..) seeds
 
 
-def _f(default, help: str):
-    return field(default=default, metadata={'help': help})
-
-
 @dataclass
-class TrainConfig:
-    """One training run. `rad train --<field-name-with-dashes> VALUE` sets any field."""
+class TrainConfig(LearnerConfig):
+    """One training run: the shared knobs (`LearnerConfig`: seed, init, lr, batch_size,
+    target_update, gamma, grad_clip, threads) and DQN's own. `rad train --<field-name-with-dashes>
+    VALUE` sets any field."""
 
-    method: str = _f('milp-dqn', "milp-dqn (allocation's actions), dqn (any unit, any free cell), dqn-rel "
-                                 "(next to placed blocks)")
-    dataset: str = _f('data/train-g3.jsonl.gz', 'training scenes with allocations (`rad dataset build`)')
-    total_steps: int = _f(40_000, 'environment steps to train for')
-    seed: int = _f(0, 'seeds scene sampling, exploration, replay sampling and the initial weights')
-    lr: float = _f(3e-4, 'Adam learning rate')
-    batch_size: int = _f(32, 'transitions per gradient step')
-    buffer_size: int = _f(30_000, 'replay capacity, transitions')
-    learning_starts: int = _f(1_000, 'environment steps before the first gradient step')
-    train_every: int = _f(4, 'environment steps per gradient step')
-    target_update: int = _f(1_000, 'environment steps between hard target-network updates')
-    gamma: float = _f(0.999, "discount (the paper's)")
-    eps_start: float = _f(1.0, 'initial exploration rate')
-    eps_end: float = _f(0.05, 'final exploration rate')
-    eps_fraction: float = _f(0.4, 'fraction of total_steps over which epsilon decays linearly')
-    double: bool = _f(False, 'double DQN targets (online argmax, target value)')
-    grad_clip: float = _f(10.0, 'gradient norm clip')
-    eval_every: int = _f(2_000, 'environment steps between greedy evaluations on validation scenes')
-    eval_scenes: int = _f(50, 'validation scenes (generator seeds from 500000, never used elsewhere)')
-    eval_grid: int = _f(3, 'g of the validation scenes')
-    checkpoint_every_s: float = _f(120.0, 'seconds between training checkpoints (also on SIGINT and at the end)')
-    device: str = _f('auto', "'auto' (cuda if present, else cpu), 'cpu', 'cuda', 'cuda:1', ...")
-    threads: int = _f(1, 'torch CPU threads (1 is fastest on the 2-core machine when anything else runs)')
-    robot: bool = _f(False, 'train (and validate) with the robot in the loop: GAMP, teleport execution, physics')
-    robot_settle_s: float = _f(0.2, 'with the robot: simulated settling before a placement is judged (0.2 s '
-                                    'gave the verdicts of 0.5 s on every placement measured)')
-    init: str = _f('', "start from this model's weights: a shipped name ('milp-dqn-mixed') or a model.pt")
-    dim: int = _f(64, 'network: node encoding width')
-    heads: int = _f(4, 'network: attention heads')
-    rounds: int = _f(3, 'network: message-passing rounds')
-    ff: int = _f(512, 'network: feed-forward width in each round')
-    readout: int = _f(128, 'network: hidden width of the Q heads')
+    method: str = knob('milp-dqn', "milp-dqn (allocation's actions), dqn (any unit, any free cell), dqn-rel "
+                                   "(next to placed blocks)")
+    dataset: str = knob('data/train-g3.jsonl.gz', 'training scenes with allocations (`rad dataset build`)')
+    total_steps: int = knob(40_000, 'environment steps to train for')
+    buffer_size: int = knob(30_000, 'replay capacity, transitions')
+    learning_starts: int = knob(1_000, 'environment steps before the first gradient step')
+    train_every: int = knob(4, 'environment steps per gradient step')
+    eps_start: float = knob(1.0, 'initial exploration rate')
+    eps_end: float = knob(0.05, 'final exploration rate')
+    eps_fraction: float = knob(0.4, 'fraction of total_steps over which epsilon decays linearly')
+    double: bool = knob(False, 'double DQN targets (online argmax, target value)')
+    eval_every: int = knob(2_000, 'environment steps between greedy evaluations on validation scenes')
+    eval_scenes: int = knob(50, 'validation scenes (generator seeds from 500000, never used elsewhere)')
+    eval_grid: int = knob(3, 'g of the validation scenes')
+    checkpoint_every_s: float = knob(120.0, 'seconds between training checkpoints (also on SIGINT and at the end)')
+    device: str = knob('auto', "'auto' (cuda if present, else cpu), 'cpu', 'cuda', 'cuda:1', ...")
+    robot: bool = knob(False, 'train (and validate) with the robot in the loop: GAMP, teleport execution, physics')
+    robot_settle_s: float = knob(0.2, 'with the robot: simulated settling before a placement is judged (0.2 s '
+                                      'gave the verdicts of 0.5 s on every placement measured)')
+    dim: int = knob(64, 'network: node encoding width')
+    heads: int = knob(4, 'network: attention heads')
+    rounds: int = knob(3, 'network: message-passing rounds')
+    ff: int = knob(512, 'network: feed-forward width in each round')
+    readout: int = knob(128, 'network: hidden width of the Q heads')
 
     def validate(self) -> None:
         if self.method not in METHODS:
             raise RadError(f'method must be one of {", ".join(METHODS)}, got {self.method!r}')
-        for name in ('total_steps', 'batch_size', 'buffer_size', 'train_every', 'target_update', 'eval_every',
-                     'eval_scenes', 'threads', 'dim', 'heads', 'rounds', 'ff', 'readout'):
-            if getattr(self, name) < 1:
-                raise RadError(f'{name} must be at least 1, got {getattr(self, name)}')
+        super().validate()
+        self.require_positive('total_steps', 'buffer_size', 'train_every', 'eval_every', 'eval_scenes',
+                              'dim', 'heads', 'rounds', 'ff', 'readout')
         if self.dim % self.heads:
             raise RadError(f'dim ({self.dim}) must be a multiple of heads ({self.heads})')
         if not (0 <= self.eps_end <= self.eps_start <= 1):
             raise RadError('need 0 <= eps_end <= eps_start <= 1')
-        if not (0 < self.gamma <= 1) or self.lr <= 0:
-            raise RadError('need 0 < gamma <= 1 and lr > 0')
-        if not self.grad_clip > 0:
-            raise RadError(f'grad_clip must be a positive gradient norm, got {self.grad_clip}')
         if not self.robot_settle_s > 0:
             raise RadError(f'robot_settle_s must be positive, got {self.robot_settle_s}')
 
@@ -126,10 +113,41 @@ class TrainConfig:
     def net(self) -> NetConfig:
         return NetConfig(self.dim, self.heads, self.rounds, self.ff, self.readout)
 
-    @classmethod
-    def from_dict(cls, d: dict) -> 'TrainConfig':
-        known = {f.name for f in fields(cls)}
-        return cls(**{k: v for k, v in d.items() if k in known})
+
+def explore(env: AssemblyEnv, space, rng: np.random.Generator, epsilon: Callable[[], float],
+            greedy: Callable[[GraphObs], int], record: Callable[[Transition], None], act=None) -> Episode:
+    """One epsilon-greedy episode from the env's state: at each step, with probability epsilon() a
+    uniform choice among the candidates space(env) and terminating, else greedy(observation) (a
+    candidate's index, -1 for terminating); record(transition) after each step, in play order
+    (the transition's next observation is the one the next decision sees). act: as `run_episode`'s.
+    The serial trainer and the actors play their episodes with it."""
+    observe = Observer(env)
+    current = {}
+
+    def decide(env: AssemblyEnv, rng: np.random.Generator) -> Decision:
+        if 'obs' not in current:
+            actions = space(env)
+            current.update(obs=observe(env, actions), actions=actions)
+        actions = current['actions']
+        if rng.random() < epsilon():
+            k = int(rng.integers(len(actions) + 1)) - 1   # uniform over candidates and terminate
+        else:
+            k = greedy(current['obs'])
+        current['k'] = k
+        return Decision(actions[k] if k >= 0 else TERMINATE)
+
+    def on_step(decision: Decision, result) -> None:
+        nxt = {}
+        if not result.done:
+            actions = space(env)
+            nxt = {'obs': observe(env, actions), 'actions': actions}
+        transition = Transition(current['obs'], current['k'], float(result.reward), bool(result.done),
+                                nxt.get('obs'))
+        current.clear()
+        current.update(nxt)
+        record(transition)
+
+    return run_episode(env, decide, rng, act, on_step=on_step)
 
 
 def pick_device(name: str) -> torch.device:
@@ -230,31 +248,9 @@ class Trainer:
         """One training episode on a random dataset scene, learning as it goes."""
         entry = self.dataset.entries[int(self.rng.integers(len(self.dataset)))]
         env = self.make_env(entry.scene())
-        space = action_space(self.actions, env, entry.placements)
-        observe = Observer(env)
-        current = {}
 
-        def decide(env: AssemblyEnv, rng: np.random.Generator) -> Decision:
-            if 'obs' not in current:
-                actions = space(env)
-                current.update(obs=observe(env, actions), actions=actions)
-            actions = current['actions']
-            if rng.random() < self.epsilon():
-                k = int(rng.integers(len(actions) + 1)) - 1   # uniform over candidates and terminate
-            else:
-                k = self.greedy(current['obs'])
-            current['k'] = k
-            return Decision(actions[k] if k >= 0 else TERMINATE)
-
-        def on_step(decision: Decision, result) -> None:
-            nxt = {}
-            if not result.done:
-                actions = space(env)
-                nxt = {'obs': observe(env, actions), 'actions': actions}
-            self.replay.add(Transition(current['obs'], current['k'], float(result.reward), bool(result.done),
-                                       nxt.get('obs')))
-            current.clear()
-            current.update(nxt)
+        def learn_from(transition: Transition) -> None:
+            self.replay.add(transition)
             self.pos['env_steps'] += 1
             steps = self.pos['env_steps']
             if steps >= self.cfg.learning_starts and steps % self.cfg.train_every == 0:
@@ -262,7 +258,8 @@ class Trainer:
             if steps % self.cfg.target_update == 0:
                 self.target.load_state_dict(self.q.state_dict())
 
-        ep = run_episode(env, decide, self.rng, self.act if self.cfg.robot else None, on_step=on_step)
+        ep = explore(env, action_space(self.actions, env, entry.placements), self.rng, self.epsilon, self.greedy,
+                     learn_from, self.act if self.cfg.robot else None)
         self.pos['episodes'] += 1
         self.recent = (self.recent + [(ep.ret, ep.coverage)])[-100:]
 
@@ -460,23 +457,30 @@ class Trainer:
                    if self.step_cache is not None else {})}
 
 
+def open_run(cfg: TrainConfig, out: str | Path, resume: bool = False, total_steps: int | None = None,
+             make: Callable[[TrainConfig, Path], Trainer] = Trainer) -> Trainer:
+    """The trainer of the run in `out`, made by make(config, out): with resume, the run its
+    checkpoint holds, restored (the checkpoint's config wins; total_steps may extend it); else a
+    new run with `cfg`, refusing a folder that holds one already."""
+    out = Path(out)
+    path = out / 'checkpoint.pt'
+    if resume:
+        doc = ckpt.read(path, ckpt.TRAIN_FORMAT, weights_only=False)
+        cfg = TrainConfig.from_dict(doc['train']['config'])
+        if total_steps is not None:
+            cfg.total_steps = total_steps
+        trainer = make(cfg, out)
+        trainer.restore(path)
+        return trainer
+    if path.exists():
+        raise RadError(f'{str(out)!r} already holds a training run; use --resume to continue it, '
+                       f'or another --out')
+    return make(cfg, out)
+
+
 def train(cfg: TrainConfig, out: str | Path, resume: bool = False, total_steps: int | None = None,
           progress=None) -> dict:
     """Train (or with resume, continue the run in `out` from its checkpoint, whose
     config wins; total_steps may extend it). Writes out/progress.csv, out/tb/,
     out/checkpoint.pt, out/model.pt, out/curves.png."""
-    out = Path(out)
-    if resume:
-        path = out / 'checkpoint.pt'
-        doc = ckpt.read(path, ckpt.TRAIN_FORMAT, weights_only=False)
-        cfg = TrainConfig.from_dict(doc['train']['config'])
-        if total_steps is not None:
-            cfg.total_steps = total_steps
-        trainer = Trainer(cfg, out)
-        trainer.restore(path)
-    else:
-        if (out / 'checkpoint.pt').exists():
-            raise RadError(f'{str(out)!r} already holds a training run; use --resume to continue it, '
-                           f'or another --out')
-        trainer = Trainer(cfg, out)
-    return trainer.run(progress)
+    return open_run(cfg, out, resume, total_steps).run(progress)

@@ -33,7 +33,7 @@ import json
 import os
 import pickle
 import time
-from dataclasses import asdict, dataclass, fields, replace
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -54,7 +54,7 @@ from rad_core.learning.replay import Transition
 from rad_core.sequencing.agent.agent_plan import AgentPlanner
 from rad_core.sequencing.decide.actions import mdp_actions
 from rad_core.sequencing.decide.agents import parse
-from rad_core.training.dqn import _f
+from rad_core.training.config import LearnerConfig, knob
 
 TRAIN_SEED_BASE = 3_000_000
 """Generator seeds of the expert's generated scenes: neither evaluation (0..), validation (500000..)
@@ -62,44 +62,38 @@ nor the DQN datasets' (1000000..)."""
 
 
 @dataclass
-class ExpertConfig:
-    """One expert-iteration run. `rad expert --<field-name-with-dashes> VALUE` sets any field."""
+class ExpertConfig(LearnerConfig):
+    """One expert-iteration run: the shared knobs (`LearnerConfig`: seed, init, lr, batch_size,
+    target_update, gamma, grad_clip, threads) and the expert's own. `rad expert
+    --<field-name-with-dashes> VALUE` sets any field."""
 
-    init: str = _f('milp-dqn-mixed', "the network to start from: a shipped name or a model.pt")
-    agent: str = _f('default', 'the expert: an agent around the network (its scorer is replaced by the '
-                               'current network); it needs the robot-verified plan (verify)')
-    grids: str = _f('4,5,6', 'comma-separated g of the generated training scenes')
-    scenes: int = _f(20, 'generated scenes per grid size and round')
-    shapes: bool = _f(True, "also the training splits of the hand-made and the hard shapes, one layout per round")
-    rounds: int = _f(2, 'collect-and-train rounds')
-    steps: int = _f(400, 'gradient steps per round')
-    lr: float = _f(3e-5, 'Adam learning rate')
-    batch_size: int = _f(32, 'transitions per gradient step')
-    margin: float = _f(0.02, "the large-margin loss's margin (Q units; the shipped network's best two candidates "
-                             "lie 0.014 apart at the median)")
-    expert_weight: float = _f(1.0, 'weight of the large-margin loss beside the TD loss')
-    td_weight: float = _f(1.0, 'weight of the one-step TD loss')
-    anchor_weight: float = _f(10.0, "weight of the squared difference to the starting network's values on every "
-                                    "candidate (0: none); without it a few hundred steps reorder the network's "
-                                    "near-tied candidates everywhere")
-    gamma: float = _f(0.999, "discount (the paper's)")
-    target_update: int = _f(500, 'gradient steps between hard target-network updates')
-    weight_decay: float = _f(1e-5, 'L2 regularisation (Adam weight decay), as DQfD')
-    grad_clip: float = _f(10.0, 'gradient norm clip')
-    holdout: float = _f(0.15, 'fraction of each round\'s scenes whose demonstrations only measure agreement')
-    time_limit_s: float = _f(120.0, "the expert's planning time limit per scene")
-    workers: int = _f(2, 'Dask worker processes planning scenes (1: in this process)')
-    seed: int = _f(0, 'seeds scene choice, the held-out split, batch sampling and the weights of new rounds')
-    threads: int = _f(1, 'torch CPU threads for training')
+    init: str = LearnerConfig.with_default('init', 'milp-dqn-mixed')
+    lr: float = LearnerConfig.with_default('lr', 3e-5)
+    target_update: int = LearnerConfig.with_default('target_update', 500)
+    agent: str = knob('default', 'the expert: an agent around the network (its scorer is replaced by the '
+                                 'current network); it needs the robot-verified plan (verify)')
+    grids: str = knob('4,5,6', 'comma-separated g of the generated training scenes')
+    scenes: int = knob(20, 'generated scenes per grid size and round')
+    shapes: bool = knob(True, "also the training splits of the hand-made and the hard shapes, one layout per round")
+    rounds: int = knob(2, 'collect-and-train rounds')
+    steps: int = knob(400, 'gradient steps per round')
+    margin: float = knob(0.02, "the large-margin loss's margin (Q units; the shipped network's best two candidates "
+                               "lie 0.014 apart at the median)")
+    expert_weight: float = knob(1.0, 'weight of the large-margin loss beside the TD loss')
+    td_weight: float = knob(1.0, 'weight of the one-step TD loss')
+    anchor_weight: float = knob(10.0, "weight of the squared difference to the starting network's values on every "
+                                      "candidate (0: none); without it a few hundred steps reorder the network's "
+                                      "near-tied candidates everywhere")
+    weight_decay: float = knob(1e-5, 'L2 regularisation (Adam weight decay), as DQfD')
+    holdout: float = knob(0.15, 'fraction of each round\'s scenes whose demonstrations only measure agreement')
+    time_limit_s: float = knob(120.0, "the expert's planning time limit per scene")
+    workers: int = knob(2, 'Dask worker processes planning scenes (1: in this process)')
 
     def validate(self) -> None:
-        for name in ('scenes', 'rounds', 'steps', 'batch_size', 'target_update', 'workers', 'threads'):
-            if getattr(self, name) < 1:
-                raise RadError(f'{name} must be at least 1, got {getattr(self, name)}')
-        if not (self.lr > 0 and self.margin >= 0 and min(self.expert_weight, self.td_weight, self.anchor_weight) >= 0
-                and 0 < self.gamma <= 1):
-            raise RadError('need lr > 0, margin >= 0, expert_weight, td_weight and anchor_weight >= 0 and '
-                           '0 < gamma <= 1')
+        super().validate()
+        self.require_positive('scenes', 'rounds', 'steps', 'workers')
+        if not (self.margin >= 0 and min(self.expert_weight, self.td_weight, self.anchor_weight) >= 0):
+            raise RadError('need margin >= 0, and expert_weight, td_weight and anchor_weight >= 0')
         if not 0 <= self.holdout < 1:
             raise RadError(f'holdout must be in [0, 1), got {self.holdout}')
         self.grid_sizes()
@@ -116,11 +110,6 @@ class ExpertConfig:
         if any(g < 2 for g in grids):
             raise RadError(f'grids must be at least 2, got {self.grids!r}')
         return grids
-
-    @classmethod
-    def from_dict(cls, d: dict) -> 'ExpertConfig':
-        known = {f.name for f in fields(cls)}
-        return cls(**{k: v for k, v in d.items() if k in known})
 
 
 # ---- demonstrations -----------------------------------------------------------------

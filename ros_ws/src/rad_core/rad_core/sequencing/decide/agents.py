@@ -150,16 +150,13 @@ def label(spec: AgentSpec) -> str:
     return '+'.join(parts)
 
 
+# Named agents for what people ask for. `default` is what the sequencer node and /plan_assembly
+# run (the node graph always verifies with GAMP, re-allocates and allocates with support): the
+# greedy mixed network with order repair, on an allocation the hand can place in some order
+# (support:hand). Both parts raise coverage on g = 5, g = 6 and the hard shapes (docs/search.md).
+# It has no look-ahead search: tried after the network's plan, that changed no plan's coverage in
+# 111 measured and cost up to improve_time_s each time.
 PRESETS = {
-    # What the sequencer node and /plan_assembly run by default (the node graph always verifies
-    # with GAMP, re-allocates and allocates with support): the greedy network, with order repair
-    # (2026-12-03: g = 5 0.949 -> 0.951, g = 6 0.932 -> 0.94, the hard set 0.942 -> 0.948 within
-    # the node's improve_time_s; docs/search.md). Until 2026-12-03 it was the greedy network with a
-    # look-ahead search (lookahead:5), whose plan, tried after the network's wherever that left
-    # cells open, changed no plan's coverage in 111 measured (rad eval g = 5 and 6, the hard set,
-    # /plan_assembly's benchmark twice) and cost up to improve_time_s each time. Since 2026-12-04 its
-    # allocation asks for an order the hand can place (support:hand; g = 5 0.959 -> 0.966, g = 6
-    # 0.952 -> 0.979, held-out 0.953 -> 0.965, hard 0.956 -> 0.968; docs/search.md).
     'default': 'milp-dqn-mixed+verify+realloc+repair+support:hand',
     'greedy': 'milp-dqn-mixed+verify+realloc+support:arm',   # the network alone, verified
     'paper': 'milp-dqn+mcts:5+support:none',         # the paper's MILP-DQN-MCTS
