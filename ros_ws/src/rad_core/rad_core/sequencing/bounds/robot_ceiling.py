@@ -165,61 +165,91 @@ def robot_ceiling(scene, time_limit_s: float = 60.0, support: str | tuple[str, .
     with RobotAssemblyEnv(scene, RobotEnvConfig(execution='teleport')) as renv:
         renv.reset()
         env = renv.env
-        arm_bound = ArmCoverageBound(scene, env.grid, renv.config.gamp, ordered=ordered)
-        # The root's bound decides whether an answer is the true ceiling: CP-SAT gets longer there
-        # (remembered for every search from the root), the states below it the bound's own limit.
-        root = arm_bound(env, max(arm_bound.time_limit_s, min(30.0, time_limit_s / 10)))
-        if ordered and root > env.coverage() + 1e-9:
-            # Where the hand's order is not proven in its time (a 72-block wall's 590 poses), the
-            # bound course by course, a relaxation of it that CP-SAT proves in seconds, is tighter.
-            arm_bound.cap(env, course_bound(scene, min(30.0, max(10.0, time_limit_s / 10))))
+        arm_bound = _root_bound(scene, renv, time_limit_s, ordered)
         memo = _FailedMoves(renv, arm_bound.hand)
-        check = memo.check()
-
-        def on_dead_end(_model, current):
-            # A copy of the line's space (its parent keeps its own), with the no-goods found on the line.
-            sub = AllocationActions(env, current.guide.placements)
-            reallocator = Reallocator(sub, check, config)
-            reallocator.no_goods = dict(getattr(current, 'no_goods', {}))
-            reallocator.blocked = dict(getattr(current, 'blocked', {}))
-            event = reallocator.stalled(env, 'exact search: dead end')
-            sub.no_goods, sub.blocked = reallocator.no_goods, reallocator.blocked
-            return sub if event.changed else None
+        on_dead_end = _reallocate_at_dead_end(env, memo.check(), config)
 
         def bound_of(_model) -> float:   # re-allocating: what any allocation of the free cells could cover
             return arm_bound(env)
 
-        answer, searched = None, set()
-        for rule in supports:
-            placements = solve(scene, AllocationParams(support=rule)).placements
-            key = frozenset(placements)
-            left = deadline - time.monotonic()
-            if answer is not None and (key in searched or left <= 0):
-                continue
-            left = max(left, 1e-9)      # the first search runs, if only to say the limit cut it
-            searched.add(key)
-            known = incumbent if answer is None else max(incumbent, answer.coverage)
-            found = exact_search(EnvModel(memo, None, AllocationActions(env, placements)), left,
-                                 max_states=max_states if answer is None else max(1, max_states - answer.states),
-                                 on_dead_end=on_dead_end, bound_of=bound_of, incumbent=known)
-            answer = found if answer is None else _better(answer, found)
-            if not answer.complete or answer.proof == 'bound':
-                break
+        answer = _search_allocations(scene, supports, env, memo, deadline, max_states, incumbent,
+                                     on_dead_end, bound_of)
         left = deadline - time.monotonic()
         if every_pose and answer.complete and answer.proof == 'exhausted' and left > 0:
-            # Every pose the bound counts, in one space: exhausted, no placement sequence of them does
-            # better, which is what the bound is over: the true ceiling.
-            space = AllocationActions(env, [c.placement for c in arm_bound.candidates])
-            found = exact_search(EnvModel(memo, None, space), left,
-                                 max_states=max(1, max_states - answer.states), bound_of=bound_of,
-                                 incumbent=max(incumbent, answer.coverage))
-            done = found.complete
-            answer = _better(answer, found)
-            # Cut, it still searched more than the allocations did: their answer stands, or the line it found.
-            answer.complete, answer.reason = True, ''
-            answer.proof = {'bound': 'bound', 'exhausted': 'all poses'}.get(found.proof, 'exhausted') if done \
-                else 'exhausted'
+            answer = _search_every_pose(answer, env, memo, arm_bound, left, max_states, incumbent, bound_of)
         return answer
+
+
+def _root_bound(scene, renv, time_limit_s: float, ordered: bool) -> ArmCoverageBound:
+    """The arm's coverage bound of the scene in the planning twin, its value at the root (the empty
+    scene) proven with more time, and capped there course by course where `ordered`."""
+    env = renv.env
+    arm_bound = ArmCoverageBound(scene, env.grid, renv.config.gamp, ordered=ordered)
+    # The root's bound decides whether an answer is the true ceiling: CP-SAT gets longer there
+    # (remembered for every search from the root), the states below it the bound's own limit.
+    root = arm_bound(env, max(arm_bound.time_limit_s, min(30.0, time_limit_s / 10)))
+    if ordered and root > env.coverage() + 1e-9:
+        # Where the hand's order is not proven in its time (a 72-block wall's 590 poses), the
+        # bound course by course, a relaxation of it that CP-SAT proves in seconds, is tighter.
+        arm_bound.cap(env, course_bound(scene, min(30.0, max(10.0, time_limit_s / 10))))
+    return arm_bound
+
+
+def _reallocate_at_dead_end(env, check, config: ReallocationConfig):
+    """The search's `on_dead_end`: re-allocate the line's space where no move succeeds (None where
+    the re-allocation changes nothing)."""
+    def on_dead_end(_model, current):
+        # A copy of the line's space (its parent keeps its own), with the no-goods found on the line.
+        sub = AllocationActions(env, current.guide.placements)
+        reallocator = Reallocator(sub, check, config)
+        reallocator.no_goods = dict(getattr(current, 'no_goods', {}))
+        reallocator.blocked = dict(getattr(current, 'blocked', {}))
+        event = reallocator.stalled(env, 'exact search: dead end')
+        sub.no_goods, sub.blocked = reallocator.no_goods, reallocator.blocked
+        return sub if event.changed else None
+    return on_dead_end
+
+
+def _search_allocations(scene, supports: tuple[str, ...], env, memo: _FailedMoves, deadline: float,
+                        max_states: int, incumbent: float, on_dead_end, bound_of) -> ExactResult:
+    """The branch and bound over each support rule's allocation in turn (`robot_ceiling`'s support),
+    each from the best found so far, while the searches before were exhausted below the bound and
+    time is left; the same allocation twice is searched once."""
+    answer, searched = None, set()
+    for rule in supports:
+        placements = solve(scene, AllocationParams(support=rule)).placements
+        key = frozenset(placements)
+        left = deadline - time.monotonic()
+        if answer is not None and (key in searched or left <= 0):
+            continue
+        left = max(left, 1e-9)      # the first search runs, if only to say the limit cut it
+        searched.add(key)
+        known = incumbent if answer is None else max(incumbent, answer.coverage)
+        found = exact_search(EnvModel(memo, None, AllocationActions(env, placements)), left,
+                             max_states=max_states if answer is None else max(1, max_states - answer.states),
+                             on_dead_end=on_dead_end, bound_of=bound_of, incumbent=known)
+        answer = found if answer is None else _better(answer, found)
+        if not answer.complete or answer.proof == 'bound':
+            break
+    return answer
+
+
+def _search_every_pose(answer: ExactResult, env, memo: _FailedMoves, arm_bound: ArmCoverageBound, left: float,
+                       max_states: int, incumbent: float, bound_of) -> ExactResult:
+    """The search over every pose the bound counts, in one space, from the allocations' best
+    (`answer`, exhausted below the bound): exhausted, no placement sequence of them does better,
+    which is what the bound is over: the true ceiling ('all poses')."""
+    space = AllocationActions(env, [c.placement for c in arm_bound.candidates])
+    found = exact_search(EnvModel(memo, None, space), left,
+                         max_states=max(1, max_states - answer.states), bound_of=bound_of,
+                         incumbent=max(incumbent, answer.coverage))
+    done = found.complete
+    answer = _better(answer, found)
+    # Cut, it still searched more than the allocations did: their answer stands, or the line it found.
+    answer.complete, answer.reason = True, ''
+    answer.proof = {'bound': 'bound', 'exhausted': 'all poses'}.get(found.proof, 'exhausted') if done \
+        else 'exhausted'
+    return answer
 
 
 def _better(first: ExactResult, then: ExactResult) -> ExactResult:

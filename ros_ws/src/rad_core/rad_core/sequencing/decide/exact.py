@@ -109,6 +109,118 @@ def by_gain_then_height(env: AssemblyEnv, actions: list[Action]) -> list[Action]
     return sorted(actions, key=key)
 
 
+class _BranchAndBound:
+    """One `exact_search`: its limits, the states visited and the best line found so far."""
+
+    def __init__(self, model, space, time_limit_s: float, deadline: float, max_states: int, order: Order,
+                 on_dead_end: OnDeadEnd | None, bound_of: Callable[[object], float] | None,
+                 bound: float, best: float):
+        self.model, self.env = model, model.env
+        self.root_space = space
+        self.time_limit_s, self.deadline, self.max_states = time_limit_s, deadline, max_states
+        self.order, self.on_dead_end, self.bound_of = order, on_dead_end, bound_of
+        self.bound = bound
+        self.best, self.best_line = best, []
+        self.seen: set[frozenset] = set()
+
+    def moves(self, space) -> list[tuple[Action, frozenset]]:
+        """The distinct moves (deduped as first_feasible dedupes a ranking), in order,
+        each with the placements it would lead to."""
+        env = self.env
+        distinct = {}
+        for action in space(env):
+            cells, yaw = env.resulting_cells(action)
+            distinct.setdefault((action.block, tuple(sorted(int(c) for c in cells)), yaw), action)
+        actions = list(distinct.values())
+        ordered = list(self.order(env, actions))
+        if len(ordered) != len(actions) or set(ordered) != set(actions):
+            raise RadError('exact_search: order() must return the actions it was given, reordered '
+                           f'(got {len(ordered)} for {len(actions)})')
+        key = _placements(env)
+        child = {a: key | {(a.block, k[1])} for k, a in distinct.items()}
+        return [(a, child[a]) for a in ordered]
+
+    def open_poses(self, space) -> frozenset:
+        """The cells of the space's allocated poses still open."""
+        guide = space.guide
+        return frozenset(tuple(guide.pose_cells[k].tolist()) for k in guide.open_poses(self.env.state))
+
+    def check_time(self) -> None:
+        if time.monotonic() > self.deadline:
+            raise _Cut(f'time limit of {self.time_limit_s:g} s')
+
+    def expand(self, space, line: list[Action]) -> bool:
+        """Search every move of the space from here; whether any step succeeded."""
+        model = self.model
+        here = model.snapshot()
+        any_valid = False
+        try:
+            for action, child in self.moves(space):
+                if child in self.seen:
+                    # Searched already (another order, or another yaw of the same move): not
+                    # stepped again, and not a dead end here (its subtree is searched).
+                    any_valid = True
+                    continue
+                self.check_time()
+                _, _, invalid = model.step(action)
+                if not invalid:
+                    any_valid = True
+                    self.search(space, line + [action])
+                model.restore(here)
+        finally:
+            model.restore(here)
+        return any_valid
+
+    def search(self, space, line: list[Action]) -> None:
+        """Search the state the model is in, reached by `line`: record it, prune it against the
+        bound, then expand it, re-allocating at dead ends (`on_dead_end`)."""
+        env, model = self.env, self.model
+        key = _placements(env)
+        if key in self.seen:
+            return
+        if len(self.seen) >= self.max_states:
+            raise _Cut(f'state limit of {self.max_states}')
+        self.seen.add(key)
+        coverage = env.coverage()
+        if coverage > self.best:
+            self.best, self.best_line = coverage, list(line)
+        if self.best >= self.bound - _EPS:
+            raise _AtBound()
+        if env.state.done:
+            return
+        if self.bound_of is not None and self.bound_of(model) <= self.best + _EPS:
+            return                                             # nothing from here beats the best
+        tried = set()
+        while self.bound_of is not None or optimum_coverage(env, space.guide) > self.best + _EPS:
+            tried.add(self.open_poses(space))
+            if self.expand(space, line) or self.on_dead_end is None:
+                return
+            if not self.open_poses(space) and not (env.grid.is_target & (env.state.occupancy < 0)).any():
+                return                                         # the target is full
+            here = model.snapshot()
+            new = self.on_dead_end(model, space)
+            model.restore(here)
+            if new is None or self.open_poses(new) in tried:
+                return   # no new space, or the same open poses again: nothing new to try
+            space = new
+            self.check_time()
+
+    def run(self, root) -> tuple[bool, str, str]:
+        """Search from the root space; (complete, reason, proof). The model is restored to `root`."""
+        complete, reason, proof = True, '', 'exhausted'
+        try:
+            self.search(self.root_space, [])
+        except _AtBound:
+            proof = 'bound'
+        except _Cut as cut:
+            complete, proof = False, ''
+            reason = (f'{cut.args[0]} reached after {len(self.seen)} states; '
+                      f'{self.best:.2f} is a lower bound')
+        finally:
+            self.model.restore(root)
+        return complete, reason, proof
+
+
 def exact_search(model, time_limit_s: float = 60.0, max_states: int = 100_000,
                  order: Order | None = None, on_dead_end: OnDeadEnd | None = None,
                  bound_of: Callable[[object], float] | None = None, incumbent: float = 0.0) -> ExactResult:
@@ -144,97 +256,8 @@ def exact_search(model, time_limit_s: float = 60.0, max_states: int = 100_000,
     deadline = start_time + time_limit_s
     root = model.snapshot()
     bound = optimum_coverage(env, space.guide) if bound_of is None else bound_of(model)
-    best, best_line = max(env.coverage(), float(incumbent)), []
-    seen: set[frozenset] = set()
-
-
-    def moves(space) -> list[tuple[Action, frozenset]]:
-        """The distinct moves (deduped as first_feasible dedupes a ranking), in order,
-        each with the placements it would lead to."""
-        distinct = {}
-        for action in space(env):
-            cells, yaw = env.resulting_cells(action)
-            distinct.setdefault((action.block, tuple(sorted(int(c) for c in cells)), yaw), action)
-        actions = list(distinct.values())
-        ordered = list(order(env, actions))
-        if len(ordered) != len(actions) or set(ordered) != set(actions):
-            raise RadError('exact_search: order() must return the actions it was given, reordered '
-                           f'(got {len(ordered)} for {len(actions)})')
-        key = _placements(env)
-        child = {a: key | {(a.block, k[1])} for k, a in distinct.items()}
-        return [(a, child[a]) for a in ordered]
-
-    def open_poses(space) -> frozenset:
-        guide = space.guide
-        return frozenset(tuple(guide.pose_cells[k].tolist()) for k in guide.open_poses(env.state))
-
-    def check_time() -> None:
-        if time.monotonic() > deadline:
-            raise _Cut(f'time limit of {time_limit_s:g} s')
-
-    def expand(space, line: list[Action]) -> bool:
-        """Search every move of the space from here; whether any step succeeded."""
-        here = model.snapshot()
-        any_valid = False
-        try:
-            for action, child in moves(space):
-                if child in seen:
-                    # Searched already (another order, or another yaw of the same move): not
-                    # stepped again, and not a dead end here (its subtree is searched).
-                    any_valid = True
-                    continue
-                check_time()
-                _, _, invalid = model.step(action)
-                if not invalid:
-                    any_valid = True
-                    search(space, line + [action])
-                model.restore(here)
-        finally:
-            model.restore(here)
-        return any_valid
-
-    def search(space, line: list[Action]) -> None:
-        nonlocal best, best_line
-        key = _placements(env)
-        if key in seen:
-            return
-        if len(seen) >= max_states:
-            raise _Cut(f'state limit of {max_states}')
-        seen.add(key)
-        coverage = env.coverage()
-        if coverage > best:
-            best, best_line = coverage, list(line)
-        if best >= bound - _EPS:
-            raise _AtBound()
-        if env.state.done:
-            return
-        if bound_of is not None and bound_of(model) <= best + _EPS:
-            return                                             # nothing from here beats the best
-        tried = set()
-        while bound_of is not None or optimum_coverage(env, space.guide) > best + _EPS:
-            tried.add(open_poses(space))
-            if expand(space, line) or on_dead_end is None:
-                return
-            if not open_poses(space) and not (env.grid.is_target & (env.state.occupancy < 0)).any():
-                return                                         # the target is full
-            here = model.snapshot()
-            new = on_dead_end(model, space)
-            model.restore(here)
-            if new is None or open_poses(new) in tried:
-                return   # no new space, or the same open poses again: nothing new to try
-            space = new
-            check_time()
-
-    complete, reason, proof = True, '', 'exhausted'
-    try:
-        search(space, [])
-    except _AtBound:
-        proof = 'bound'
-    except _Cut as cut:
-        complete, proof = False, ''
-        reason = (f'{cut.args[0]} reached after {len(seen)} states; '
-                  f'{best:.2f} is a lower bound')
-    finally:
-        model.restore(root)
-    return ExactResult(best, best_line, complete, bound, len(seen),
+    search = _BranchAndBound(model, space, time_limit_s, deadline, max_states, order, on_dead_end, bound_of,
+                             bound, max(env.coverage(), float(incumbent)))
+    complete, reason, proof = search.run(root)
+    return ExactResult(search.best, search.best_line, complete, bound, len(search.seen),
                        time.monotonic() - start_time, reason, proof)

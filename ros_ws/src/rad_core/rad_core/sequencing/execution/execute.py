@@ -183,33 +183,17 @@ def execute_assembly(scene: Scene, plan: Plan, move_arm: MoveArm, move_gripper: 
     """
     config.validate()
     report = report or (lambda *_: None)
+    plant = _Plant(move_arm, move_gripper, register, joints, settle, present, report, config)
     result = ExecutionResult(False, '', scene, final_scene=scene)
     last_q = None
     current = scene
-
-    def measure() -> Scene:
-        """The world as registered now (final_scene, lost_blocks), and the scene to plan from."""
-        got = register()
-        reg = got if isinstance(got, Registration) else Registration(got)
-        result.final_scene, result.lost_blocks = reg.scene, dict(reg.set_aside)
-        result.blocked_cells = {name: [list(c) for c in cells] for name, cells in reg.blocked.items()}
-        return reg.plannable()
-
     try:
         while True:
             report(len(result.steps), 0, '', 'planning', '')
             start = joints() if joints is not None else last_q
             last_q = None if start is None else np.asarray(start, dtype=float)
             assembly = plan(current, start)
-            if result.faults and result.replans:
-                result.faults[-1]['recovered'] = True     # a new plan from the measured world
-            if result.allocation is None:
-                result.allocation = assembly.allocation
-                promised = current
-                for step in assembly.steps:
-                    promised = step.scene_after(promised)
-                result.planned_coverage = measured_coverage(promised)
-            result.reallocations += [e.to_dict() for e in assembly.reallocations]
+            _note_plan(result, assembly, current)
             problem = None
             for k, step in enumerate(assembly.steps):
                 if cancelled():
@@ -221,42 +205,14 @@ def execute_assembly(scene: Scene, plan: Plan, move_arm: MoveArm, move_gripper: 
                     # Blocks were seen off their cells since the plan was made, or the step before was
                     # planned again and left the arm elsewhere: plan this motion again from the world as
                     # measured (the first step's was planned from it).
-                    fresh = plan_motion(current, SceneAction(step.block, step.unit, step.target, tuple(step.cell),
-                                                             step.rotation), step_start,
-                                        **({'move_aside': True} if step.moved_aside else {}))
-                    if not fresh.success:
-                        problem = (f'block {step.block}: planned again against the blocks where motion capture '
-                                   f'sees them, it cannot be placed ({fresh.reason})')
+                    step, problem = _plan_motion_again(step, current, step_start, plan_motion)
+                    if problem is not None:
                         result.faults.append({'step': len(result.steps), 'block': step.block, 'problem': problem,
                                               'recovered': False})
                         break
-                    step = replace(step, motion=fresh.motion, grasp=tuple(fresh.grasp),
-                                   moved_aside=list(fresh.moved_aside))
-                if current.in_feeder(step.block):
-                    if present is None:
-                        raise RadError(f'block {step.block} is in the feeder, and this plant has no feeder '
-                                       f'to present it')
-                    present(step.block)
-                motion = Motion.from_dict(step.motion)
-                failed = _run_step(motion, move_arm, move_gripper, step_start, joints, config)
-                # A failed grasp, or a trajectory the controller aborted (something held the arm back), has
-                # opened the hand and backed the arm out to where the step began.
-                last_q = motion.final_joints() if not failed else np.concatenate(
-                    [step_start[:7], [motion.opening] * 2])
-                settle(config.settle_s)
-                report(len(result.steps), len(assembly.steps), step.block, 'verifying', failed)
-                expected = step.scene_after(current)
-                result.steps.append({**step.to_dict(), **({'failure': failed} if failed else {})})
-                try:
-                    current = measure()
-                except RadError as e:
-                    result.faults.append({'step': len(result.steps) - 1, 'block': step.block,
-                                          'problem': str(e), 'recovered': False})
-                    raise
-                problem = failed or deviation(expected, current, config.deviation_tol, result.lost_blocks)
+                problem, current, last_q = _execute_step(plant, result, step, step_start, current,
+                                                         len(assembly.steps))
                 if problem is not None:
-                    result.faults.append({'step': len(result.steps) - 1, 'block': step.block, 'problem': problem,
-                                          'recovered': False})
                     break
             if problem is None:
                 result.success, result.reason = assembly.success, assembly.reason
@@ -268,9 +224,101 @@ def execute_assembly(scene: Scene, plan: Plan, move_arm: MoveArm, move_gripper: 
     except RadError as e:
         result.success, result.reason = False, str(e)
     try:
-        measure()
+        _measure(register, result)
     except RadError:
         pass   # the plant is gone, or a block is where no plan can go: keep what was measured last
+    _judge_coverage(result)
+    report(len(result.steps), len(result.steps), '', 'done', result.reason)
+    return result
+
+
+@dataclass(frozen=True)
+class _Plant:
+    """What `execute_assembly` runs a step with and checks it by (its arguments of the same names)."""
+
+    move_arm: MoveArm
+    move_gripper: MoveGripper
+    register: Register
+    joints: Callable[[], 'np.ndarray | None'] | None
+    settle: Callable[[float], None]
+    present: Callable[[str], object] | None
+    report: Report
+    config: ExecuteConfig
+
+
+def _measure(register: Register, result: ExecutionResult) -> Scene:
+    """The world as registered now (into the result's final_scene, lost_blocks and blocked_cells),
+    and the scene to plan from."""
+    got = register()
+    reg = got if isinstance(got, Registration) else Registration(got)
+    result.final_scene, result.lost_blocks = reg.scene, dict(reg.set_aside)
+    result.blocked_cells = {name: [list(c) for c in cells] for name, cells in reg.blocked.items()}
+    return reg.plannable()
+
+
+def _note_plan(result: ExecutionResult, assembly: AssemblyPlan, current: Scene) -> None:
+    """Record a new plan: a fault before it recovered, the first plan's allocation and the coverage it
+    sets out to build, every plan's re-allocations."""
+    if result.faults and result.replans:
+        result.faults[-1]['recovered'] = True     # a new plan from the measured world
+    if result.allocation is None:
+        result.allocation = assembly.allocation
+        promised = current
+        for step in assembly.steps:
+            promised = step.scene_after(promised)
+        result.planned_coverage = measured_coverage(promised)
+    result.reallocations += [e.to_dict() for e in assembly.reallocations]
+
+
+def _plan_motion_again(step, current: Scene, step_start: np.ndarray, plan_motion: PlanMotion):
+    """(the step with its motion planned again from the measured world `current`, None), or (the
+    step as it was, the problem) where it cannot be placed so."""
+    fresh = plan_motion(current, SceneAction(step.block, step.unit, step.target, tuple(step.cell),
+                                             step.rotation), step_start,
+                        **({'move_aside': True} if step.moved_aside else {}))
+    if not fresh.success:
+        return step, (f'block {step.block}: planned again against the blocks where motion capture '
+                      f'sees them, it cannot be placed ({fresh.reason})')
+    return replace(step, motion=fresh.motion, grasp=tuple(fresh.grasp), moved_aside=list(fresh.moved_aside)), None
+
+
+def _execute_step(plant: _Plant, result: ExecutionResult, step, step_start: np.ndarray, current: Scene,
+                  n_steps: int) -> tuple[str | None, Scene, np.ndarray]:
+    """Run one step on the plant, register the world and compare it with what the step expected.
+    The step goes into the result, with a fault where it failed or deviated (a failed registration is
+    booked as a fault and raised). Returns (the problem or None, the measured world to plan from,
+    where the arm is)."""
+    if current.in_feeder(step.block):
+        if plant.present is None:
+            raise RadError(f'block {step.block} is in the feeder, and this plant has no feeder '
+                           f'to present it')
+        plant.present(step.block)
+    motion = Motion.from_dict(step.motion)
+    failed = _run_step(motion, plant.move_arm, plant.move_gripper, step_start, plant.joints, plant.config)
+    # A failed grasp, or a trajectory the controller aborted (something held the arm back), has
+    # opened the hand and backed the arm out to where the step began.
+    last_q = motion.final_joints() if not failed else np.concatenate(
+        [step_start[:7], [motion.opening] * 2])
+    plant.settle(plant.config.settle_s)
+    plant.report(len(result.steps), n_steps, step.block, 'verifying', failed)
+    expected = step.scene_after(current)
+    result.steps.append({**step.to_dict(), **({'failure': failed} if failed else {})})
+    try:
+        current = _measure(plant.register, result)
+    except RadError as e:
+        result.faults.append({'step': len(result.steps) - 1, 'block': step.block,
+                              'problem': str(e), 'recovered': False})
+        raise
+    problem = failed or deviation(expected, current, plant.config.deviation_tol, result.lost_blocks)
+    if problem is not None:
+        result.faults.append({'step': len(result.steps) - 1, 'block': step.block, 'problem': problem,
+                              'recovered': False})
+    return problem, current, last_q
+
+
+def _judge_coverage(result: ExecutionResult) -> None:
+    """Judge the run by what the last registration sees: below what the first plan set out to build
+    is no success, and the reason names the lost blocks."""
     lost = '; '.join(f'{b} ({why})' for b, why in sorted(result.lost_blocks.items()))
     if result.success and result.planned_coverage is not None and result.coverage < result.planned_coverage - 1e-9:
         result.success = False
@@ -280,8 +328,6 @@ def execute_assembly(scene: Scene, plan: Plan, move_arm: MoveArm, move_gripper: 
         result.reason = f'built without {len(result.lost_blocks)} lost block(s): {lost}'
     elif not result.success and lost:
         result.reason = f'{result.reason}; lost blocks: {lost}'
-    report(len(result.steps), len(result.steps), '', 'done', result.reason)
-    return result
 
 
 def _starts_at(motion: dict | None, q: np.ndarray) -> bool:
