@@ -6,7 +6,7 @@ Each cycle builds the target with the execute / verify / replan loop /execute_as
 takes it apart onto the table with the loop /take_apart runs (rad_core.sequencing.execution.disassembly),
 in-process on one `Twin` built as the twin node builds it (the whole arm motion simulated, the
 node's path and goal tolerances); the next cycle builds from what motion capture sees. Plans:
-the agent as the node graph runs it (`sequencing.agent_plan.AgentPlanner`, `default`).
+the agent as the node graph runs it (`sequencing.agent.agent_plan.AgentPlanner`, `default`).
 Per cycle: build coverage, steps, replans, take-apart success, blocks lost, drift from the
 heap (mm, mean and max), wall time. Results: docs/results/cycles.md (`common.write_page`, a line per
 cycle) and --rows (one compact line per cycle, out/cache/cycles/rows.jsonl by default); the per-scene

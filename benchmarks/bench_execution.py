@@ -6,7 +6,7 @@
 
 What /execute_assembly runs, in-process: the execute / verify / replan loop
 (`rad_core.sequencing.execution.execute.execute_assembly`, the function the assembly node calls),
-plans from the agent as the node graph runs it (`sequencing.agent_plan.AgentPlanner`: CP-SAT,
+plans from the agent as the node graph runs it (`sequencing.agent.agent_plan.AgentPlanner`: CP-SAT,
 the sequencer, in-process GAMP; `default`: stable allocation, re-allocation on), the plant a
 real `Twin` as the twin node builds it (`twin_world_config`: blocks with 0.5 mm of play per side; PyBullet: the
 arm follows every trajectory under the path and goal tolerances the assembly node sends,

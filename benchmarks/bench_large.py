@@ -12,7 +12,7 @@ sequencer, GAMP on the planning twin, re-allocation), then the twin builds the p
 (teleporting execution, physics settling after each block) and motion capture registers it.
 Per structure it records the blocks in the scene, the blocks placed, the planning time and
 its stages, the predicted and the built coverage, the failures (blocks the build lost) and, after
-planning, an upper bound on what any top-down build reaches (`sequencing.courses.course_bound`);
+planning, an upper bound on what any top-down build reaches (`sequencing.planning.courses.course_bound`);
 it writes <out>/large.md and <out>/large.rows.jsonl (`common.write_page`) and docs/img/large.png (planning time per
 placed block against the blocks in the scene: the issue asks that it grow no faster than
 linearly, i.e. that the time per block stay flat or grow at most linearly). While it runs,

@@ -9,7 +9,7 @@ each scene as /plan_assembly does and the plan is built in a fresh twin (telepor
 execution). Scenes: generated two-sided scenes, seeds 0..N-1, and hand-made shape sets
 ('train', 'holdout', or 'tight': the held-out shapes with their blocks packed at least 2 cm apart,
 2.5 cm on the layout's lattice).
-The ceiling is `sequencing.exact.robot_ceiling` (the branch and bound over orders and
+The ceiling is `sequencing.bounds.robot_ceiling.robot_ceiling` (the branch and bound over orders and
 re-allocations from the empty scene, the arm's allocation, the hand's, then every pose while time
 is left, --ceiling-s per scene). Its rows say how each search ended (`proof`): 'bound',
 the ceiling over every allocation (the best reached what any allocation could cover with poses the

@@ -3,7 +3,7 @@
     python benchmarks/bench_reallocation_time.py [--scenes 20] [--grids 4 5] [--policy milp-dqn-lookahead]
 
 Plans generated two-sided scenes (seeds 100..) in-process with the code behind
-/plan_assembly (`sequencing.plan.plan_assembly`, the stable allocation as the
+/plan_assembly (`sequencing.planning.plan.plan_assembly`, the stable allocation as the
 assembly node's default, GAMP in-process, the sequencer's `rank`), once without and
 once with re-allocation, and prints per grid size the median and p95 planning
 time of each, the ratio of the medians (issue 9's target: re-allocation adds under

@@ -17,7 +17,7 @@ training, which uses seeds from 1,000,000, nor in validation, 500,000..):
   planning copy finds stable (the env's own physics check; no failures by
   construction). It uses the simulator at test time, as the paper's MCTS does;
 - ceiling: the best coverage any order of the allocation's poses reaches
-  (exhaustive search, `sequencing.ceiling`), the most a sequencer can do with
+  (exhaustive search, `sequencing.bounds.ceiling`), the most a sequencer can do with
   this allocation.
 
 Also the hand-made shapes (`rad_core.domain.shapes`), training and held-out splits

@@ -250,7 +250,7 @@ def process(tmp_path):
 
 @pytest.fixture(scope='module')
 def motion():
-    """An in-process GAMP as plans take it (`sequencing.plan.local_motion_planner`), one per test module."""
+    """An in-process GAMP as plans take it (`sequencing.planning.plan.local_motion_planner`), one per test module."""
     from rad_core.gamp.action import MotionPlanner
     from rad_core.sequencing.planning.plan import local_motion_planner
     planner = MotionPlanner()

@@ -1,4 +1,4 @@
-"""A line built course by course (`sequencing.courses`), for structures too large for one ordered cover."""
+"""A line built course by course (`sequencing.planning.courses`), for structures too large for one ordered cover."""
 
 from __future__ import annotations
 

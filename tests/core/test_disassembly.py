@@ -1,4 +1,4 @@
-"""sequencing.disassembly: take a built structure apart onto the table, on an in-process plant.
+"""sequencing.execution.disassembly: take a built structure apart onto the table, on an in-process plant.
 
 The plant is a real twin (physics, contact grasps), the plans real CP-SAT and GAMP; a fault is
 injected only where the real parts will not make it on demand (a block pushed aside mid-run).

@@ -1,4 +1,4 @@
-"""sequencing.execute: the execute / verify / replan loop on an in-process plant, without DDS.
+"""sequencing.execution.execute: the execute / verify / replan loop on an in-process plant, without DDS.
 
 The plant is a real twin (physics, contact grasps), the plans come from real CP-SAT
 and GAMP; only the faults the real parts will not produce on demand are injected

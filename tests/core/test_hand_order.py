@@ -1,4 +1,4 @@
-"""The hand's own order of an allocation (`sequencing.hand_order`): order repair's second chain."""
+"""The hand's own order of an allocation (`allocation.order`): order repair's second chain."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""`sequencing.plan.pits_last`: actions that would leave an open pose in a pit go last."""
+"""`sequencing.planning.plan.pits_last`: actions that would leave an open pose in a pit go last."""
 
 from __future__ import annotations
 

@@ -148,7 +148,7 @@ def test_inventory_files_and_costs_are_checked(tmp_path):
 
 
 def _hand_placeable(placements, targets) -> int:
-    """Target cells of `placements` that sequencing.hand_order can place in some order."""
+    """Target cells of `placements` that allocation.order can place in some order."""
     from rad_core.allocation.order import hand_order
     from rad_core.domain.grid import Grid
     from rad_core.domain.scene import Scene

@@ -105,7 +105,7 @@ def moved_aside_from_msgs(blocks, poses) -> list[dict]:
 
 
 def rigid_bodies_msg(bodies, frame_number: int, stamp, frame_id: str) -> RigidBodies:
-    """bodies: objects with name, position, quaternion, tracking_valid (sim.mocap.RigidBodyPose)."""
+    """bodies: objects with name, position, quaternion, tracking_valid (cell.mocap.RigidBodyPose)."""
     msg = RigidBodies(frame_number=int(frame_number))
     msg.header.stamp = stamp
     msg.header.frame_id = frame_id

@@ -24,7 +24,7 @@ def step_to_msg(step, frame_id: str) -> PlanStep:
 
 
 def reallocation_to_msg(event) -> Reallocation:
-    """A `sequencing.reallocation.Reallocation` as a message."""
+    """A `sequencing.planning.reallocation.Reallocation` as a message."""
     return Reallocation(
         step=int(event.step), reason=event.reason,
         no_goods=[placement_to_msg(Placement(d['type'], d['target'], 0, tuple(tuple(c) for c in d['cells'])))

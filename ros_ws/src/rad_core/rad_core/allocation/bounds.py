@@ -43,7 +43,7 @@ class ArmCoverageBound:
     can no longer place (`HandBlocked`). Each is conservative, so it stays a bound; it is tighter
     than `coverage_bound` where built cells hem poses in.
 
-    ordered: the poses chosen must also have an order (`sequencing.hand_order.order_model`) in
+    ordered: the poses chosen must also have an order (`allocation.order.order_model`) in
     which each, when its turn comes, has a way of being held that no pose before it is in the
     way of, and rests on something. Every build GAMP verifies has one: GAMP refuses what
     `HandBlocked` blocks and the MDP a block resting on nothing, and blocks stay where they are
@@ -89,7 +89,7 @@ class ArmCoverageBound:
 
     def cap(self, env, value: float) -> float:
         """Lower the remembered bound of the env's state (asked before) to `value` where that is
-        tighter (another bound of the same state, `sequencing.courses.course_bound`); the bound now."""
+        tighter (another bound of the same state, `sequencing.planning.courses.course_bound`); the bound now."""
         key = self._state(env)[2]
         bound, loose, blocked = self._memo[key]
         self._memo[key] = (min(bound, value), loose, blocked)

@@ -41,7 +41,7 @@ blocks on the table it cannot pick where they lie, poses whose every grasp is ou
 reach; the result's `arm` says what and why.
 
 `support='hand'` (rad's, arm as above) also asks for an order in which a top-down hand can
-place the allocation (`sequencing.hand_order`: each pose, when its turn comes, has a way of
+place the allocation (`allocation.order`: each pose, when its turn comes, has a way of
 being held that no pose placed before it is in the way of): the poses it cannot place are ruled
 out and the model solved again, at most `HAND_ROUNDS` times within the time limit, and the
 allocation whose order places the most (c^T g of the poses it places) is kept (ties: the earlier
@@ -324,7 +324,7 @@ def solve_rounds(model, w, candidates: list[Candidate], scene: Scene, rounds: in
 
 def hand_unplaced(scene: Scene, placements) -> list[int]:
     """The indices of the `placements` (allocation.Placement, of the scene's free cells) that no
-    order `sequencing.hand_order` finds places beside the others (the support rule 'hand' and
+    order `allocation.order` finds places beside the others (the support rule 'hand' and
     `rad_core.allocation.supply` rule them out and solve again)."""
     placements = list(placements)
     placed = set(hand_order(scene, placements).order)

@@ -1,6 +1,6 @@
 """An order of an allocation's poses in which a top-down hand can place each one: order repair's
 second chain; the same model over every candidate pose, for order repair's fourth chain
-(`ordered_cover`) and the robot ceiling's bound (`allocation.arm.ArmCoverageBound`, `ordered`).
+(`ordered_cover`) and the robot ceiling's bound (`allocation.bounds.ArmCoverageBound`, `ordered`).
 
 Order repair (`agent_plan.plan_for_agent`) learns precedences from GAMP's refusals: a pose refused
 because the hand hit a placed block is tried before that block's pose next time. A refusal names
@@ -86,7 +86,7 @@ def order_model(grid: Grid, occupied: np.ndarray, poses: list[tuple], counts: di
     Maximizes the target cells placed.
 
     cover: `ordered_cover`'s stricter rules for a plan (the bound keeps the MDP's): each pose
-    stands as the allocation's support='stable' asks (`allocation.cpsat.support_options`: its
+    stands as the allocation's support='stable' asks (`allocation.constraints.support_options`: its
     centre of mass over units resting on the table, built cells or poses placed before it), and
     among the best, the fewest cells outside the target (fillers), as c^T g would. rest=False: no
     rule on what a pose rests on (`courses.course_bound`'s relaxation)."""
@@ -152,7 +152,7 @@ def order_model(grid: Grid, occupied: np.ndarray, poses: list[tuple], counts: di
 
 def _stands(model, grid: Grid, occupied: np.ndarray, cells, n: int, placed, order, owners) -> None:
     """Pose n, where placed, stands on one of its sufficient support sets
-    (`allocation.cpsat.support_options`): every unit of the set on the table, a built cell, or a
+    (`allocation.constraints.support_options`): every unit of the set on the table, a built cell, or a
     pose placed before it."""
     sets = support_options(grid, list(cells), occupied, owners)
     if sets is None:
@@ -194,7 +194,7 @@ def hand_order(scene: Scene, placements, time_limit_s: float = 1.0, gamp=None) -
 
 def ordered_cover(scene: Scene, time_limit_s: float = 2.0, gamp=None, avoid=()) -> HandOrder:
     """The allocation and its order at once: among every pose an arm-aware allocation may propose
-    (`allocation.arm.ArmCoverageBound.candidates`: fillers worth 0 included, the arm's filter
+    (`allocation.bounds.ArmCoverageBound.candidates`: fillers worth 0 included, the arm's filter
     applied) and the blocks the arm can pick, the disjoint ones with an order in which the hand
     can place the most target cells (`order_model` with counts), with that order's precedences
     and the poses as `placements`. What the robot ceiling's ordered bound solves, kept as a plan:
@@ -210,7 +210,7 @@ def ordered_cover(scene: Scene, time_limit_s: float = 2.0, gamp=None, avoid=()) 
 
 def cover_candidates(scene: Scene, grid: Grid, gamp=None):
     """What an ordered cover chooses from: every pose an arm-aware allocation may propose
-    (`allocation.arm.ArmCoverageBound.candidates`: fillers worth 0 included, the arm's filter
+    (`allocation.bounds.ArmCoverageBound.candidates`: fillers worth 0 included, the arm's filter
     applied), the blocks per type the arm can pick, the hand's blocking cells (`HandBlocked`) and
     the indices of the blocks it cannot pick where they lie."""
     fillers = [c for c in enumerate_candidates(scene, grid, positive_only=False) if c.value >= 0]

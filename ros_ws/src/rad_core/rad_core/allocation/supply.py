@@ -12,7 +12,7 @@ every block rests on the table, a chosen block or a filled cell when placed), le
 3. the fewest blocks (`fewest`) or the lowest total cost (`cheapest`, per-type costs).
 
 With `SupplyParams.hand` (the default) the cover must also be one a top-down hand can build:
-`sequencing.hand_order` looks for an order in which each chosen piece, when its turn comes, has
+`allocation.order` looks for an order in which each chosen piece, when its turn comes, has
 a way of being held that no piece placed before it is in the way of, and rests on something.
 The pieces it cannot place are ruled out and the model solved again, for at most `hand_rounds`
 rounds within the time limit; the cover whose order places the most target cells is kept (ties:

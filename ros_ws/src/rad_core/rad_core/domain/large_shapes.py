@@ -17,8 +17,8 @@ stays within the reach of a top-down hand (the far cells at 0.72 m from the base
 And three with the two leaves flush, back to back (the generator's two-sided layout, filled):
 `wall_openings`, `viaduct` and `stepped_wall`. A parallel gripper taking blocks from above cannot
 fill such a wall whatever the order: every full course loses a cell (`FLUSH_LIMIT`;
-`sequencing.courses.course_bound` puts their limit at 0.977-0.988). Built course by course
-(`sequencing.courses.course_line`), rad gets 0.93-0.97 of them.
+`sequencing.planning.courses.course_bound` puts their limit at 0.977-0.988). Built course by course
+(`sequencing.planning.courses.course_line`), rad gets 0.93-0.97 of them.
 
 Their block multisets are exact stable tilings by small types plus a few spares: for the
 faces a bond drawn course by course (`coursed_tiling`: bars of three and two, joints staggered

@@ -5,9 +5,9 @@ allocation support; `rad_core.sequencing.decide.agents` has its text form and pr
 episodes with the robot in the loop or without it.
 
 With the robot, an episode is what the node graph does with the scene: the agent plans
-it as /plan_assembly does (`sequencing.agent_plan.AgentPlanner`: CP-SAT, the sequencer
+it as /plan_assembly does (`sequencing.agent.agent_plan.AgentPlanner`: CP-SAT, the sequencer
 and its search, GAMP; `plan_assembly`'s episode gives the return and the outcome), and the
-plan is built in a fresh PyBullet twin (`sequencing.twin_build`: teleporting, or the arm
+plan is built in a fresh PyBullet twin (`sequencing.execution.twin_build`: teleporting, or the arm
 simulated through /execute_assembly's loop); coverage is what the twin's registration
 finds built. Unverified, the plan takes the best-ranked action blindly (the paper's agents:
 one GAMP or the stability check refuses ends the episode with f_g / f_p); verified, the
@@ -57,7 +57,7 @@ class Agent:
 
     name: the spec's canonical text (`agents.label`). robot: None follows `evaluate`'s robot
     flag; True / False whatever it says (legacy names fixed it; the branch and bound needs the
-    robot). search: '' or a search of `sequencing.search.SEARCHES`, with its budget (seconds for
+    robot). search: '' or a search of `sequencing.decide.search.SEARCHES`, with its budget (seconds for
     bnb). actions and support: the scorer's action space and the allocation it runs with (a
     model file records both).
     """

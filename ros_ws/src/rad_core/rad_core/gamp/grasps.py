@@ -8,7 +8,7 @@ x axis (yaw 0) or y axis (yaw 90). 180 and
 which of the two hand yaws is used is the IK's choice (joint 7's range).
 
 Why a tight grasp holds the top: the rubber tips, 18.5 mm tall, are the fingers' thinnest
-part (15 mm); above them the finger widens to 26 mm (`sim.panda.FINGER_BOXES`). Held near its
+part (15 mm); above them the finger widens to 26 mm (`cell.panda.FINGER_BOXES`). Held near its
 top, a unit has only the tips beside it, so a neighbour 2.5 cm away leaves room (the pads still
 cover 16 mm of the unit's side at a 5 cm unit). The rule, from the hand's geometry: the
 fingers open 0.08 m at most and their pads span from 8 mm below the grasp

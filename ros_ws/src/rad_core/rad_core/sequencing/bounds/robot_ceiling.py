@@ -125,7 +125,7 @@ def robot_ceiling(scene, time_limit_s: float = 60.0, support: str | tuple[str, .
     builds with the robot: the branch and bound from the empty scene in a planning twin
     (teleporting execution), children most target cells first, re-allocating where no move
     succeeds (the no-goods found there excluded) and bounded by what the blocks left could
-    cover at most with poses the arm might still build (`allocation.arm.ArmCoverageBound`:
+    cover at most with poses the arm might still build (`allocation.bounds.ArmCoverageBound`:
     `allocation.cpsat.coverage_bound` without blocks it cannot pick, poses out of reach and
     poses the hand can no longer enter between built cells; `ordered`: and only poses with an
     order the hand can place them in, `ArmCoverageBound.ordered_bound`). Each move is planned

@@ -8,7 +8,7 @@
 - search: a test-time search over the planning twin before every decision, with its
   budget per decision: `mcts` (the paper's MCTS), `halving` (sequential halving),
   `lookahead` (verified greedy with a look-ahead veto) in simulations (default 5, the
-  paper's), or `bnb` (the branch and bound of `sequencing.exact`) in seconds
+  paper's), or `bnb` (the branch and bound of `sequencing.decide.exact`) in seconds
   (default 10).
 - verify: take the best-ranked action found feasible (with the robot: GAMP; without:
   the stability check), not the best-ranked one blindly (the paper's agents fail then).
@@ -17,11 +17,11 @@
 - repair: order repair (needs verify). A plan that leaves cells unfilled because
   the arm hit a block the plan had placed earlier ('hand hits block b3') is planned
   again, trying last the actions that would place such a block while the cells it
-  kept the arm from are still open (`sequencing.plan.Precedence`); the better plan
-  is kept (`sequencing.agent_plan.plan_for_agent`). It learns from GAMP, so it acts
+  kept the arm from are still open (`allocation.order.Precedence`); the better plan
+  is kept (`sequencing.agent.agent_plan.plan_for_agent`). It learns from GAMP, so it acts
   only with the robot in the loop; without it the agent plans as it would without repair.
 - ceiling:S: where the plans leave target cells unfilled, spend up to S seconds on the
-  robot-feasible ceiling's search (`sequencing.exact.robot_ceiling`: the allocations' orders,
+  robot-feasible ceiling's search (`sequencing.bounds.robot_ceiling.robot_ceiling`: the allocations' orders,
   then every pose) from the best plan's coverage, and plan the line it finds, kept where it
   fills more (needs verify; with the robot in the loop only). Time for coverage: off by default.
 - support: the allocation's support rule, `none` (the paper's MILP), `stable`

@@ -1,8 +1,8 @@
-"""How a ranking becomes a decision of the episode loop (`sequencing.episode`) without the
+"""How a ranking becomes a decision of the episode loop (`sequencing.decide.episode`) without the
 robot (`rad eval` without --robot, training's evaluations): the best-ranked action, the best
 one a check finds feasible, or a test-time search's move. The checks: the physics stability
 check, or a simulated step of the planning copy. With the robot, decisions are
-/plan_assembly's (`sequencing.plan`), whoever runs it.
+/plan_assembly's (`sequencing.planning.plan`), whoever runs it.
 """
 
 from __future__ import annotations
@@ -51,7 +51,7 @@ def policy_decider(policy: Policy, actions: ActionSpace, verify=None) -> Decide:
 
 def search_decider(policy: Policy, actions: ActionSpace, stepper, search_name: str, budget: int,
                    epsilon: float | None = None, verify=None) -> Decide:
-    """decide() that searches before every decision (`sequencing.search.SEARCHES[search_name]`, with
+    """decide() that searches before every decision (`sequencing.decide.search.SEARCHES[search_name]`, with
     `budget` simulations and exploration `epsilon`, None: the search's default) on `stepper`, the env
     that acts (RobotAssemblyEnv with the robot, the AssemblyEnv without); the search
     leaves it as it was. Unverified: the search's move. Verified: the best of the

@@ -2,10 +2,10 @@
 
 The robot-feasible ceiling: a depth-first branch and bound over the orders in
 which the allocation's open poses can be filled, each move a real step of the
-search model (`sequencing.search.EnvModel` over a `RobotAssemblyEnv`: GAMP,
-execution, physics) from a snapshot, undone with `restore`. `sequencing.search.bnb`
+search model (`sequencing.decide.search.EnvModel` over a `RobotAssemblyEnv`: GAMP,
+execution, physics) from a snapshot, undone with `restore`. `sequencing.decide.search.bnb`
 serves it as a search like the others (budget: seconds). Unlike the no-robot
-ceiling (`sequencing.ceiling`), which block of a type fills a pose matters here:
+ceiling (`sequencing.bounds.ceiling`), which block of a type fills a pose matters here:
 the robot picks each block from its own place on the table, so a move is (block,
 the cells it fills, its yaw), one per distinct final pose of each block still on
 the table.
@@ -228,7 +228,7 @@ def exact_search(model, time_limit_s: float = 60.0, max_states: int = 100_000,
     the loop (module docstring), from the model's current state.
 
     model: a search model with the env it steps and the allocation's action space
-        (`sequencing.search.EnvModel`: `.env`, `.space`, `.step`, `.snapshot`,
+        (`sequencing.decide.search.EnvModel`: `.env`, `.space`, `.step`, `.snapshot`,
         `.restore`), between steps; it is left in the state it was given. The space's
         guide (an `AllocationActions`) gives the bound.
     order: `order(env, actions) -> the same actions, best first` (e.g. a policy's

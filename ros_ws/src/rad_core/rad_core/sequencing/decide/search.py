@@ -41,7 +41,7 @@ the move. So it is never worse than the verified greedy policy within its budget
 and a block that would leave the rest unbuildable is skipped while another order
 exists.
 
-`bnb` is the branch and bound of `sequencing.exact` as a search: its budget is
+`bnb` is the branch and bound of `sequencing.decide.exact` as a search: its budget is
 seconds, not simulations; it searches the orders of the allocation's open poses
 (children in the order of Q) for the line that fills the most of the target, and
 the move is that line's first action. The whole line comes back (`SearchResult.line`)
@@ -384,7 +384,7 @@ def q_order(model: Model):
 
 def bnb(model: Model, rng: np.random.Generator, budget: float = 10.0, epsilon: float = 0.0,
         max_states: int = 100_000) -> SearchResult:
-    """The branch and bound (`sequencing.exact.exact_search`) within `budget` seconds,
+    """The branch and bound (`sequencing.decide.exact.exact_search`) within `budget` seconds,
     children in the order of Q (a scorer whose scores are no values, HEUR: most target
     cells first, then bottom-up, `exact.by_gain_then_height`): the move is the first action of the best line found
     (termination when no line fills more of the target than stopping here). The
@@ -428,7 +428,7 @@ class EnvModel:
 
     robot_env: the env that steps (RobotAssemblyEnv, or the AssemblyEnv itself);
     policy: a sequencing Policy whose scores are Q-values (a QPolicy);
-    space: an action space (`sequencing.actions.action_space`) giving the allowed actions.
+    space: an action space (`sequencing.decide.actions.action_space`) giving the allowed actions.
     """
 
     def __init__(self, robot_env, policy, space, rng_seed: int = 0):

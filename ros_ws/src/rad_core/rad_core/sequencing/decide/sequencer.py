@@ -12,7 +12,7 @@ The agent (`rad_core.sequencing.decide.agents`, text form): the sequencer uses i
 HEUR), its search and the search's budget. `default` is what the node runs: the mixed
 network, no search (`agents.PRESETS`). Verification, re-allocation and the allocation's
 support are the caller's (/plan_assembly always takes the first action GAMP finds
-feasible). Every search is one of `sequencing.search.SEARCHES`; one that plans whole
+feasible). Every search is one of `sequencing.decide.search.SEARCHES`; one that plans whole
 lines (the branch and bound, `bnb`) has its line kept, so later requests along it
 answer at once (a state off the line searches again).
 
@@ -111,7 +111,7 @@ class Ranking:
     choice is to stop (reason says why); actions is then empty, or lists what a verified
     caller may still try. The last `fallbacks` actions are those the agent values below
     stopping, for a verified caller to try where nothing else is left
-    (`sequencing.policy.FALLBACKS`); an unverified one takes the first action, or stops on
+    (`sequencing.decide.policy.FALLBACKS`); an unverified one takes the first action, or stops on
     terminate."""
 
     actions: list[SceneAction] = field(default_factory=list)

@@ -2,7 +2,7 @@
 
 A cell that builds, takes apart and builds again with nothing touched by hand needs
 the way back as much as the way there. `plan_take_apart` plans it from a registered
-scene, one block at a time on a planning copy, like `sequencing.plan.plan_assembly`:
+scene, one block at a time on a planning copy, like `sequencing.planning.plan.plan_assembly`:
 
 - which block next: only a block with nothing resting on it (`resting_on`), the
   reverse of the build order where it is known, else the highest first;
@@ -16,7 +16,7 @@ scene, one block at a time on a planning copy, like `sequencing.plan.plan_assemb
   over ROS); the first block and spot GAMP finds feasible is taken.
 
 `take_apart` runs that plan on a plant through the execute loop
-(`sequencing.execute.execute_assembly`): the same arm and gripper callables, each
+(`sequencing.execution.execute.execute_assembly`): the same arm and gripper callables, each
 step verified against the registered world, a re-plan from what is seen when a
 step deviates (bounded). Its `TakeApartResult` says what the heap looks like again:
 blocks lost (in the heap, not seen at the end) and each block's drift (how far it

@@ -5,7 +5,7 @@ Two ways, as `rad eval --execution` names them:
 - `build_teleported`: every planned step puts its block at the pose the plan gives, physics
   settles the world after each, and the twin's registration (as motion capture sees it)
   judges the result; a block that fell over or off its cell is set aside and not counted.
-- `build_simulated`: `sequencing.execute.execute_assembly`, the execute / verify / replan loop
+- `build_simulated`: `sequencing.execution.execute.execute_assembly`, the execute / verify / replan loop
   the assembly node's /execute_assembly runs, against the twin's controller: the arm follows
   every trajectory, the gripper closes and opens, faults (if configured) happen, and the loop
   replans from the registered world.
@@ -30,7 +30,7 @@ from rad_core.sim.world import World
 class SimulatedBuild:
     """What `build_simulated` returns: the execution's result and what the twin saw."""
 
-    result: object                        # sequencing.execute.ExecutionResult
+    result: object                        # sequencing.execution.execute.ExecutionResult
     sim_s: float = 0.0                    # simulated seconds the run took
     injected: dict = field(default_factory=dict)   # fault (or action) -> how many the twin injected
 
@@ -38,7 +38,7 @@ class SimulatedBuild:
 def build_teleported(scene: Scene, steps, settle_s: float = 0.5):
     """Put each step's block (`PlanStep`: block, position, yaw; first the blocks it moves out of
     the way, `moved_aside`) where the plan says and the arm where its motion ends, settle
-    `settle_s` simulated seconds after each, and register the world: a `sim.mocap.Registration`
+    `settle_s` simulated seconds after each, and register the world: a `cell.mocap.Registration`
     (its scene: where every block is; set_aside: blocks no scene can express, with why)."""
     with World(scene, twin_world_config()) as world:
         twin = Twin(world)
