@@ -1,4 +1,4 @@
-"""Anytime planning (sequencing.agent_plan.plan_for_agent): a first plan by the scorer alone, the
+"""Anytime planning (sequencing.agent.agent_plan.plan_for_agent): a first plan by the scorer alone, the
 agent's own (searched) plan only while time remains and only where it fills more."""
 
 from __future__ import annotations

@@ -21,7 +21,7 @@ wall a course at a time, and so does `course_line`:
 
 Looking one course ahead keeps a course from leaving a hole under a block the next one needs.
 The line is the twin's successful steps; the agent plans it as an allocation with its order
-(`agent_plan.line_allocation`), so GAMP checks every step again from the robot's own start.
+(`agent.stages.line_allocation`), so GAMP checks every step again from the robot's own start.
 """
 
 from __future__ import annotations

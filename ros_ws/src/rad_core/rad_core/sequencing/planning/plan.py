@@ -19,7 +19,7 @@ With `reallocate` (an allocation callable that takes the scene state, no-goods a
 time limit), a step where nothing can be built while allocated poses remain does not
 end the plan: the open poses are checked with GAMP from the planning copy, those
 that fail become no-goods, the allocation is solved again over the free cells
-(`sequencing.reallocation`) and sequencing goes on; each event is in
+(`sequencing.planning.reallocation`) and sequencing goes on; each event is in
 `AssemblyPlan.reallocations`.
 """
 
@@ -136,14 +136,15 @@ class AssemblyPlan:
     predicted_coverage: float = 0.0
     final_scene: Scene | None = None
     timings: dict = field(default_factory=dict)
-    reallocations: list = field(default_factory=list)   # sequencing.reallocation.Reallocation, in order
+    reallocations: list = field(default_factory=list)   # sequencing.planning.reallocation.Reallocation, in order
     episode: Episode | None = None
     """The planning copy's MDP episode: discounted return, outcome (an unverified agent's
     first action that GAMP or the stability check refuses ends it invalid: f_g / f_p), steps."""
     anytime: list = field(default_factory=list)
-    """Anytime planning (`agent_plan.plan_for_agent`): after each plan, {'t': seconds since the
-    start, 'coverage': the best predicted coverage so far, 'plan': 'scorer' | 'courses' | 'repair' |
-    'ceiling' | 'search' (which plan is the best so far)}; one entry for an agent that plans once, none from
+    """An agent's planning (`agent_plan.plan_for_agent`): after the first plan and after each
+    stage that planned, {'t': seconds since the start, 'coverage': the best predicted coverage so
+    far, 'plan': the stage that made the best plan so far: 'scorer' or 'search' (the first plan),
+    or a stage's name (`agent.stages.STAGES`)}; one entry for an agent that plans once, none from
     `plan_assembly` called directly."""
     conflicts: list = field(default_factory=list)
     """`Precedence`s this plan's failures teach: an action GAMP refused because the arm hit a
@@ -152,7 +153,7 @@ class AssemblyPlan:
 
 Allocate = Callable[[Scene], AllocationResult]
 PlanMotion = Callable[[Scene, SceneAction, 'np.ndarray | None'], MotionPlan]
-# (scene state, allocation placements, start joints or None) -> a sequencing.sequencer.Ranking
+# (scene state, allocation placements, start joints or None) -> a sequencing.decide.sequencer.Ranking
 Rank = Callable[[Scene, list, 'np.ndarray | None'], Any]
 
 
@@ -168,7 +169,7 @@ def moved(scene: Scene, block_id: str, position, yaw: int) -> Scene:
 
 def plan_assembly(scene: Scene, allocate: Allocate, plan_motion: PlanMotion, sequencer: Policy | Rank,
                   seed: int = 0, start=None, time_limit_s: float = 60.0, reallocate=None,
-                  reallocation=None, verify: bool = True, precedences=()) -> AssemblyPlan:
+                  reallocation=None, verify: bool = True, precedences=(), pace: dict | None = None) -> AssemblyPlan:
     """sequencer: a Policy (in-process scores of the MDP state) or a Rank callable.
     A Rank callable's RadError (say, the sequencer node is down) propagates.
     reallocate: (scene state, no-goods, time limit) -> AllocationResult, to re-allocate on
@@ -176,7 +177,12 @@ def plan_assembly(scene: Scene, allocate: Allocate, plan_motion: PlanMotion, seq
     verify: take the best-ranked action GAMP finds feasible (the default); False: the
     best-ranked one only, and the plan stops where it cannot be done (the paper's agents).
     precedences: `Precedence`s a verified plan keeps to where the ranking allows
-    (`precedences_last`; order repair passes what an earlier plan's `conflicts` taught)."""
+    (`precedences_last`; order repair passes what an earlier plan's `conflicts` taught).
+    time_limit_s: a deadline from the call: no ranking or motion is asked for that would end after
+    it (as long as such calls took on average), nor a re-allocation once it has passed; the plan so
+    far comes back, its `reason` saying the limit ended it (the allocation is the caller's to bound:
+    `allocate` is called first, as it is). pace: {'rank': [seconds, count], 'motion': [...]} of the
+    calls made so far, updated here (plans of one agent's planning share it; default: this plan's)."""
     t0 = time.perf_counter()
     timings = {'allocation': 0.0, 'sequencing': 0.0, 'motion': 0.0}
     allocation = allocate(scene)
@@ -194,117 +200,12 @@ def plan_assembly(scene: Scene, allocate: Allocate, plan_motion: PlanMotion, seq
         plan.reason = 'the allocation places no block' + (f' (what the arm cannot do: {arm.summary()})'
                                                           if arm is not None else '')
         return _done(plan, t0)
-    allowed_actions = AllocationActions(env, allocation.placements)   # its guide changes on re-allocation
-    world = {'scene': scene, 'q': start}   # the planning copy: scene and arm joints
-
-    def rank_by_policy(env: AssemblyEnv, allowed, rng, fallbacks: bool) -> list | str:
-        ts = time.perf_counter()
-        ranked = ranked_actions(sequencer, env, allowed, rng, fallbacks=fallbacks)
-        timings['sequencing'] += time.perf_counter() - ts
-        if fallbacks:
-            return ranked or 'no fallback'
-        if not ranked:
-            left = len(allowed_actions.guide.open_poses(env.state))
-            return (f'{left} allocated poses left, none of them can be built next '
-                    f'({getattr(sequencer, "why_none", sequencer.name + " values stopping more")})')
-        return ranked
-
-    asked: dict = {}    # the sequencer's last answer, and the step and allocation it answered for
-
-    def rank_by_sequencer(env: AssemblyEnv, allowed, rng, fallbacks: bool) -> list | str:
-        if asked.get('steps') != len(plan.steps) or asked.get('guide') is not allowed_actions.guide:
-            # (the fallbacks come from the answer the plan just had)
-            ts = time.perf_counter()
-            ranking = sequencer(world['scene'], list(allowed_actions.guide.placements), world['q'])
-            timings['sequencer_call'] = timings.get('sequencer_call', 0.0) + time.perf_counter() - ts
-            timings['sequencing'] += float(ranking.timings.get('sequencing', 0.0))
-            asked.update(steps=len(plan.steps), guide=allowed_actions.guide, ranking=ranking)
-        ranking = asked['ranking']
-        preferred = len(ranking.actions) - ranking.fallbacks
-        if fallbacks:
-            return mdp_actions(env, ranking.actions[preferred:], allowed) or 'no fallback'
-        if not preferred or (ranking.terminate and not verify):
-            return ranking.reason or 'the sequencer proposes to stop'
-        ranked = mdp_actions(env, ranking.actions[:preferred], allowed)
-        return ranked or (f'the sequencer proposed {preferred} actions, none of them among the '
-                          f'{len(allowed)} the allocation allows now')
-
-    rank = rank_by_policy if hasattr(sequencer, 'scores') else rank_by_sequencer
-    # GAMP's answers from the current planning state (the state changes only with a step):
-    # a re-allocation's checks reuse what the step's own choice already planned.
-    memo: dict = {}
-    # Motion planners that can move blocks aside (the in-process one, the gamp node's client) are asked to.
-    aside = {'move_aside': True} if 'move_aside' in inspect.signature(plan_motion).parameters else {}
-
-    def planned_motion(scene_now: Scene, action: SceneAction, q) -> MotionPlan:
-        """GAMP's answer; a pick its neighbours on the table block is planned with them moved aside
-        first, where the motion planner can (`MotionPlanner`'s move_aside)."""
-        key = (len(plan.steps), action)
-        if key not in memo:
-            if len(memo) > 4096:
-                memo.clear()
-            memo[key] = plan_motion(scene_now, action, q, **aside)
-            timings['gamp'] = timings.get('gamp', 0.0) + memo[key].seconds
-        return memo[key]
-
-    seen: dict = {}     # Precedence -> None: what GAMP's refusals named, in order
-
-    def check_motion(env: AssemblyEnv, scene_now: Scene, action, q) -> MotionPlan:
-        """`_checked_motion`, noting the placed blocks a refusal names (`conflicts_of`)."""
-        motion = _checked_motion(env, scene_now, action, planned_motion, q, timings)
-        if not motion.success and motion.failure != 'stability':
-            for p in conflicts_of(env, action, motion.reason):
-                seen.setdefault(p, None)
-        return motion
-
-    def decide(env: AssemblyEnv, rng, fallbacks: bool = False) -> Decision:
-        """The best feasible action the sequencer ranks above stopping; fallbacks: of those it
-        ranks below (a verified plan's last resort, `deciders.with_fallbacks`)."""
-        allowed = allowed_actions(env)
-        if not allowed:
-            return stop()
-        ranked = rank(env, allowed, rng, fallbacks)
-        if isinstance(ranked, str):
-            return stop(ranked)
-        if verify and PIT_LAYERS:
-            ranked = pits_last(env, allowed_actions.guide, ranked)
-        if verify and precedences:
-            ranked = precedences_last(env, ranked, precedences)
-        found = _first_feasible(env, world['scene'], ranked if verify else ranked[:1], check_motion, world['q'],
-                                book=not verify)
-        if isinstance(found, str):
-            return stop(found)
-        action, step = found
-        return Decision(action, step)
-
-    def act(decision: Decision):
-        if isinstance(decision.plan, MotionPlan):        # unverified: the best-ranked action cannot be done
-            return _book_failure(env, decision.action, decision.plan)
-        result = env.step(decision.action)
-        if decision.plan is not None:
-            step = decision.plan
-            plan.steps.append(step)
-            world['scene'] = step.scene_after(world['scene'])
-            world['q'] = step.final_joints()
-        return result
-
+    run = _Planning(plan, env, plan_motion, sequencer, start, verify, precedences, t0 + time_limit_s, pace)
     reallocator = None
     if reallocate is not None:
-
-        def pose_check(action) -> MotionPlan:
-            """What the plan's own steps are held to (`_checked_motion`): a pose whose block would
-            tip the structure is as much a no-good as one the arm cannot reach."""
-            return check_motion(env, world['scene'], action, world['q'])
-        reallocator = Reallocator(allowed_actions, pose_check, reallocation or ReallocationConfig(),
-                                  scene_of=lambda _: world['scene'], allocate=reallocate,
-                                  deadline=t0 + time_limit_s)
-        decided = with_reallocation(decide, reallocator)
-    else:
-        decided = decide
-    if verify:
-        decided = with_fallbacks(decide, decided)   # below stopping only where nothing else is left
-    episode = run_episode(env, decided, np.random.default_rng(seed), act, deadline=t0 + time_limit_s)
-    plan.episode = episode
+        reallocator = Reallocator(run.allowed, run.pose_check, reallocation or ReallocationConfig(),
+                                  scene_of=lambda _: run.world['scene'], allocate=reallocate, deadline=run.deadline)
+    episode = plan.episode = run.episode(reallocator, seed)
     if reallocator is not None:
         plan.reallocations = reallocator.events
         timings['reallocation'] = reallocator.seconds
@@ -312,14 +213,166 @@ def plan_assembly(scene: Scene, allocate: Allocate, plan_motion: PlanMotion, seq
         plan.reason = f'time limit of {time_limit_s:g} s reached after {len(plan.steps)} steps'
     else:
         plan.reason = episode.reason
-    plan.final_scene = world['scene']
+    plan.final_scene = run.world['scene']
     plan.predicted_coverage = env.coverage()
     open_cells = env.state.occupancy < 0
-    plan.conflicts = [p for p in seen if open_cells[list(p.first)].any()]
-    plan.success = not plan.reason and not allowed_actions.guide.open_poses(env.state)
+    plan.conflicts = [p for p in run.seen if open_cells[list(p.first)].any()]
+    plan.success = not plan.reason and not run.allowed.guide.open_poses(env.state)
     if not plan.success and not plan.reason:
         plan.reason = 'allocated poses remain unbuilt'
     return _done(plan, t0)
+
+
+def new_pace() -> dict:
+    """`plan_assembly`'s pace before any call: {'rank': [seconds, count], 'motion': [seconds, count]}."""
+    return {'rank': [0.0, 0], 'motion': [0.0, 0]}
+
+
+class _OutOfTime(Exception):
+    """The plan's deadline passed before a ranking or a motion it needed (`_Planning.episode` ends there)."""
+
+
+class _Planning:
+    """One `plan_assembly` call under way: the planning copy (its MDP `env`, and `world`: the scene
+    and the arm joints), the plan so far, and the sequencer's and GAMP's answers in this state."""
+
+    def __init__(self, plan: AssemblyPlan, env: AssemblyEnv, plan_motion: PlanMotion, sequencer, start,
+                 verify: bool, precedences, deadline: float, pace: dict | None = None):
+        self.plan, self.env, self.timings = plan, env, plan.timings
+        self.allowed = AllocationActions(env, plan.allocation.placements)   # its guide changes on re-allocation
+        self.world = {'scene': plan.scene, 'q': start}
+        self.sequencer, self.verify, self.precedences, self.deadline = sequencer, verify, precedences, deadline
+        self.rank = self.rank_by_policy if hasattr(sequencer, 'scores') else self.rank_by_sequencer
+        self.asked: dict = {}   # the sequencer's last answer, and the step and allocation it answered for
+        # GAMP's answers from the current planning state (the state changes only with a step):
+        # a re-allocation's checks reuse what the step's own choice already planned.
+        self.memo: dict = {}
+        self.plan_motion = plan_motion
+        # Motion planners that can move blocks aside (the in-process one, the gamp node's client) are asked to.
+        self.aside = {'move_aside': True} if 'move_aside' in inspect.signature(plan_motion).parameters else {}
+        self.seen: dict = {}    # Precedence -> None: what GAMP's refusals named, in order
+        self.pace = pace if pace is not None else new_pace()
+
+    def in_time(self, call: str) -> None:
+        """Raise `_OutOfTime` where a `call` ('rank' or 'motion') as long as such calls take on
+        average (`pace`) would end past the deadline."""
+        seconds, count = self.pace[call]
+        if time.perf_counter() + (seconds / count if count else 0.0) > self.deadline:
+            raise _OutOfTime
+
+    def timed(self, call: str, ask, *args, **kw):
+        """ask(*args, **kw), its time counted in `pace` (not an answer from memory: under 1 ms)."""
+        ts = time.perf_counter()
+        answer = ask(*args, **kw)
+        seconds = time.perf_counter() - ts
+        if seconds >= 1e-3:
+            self.pace[call][0] += seconds
+            self.pace[call][1] += 1
+        return answer
+
+    def rank_by_policy(self, env: AssemblyEnv, allowed, rng, fallbacks: bool) -> list | str:
+        ts = time.perf_counter()
+        ranked = ranked_actions(self.sequencer, env, allowed, rng, fallbacks=fallbacks)
+        self.timings['sequencing'] += time.perf_counter() - ts
+        if fallbacks:
+            return ranked or 'no fallback'
+        if not ranked:
+            left = len(self.allowed.guide.open_poses(env.state))
+            return (f'{left} allocated poses left, none of them can be built next '
+                    f'({getattr(self.sequencer, "why_none", self.sequencer.name + " values stopping more")})')
+        return ranked
+
+    def rank_by_sequencer(self, env: AssemblyEnv, allowed, rng, fallbacks: bool) -> list | str:
+        asked, guide = self.asked, self.allowed.guide
+        if asked.get('steps') != len(self.plan.steps) or asked.get('guide') is not guide:
+            # (the fallbacks come from the answer the plan just had)
+            self.in_time('rank')
+            ts = time.perf_counter()
+            ranking = self.timed('rank', self.sequencer, self.world['scene'], list(guide.placements), self.world['q'])
+            self.timings['sequencer_call'] = self.timings.get('sequencer_call', 0.0) + time.perf_counter() - ts
+            self.timings['sequencing'] += float(ranking.timings.get('sequencing', 0.0))
+            asked.update(steps=len(self.plan.steps), guide=guide, ranking=ranking)
+        ranking = asked['ranking']
+        preferred = len(ranking.actions) - ranking.fallbacks
+        if fallbacks:
+            return mdp_actions(env, ranking.actions[preferred:], allowed) or 'no fallback'
+        if not preferred or (ranking.terminate and not self.verify):
+            return ranking.reason or 'the sequencer proposes to stop'
+        ranked = mdp_actions(env, ranking.actions[:preferred], allowed)
+        return ranked or (f'the sequencer proposed {preferred} actions, none of them among the '
+                          f'{len(allowed)} the allocation allows now')
+
+    def planned_motion(self, scene_now: Scene, action: SceneAction, q) -> MotionPlan:
+        """GAMP's answer; a pick its neighbours on the table block is planned with them moved aside
+        first, where the motion planner can (`MotionPlanner`'s move_aside)."""
+        key = (len(self.plan.steps), action)
+        if key not in self.memo:
+            self.in_time('motion')
+            if len(self.memo) > 4096:
+                self.memo.clear()
+            self.memo[key] = self.timed('motion', self.plan_motion, scene_now, action, q, **self.aside)
+            self.timings['gamp'] = self.timings.get('gamp', 0.0) + self.memo[key].seconds
+        return self.memo[key]
+
+    def check_motion(self, env: AssemblyEnv, scene_now: Scene, action, q) -> MotionPlan:
+        """`_checked_motion`, noting the placed blocks a refusal names (`conflicts_of`)."""
+        motion = _checked_motion(env, scene_now, action, self.planned_motion, q, self.timings)
+        if not motion.success and motion.failure != 'stability':
+            for p in conflicts_of(env, action, motion.reason):
+                self.seen.setdefault(p, None)
+        return motion
+
+    def pose_check(self, action) -> MotionPlan:
+        """What the plan's own steps are held to (`_checked_motion`), for a re-allocation's checks: a
+        pose whose block would tip the structure is as much a no-good as one the arm cannot reach."""
+        return self.check_motion(self.env, self.world['scene'], action, self.world['q'])
+
+    def decide(self, env: AssemblyEnv, rng, fallbacks: bool = False) -> Decision:
+        """The best feasible action the sequencer ranks above stopping; fallbacks: of those it
+        ranks below (a verified plan's last resort, `deciders.with_fallbacks`)."""
+        allowed = self.allowed(env)
+        if not allowed:
+            return stop()
+        ranked = self.rank(env, allowed, rng, fallbacks)
+        if isinstance(ranked, str):
+            return stop(ranked)
+        if self.verify and PIT_LAYERS:
+            ranked = pits_last(env, self.allowed.guide, ranked)
+        if self.verify and self.precedences:
+            ranked = precedences_last(env, ranked, self.precedences)
+        found = _first_feasible(env, self.world['scene'], ranked if self.verify else ranked[:1], self.check_motion,
+                                self.world['q'], book=not self.verify)
+        if isinstance(found, str):
+            return stop(found)
+        action, step = found
+        return Decision(action, step)
+
+    def act(self, decision: Decision):
+        if isinstance(decision.plan, MotionPlan):        # unverified: the best-ranked action cannot be done
+            return _book_failure(self.env, decision.action, decision.plan)
+        result = self.env.step(decision.action)
+        if decision.plan is not None:
+            step = decision.plan
+            self.plan.steps.append(step)
+            self.world['scene'] = step.scene_after(self.world['scene'])
+            self.world['q'] = step.final_joints()
+        return result
+
+    def episode(self, reallocator: Reallocator | None, seed: int) -> Episode:
+        """The planning copy's episode, deciding with re-allocation where there is a `reallocator` and
+        with the fallbacks where verified; one the deadline cut is `timed_out`."""
+        decided = with_reallocation(self.decide, reallocator) if reallocator is not None else self.decide
+        if self.verify:
+            decided = with_fallbacks(self.decide, decided)   # below stopping only where nothing else is left
+        results: list = []
+        try:
+            return run_episode(self.env, decided, np.random.default_rng(seed), self.act,
+                               on_step=lambda _, result: results.append(result), deadline=self.deadline)
+        except _OutOfTime:      # within a step: the plan is as the last step left it
+            gamma = self.env.config.gamma
+            return Episode(sum(r.reward * gamma ** k for k, r in enumerate(results)),
+                           results[-1].outcome if results else None, self.env.state.steps, self.env.coverage(),
+                           timed_out=True)
 
 
 class _SharedStability:
