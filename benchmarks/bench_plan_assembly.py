@@ -1,7 +1,7 @@
 """/plan_assembly end to end over DDS on the live node graph: latency and predicted coverage.
 
     python benchmarks/bench_plan_assembly.py [--scenes 20] [--grid 5] [--seed 9000] [--agent default]
-                                             [--improve-time-s 2.0] [--torch-threads 1]
+                                             [--improve-time-s 2.0] [--torch-threads 1] [--time-limits 0,2]
 
 Starts the allocation, gamp, sequencer and assembly nodes (real processes, loopback DDS, the
 agent given to both the sequencer and the assembly node), calls /plan_assembly on generated
@@ -9,6 +9,8 @@ two-sided scenes the project never trained or tuned on (seeds from --seed on), a
 writes (docs/results/plan_assembly.md and .rows.jsonl, `common.write_page`) the end-to-end time (median, p95, max),
 the time to the anytime planner's first complete plan, the predicted coverage and how often a
 later plan (order repair's, a search's) replaced the first. Plans start at home; no robot runs.
+Each scene is asked once per request time limit in --time-limits (0: the node's default,
+`time_limit_s` 120 s); the answer must come within the limit plus 10 %.
 """
 
 from __future__ import annotations
@@ -35,6 +37,8 @@ def main():
     p.add_argument('--agent', default='default')
     p.add_argument('--improve-time-s', type=float, default=2.0, help="the assembly node's improve_time_s")
     p.add_argument('--torch-threads', type=int, default=1, help="the sequencer node's torch_threads")
+    p.add_argument('--time-limits', default='0,2',
+                   help="the requests' time_limit_s, comma-separated, each over every scene (0: the node default)")
     p.add_argument('--results', default=str(RESULTS))
     args = p.parse_args()
     params = {'sequencer_node': {'agent': args.agent, 'torch_threads': args.torch_threads},
@@ -53,24 +57,25 @@ def main():
         assert client.wait_for_service(timeout_sec=60.0), 'the assembly node did not come up'
         assert node.create_client(Sequence, 'sequence').wait_for_service(timeout_sec=60.0), 'no sequencer node'
         config = GeneratorConfig(grid=args.grid, sides=2)
-        for k in range(args.scenes):
+        for limit, k in ((float(x), k) for x in args.time_limits.split(',') for k in range(args.scenes)):
             seed = args.seed + k
             scene = generate_scene(config, seed)
             t0 = time.perf_counter()
-            future = client.call_async(PlanAssembly.Request(scene_json=scene.dumps(), start_positions=HOME9))
+            future = client.call_async(PlanAssembly.Request(scene_json=scene.dumps(), start_positions=HOME9,
+                                                            time_limit_s=limit))
             rclpy.spin_until_future_complete(node, future, timeout_sec=300.0)
             seconds = time.perf_counter() - t0
             r = future.result()
             assert r is not None, f'no answer for seed {seed}'
             timing = {t.stage: t.seconds for t in r.timings}
-            rows.append({'seed': seed, 'seconds': seconds, 'first_plan_s': (r.anytime_times_s[0] if r.anytime_times_s
-                                                                             else timing.get('total', seconds)),
+            first = r.anytime_times_s[0] if r.anytime_times_s else timing.get('total', seconds)
+            rows.append({'seed': seed, 'time_limit_s': limit, 'seconds': seconds, 'first_plan_s': first,
                          'coverage': r.predicted_coverage, 'success': r.success, 'steps': len(r.steps),
                          'blocks': len(scene.blocks), 'plans': list(r.anytime_plans),
                          'anytime_coverages': list(r.anytime_coverages),
                          'stages': timing})
-            print(f'seed {seed}: {seconds:6.2f} s, coverage {r.predicted_coverage:.3f}, {len(r.steps)} steps, '
-                  f'plans {list(r.anytime_plans)}', flush=True)
+            print(f'limit {limit:g} s, seed {seed}: {seconds:6.2f} s, coverage {r.predicted_coverage:.3f}, '
+                  f'{len(r.steps)} steps, plans {list(r.anytime_plans)}', flush=True)
     finally:
         node.destroy_node()
         rclpy.try_shutdown()
@@ -104,15 +109,19 @@ def stage_lines(rows) -> list[str]:
 
 
 def table(rows) -> list[list]:
-    t = np.array([r['seconds'] for r in rows])
-    first = np.array([r['first_plan_s'] for r in rows])
-    cov = np.array([r['coverage'] for r in rows])
-    return [['end to end (s)', f'{np.median(t):.2f}', f'{np.percentile(t, 95):.2f}', f'{t.max():.2f}'],
-            ['first complete plan (s)', f'{np.median(first):.2f}', f'{np.percentile(first, 95):.2f}',
-             f'{first.max():.2f}'],
-            ['predicted coverage', f'mean {cov.mean():.3f}', f'complete {int((cov >= 1 - 1e-4).sum())} of {len(rows)}',
-             ''],
-            [f'all {len(rows)} requests (s)', f'{t.sum():.2f}', '', '']]
+    """One line per request time limit: end-to-end seconds (median, p95, max), the share answered within
+    the limit plus 10 %, the first plan's median, the predicted coverage."""
+    out = []
+    for limit in dict.fromkeys(r['time_limit_s'] for r in rows):
+        mine = [r for r in rows if r['time_limit_s'] == limit]
+        t = np.array([r['seconds'] for r in mine])
+        first = np.array([r['first_plan_s'] for r in mine])
+        cov = np.array([r['coverage'] for r in mine])
+        within = f'{int((t <= 1.1 * limit).sum())} of {len(mine)}' if limit else ''
+        out.append([f'{limit:g}' if limit else 'node default (120)', f'{np.median(t):.2f}',
+                    f'{np.percentile(t, 95):.2f}', f'{t.max():.2f}', within, f'{np.median(first):.2f}',
+                    f'{cov.mean():.3f}', f'{int((cov >= 1 - 1e-4).sum())} of {len(mine)}'])
+    return out
 
 
 def write(rows, args) -> None:
@@ -120,10 +129,12 @@ def write(rows, args) -> None:
         print(line)
     note = (f'The allocation, gamp, sequencer and assembly nodes as real processes on loopback DDS, agent '
             f'`{args.agent}`, improve_time_s {args.improve_time_s:g}; {len(rows)} generated two-sided g = {args.grid} '
-            f'scenes, seeds {args.seed}..{args.seed + len(rows) - 1} (never used in training); the client\'s wall '
+            f'scenes, seeds {args.seed}..{args.seed + args.scenes - 1} (never used in training); the client\'s wall '
             'clock. Where each request\'s time went is in its row (`stages`).')
-    page = write_page('plan_assembly', f'/plan_assembly over DDS, g = {args.grid}', ['', 'median', 'p95', 'max'],
-                      table(rows), note, rows, results=args.results)
+    headers = ['time_limit_s', 'median (s)', 'p95 (s)', 'max (s)', 'within limit + 10 %', 'first plan, median (s)',
+               'mean predicted coverage', 'complete']
+    page = write_page('plan_assembly', f'/plan_assembly over DDS, g = {args.grid}', headers, table(rows), note, rows,
+                      results=args.results)
     print(f'wrote {page}')
 
 
