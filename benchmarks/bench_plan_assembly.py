@@ -131,8 +131,8 @@ def write(rows, args) -> None:
         print(line)
     note = (f'The allocation, gamp, sequencer and assembly nodes as real processes on loopback DDS, agent '
             f'`{args.agent}`, improve_time_s {args.improve_time_s:g}; {args.scenes} generated two-sided '
-            f'g = {args.grid} scenes, seeds {args.seed}..{args.seed + args.scenes - 1} (never used in training); the client\'s wall '
-            'clock. Where each request\'s time went is in its row (`stages`).')
+            f'g = {args.grid} scenes, seeds {args.seed}..{args.seed + args.scenes - 1} (never used in training); '
+            'the client\'s wall clock. Where each request\'s time went is in its row (`stages`).')
     headers = ['time_limit_s', 'median (s)', 'p95 (s)', 'max (s)', 'within limit + 10 %', 'first plan, median (s)',
                'mean predicted coverage', 'complete']
     page = write_page('plan_assembly', f'/plan_assembly over DDS, g = {args.grid}', headers, table(rows), note, rows,

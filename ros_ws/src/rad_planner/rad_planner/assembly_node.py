@@ -109,6 +109,8 @@ from rad_planner.take_apart import serve_take_apart
 # /plan_assembly's deadline when a request leaves time_limit_s at 0: the answer, the best plan found by
 # then, comes within it plus 10 % (2.5 s). A larger structure asks for more in its request.
 PLAN_TIME_LIMIT_S = 2.25
+# The share of a request's time limit kept back from the planner (see plan_assembly_callback).
+DEADLINE_MARGIN = 0.05
 
 
 class AssemblyNode(Node):
@@ -419,8 +421,11 @@ class AssemblyNode(Node):
             scene, registered = self.scene_of(request.scene, request.scene_json)
             registration = time.perf_counter() - t0 if registered else 0.0
             start = self.start_joints(request.start_positions)
-            # The request's limit holds from its arrival: the planner gets what registration left of it.
-            plan = self.plan(scene, max(1e-3, limit - (time.perf_counter() - t0)), start)
+            # The request's limit holds from its arrival: the planner gets what registration left of it,
+            # less a margin for what runs past the planner's deadline (a GAMP or CP-SAT call under way
+            # ends first) and for the response.
+            budget = (1.0 - DEADLINE_MARGIN) * limit - (time.perf_counter() - t0)
+            plan = self.plan(scene, max(1e-3, budget), start)
         except RadError as e:
             response.success, response.reason = False, str(e)
             self.get_logger().warning(f'plan_assembly refused: {e}')
