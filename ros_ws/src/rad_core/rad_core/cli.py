@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 from pathlib import Path
@@ -34,6 +35,7 @@ from typing import TYPE_CHECKING
 
 from rad_core.domain import jsonfmt
 from rad_core.domain.errors import RadError
+from rad_core.view.progress import ProgressBar
 
 if TYPE_CHECKING:
     from rad_core.domain.scene import Scene
@@ -58,14 +60,14 @@ def _write_text(text: str, path: str | None) -> None:
 
 
 def _allocation_params(args):
-    from rad_core.allocation import AllocationParams
+    from rad_core.allocation import AllocationParams  # ortools: this command only
     params = AllocationParams(time_limit_s=args.time_limit, seed=args.seed, num_workers=args.workers)
     params.validate()
     return params
 
 
 def cmd_scene_generate(args) -> int:
-    from rad_core.domain.generator import GeneratorConfig, generate_scene
+    from rad_core.domain.generator import GeneratorConfig, generate_scene  # numpy: this command only
     config = GeneratorConfig(grid=args.grid, sides=args.sides, unit=args.unit, clearance=args.clearance,
                              supply=args.supply, feeder_order=args.feeder_order, feeder_window=args.feeder_window)
     _write_text(generate_scene(config, args.seed).dumps(), args.output)
@@ -83,15 +85,15 @@ def cmd_scene_check(args) -> int:
 
 
 def cmd_scene_stats(args) -> int:
-    from rad_core.domain.generator import GeneratorConfig, target_statistics
+    from rad_core.domain.generator import GeneratorConfig, target_statistics  # numpy: this command only
     stats = target_statistics(GeneratorConfig(grid=args.grid, sides=args.sides), args.scenes, args.seed)
     print(jsonfmt.dumps(stats))
     return 0
 
 
 def cmd_scene_render(args) -> int:
-    from rad_core.allocation import AllocationResult
-    from rad_core.view.render import save_scene_png
+    from rad_core.allocation import AllocationResult  # ortools: this command only
+    from rad_core.view.render import save_scene_png  # numpy: this command only
     scene = _read_scene(args.scene)
     allocation = None
     if args.allocation:
@@ -101,7 +103,7 @@ def cmd_scene_render(args) -> int:
             raise RadError(f'cannot read allocation {args.allocation!r}: {e}') from None
     robot = None
     if args.robot:
-        from rad_core.cell.panda import HOME
+        from rad_core.cell.panda import HOME  # numpy: this command only
         robot = HOME
     save_scene_png(scene, args.output, allocation=allocation, width=args.width, height=args.height, robot=robot)
     print(f'wrote {args.output}')
@@ -110,8 +112,8 @@ def cmd_scene_render(args) -> int:
 
 def _supply_types(args, scene=None) -> tuple[dict, dict | None, dict]:
     """The block types, the inventory (None: any number) and the costs the supply flags name."""
-    from rad_core.allocation.supply import library, parse_costs, pick_types, read_inventory
-    from rad_core.domain.blocks import DEFAULT_LIBRARY
+    from rad_core.allocation.supply import library, parse_costs, pick_types, read_inventory  # ortools
+    from rad_core.domain.blocks import DEFAULT_LIBRARY  # numpy: this command only
     known = library(scene)
     if args.types and args.inventory:
         raise RadError('give --types or --inventory, not both (an inventory names its types)')
@@ -130,7 +132,7 @@ def _supply_types(args, scene=None) -> tuple[dict, dict | None, dict]:
 
 def _supply_and_write(args, targets, unit: float, clearance: float = 0.0, scene=None) -> int:
     """Choose and lay out the blocks (or none, with --no-supply), write the scene, say how well it covers."""
-    from rad_core.allocation.supply import SupplyParams, supply, target_only
+    from rad_core.allocation.supply import SupplyParams, supply, target_only  # ortools: this command only
     types, inventory, costs = _supply_types(args, scene)
     clearance = clearance if args.clearance is None else args.clearance
     if getattr(args, 'no_supply', False):
@@ -159,20 +161,20 @@ def _say(args, line: str) -> None:
 
 
 def cmd_scene_from_mesh(args) -> int:
-    from rad_core.domain.voxels import mesh_models, place_regions, region_names
+    from rad_core.domain.voxels import mesh_models, place_regions, region_names  # numpy: this command only
     models = mesh_models(region_names(args.models), args.unit, size=args.size, scale=args.scale, up=args.up,
                          hollow=args.hollow)
     return _supply_and_write(args, place_regions(models, args.unit), args.unit)
 
 
 def cmd_scene_from_voxels(args) -> int:
-    from rad_core.domain.voxels import place_regions, region_names, voxel_models
+    from rad_core.domain.voxels import place_regions, region_names, voxel_models  # numpy: this command only
     models = voxel_models(region_names(args.files), args.unit, up=args.up, hollow=args.hollow)
     return _supply_and_write(args, place_regions(models, args.unit), args.unit)
 
 
 def cmd_scene_supply(args) -> int:
-    from rad_core.domain.grid import Grid, blocks_on_grid
+    from rad_core.domain.grid import Grid, blocks_on_grid  # numpy: this command only
     scene = _read_scene(args.scene)
     placed = blocks_on_grid(scene, Grid(scene))
     if placed:
@@ -182,8 +184,8 @@ def cmd_scene_supply(args) -> int:
 
 
 def cmd_allocate(args) -> int:
-    from rad_core.allocation import solve
-    from rad_core.allocation.highs import solve_highs
+    from rad_core.allocation import solve  # ortools: this command only
+    from rad_core.allocation.highs import solve_highs  # ortools: this command only
     scene = _read_scene(args.scene)
     params = _allocation_params(args)
     result = solve(scene, params) if args.solver == 'cp-sat' else solve_highs(scene, params.time_limit_s)
@@ -196,7 +198,6 @@ def cmd_demo(args) -> int:
 
     rad_core stays free of ROS: the demo is a separate installed executable.
     """
-    import os
     exe = next((Path(prefix) / 'lib' / 'rad_planner' / 'demo'
                 for prefix in os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep)
                 if prefix and (Path(prefix) / 'lib' / 'rad_planner' / 'demo').is_file()), None)
@@ -217,11 +218,11 @@ def cmd_limits(args) -> int:
     """Would a real Franka take these arm trajectories? Every trajectory of a rad-result document
     (result.json of `rad demo` or /execute_assembly) or a plan (steps with trajectories), in order,
     each from where the previous one ended (HOME first), through `trajectory.limit_violation`."""
-    import numpy as np
+    import numpy as np  # numpy: this command only
 
-    from rad_core.cell.panda import HOME
-    from rad_core.cell.robot_model import robot_model
-    from rad_core.cell.trajectory import limit_ratios, limit_violation
+    from rad_core.cell.panda import HOME  # numpy: this command only
+    from rad_core.cell.robot_model import robot_model  # numpy: this command only
+    from rad_core.cell.trajectory import limit_ratios, limit_violation  # numpy: this command only
     model = robot_model(args.robot, args.joint_prefix)
     try:
         doc = json.loads(Path(args.result).read_text() if args.result != '-' else sys.stdin.read())
@@ -256,7 +257,7 @@ def cmd_limits(args) -> int:
 def cmd_calibrate(args) -> int:
     """Fit the motion-capture frame to the robot's base from point pairs (rad_core.cell.calibration); print
     the transform and its residuals as one JSON object; --out writes the assembly node's parameters."""
-    from rad_core.cell.calibration import fit, parse_pairs_csv, read_pairs_csv
+    from rad_core.cell.calibration import fit, parse_pairs_csv, read_pairs_csv  # numpy: this command only
     if not args.mocap_frame:
         raise RadError("--mocap-frame must name the motion-capture frame ('' means no calibration)")
     if args.out == '-':
@@ -275,9 +276,8 @@ def cmd_calibrate(args) -> int:
 
 
 def cmd_eval(args) -> int:
-    from rad_core.domain.scene_sources import generated_scenes, scene_dir
-    from rad_core.experiment.evaluation import evaluate, get_agent, uses_robot
-    from rad_core.view.progress import ProgressBar
+    from rad_core.domain.scene_sources import generated_scenes, scene_dir  # numpy: this command only
+    from rad_core.experiment.evaluation import evaluate, get_agent, uses_robot  # ortools: this command only
     distributed = args.workers is not None or args.scheduler is not None
     if args.workers is not None and args.workers < 1:
         raise RadError(f'--workers must be at least 1, got {args.workers}')
@@ -297,11 +297,11 @@ def cmd_eval(args) -> int:
         last = args.seed + args.scenes - 1
         total, source = args.scenes, f'g={args.grid} sides={args.sides} seeds {args.seed}..{last}'
     t0 = time.perf_counter()
-    from rad_core.allocation import AllocationParams
+    from rad_core.allocation import AllocationParams  # ortools: this command only
     allocation = AllocationParams(support=args.support) if args.support else None
     bar = ProgressBar(total, args.agent)
     if distributed:
-        from rad_core.experiment.distributed import AgentArgs, evaluate_distributed
+        from rad_core.experiment.distributed import AgentArgs, evaluate_distributed  # ortools: this command only
         agent_args = AgentArgs(args.agent, args.checkpoint, args.verify, args.budget, args.reallocate)
         result = evaluate_distributed(agent_args, scenes, robot, args.seed, progress=bar, workers=args.workers,
                                       scheduler=args.scheduler, execution=args.execution, allocation=allocation,
@@ -324,8 +324,8 @@ def cmd_eval(args) -> int:
 
 
 def cmd_ceiling(args) -> int:
-    from rad_core.sequencing.bounds.robot_ceiling import robot_ceiling
-    from rad_core.sequencing.decide.agents import SUPPORTS
+    from rad_core.sequencing.bounds.robot_ceiling import robot_ceiling  # ortools: this command only
+    from rad_core.sequencing.decide.agents import SUPPORTS  # numpy: this command only
     if not args.time_limit > 0:
         raise RadError(f'--time-limit must be a positive number of seconds, got {args.time_limit}')
     supports = tuple(s for s in args.support.split(',') if s)
@@ -335,7 +335,7 @@ def cmd_ceiling(args) -> int:
     scenes = [(Path(f).stem if f != '-' else 'stdin', _read_scene(f)) for f in args.scenes]
     agent = None
     if args.agent:
-        from rad_core.experiment.evaluation import evaluate, get_agent
+        from rad_core.experiment.evaluation import evaluate, get_agent  # ortools: this command only
         agent = get_agent(args.agent)
     rows = []
     for k, (name, scene) in enumerate(scenes):
@@ -369,11 +369,10 @@ def cmd_ceiling(args) -> int:
 
 
 def cmd_dataset_build(args) -> int:
-    from rad_core.training.dataset import build
-    from rad_core.view.progress import ProgressBar
+    from rad_core.training.dataset import build  # ortools: this command only
     shapes = []
     if args.shapes:
-        from rad_core.domain import shapes as shape_lib
+        from rad_core.domain import shapes as shape_lib  # numpy: this command only
         names = shape_lib.SPLITS.get(args.shapes, None)
         if names is None:
             raise RadError(f'--shapes must be one of {", ".join(shape_lib.SPLITS)}, got {args.shapes!r}')
@@ -385,7 +384,7 @@ def cmd_dataset_build(args) -> int:
     if not grids:
         raise RadError('--grids names no grid size')
     bar = ProgressBar(len(grids) * args.scenes + len(shapes), 'dataset')
-    from rad_core.allocation import AllocationParams
+    from rad_core.allocation import AllocationParams  # ortools: this command only
     params = AllocationParams(support=args.support)
     params.validate()
     header = build(args.output, grids, args.scenes, sides=args.sides, first_seed=args.seed, shapes=shapes,
@@ -398,8 +397,7 @@ def cmd_dataset_build(args) -> int:
 def cmd_train(args) -> int:
     from dataclasses import fields
 
-    from rad_core.training.dqn import TrainConfig, train
-    from rad_core.view.progress import ProgressBar
+    from rad_core.training.dqn import TrainConfig, train  # torch: this command only
     given = {f.name: getattr(args, f.name) for f in fields(TrainConfig) if getattr(args, f.name) is not None}
     if args.resume:
         extra = sorted(set(given) - {'total_steps'})
@@ -413,7 +411,7 @@ def cmd_train(args) -> int:
     seeds = _train_mode(args, given)
     total = given.get('total_steps', config.total_steps)
     if seeds is not None:
-        from rad_core.training.actors import seed_folder, train_seeds
+        from rad_core.training.actors import seed_folder, train_seeds  # torch: this command only
 
         def finished(seed: int, result: dict) -> None:
             print(f'seed {seed}: {result["env_steps"]} environment steps, {result["grad_steps"]} gradient steps, '
@@ -430,7 +428,7 @@ def cmd_train(args) -> int:
         bar()
 
     if args.actors is not None:
-        from rad_core.training.actors import ActorConfig, train_with_actors
+        from rad_core.training.actors import ActorConfig, train_with_actors  # torch: this command only
         actor = ActorConfig(args.actors, args.chunk_steps or ActorConfig.chunk_steps,
                             args.refresh_every or ActorConfig.refresh_every)
         result = train_with_actors(config, args.out, actor, resume=args.resume,
@@ -446,7 +444,7 @@ def cmd_train(args) -> int:
 def cmd_expert(args) -> int:
     from dataclasses import fields
 
-    from rad_core.training.expert import ExpertConfig, ExpertIteration
+    from rad_core.training.expert import ExpertConfig, ExpertIteration  # torch: this command only
     given = {f.name: getattr(args, f.name) for f in fields(ExpertConfig) if getattr(args, f.name) is not None}
     out = Path(args.out)
     if args.resume and (out / 'config.json').exists():
@@ -496,7 +494,7 @@ def _add_train_args(p: argparse.ArgumentParser, config=None) -> None:
     """Every field of a training config (default: TrainConfig) as --field-name (default: the dataclass's)."""
     from dataclasses import MISSING, fields
     if config is None:
-        from rad_core.training.dqn import TrainConfig as config
+        from rad_core.training.dqn import TrainConfig as config  # torch: this command only
     for f in fields(config):
         flag = '--' + f.name.replace('_', '-')
         default = f.default if f.default is not MISSING else None
@@ -747,7 +745,7 @@ def build_parser(command: str | None = 'train') -> argparse.ArgumentParser:
     p.add_argument('--out', required=True, help='run folder: demos/, rR.pt, model.pt, progress.jsonl, expert.log')
     p.add_argument('--resume', action='store_true', help='continue the run in --out (only --rounds may change)')
     if command == 'expert':
-        from rad_core.training.expert import ExpertConfig
+        from rad_core.training.expert import ExpertConfig  # torch: this command only
         _add_train_args(p, ExpertConfig)
     p.set_defaults(func=cmd_expert)
     return parser

@@ -1,5 +1,5 @@
 """An order of an allocation's poses in which a top-down hand can place each one: order repair's
-second chain; the same model over every candidate pose, for order repair's fourth chain
+'hand-order' stage; the same model over every candidate pose, for the 'cover' stage
 (`ordered_cover`) and the robot ceiling's bound (`allocation.bounds.ArmCoverageBound`, `ordered`).
 
 Order repair (`agent_plan.plan_for_agent`) learns precedences from GAMP's refusals: a pose refused

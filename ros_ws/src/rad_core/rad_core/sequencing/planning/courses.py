@@ -1,12 +1,12 @@
 """A line built course by course, for structures too large for one ordered cover.
 
-Order repair's fourth chain asks CP-SAT for the allocation and its hand order at once over every
-candidate pose (`hand_order.ordered_cover`). On a 72-block wall that is 590 poses and CP-SAT finds
-no cover in its 5 s; its plans' refusals then cost a re-allocation each. A mason builds such a
+The 'cover' stage (`sequencing.agent.stages`) asks CP-SAT for the allocation and its hand order
+at once over every candidate pose (`allocation.order.ordered_cover`). On a 72-block wall that is
+590 poses and CP-SAT finds no cover in its 5 s; its plans' refusals then cost a re-allocation each. A mason builds such a
 wall a course at a time, and so does `course_line`:
 
 1. the poses whose lowest cells lie in the next two courses (`COURSE_WINDOW`), with what is built
-   below as built, get an ordered cover (`hand_order.order_model` with the cover's rules: the
+   below as built, get an ordered cover (`allocation.order.order_model` with the cover's rules: the
    allocation's 'stable' support, a way of being held that no pose before it is in the way of,
    the most target cells, then the fewest fillers); so does the next course alone, which CP-SAT
    proves at once, and the two-course cover is taken where it places at least as many cells (in
@@ -40,7 +40,7 @@ from rad_core.domain.scene import Scene
 from rad_core.env.robot_env import RobotAssemblyEnv, RobotEnvConfig
 
 COURSES_ABOVE = 200
-"""`course_line` plans where a scene has more candidate poses than this (`hand_order.candidate_poses`):
+"""`course_line` plans where a scene has more candidate poses than this (`allocation.order.candidate_poses`):
 generated g = 5 scenes (seeds 0..39) have 17-163, g = 6 (seeds 0..19) 17-274 (two above 200), the
 hand-made held-out shapes 18-130, g = 8 230-310, g = 10 310-430, the 45- to 100-block walls and
 tower 280-1190."""
@@ -154,7 +154,7 @@ def course_bound(scene: Scene, time_limit_s: float = 10.0) -> float:
     """An upper bound on the coverage any top-down build of the scene reaches, course by course,
     for structures too large for the robot ceiling's ordered bound (`ArmCoverageBound`, not
     proven on a 72-block wall in 120 s): the sum over the courses of the most target cells of the
-    course that poses touching it can fill in an order the hand can keep (`hand_order.order_model`
+    course that poses touching it can fill in an order the hand can keep (`allocation.order.order_model`
     over those poses alone, a pose's cells of the course counted, with no rest rule), over the
     target cells. A build restricted to the poses touching a course is such an order, so each
     course's maximum bounds what any build fills of it. CP-SAT's proven bound per course within
