@@ -1,8 +1,9 @@
 """A line built course by course, for structures too large for one ordered cover.
 
 The 'cover' stage (`sequencing.agent.stages`) asks CP-SAT for the allocation and its hand order
-at once over every candidate pose (`allocation.order.ordered_cover`). On a 72-block wall that is
-590 poses and CP-SAT finds no cover in its 5 s; its plans' refusals then cost a re-allocation each. A mason builds such a
+at once over every candidate pose (`allocation.order.ordered_cover`). On a 72-block wall that
+is 590 poses and CP-SAT finds no cover in its 5 s; its plans' refusals then cost a re-allocation
+each. A mason builds such a
 wall a course at a time, and so does `course_line`:
 
 1. the poses whose lowest cells lie in the next two courses (`COURSE_WINDOW`), with what is built
