@@ -2,7 +2,8 @@
 
     python benchmarks/bench_distributed.py [--scenes 40] [--grid 4] [--agent default] [--verify]
                                            [--workers 1 2] [--seed 0] [--start-method fork|spawn|forkserver]
-                                           [--serial-threads N] [--cold] [--rows FILE]
+                                           [--serial-threads N] [--cold] [--rounds 1] [--results DIR] [--rows FILE]
+    python benchmarks/bench_distributed.py --from-rows docs/results/distributed.rows.jsonl   # the page again
 
 Runs the same generated two-sided scenes with `evaluation.evaluate` (the serial path, in this
 process, as `rad eval` runs it: the agent built first, the planner inside the run) and with
@@ -18,13 +19,15 @@ machine is shared, so each run also prints the load average (1 min) before and a
 time from /proc/stat less this process's and its workers'); --wait-quiet S waits up to S
 seconds before each run for the others to go quiet (< 0.1 core).
 --cold: first, a fresh process's cold start, step by step (what a spawned worker pays).
---rows FILE: append one JSON line per run (times, loads, command, date).
+--rounds R: serial and then each worker count, R times over. Writes <results>/distributed.md (one
+row per run on workers: its round's serial time, its own with start-up, the speed-up, CPU seconds)
+and distributed.rows.jsonl (one line per run: times, loads, command, date); --results DIR (default
+docs/results); --rows FILE also appends those lines to FILE; --from-rows FILE rebuilds the page.
 
 The serial run uses torch's default thread count (as `rad eval` does: the cores), the workers
 one thread each; a network's scores can differ in the last bits between the two, enough to
 flip a near tie, so with a learned agent a few rows can differ from a serial run on more
-threads (`--serial-threads 1` gives the workers' rows exactly). Results and the history of this
-figure: docs/results/distributed.md.
+threads (`--serial-threads 1` gives the workers' rows exactly). Results: docs/results/distributed.md.
 
     python benchmarks/bench_distributed.py --train [--train-steps 400] [--actors 1 2] [--dataset FILE]
 
@@ -45,6 +48,9 @@ import os
 import subprocess
 import sys
 import time
+from pathlib import Path
+
+from common import RESULTS, command_line, page_meta, read_rows, write_page
 
 WALL_CLOCK = ('reallocation_s', 'solve_time_s')
 
@@ -63,7 +69,11 @@ def main() -> int:
     p.add_argument('--serial-threads', type=int, help="torch threads of the serial run (default: torch's own)")
     p.add_argument('--cold', action='store_true', help="first, a fresh process's cold start step by step")
     p.add_argument('--cold-child', action='store_true', help=argparse.SUPPRESS)
-    p.add_argument('--rows', metavar='FILE', help='append one JSON line per run to FILE')
+    p.add_argument('--rounds', type=int, default=1, help='serial and then each worker count, this many times')
+    p.add_argument('--results', type=Path, default=RESULTS, help='folder of distributed.md and its rows')
+    p.add_argument('--from-rows', type=Path,
+                   help="rebuild the page from this rows file, running nothing (the page's command, commit, date stay)")
+    p.add_argument('--rows', metavar='FILE', help='also append one JSON line per run to FILE')
     p.add_argument('--wait-quiet', type=float, default=0, metavar='S',
                    help='before each run, wait up to S seconds until other processes use < 0.1 core')
     p.add_argument('--train', action='store_true', help='benchmark training (--actors) instead of evaluation')
@@ -73,6 +83,8 @@ def main() -> int:
     args = p.parse_args()
     if args.train:
         return bench_train(args)
+    if args.from_rows:
+        return write(read_rows(args.from_rows), args.results, page_meta(args.results / 'distributed.md'))
     if args.cold_child:
         return cold_child(args)
     if args.cold:
@@ -101,58 +113,66 @@ def main() -> int:
           f'scenes (seeds {args.seed}..{args.seed + args.scenes - 1}); serial: torch on {torch.get_num_threads()} '
           f'thread(s); workers: {args.start_method}ed, torch on 1 thread', flush=True)
     meta = dict(date=datetime.datetime.now().astimezone().isoformat(timespec='seconds'),
-                command='python benchmarks/bench_distributed.py ' + ' '.join(sys.argv[1:]), agent=agent.name,
-                robot=robot, scenes=args.scenes, grid=args.grid, seed=args.seed, cores=os.cpu_count())
+                command=command_line(), agent=agent.name, robot=robot, scenes=args.scenes, grid=args.grid,
+                seed=args.seed, cores=os.cpu_count())
 
-    durations = []
+    durations, runs = [], []
     last = [0.0]
 
     def lap(_row):
         now = time.perf_counter()
         durations.append(now - last[0])
         last[0] = now
-    waited = wait_until_quiet(args.wait_quiet) if args.wait_quiet else 0.0
-    load0 = os.getloadavg()[0]
-    with Others() as others:
-        t0 = last[0] = time.perf_counter()
-        serial = evaluate(agent, scenes, robot, args.seed, progress=lap)
-        serial_s = time.perf_counter() - t0
-    print(f'{"run":<10} {"start-up s":>10} {"(warm s)":>8} {"run s":>8} {"close s":>7} {"total s":>8} '
-          f'{"scenes/s":>9} {"speed-up":>8} {"with start-up":>13} {"load":>9} {"others":>6}  rows')
-    print(f'{"serial":<10} {"-":>10} {"-":>8} {serial_s:8.2f} {"-":>7} {serial_s:8.2f} {args.scenes / serial_s:9.3f} '
-          f'{1.0:8.2f} {1.0:13.2f} {load0:4.2f}>{others.load:4.2f} {others.cores:6.2f}  -', flush=True)
-    _append(args.rows, {**meta, 'run': 'serial', 'torch_threads': torch.get_num_threads(), 'total_s': serial_s,
-                        'load_before': load0, 'load_after': others.load, 'others_cores': others.cores,
-                        'cpu_s': others.own_s, 'waited_s': waited, 'scene_s': [round(d, 3) for d in durations]})
 
-    for n in args.workers:
+    def record(doc):
+        runs.append(doc)
+        _append(args.rows, doc)
+
+    for _ in range(args.rounds):
+        durations.clear()
         waited = wait_until_quiet(args.wait_quiet) if args.wait_quiet else 0.0
         load0 = os.getloadavg()[0]
         with Others() as others:
-            t0 = time.perf_counter()
-            with dask_client(workers=n, start_method=args.start_method) as client:
-                cluster_s = time.perf_counter() - t0
-                warm_up(client, agent_args, robot)
-                startup_s = time.perf_counter() - t0
-                t1 = time.perf_counter()
-                result = evaluate_distributed(agent_args, scenes, robot, args.seed, client=client)
-                run_s = time.perf_counter() - t1
-                worker_cpu = sorted(client.run(time.process_time).values())   # each since its fork
-                t2 = time.perf_counter()
-            close_s = time.perf_counter() - t2
-            total_s = time.perf_counter() - t0
-        differ = different_rows(serial, result)
-        same = 'identical' if not differ else f'{len(differ)} differ: {", ".join(differ)}'
-        print(f'{f"{n} worker" + "s" * (n > 1):<10} {startup_s:10.2f} {startup_s - cluster_s:8.2f} {run_s:8.2f} '
-              f'{close_s:7.2f} {total_s:8.2f} {args.scenes / total_s:9.3f} {serial_s / run_s:8.2f} '
-              f'{serial_s / total_s:13.2f} {load0:4.2f}>{others.load:4.2f} {others.cores:6.2f}  {same}; '
-              f'CPU s per worker {" ".join(f"{c:.1f}" for c in worker_cpu)}', flush=True)
-        _append(args.rows, {**meta, 'run': f'{n} workers', 'start_method': args.start_method, 'cluster_s': cluster_s,
-                            'startup_s': startup_s, 'run_s': run_s, 'close_s': close_s, 'total_s': total_s,
-                            'speedup': serial_s / run_s, 'speedup_with_startup': serial_s / total_s,
-                            'load_before': load0, 'load_after': others.load, 'others_cores': others.cores,
-                            'cpu_s': others.own_s, 'worker_cpu_s': worker_cpu, 'waited_s': waited,
-                            'rows_differ': differ})
+            t0 = last[0] = time.perf_counter()
+            serial = evaluate(agent, scenes, robot, args.seed, progress=lap)
+            serial_s = time.perf_counter() - t0
+        print(f'{"run":<10} {"start-up s":>10} {"(warm s)":>8} {"run s":>8} {"close s":>7} {"total s":>8} '
+              f'{"scenes/s":>9} {"speed-up":>8} {"with start-up":>13} {"load":>9} {"others":>6}  rows')
+        print(f'{"serial":<10} {"-":>10} {"-":>8} {serial_s:8.2f} {"-":>7} {serial_s:8.2f} '
+              f'{args.scenes / serial_s:9.3f} {1.0:8.2f} {1.0:13.2f} {load0:4.2f}>{others.load:4.2f} '
+              f'{others.cores:6.2f}  -', flush=True)
+        record({**meta, 'run': 'serial', 'torch_threads': torch.get_num_threads(), 'total_s': serial_s,
+                'load_before': load0, 'load_after': others.load, 'others_cores': others.cores,
+                'cpu_s': others.own_s, 'waited_s': waited, 'scene_s': [round(d, 3) for d in durations]})
+
+        for n in args.workers:
+            waited = wait_until_quiet(args.wait_quiet) if args.wait_quiet else 0.0
+            load0 = os.getloadavg()[0]
+            with Others() as others:
+                t0 = time.perf_counter()
+                with dask_client(workers=n, start_method=args.start_method) as client:
+                    cluster_s = time.perf_counter() - t0
+                    warm_up(client, agent_args, robot)
+                    startup_s = time.perf_counter() - t0
+                    t1 = time.perf_counter()
+                    result = evaluate_distributed(agent_args, scenes, robot, args.seed, client=client)
+                    run_s = time.perf_counter() - t1
+                    worker_cpu = sorted(client.run(time.process_time).values())   # each since its fork
+                    t2 = time.perf_counter()
+                close_s = time.perf_counter() - t2
+                total_s = time.perf_counter() - t0
+            differ = different_rows(serial, result)
+            same = 'identical' if not differ else f'{len(differ)} differ: {", ".join(differ)}'
+            print(f'{f"{n} worker" + "s" * (n > 1):<10} {startup_s:10.2f} {startup_s - cluster_s:8.2f} {run_s:8.2f} '
+                  f'{close_s:7.2f} {total_s:8.2f} {args.scenes / total_s:9.3f} {serial_s / run_s:8.2f} '
+                  f'{serial_s / total_s:13.2f} {load0:4.2f}>{others.load:4.2f} {others.cores:6.2f}  {same}; '
+                  f'CPU s per worker {" ".join(f"{c:.1f}" for c in worker_cpu)}', flush=True)
+            record({**meta, 'run': f'{n} workers', 'start_method': args.start_method, 'cluster_s': cluster_s,
+                    'startup_s': startup_s, 'run_s': run_s, 'close_s': close_s, 'total_s': total_s,
+                    'speedup': serial_s / run_s, 'speedup_with_startup': serial_s / total_s,
+                    'load_before': load0, 'load_after': others.load, 'others_cores': others.cores,
+                    'cpu_s': others.own_s, 'worker_cpu_s': worker_cpu, 'waited_s': waited,
+                    'rows_differ': differ})
     if 2 in args.workers:
         costs = [scene_cost(s) for _, s in scenes]
         print(f'2 workers, from the serial scene times ({sum(durations):.1f} s of scenes): ideal makespan '
@@ -160,6 +180,52 @@ def main() -> int:
               f'{makespan(durations, range(len(scenes))):.1f} s, by scene_cost '
               f'{makespan(durations, sorted(range(len(scenes)), key=lambda i: -costs[i])):.1f} s, '
               f'by the true times {makespan(durations, sorted(range(len(scenes)), key=lambda i: -durations[i])):.1f} s')
+    write(runs, args.results)
+    return 0
+
+
+def table(runs: list[dict]) -> tuple[list[str], list[list]]:
+    """The page's headers and rows: one row per run on workers, with the serial run of its round
+    (the serial run before it)."""
+    labels = sorted({r['run'] for r in runs if r['run'] != 'serial'})
+    one = labels[0] if len(labels) == 1 else 'workers'
+    threads = next((r['torch_threads'] for r in runs if r['run'] == 'serial'), '?')
+    headers = ['run', f'serial s (torch {threads} threads)', f'{one} s, start-up included', 'speed-up',
+               'CPU s serial', 'CPU s workers (each)']
+    out, serial, n = [], None, 0
+    for r in runs:
+        if r['run'] == 'serial':
+            serial, n = r, n + 1
+            continue
+        out.append([n if len(labels) == 1 else f'{n} ({r["run"]})', f'{serial["total_s"]:.2f}', f'{r["total_s"]:.2f}',
+                    f'{r["speedup_with_startup"]:.2f}x', f'{serial["cpu_s"]:.1f}',
+                    ', '.join(f'{c:.1f}' for c in r['worker_cpu_s'])])
+    return headers, out
+
+
+def write(runs: list[dict], results: Path, meta: dict | None = None) -> int:
+    """<results>/distributed.md and distributed.rows.jsonl from the runs' rows."""
+    workers = [r for r in runs if r['run'] != 'serial']
+    if not workers:
+        print('no run on workers: no page written')
+        return 0
+    first = runs[0]
+    counts = ' and '.join(sorted({r['run'].split()[0] for r in workers}, key=int))
+    identical = sum(not r['rows_differ'] for r in workers)
+    startup = [r['startup_s'] for r in workers]
+    rounds = sum(r['run'] == 'serial' for r in runs)
+    note = (f"{rounds} round{'s' * (rounds != 1)} of `{first['agent']}` "
+            f"{'with the robot (teleporting execution)' if first['robot'] else 'without the robot'} on "
+            f"{first['scenes']} g = {first['grid']} two-sided scenes (seeds from {first['seed']}), on a "
+            f"{first['cores']}-core machine where other processes kept at most "
+            f"{max(r['others_cores'] for r in runs):.2f} cores busy; the workers' rows are identical to the serial "
+            f"run's in {identical} of {len(workers)}. Start-up (the cluster and every worker's warm-up) is "
+            f"{min(startup):.2f}-{max(startup):.2f} s of the time. `bash benchmarks/bench_process_pair.sh` times two "
+            'plain processes side by side for comparison.')
+    headers, rows = table(runs)
+    page = write_page('distributed', f'rad eval --workers: {first["scenes"]} scenes on {counts} local workers',
+                      headers, rows, note, runs, results=results, **(meta or {}))
+    print(f'wrote {page}')
     return 0
 
 

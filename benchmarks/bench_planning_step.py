@@ -2,6 +2,7 @@
 
     python benchmarks/bench_planning_step.py --record out/bench_planning_step/record.json
     python benchmarks/bench_planning_step.py --compare out/bench_planning_step/record.json [--profile 25]
+    python benchmarks/bench_planning_step.py --compare out/bench_planning_step/record.json --page
 
 A planning-twin step is `RobotAssemblyEnv.step` with teleporting execution (GAMP decides, the block
 is put at its pose, physics settles the structure): what the sequencer's searches and the branch and
@@ -26,6 +27,9 @@ with `--verdicts` only what each step decides (`verdicts`: outcomes, GAMP's succ
 without their numbers), the check the settling's early end is held to. Both
 print the time per step and per GAMP call (wall and process CPU: the machine may be shared), and
 `--profile N` the N entries of a cProfile run that take the most time (a second pass).
+`--page [DIR]` writes DIR/planning_step.md (DIR: docs/results) with one row per scene (steps, ms a
+step, MotionPlanner calls and ms a call, exact restores; with --compare, whether it matched the
+record) and planning_step.rows.jsonl.
 """
 
 from __future__ import annotations
@@ -41,7 +45,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from common import HARD_TABLE, candidates, wide_scenes
+from common import HARD_TABLE, RESULTS, candidates, wide_scenes, write_page
 from rad_core.allocation import solve
 from rad_core.allocation.guide import AllocationGuide
 from rad_core.domain.generator import GeneratorConfig, generate_scene
@@ -193,18 +197,21 @@ def step_row(name, depth, kind, action, result, renv) -> dict:
             'reason': result.reason, 'plan': plan_record(renv.last_plan), **world_digest(renv.world)}
 
 
-def run_all(args) -> tuple[list[dict], dict]:
+def run_all(args) -> tuple[list[dict], dict, dict]:
+    """The record, the timers, and per scene what each timer spent on it: {scene: {timer: (n, wall, cpu)}}."""
     timers = {k: Timer() for k in ('step', 'step via GAMP', 'snapshot', 'restore', 'MotionPlanner')}
-    rows = []
+    rows, spent = [], {}
     planner = MotionPlanner()
     try:
         for name, scene in fixed_scenes(args.quick, args.wide):
             if args.only not in name:
                 continue
+            before = {k: (t.n, t.wall, t.cpu) for k, t in timers.items()}
             rows += run_scene(name, scene, args, timers, planner)
+            spent[name] = {k: tuple(v - w for v, w in zip((t.n, t.wall, t.cpu), before[k])) for k, t in timers.items()}
     finally:
         planner.close()
-    return rows, timers
+    return rows, timers, spent
 
 
 def differences(old: list[dict], new: list[dict], tol: float) -> tuple[list[str], tuple[float, str]]:
@@ -278,6 +285,59 @@ def summary(rows: list[dict]) -> str:
             + ', '.join(f'{k} {v}' for k, v in sorted(kinds.items())))
 
 
+def scene_rows(rows: list[dict], spent: dict, compared: tuple[list[dict], list[dict]] | None, tol: float) -> list[dict]:
+    """One row per scene for the page: steps, their wall and CPU ms, MotionPlanner calls, exact restores,
+    and with compared (the record and this run, as --compare checks them) the differences found."""
+    out = []
+    for name, t in spent.items():
+        (n, wall, cpu), (m, m_wall, _) = t['step'], t['MotionPlanner']
+        restores = [r for r in rows if r['scene'] == name and r['kind'] == 'restore']
+        row = {'scene': name, 'steps': n, 'step_ms': wall / max(n, 1) * 1e3, 'step_cpu_ms': cpu / max(n, 1) * 1e3,
+               'motion_planner': m, 'motion_planner_ms': m_wall / max(m, 1) * 1e3,
+               'restores': len(restores), 'exact': sum(r['exact'] for r in restores)}
+        if compared:
+            old, new = ([r for r in side if r['scene'] == name] for side in compared)
+            row['differences'] = len(differences(old, new, tol)[0])
+        out.append(row)
+    return out
+
+
+def page_table(per_scene: list[dict], compared: bool) -> tuple[list[str], list[list]]:
+    """Headers and rows of the page's table: each scene, then all of them."""
+    headers = ['scene', 'steps', 'ms a step (wall)', 'ms a step (CPU)', 'MotionPlanner calls',
+               'ms a MotionPlanner call', 'exact restores'] + ['the record'] * compared
+    total = {k: sum(r[k] for r in per_scene) for k in ('steps', 'motion_planner', 'restores', 'exact')}
+    for key, calls in (('step_ms', 'steps'), ('step_cpu_ms', 'steps'), ('motion_planner_ms', 'motion_planner')):
+        total[key] = sum(r[key] * r[calls] for r in per_scene) / max(total[calls], 1)
+    if compared:
+        total['differences'] = sum(r['differences'] for r in per_scene)
+    table = []
+    for r in [*per_scene, {'scene': f'all ({len(per_scene)} scenes)', **total}]:
+        table.append([r['scene'], r['steps'], f'{r["step_ms"]:.2f}', f'{r["step_cpu_ms"]:.2f}', r['motion_planner'],
+                      f'{r["motion_planner_ms"]:.2f}', f'{r["exact"]} of {r["restores"]}']
+                     + ([f'{r["differences"]} differences' if r['differences'] else 'the same'] if compared else []))
+    return headers, table
+
+
+def write_step_page(args, per_scene: list[dict]) -> Path:
+    """DIR/planning_step.md and planning_step.rows.jsonl (DIR: --page's)."""
+    which = (f'the wider set ({args.wide} seeds of each generated kind)' if args.wide
+             else 'the quick set' if args.quick else 'the fixed set')
+    only = f" whose name contains '{args.only}'" if args.only else ''
+    check = ''
+    if args.compare:
+        what = 'verdicts only (`--verdicts`)' if args.verdicts else f'every number within {args.tol:g}'
+        check = f' The record: `--compare {args.compare}`, {what}.'
+    note = ('A planning-twin step is `RobotAssemblyEnv.step` with teleporting execution, between `snapshot()` and '
+            '`restore()`, as the searches and the branch and bound run it; a MotionPlanner call is GAMP planning one '
+            f'action from a scene state, as /plan_assembly does. Scenes: {which}{only}, {args.candidates} candidates '
+            f'from each of up to {args.depth} states (seed {args.seed}); wall and process CPU time, the machine may '
+            f'be shared.{check}')
+    headers, table = page_table(per_scene, bool(args.compare))
+    return write_page('planning_step', 'A planning-twin step: what it costs', headers, table, note, per_scene,
+                      results=args.page)
+
+
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     g = p.add_mutually_exclusive_group()
@@ -296,16 +356,18 @@ def main() -> int:
                         'left out (what a step decides; the motions and poses may differ)')
     p.add_argument('--only', default='', help='only the scenes whose name contains this (a look at one)')
     p.add_argument('--profile', type=int, default=0, help='then a cProfile pass: print its N costliest entries')
+    p.add_argument('--page', type=Path, nargs='?', const=RESULTS, metavar='DIR',
+                   help='write DIR/planning_step.md and its rows (DIR: docs/results)')
     args = p.parse_args()
 
     t0 = time.perf_counter()
-    rows, timers = run_all(args)
+    rows, timers, spent = run_all(args)
     wall = time.perf_counter() - t0
     print(summary(rows))
     for name, timer in timers.items():
         print(timer.line(name))
     print(f'whole run {wall:.1f} s wall')
-    status = 0
+    status, compared = 0, None
     if args.record:
         args.record.parent.mkdir(parents=True, exist_ok=True)
         args.record.write_text(json.dumps({'args': {k: getattr(args, k) for k in ('candidates', 'depth', 'seed',
@@ -317,6 +379,7 @@ def main() -> int:
         old, new = saved['rows'], json.loads(json.dumps(rows))
         if args.verdicts:
             old, new = verdicts(old), verdicts(new)
+        compared = old, new
         diffs, worst = differences(old, new, args.tol)
         print(f'largest numeric deviation from the record: {worst[0]:.2e} at {worst[1]} (tolerance {args.tol:g})')
         if diffs:
@@ -326,6 +389,8 @@ def main() -> int:
             status = 1
         else:
             print(f'the same as {args.compare} ({len(rows)} entries)')
+    if args.page:
+        print(f'wrote {write_step_page(args, scene_rows(rows, spent, compared, args.tol))}')
     if args.profile:
         prof = cProfile.Profile()
         prof.enable()

@@ -1,6 +1,7 @@
 """Your own shapes, built: the supply that asks the hand against the one that does not.
 
-    python benchmarks/bench_supply.py [--agent default] [--city 12] [--seed 2026] [--rows FILE]
+    python benchmarks/bench_supply.py [--agent default] [--city 12] [--seed 2026] [--results DIR]
+    python benchmarks/bench_supply.py --from-rows docs/results/supply.rows.jsonl   # the page again, running nothing
 
 `rad scene from-mesh` / `from-voxels` choose the blocks for a target (`rad_core.allocation.supply`). Since
 2026-12-04 the cover must be one a top-down hand can place in some order (`SupplyParams.hand`);
@@ -16,8 +17,9 @@ The shapes, none from the generator and none used in training:
 - `--city` random "city blocks" (footprints 2..4 x 2..3, every column 0..3 cells high, drawn
   from `--seed`), at 5 and 4 cm.
 
-Printed: per set, the mean coverage of both supplies and every scene whose coverage differs;
-with `--rows`, one row per scene (supply counts, the cells the hand's order places, coverage).
+Writes <results>/supply.md (per set: the mean coverage of both supplies, the scenes better, worse
+and given the same blocks) and supply.rows.jsonl (one row per scene and supply: supply counts, the
+cells the hand's order places, coverage); prints every scene whose coverage differs.
 """
 
 from __future__ import annotations
@@ -29,7 +31,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from common import ROOT, command_line, write_rows
+from common import RESULTS, ROOT, page_meta, read_rows, write_page
 
 MESHES = ROOT / 'data' / 'meshes'
 
@@ -118,20 +120,21 @@ def shape_sets(args) -> dict[str, list[tuple[str, list, float, float]]]:
     return sets
 
 
-def main() -> int:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument('--agent', default='default', help='the agent (rad_core.sequencing.decide.agents)')
-    p.add_argument('--city', type=int, default=12, help='random city-block shapes')
-    p.add_argument('--seed', type=int, default=2026, help='seed of the city-block shapes')
-    p.add_argument('--rows', type=Path, help='write one row per scene here')
-    args = p.parse_args()
+# What each set's row of the table says it holds; {shapes}: scenes / 2, {seed}: --seed.
+SET_TEXT = {'gallery meshes': "the gallery's {shapes} meshes, flush and at clearance 0.2",
+            'drawn voxels': '{shapes} voxel shapes drawn in the benchmark, 5 and 4 cm',
+            'city voxels': '{shapes} random "city blocks" (seed {seed}), 5 and 4 cm'}
+HEADERS = ['shapes', 'scenes', 'coverage, any order', 'coverage, the hand asked', 'better', 'worse',
+           'the same blocks']
+TITLE = 'Your own shapes: blocks the hand can place'
 
+
+def measure(args) -> list[dict]:
+    """Every scene made both ways, planned and built: one row per scene and supply."""
     from rad_core.experiment.evaluation import evaluate
-    rows, t0 = [], time.perf_counter()
-    print(command_line())
+    rows = []
     for label, entries in shape_sets(args).items():
-        scenes = {True: [], False: []}
-        reports = {}
+        scenes, reports = {True: [], False: []}, {}
         for name, models, unit, clearance in entries:
             for hand in (True, False):
                 scene, report = make(models, unit, clearance, hand)
@@ -139,27 +142,75 @@ def main() -> int:
                 reports[name, hand] = report
         results = {hand: {r['name']: r for r in evaluate(args.agent, scenes[hand], True, 0)['scenes']}
                    for hand in (True, False)}
-        cov = {hand: [results[hand][n]['coverage'] for n, *_ in entries] for hand in (True, False)}
-        pairs = list(zip(cov[False], cov[True]))
-        same = sum(reports[n, True].counts == reports[n, False].counts for n, *_ in entries)
-        print(f'{label}: {len(entries)} scenes, coverage {np.mean(cov[False]):.3f} (any order) -> '
-              f'{np.mean(cov[True]):.3f} (the hand asked); better on {sum(b > a + 1e-9 for a, b in pairs)}, '
-              f'worse on {sum(b < a - 1e-9 for a, b in pairs)}, the same blocks on {same}')
-        for (name, *_), a, b in zip(entries, cov[False], cov[True]):
-            r = reports[name, True]
-            if abs(a - b) > 1e-9:
-                print(f'  {name}: {a:.3f} -> {b:.3f} (the hand places {r.hand_covered} of {r.covered} cells; '
-                      f'{dict(reports[name, False].counts)} -> {dict(r.counts)})')
+        for name, *_ in entries:
             for hand in (True, False):
                 rep = reports[name, hand]
                 rows.append({'set': label, 'scene': name, 'hand': hand, 'counts': dict(rep.counts),
                              'covered': rep.covered, 'target_cells': rep.target_cells,
                              'hand_covered': rep.hand_covered, 'rounds': rep.rounds,
                              'coverage': results[hand][name]['coverage'], 'steps': results[hand][name]['steps']})
-    print(f'{time.perf_counter() - t0:.0f} s')
-    if args.rows:
-        write_rows(args.rows, rows)
-        print(f'{len(rows)} rows -> {args.rows}')
+        print(f'{label}: {len(entries)} scenes', flush=True)
+    return rows
+
+
+def pairs(rows: list[dict]) -> dict[str, list[tuple[str, dict, dict]]]:
+    """Set -> [(scene, its row with any order, its row with the hand asked)], in the rows' order."""
+    by = {(r['set'], r['scene'], r['hand']): r for r in rows}
+    out = {}
+    for r in rows:
+        if r['hand']:
+            out.setdefault(r['set'], []).append((r['scene'], by[r['set'], r['scene'], False], r))
+    return out
+
+
+def table(rows: list[dict], seed: int) -> list[list]:
+    out = []
+    for label, scenes in pairs(rows).items():
+        a = [x['coverage'] for _, x, _ in scenes]
+        b = [y['coverage'] for _, _, y in scenes]
+        text = SET_TEXT.get(label, label).format(shapes=len(scenes) // 2, seed=seed)
+        out.append([text, len(scenes), f'{np.mean(a):.3f}', f'{np.mean(b):.3f}',
+                    sum(y > x + 1e-9 for x, y in zip(a, b)), sum(y < x - 1e-9 for x, y in zip(a, b)),
+                    sum(x['counts'] == y['counts'] for _, x, y in scenes)])
+    return out
+
+
+def note(rows: list[dict], agent: str) -> str:
+    worse = [f'{name} {x["coverage"]:.3f} -> {y["coverage"]:.3f}' for scenes in pairs(rows).values()
+             for name, x, y in scenes if y['coverage'] < x['coverage'] - 1e-9]
+    last = f'Worse with the hand asked: {", ".join(worse)}.' if worse else 'No scene is worse with the hand asked.'
+    return ('Every shape made into a scene both ways (`rad scene from-mesh`, `from-voxels`, `supply`; `--any-order` '
+            'keeps the cover with the fewest blocks, by default the cover must be one a top-down hand can place in '
+            f'some order), planned and built by `{agent}` with the robot in the loop (teleporting execution). None '
+            f'of the shapes comes from the generator or is used in training. {last}')
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument('--agent', default='default', help='the agent (rad_core.sequencing.decide.agents)')
+    p.add_argument('--city', type=int, default=12, help='random city-block shapes')
+    p.add_argument('--seed', type=int, default=2026, help='seed of the city-block shapes')
+    p.add_argument('--results', type=Path, default=RESULTS, help='folder of supply.md and supply.rows.jsonl')
+    p.add_argument('--from-rows', type=Path,
+                   help="rebuild the page from this rows file, running nothing (the page's command, commit, date stay)")
+    args = p.parse_args()
+
+    meta = {}
+    if args.from_rows:
+        rows = read_rows(args.from_rows)
+        meta = page_meta(args.results / 'supply.md')
+    else:
+        t0 = time.perf_counter()
+        rows = measure(args)
+        print(f'{time.perf_counter() - t0:.0f} s')
+    for scenes in pairs(rows).values():
+        for name, x, y in scenes:
+            if abs(x['coverage'] - y['coverage']) > 1e-9:
+                print(f'  {name}: {x["coverage"]:.3f} -> {y["coverage"]:.3f} (the hand places {y["hand_covered"]} '
+                      f'of {y["covered"]} cells; {x["counts"]} -> {y["counts"]})')
+    page = write_page('supply', TITLE, HEADERS, table(rows, args.seed), note(rows, args.agent), rows,
+                      results=args.results, **meta)
+    print(f'wrote {page}')
     return 0
 
 
