@@ -10,7 +10,8 @@ writes (docs/results/plan_assembly.md and .rows.jsonl, `common.write_page`) the 
 the time to the anytime planner's first complete plan, the predicted coverage and how often a
 later plan (order repair's, a search's) replaced the first. Plans start at home; no robot runs.
 Each scene is asked once per request time limit in --time-limits (0: the node's default,
-`plan_time_limit_s`, 2.25 s); the answer must come within the limit plus 10 %.
+the first complete plan, improved until `anytime_deadline_s`, 2.25 s); the answer should come within
+the limit (or that deadline) plus 10 %.
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ import numpy as np
 import rclpy
 from common import RESULTS, write_page
 from rad_core.domain.generator import GeneratorConfig, generate_scene
-from rad_planner.assembly_node import PLAN_TIME_LIMIT_S
+from rad_planner.assembly_node import ANYTIME_DEADLINE_S
 from rad_planner.graph import executable
 
 HOME9 = [0.0, -0.215, 0.0, -2.57, 0.0, 2.356, 2.356, 0.04, 0.04]
@@ -118,9 +119,9 @@ def table(rows) -> list[list]:
         t = np.array([r['seconds'] for r in mine])
         first = np.array([r['first_plan_s'] for r in mine])
         cov = np.array([r['coverage'] for r in mine])
-        deadline = limit or PLAN_TIME_LIMIT_S
+        deadline = limit or ANYTIME_DEADLINE_S
         within = f'{int((t <= 1.1 * deadline).sum())} of {len(mine)}'
-        out.append([f'{limit:g}' if limit else f'0 (node default, {PLAN_TIME_LIMIT_S:g})', f'{np.median(t):.2f}',
+        out.append([f'{limit:g}' if limit else f'0 (anytime, {ANYTIME_DEADLINE_S:g})', f'{np.median(t):.2f}',
                     f'{np.percentile(t, 95):.2f}', f'{t.max():.2f}', within, f'{np.median(first):.2f}',
                     f'{cov.mean():.3f}', f'{int((cov >= 1 - 1e-4).sum())} of {len(mine)}'])
     return out

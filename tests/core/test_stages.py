@@ -132,3 +132,22 @@ def test_plan_for_agent_answers_within_its_time_limit_with_the_best_plan_and_its
     t0 = time.perf_counter()
     plan = planner(scene)
     assert time.perf_counter() - t0 < 2.2 and plan.steps and plan.anytime[-1]['plan'] in ('scorer', *STAGES)
+
+
+def test_with_an_anytime_deadline_the_first_plan_completes_and_no_stage_starts_after_it(default_planner):
+    # What /plan_assembly does when a request asks for no time limit: the first plan keeps the long
+    # limit (a slow machine still gets a complete plan), the stages stop at the short deadline.
+    scene = generate_scene(GeneratorConfig(grid=5, sides=2), 0)
+    seen = []
+
+    def courses(scene_now, seconds, least_poses=None):
+        seen.append(seconds)
+        return None
+    planner = default_planner
+    from rad_core.sequencing.agent.agent_plan import plan_for_agent
+    plan = plan_for_agent(planner.spec, scene, planner.allocate, planner.motion, planner.sequencer.rank,
+                          planner.reallocate, support=planner.support, time_limit_s=60.0,
+                          reallocation=planner.reallocation, quick_rank=planner.quick_rank,
+                          improve_until_s=1e-3, solvers=Solvers(course_line=courses))
+    assert plan.steps and not plan.episode.timed_out and "time limit" not in plan.reason
+    assert [a['plan'] for a in plan.anytime] == ['scorer'] and not seen

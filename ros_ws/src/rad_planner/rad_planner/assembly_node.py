@@ -106,9 +106,10 @@ from tf2_msgs.msg import TFMessage
 from rad_planner.take_apart import serve_take_apart
 
 
-# /plan_assembly's deadline when a request leaves time_limit_s at 0: the answer, the best plan found by
-# then, comes within it plus 10 % (2.5 s). A larger structure asks for more in its request.
-PLAN_TIME_LIMIT_S = 2.25
+# /plan_assembly's anytime deadline when a request leaves time_limit_s at 0: no improvement of the first
+# complete plan starts after it, and an answer that needs no longer first plan comes within it plus 10 %
+# (2.5 s). The first plan itself has time_limit_s. A request's own time_limit_s is a hard deadline.
+ANYTIME_DEADLINE_S = 2.25
 # The share of a request's time limit kept back from the planner (see plan_assembly_callback).
 DEADLINE_MARGIN = 0.05
 
@@ -116,7 +117,7 @@ DEADLINE_MARGIN = 0.05
 class AssemblyNode(Node):
     def __init__(self):
         super().__init__('assembly')
-        for name, value in (('time_limit_s', 120.0), ('plan_time_limit_s', PLAN_TIME_LIMIT_S),
+        for name, value in (('time_limit_s', 120.0), ('anytime_deadline_s', ANYTIME_DEADLINE_S),
                             ('allocation_time_limit_s', 10.0), ('seed', 0),
                             ('task_file', ''), ('service_timeout_s', 60.0), ('stale_after_s', 2.0),
                             ('settle_s', 0.5), ('position_tol', 0.005), ('max_replans', 3),
@@ -377,21 +378,21 @@ class AssemblyNode(Node):
                           moved_aside_from_msgs(response.moved_aside_blocks, response.moved_aside_poses),
                           seconds=response.planning_time_s)
 
-    def plan(self, scene: Scene, time_limit: float, start):
+    def plan(self, scene: Scene, time_limit: float, start, improve_until: float | None = None):
         plan = plan_for_agent(self.agent, scene, self.allocate, self.plan_motion, self.rank, self.reallocate,
                               support=self.support, seed=int(self.param('seed')), start=start,
                               time_limit_s=time_limit, max_reallocations=int(self.param('max_reallocations')),
-                              quick_rank=self.quick_rank, improve_time_s=float(self.param('improve_time_s')))
+                              quick_rank=self.quick_rank, improve_time_s=float(self.param('improve_time_s')),
+                              improve_until_s=improve_until)
         self.plan_pub.publish(String(data=json.dumps(plan_json(plan))))
         return plan
 
-    def time_limit(self, requested: float, default: str = 'time_limit_s') -> float:
-        """The request's time limit, or where it is 0 the node's parameter `default`."""
+    def time_limit(self, requested: float) -> float:
         if not math.isfinite(requested) or requested < 0:
             raise RadError(f'time_limit_s must be 0 (node default) or positive, got {requested}')
-        limit = requested or float(self.param(default))
+        limit = requested or float(self.param('time_limit_s'))
         if not limit > 0:
-            raise RadError(f'the {default} parameter must be positive, got {limit}')
+            raise RadError(f'the time_limit_s parameter must be positive, got {limit}')
         return limit
 
     def start_joints(self, requested):
@@ -417,15 +418,21 @@ class AssemblyNode(Node):
     def plan_assembly_callback(self, request, response):
         t0 = time.perf_counter()
         try:
-            limit = self.time_limit(request.time_limit_s, 'plan_time_limit_s')
+            limit = self.time_limit(request.time_limit_s)
+            # No limit asked for: the first complete plan, improved until the anytime deadline.
+            anytime = None if request.time_limit_s else float(self.param('anytime_deadline_s'))
+            if anytime is not None and not anytime > 0:
+                raise RadError(f'the anytime_deadline_s parameter must be positive, got {anytime}')
             scene, registered = self.scene_of(request.scene, request.scene_json)
             registration = time.perf_counter() - t0 if registered else 0.0
             start = self.start_joints(request.start_positions)
             # The request's limit holds from its arrival: the planner gets what registration left of it,
             # less a margin for what runs past the planner's deadline (a GAMP or CP-SAT call under way
             # ends first) and for the response.
-            budget = (1.0 - DEADLINE_MARGIN) * limit - (time.perf_counter() - t0)
-            plan = self.plan(scene, max(1e-3, budget), start)
+            spent = time.perf_counter() - t0
+            budget = max(1e-3, (1.0 - DEADLINE_MARGIN) * limit - spent)
+            until = None if anytime is None else max(1e-3, (1.0 - DEADLINE_MARGIN) * anytime - spent)
+            plan = self.plan(scene, budget, start, until)
         except RadError as e:
             response.success, response.reason = False, str(e)
             self.get_logger().warning(f'plan_assembly refused: {e}')

@@ -41,7 +41,8 @@ within the deadline); 0: no improving but the ceiling's (`stages.stages_for`).""
 def plan_for_agent(spec: AgentSpec, scene: Scene, allocate, plan_motion, rank, reallocate=None, *,
                    support: str | None = None, seed: int = 0, start=None, time_limit_s: float = 60.0,
                    max_reallocations: int = 10, reallocation=None, quick_rank=None,
-                   improve_time_s: float = IMPROVE_TIME_S, solvers: Solvers | None = None) -> AssemblyPlan:
+                   improve_time_s: float = IMPROVE_TIME_S, improve_until_s: float | None = None,
+                   solvers: Solvers | None = None) -> AssemblyPlan:
     """The agent's plan of the scene, within `time_limit_s` of the call.
 
     A first plan (`plan_assembly` with the agent's allocation, ranking, verification and
@@ -60,6 +61,8 @@ def plan_for_agent(spec: AgentSpec, scene: Scene, allocate, plan_motion, rank, r
     quick_rank: the scorer alone (`Sequencer.rank(..., scorer_only=True)`): for a verified agent with
     a search, the first plan is ranked by it and the search stage plans with `rank`.
     improve_time_s: the search stage's least budget; 0: no stage but the ceiling's.
+    improve_until_s: no stage runs past this many seconds from the call (default: `time_limit_s`);
+    the first plan still has `time_limit_s`, so a slow machine gets a complete plan, late.
     solvers: the searches the stages call (default: `stages.Solvers` of this module's names)."""
     support = support or spec.resolved_support()
     if spec.realloc:
@@ -82,6 +85,8 @@ def plan_for_agent(spec: AgentSpec, scene: Scene, allocate, plan_motion, rank, r
                         seed, start, t0=t0, deadline=t0 + time_limit_s, improve_time_s=improve_time_s,
                         solvers=solvers or Solvers(course_line, hand_order, ordered_cover, robot_ceiling))
     best = planning.first = planning.plan(first_rank, planning.deadline)
+    if improve_until_s is not None:
+        planning.deadline = min(planning.deadline, t0 + improve_until_s)
     made_by = 'search' if spec.search and not anytime_search else 'scorer'
     now = time.perf_counter()
     anytime = [{'t': now - t0, 'coverage': best.predicted_coverage, 'plan': made_by}]

@@ -189,7 +189,8 @@ def plan_assembly(scene: Scene, allocate: Allocate, plan_motion: PlanMotion, seq
     timings['allocation'] = time.perf_counter() - t0
     plan = AssemblyPlan(False, '', scene, allocation, final_scene=scene, timings=timings)
     if not allocation.has_solution:
-        plan.reason = f'allocation failed: {allocation.status}'
+        plan.reason = f'allocation failed: {allocation.status}' + (
+            ' (CP-SAT found none within its time limit)' if allocation.status == 'UNKNOWN' else '')
         return _done(plan, t0)
     # The plan's MDP judges stability as the learned agents' does (physics, after a prune of blocks
     # resting on nothing): the sequencer and its search judge the actions they checked, but a ranking
