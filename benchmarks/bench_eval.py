@@ -69,8 +69,9 @@ def main() -> int:
     args.rows.parent.mkdir(parents=True, exist_ok=True)
     args.rows.write_text(''.join(json.dumps(r, sort_keys=True, default=str) + '\n' for r in rows))
     print(f'wrote {args.rows}')
-    note = (f'`{args.agent}` (`{agent.name}`) plans each scene as /plan_assembly does (in process, the same functions) and the plan is '
-            'built in a fresh PyBullet twin (teleporting execution); coverage is what the twin\'s registration '
+    note = (f'`{args.agent}` (`{agent.name}`) plans each scene as /plan_assembly does (in process, the same '
+            'functions) and the plan is built in a fresh PyBullet twin (teleporting execution); coverage is '
+            'what the twin\'s registration '
             'finds built, f the fraction of episodes that ended on a failed action. Generated scenes are '
             'two-sided, flush, never used in training; the held-out shapes are `rad_core.domain.shapes`\' '
             'held-out split, the tight layouts the same with their blocks 2.5 cm apart. Per-scene rows: '
