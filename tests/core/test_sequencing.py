@@ -63,7 +63,7 @@ def test_infeasible_motions_give_a_partial_plan_with_the_reason():
 def test_failed_allocation_and_time_limit_are_reasons(motion):
     scene = generate_scene(GeneratorConfig(grid=3), 1)
     plan = plan_assembly(scene, lambda s: AllocationResult('UNKNOWN', 0, 0, 0.0), motion, HeurPolicy())
-    assert not plan.success and plan.reason == 'allocation failed: UNKNOWN'
+    assert not plan.success and plan.reason == 'allocation failed: UNKNOWN (CP-SAT found none within its time limit)'
     plan = plan_assembly(scene, solve, motion, HeurPolicy(), time_limit_s=0.0)
     assert not plan.success and 'time limit' in plan.reason
 
