@@ -26,6 +26,20 @@ the rule cannot see (the hand's palm, 0.21 x 0.06 m, passing 14 mm above u's
 top, 26 mm in a tight grasp, or neighbouring blocks) is left to the collision checks of the planner,
 which probe the real geometry. Only units up to `MAX_GRASP_WIDTH` wide can be
 taken: the open hand must clear the unit by a few millimetres on each side.
+
+Wide grasps (`wide_grasps`, offered by the planner only with `GampConfig.wide_grasps`): the
+fingers close along the block's x (yaw 0) or y (yaw 90) axis across the block's whole extent
+there, `span` units, their pads on the block's outer faces, the fingers outside the block. A
+wide grasp `Grasp(unit, yaw, span)` names the row of units at unit `unit`'s level and position
+across the closing axis, `unit` being the row's first unit along the closing axis; its target
+(`grasp_centre`) is the middle of the row, held at the tight grasp's height (`grasp_lift`). It is
+offered where
+
+1. the row is unbroken (every cell from its first unit to its last is a unit of the block),
+   `span` >= 2 units, and its width (`span_width`) with 5 mm on each side fits the open hand;
+2. no unit of the block lies above any unit of the row (the palm comes down on the row); and
+3. no unit of the block lies in the two finger columns just outside the row's ends at the row's
+   level or above (a finger would land on it or hit it on the way down).
 """
 
 from __future__ import annotations
@@ -55,18 +69,66 @@ def grasp_lift(unit: float) -> float:
 @dataclass(frozen=True)
 class Grasp:
     """Fingers close on unit `unit` (index into the type's offsets) along the
-    block's x axis (yaw 0) or y axis (yaw 90)."""
+    block's x axis (yaw 0) or y axis (yaw 90). span > 1: a wide grasp across `span` units,
+    the row that starts at unit `unit` along the closing axis (module docstring)."""
 
     unit: int
     yaw: int
+    span: int = 1
 
     def __str__(self) -> str:
-        return f'unit {self.unit} yaw {self.yaw}'
+        if self.span == 1:
+            return f'unit {self.unit} yaw {self.yaw}'
+        return f'unit {self.unit} yaw {self.yaw} span {self.span}'
 
 
 def grasp_width(unit: float, clearance: float = 0.0) -> float:
     """The width (m) the fingers close on: a unit's outer faces, which a scene's clearance sets back."""
     return unit * (1.0 - clearance)
+
+
+def span_width(span: int, unit: float, clearance: float = 0.0) -> float:
+    """The width (m) across the outer faces of `span` units in a row: a scene's clearance sets back
+    the row's two outer faces only (`domain.blocks.unit_boxes`). `grasp_width` for one unit."""
+    return unit * (span - clearance)
+
+
+def grasp_centre(btype: BlockType, grasp: Grasp) -> np.ndarray:
+    """Where (in units, the block's frame) the grasp target sits over the held unit's centre: the
+    unit's centre, or for a wide grasp the middle of its row along the closing axis."""
+    centre = np.asarray(btype.offsets[grasp.unit], dtype=float)
+    if grasp.span > 1:
+        centre[0 if grasp.yaw == 0 else 1] += (grasp.span - 1) / 2
+    return centre
+
+
+def wide_grasps(btype: BlockType, unit: float, clearance: float = 0.0) -> tuple[Grasp, ...]:
+    """Every wide grasp the rule of the module docstring allows at this unit (m) and clearance,
+    best first (`grasp_order`)."""
+    offsets = np.asarray(btype.offsets, dtype=np.int64)
+    cells = {tuple(o): u for u, o in enumerate(offsets.tolist())}
+    height = _height(offsets)
+    out = []
+    for yaw in GRASP_YAWS:
+        axis = 0 if yaw == 0 else 1
+        step = np.eye(3, dtype=np.int64)[axis]
+        for u, cell in enumerate(offsets.tolist()):
+            first = np.asarray(cell)
+            if tuple(first - step) in cells:
+                continue                    # not the row's first unit
+            row = [first]
+            while tuple(row[-1] + step) in cells:
+                row.append(row[-1] + step)
+            span = len(row)
+            if span < 2 or span_width(span, unit, clearance) > MAX_GRASP_WIDTH:
+                continue
+            up = [(0, 0, k) for k in range(1, height + 1)]
+            covered = any(tuple(c + d) in cells for c in row for d in up)
+            fingers = (first - step, row[-1] + step)
+            blocked = any(tuple(f + (0, 0, k)) in cells for f in fingers for k in range(height + 1))
+            if not covered and not blocked:
+                out.append(Grasp(u, yaw, span))
+    return tuple(grasp_order(btype, out))
 
 
 def no_grasp_reason(btype: BlockType, unit_size: float) -> str:
@@ -76,8 +138,19 @@ def no_grasp_reason(btype: BlockType, unit_size: float) -> str:
     return f'no unit of a {btype.name} is free from above'
 
 
-def block_grasps(btype: BlockType, unit_size: float = 0.05) -> tuple[Grasp, ...]:
-    """Every grasp the rule of the module docstring allows, best first (`grasp_order`)."""
+def block_grasps(btype: BlockType, unit_size: float = 0.05, wide: bool = False,
+                 clearance: float = 0.0) -> tuple[Grasp, ...]:
+    """Every grasp the rule of the module docstring allows, best first (`grasp_order`).
+
+    unit_size: the width of one unit (a scene's `grasp_width`). wide: the wide grasps
+    (`wide_grasps`) after the unit grasps, for the scene's unit `unit_size / (1 - clearance)`."""
+    unit_grasps = _unit_grasps(btype, unit_size)
+    if not wide:
+        return unit_grasps
+    return unit_grasps + wide_grasps(btype, unit_size / (1.0 - clearance), clearance)
+
+
+def _unit_grasps(btype: BlockType, unit_size: float) -> tuple[Grasp, ...]:
     if unit_size > MAX_GRASP_WIDTH:
         return ()
     offsets = np.asarray(btype.offsets, dtype=np.int64)
@@ -103,7 +176,7 @@ def grasp_order(btype: BlockType, grasps) -> list[Grasp]:
     com = offsets.mean(axis=0)
 
     def key(g: Grasp):
-        o = offsets[g.unit]
+        o = offsets[g.unit] if g.span == 1 else grasp_centre(btype, g)
         return (round(float(np.hypot(*(o[:2] - com[:2]))), 6), -o[2], g.yaw, g.unit)
 
     return sorted(grasps, key=key)

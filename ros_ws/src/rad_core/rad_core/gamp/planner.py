@@ -22,6 +22,10 @@ vertical waypoints above it, the robot clear of everything and the carried
 block not penetrating anything beyond face contact, the transfer from lift to
 above placement, and the retreat with opened fingers from the placed block.
 
+With `GampConfig.wide_grasps`, the wide grasps (`grasps.wide_grasps`: across the block's whole extent
+along one axis) follow the unit grasps, planned the same way at the tight grasp's height
+(`wide_grasp_styles`), the fingers opened off the row's outer faces and closed on them.
+
 Failure classes as the paper's: 'grasp' (f_g) when no grasp passes the pick
 half, 'placement' (f_p) when some grasp does but none of those also places the
 block. The reason lists, per grasp, the first thing that blocked it.
@@ -40,11 +44,21 @@ import numpy as np
 
 from rad_core.cell import panda
 from rad_core.cell.motion import Motion
+from rad_core.domain.blocks import BlockType
 from rad_core.domain.errors import RadError
 from rad_core.domain.scene import Scene
 from rad_core.domain.transforms import matrix_from_quaternion, yaw_matrix, yaw_of_quaternion, yaw_quaternion
 from rad_core.gamp.collision import CollisionConfig, attachment_from_world, check_path, make_collision_fn, world_key
-from rad_core.gamp.grasps import Grasp, block_grasps, grasp_lift, grasp_width, no_grasp_reason
+from rad_core.gamp.grasps import (
+    Grasp,
+    block_grasps,
+    grasp_centre,
+    grasp_lift,
+    grasp_width,
+    no_grasp_reason,
+    span_width,
+    wide_grasps,
+)
 from rad_core.gamp.ik import IkConfig, hand_yaw_options, solve_top_down
 from rad_core.gamp.trajectory import TimingConfig, plan_motion
 from rad_core.sim.world import World
@@ -89,6 +103,10 @@ class GampConfig:
     `gamp.action.MotionPlanner` (the gamp node's `move_aside` request; `plan_assembly` asks for
     it); `plan_action` itself plans one pick and place."""
     timing: TimingConfig = field(default_factory=TimingConfig)
+    wide_grasps: bool = False
+    """Also take a block across its whole extent along its x or y axis (`grasps.wide_grasps`), after
+    every unit grasp failed: the fingers outside the block, at the tight grasp's height
+    (`wide_grasp_styles`), closing on the row's outer faces. Off: the unit grasps only."""
 
 
 @dataclass
@@ -198,64 +216,26 @@ def plan_action(world: World, block_id: str, position, yaw_deg: float, start=Non
     rng = np.random.default_rng(config.seed)
     width = grasp_width(unit, scene.clearance)
     grasps = block_grasps(btype, width)
+    if config.wide_grasps:
+        grasps += wide_grasps(btype, unit, scene.clearance)
     result = GampResult(False)
     if not grasps:
         return _finish(result, 'grasp', f'grasp: block {block_id} has no top-down grasp: '
                                         f'{no_grasp_reason(btype, width)}', clock, t0)
 
-    styles = grasp_styles(width, unit, config)
-    closed_f = max(0.0, width / 2 - config.grip_squeeze)
     pick_failures, place_failures = [], []
     with world.preserved():
         world.present(block_id)     # a block in the feeder is picked where the feeder presents it
         start = world.joint_positions() if start is None else _full(start)
         block_pos, block_quat = world.block_pose(block_id)
-        block_yaw = math.radians(yaw_of_quaternion(block_quat))
-        rot = matrix_from_quaternion(block_quat)
-        turn = math.radians(yaw_deg) - block_yaw
-        final_rot = yaw_matrix(yaw_deg)
-        tops = _tops(world, exclude=block_id)
-        bodies = world_key(world, (), None, config.collision)
+        job = _Job(world, block_id, btype, unit, scene.clearance, position, float(yaw_deg), start, block_pos,
+                   block_quat, _tops(world, exclude=block_id), world_key(world, (), None, config.collision),
+                   config, clock, rng)
         for grasp in grasps:
-            centre = np.asarray(btype.offsets[grasp.unit], dtype=float) * unit
-            closing = block_yaw + math.radians(grasp.yaw)
-            pick_reason = place_reason = ''
-            for hand_yaw in hand_yaw_options(block_pos + rot @ centre, closing):
-                pick, why = None, []
-                for open_f, lift in styles:
-                    offset = centre + (0.0, 0.0, lift)
-                    grasp_point = block_pos + rot @ offset
-                    # From the grasp point down to the held block's bottom.
-                    hang = (offset[2] - min(o[2] for o in btype.offsets) * unit) + unit / 2
-                    transit_z = tops + hang + config.transit_clearance
-                    rise_pick = max(config.approach_height, transit_z - grasp_point[2])
-                    try:
-                        pick = _remembered_pick(bodies, world, block_id, grasp_point, hand_yaw, start, open_f,
-                                                closed_f, rise_pick, config, clock, rng)
-                        break
-                    except _Blocked as e:
-                        why.append(str(e) if not why else f'tight grasp: {e}')
-                        # A lift check that failed carried the block with the hand: put it back, so
-                        # the next try is planned against the world as it is (as after a failed
-                        # placement).
-                        world.set_block_pose(block_id, block_pos, block_quat)
-                        if 'finger hits' not in str(e):
-                            break       # a tight grasp cannot help
-                if pick is None:
-                    pick_reason = pick_reason or '; '.join(why)
-                    continue
-                place_point = position + final_rot @ offset
-                rise_place = max(config.approach_height, transit_z - place_point[2])
-                try:
-                    place = _plan_place(world, block_id, pick, place_point, position, yaw_deg,
-                                        hand_yaw + turn, open_f, rise_place, config, clock, rng)
-                except _Blocked as e:
-                    place_reason = place_reason or str(e)
-                    world.set_block_pose(block_id, block_pos, block_quat)
-                    continue
-                result._path = (start, pick['waypoints'] + place['waypoints'], config.timing, width / 2)
-                result.grasp, result.hand_yaw_deg = grasp, math.degrees(hand_yaw)
-                result.success = True
+            done, pick_reason, place_reason = _try_grasp(job, grasp)
+            if done is not None:
+                result._path, result.hand_yaw_deg = done
+                result.grasp, result.success = grasp, True
                 return _finish(result, '', '', clock, t0)
             if place_reason:
                 place_failures.append(f'{grasp}: {place_reason}')
@@ -268,6 +248,83 @@ def plan_action(world: World, block_id: str, position, yaw_deg: float, start=Non
     reason = (f'placement: {n_ok} of {len(grasps)} grasps feasible, none places the block: '
               + '; '.join(place_failures))
     return _finish(result, 'placement', reason, clock, t0)
+
+
+@dataclass
+class _Job:
+    """What every grasp of one `plan_action` call is planned against."""
+
+    world: World
+    block_id: str
+    btype: BlockType
+    unit: float
+    clearance: float
+    position: np.ndarray
+    yaw_deg: float
+    start: np.ndarray
+    block_pos: np.ndarray
+    block_quat: np.ndarray
+    tops: float
+    bodies: tuple
+    config: GampConfig
+    clock: _Clock
+    rng: np.random.Generator
+
+
+def _try_grasp(job: _Job, grasp: Grasp) -> tuple[tuple | None, str, str]:
+    """Plan one grasp, both hand yaws: ((the result's path, hand yaw (deg)) or None, the pick's reason,
+    the placement's reason)."""
+    world, block_id, btype, unit, config = job.world, job.block_id, job.btype, job.unit, job.config
+    if grasp.span == 1:
+        width = grasp_width(unit, job.clearance)
+        styles = grasp_styles(width, unit, config)
+    else:
+        width = span_width(grasp.span, unit, job.clearance)
+        styles = wide_grasp_styles(width, unit, config)
+    closed_f = max(0.0, width / 2 - config.grip_squeeze)
+    block_yaw = math.radians(yaw_of_quaternion(job.block_quat))
+    rot = matrix_from_quaternion(job.block_quat)
+    turn = math.radians(job.yaw_deg) - block_yaw
+    final_rot = yaw_matrix(job.yaw_deg)
+    centre = grasp_centre(btype, grasp) * unit
+    closing = block_yaw + math.radians(grasp.yaw)
+    pick_reason = place_reason = ''
+    for hand_yaw in hand_yaw_options(job.block_pos + rot @ centre, closing):
+        pick, why = None, []
+        for open_f, lift in styles:
+            offset = centre + (0.0, 0.0, lift)
+            grasp_point = job.block_pos + rot @ offset
+            # From the grasp point down to the held block's bottom.
+            hang = (offset[2] - min(o[2] for o in btype.offsets) * unit) + unit / 2
+            transit_z = job.tops + hang + config.transit_clearance
+            rise_pick = max(config.approach_height, transit_z - grasp_point[2])
+            try:
+                pick = _remembered_pick(job.bodies, world, block_id, grasp_point, hand_yaw, job.start, open_f,
+                                        closed_f, rise_pick, config, job.clock, job.rng)
+                break
+            except _Blocked as e:
+                why.append(str(e) if not why else f'tight grasp: {e}')
+                # A lift check that failed carried the block with the hand: put it back, so
+                # the next try is planned against the world as it is (as after a failed
+                # placement).
+                world.set_block_pose(block_id, job.block_pos, job.block_quat)
+                if 'finger hits' not in str(e):
+                    break       # a tight grasp cannot help
+        if pick is None:
+            pick_reason = pick_reason or '; '.join(why)
+            continue
+        place_point = job.position + final_rot @ offset
+        rise_place = max(config.approach_height, transit_z - place_point[2])
+        try:
+            place = _plan_place(world, block_id, pick, place_point, job.position, job.yaw_deg,
+                                hand_yaw + turn, open_f, rise_place, config, job.clock, job.rng)
+        except _Blocked as e:
+            place_reason = place_reason or str(e)
+            world.set_block_pose(block_id, job.block_pos, job.block_quat)
+            continue
+        path = (job.start, pick['waypoints'] + place['waypoints'], config.timing, width / 2)
+        return (path, math.degrees(hand_yaw)), pick_reason, place_reason
+    return None, pick_reason, place_reason
 
 
 # World -> {pick key -> (pick or the reason it was blocked, generator state after)}: picks planned
@@ -290,6 +347,19 @@ def grasp_styles(width: float, unit: float, config: GampConfig = GampConfig()) -
     out = [(min(panda.FINGER_OPEN, width / 2 + config.finger_clearance), 0.0)]
     if 0 < config.tight_finger_clearance < config.finger_clearance:
         out.append((min(panda.FINGER_OPEN, width / 2 + config.tight_finger_clearance), grasp_lift(unit)))
+    return tuple(out)
+
+
+def wide_grasp_styles(width: float, unit: float, config: GampConfig = GampConfig()) -> tuple[tuple[float, float], ...]:
+    """How the planner takes a wide grasp across `width` (m) of a block of `unit` cells, in the order it
+    tries: (each finger's travel when open (m), the grasp target's height over the held units' centre (m)),
+    always at the tight grasp's height (`grasps.grasp_lift`): first the fingers `finger_clearance` off the
+    row's outer faces, then `tight_finger_clearance` off them (never wider than the hand opens)."""
+    out = [(min(panda.FINGER_OPEN, width / 2 + config.finger_clearance), grasp_lift(unit))]
+    if 0 < config.tight_finger_clearance < config.finger_clearance:
+        tight = (min(panda.FINGER_OPEN, width / 2 + config.tight_finger_clearance), grasp_lift(unit))
+        if tight != out[0]:
+            out.append(tight)
     return tuple(out)
 
 

@@ -1,0 +1,216 @@
+"""Wide grasps (issue 40): the fingers close across a block's whole extent along one axis, behind
+`GampConfig.wide_grasps` (off: the unit grasps only, as before)."""
+
+import numpy as np
+import pytest
+from rad_core.allocation import AllocationParams, solve
+from rad_core.cell import panda
+from rad_core.domain.blocks import DEFAULT_LIBRARY
+from rad_core.domain.generator import GeneratorConfig, generate_scene
+from rad_core.domain.hard_shapes import HARD_LIBRARY
+from rad_core.domain.scene import Scene
+from rad_core.gamp import allocated_pose, plan_action
+from rad_core.gamp.grasps import (
+    MAX_GRASP_WIDTH,
+    Grasp,
+    block_grasps,
+    grasp_centre,
+    grasp_width,
+    span_width,
+    wide_grasps,
+)
+from rad_core.gamp.planner import GampConfig, wide_grasp_styles
+from rad_core.sim.twin import Twin, twin_world_config
+from rad_core.sim.world import World
+
+WIDE = GampConfig(wide_grasps=True)
+
+
+# ---- which wide grasps a type offers ---------------------------------------------------------
+
+def test_a_flat_i2_is_taken_across_both_units_where_the_open_hand_takes_it():
+    i2 = DEFAULT_LIBRARY['I2']
+    assert wide_grasps(i2, 0.035) == (Grasp(0, 0, 2),)              # 70 mm + 2 x 5 mm = the 80 mm opening
+    assert wide_grasps(i2, 0.05) == ()                               # 100 mm: too wide
+    assert wide_grasps(i2, 0.036) == ()
+    # After the unit grasps, which stay as they are.
+    unit = block_grasps(i2, 0.035)
+    assert block_grasps(i2, 0.035, wide=True) == unit + (Grasp(0, 0, 2),)
+    assert block_grasps(i2, 0.05, wide=True) == block_grasps(i2, 0.05)
+    # The target sits in the middle of the row, over its column.
+    assert grasp_centre(i2, Grasp(0, 0, 2)).tolist() == [0.5, 0.0, 0.0]
+    assert grasp_centre(i2, Grasp(1, 90)).tolist() == [1.0, 0.0, 0.0]   # a unit grasp: the unit's centre
+    assert str(Grasp(0, 0, 2)) == 'unit 0 yaw 0 span 2' and str(Grasp(1, 90)) == 'unit 1 yaw 90'
+
+
+def test_a_2x2_square_that_no_unit_grasp_takes_is_taken_across_either_axis_at_3_cm():
+    o4 = HARD_LIBRARY['O4']
+    assert block_grasps(o4, 0.03) == ()
+    got = wide_grasps(o4, 0.03)
+    assert set(got) == {Grasp(0, 0, 2), Grasp(2, 0, 2), Grasp(0, 90, 2), Grasp(1, 90, 2)}
+    assert block_grasps(o4, 0.03, wide=True) == got
+    # Each row's two units, between the fingers at its two ends.
+    assert {tuple(grasp_centre(o4, g)) for g in got} == {(0.5, 0, 0), (0.5, 1, 0), (0, 0.5, 0), (1, 0.5, 0)}
+    # With a clearance the outer faces move in: 2 units at 4 cm with 0.2 is 72 mm, too wide.
+    assert wide_grasps(o4, 0.04) == () and wide_grasps(o4, 0.04, 0.3) != ()
+
+
+def test_the_width_fits_the_open_hand_with_5_mm_on_each_side():
+    i3 = DEFAULT_LIBRARY['I3']
+    assert wide_grasps(i3, 0.023) == (Grasp(0, 0, 3),)               # 69 mm
+    assert wide_grasps(i3, 0.025) == ()                              # 75 mm + 10 mm > 80 mm
+    assert wide_grasps(i3, 0.025, clearance=0.2) == (Grasp(0, 0, 3),)   # 70 mm between the outer faces
+    assert span_width(1, 0.04, 0.2) == grasp_width(0.04, 0.2)
+    assert MAX_GRASP_WIDTH == pytest.approx(panda.MAX_OPENING - 0.01)
+
+
+def test_the_fingers_pass_no_unit_of_the_block_on_their_way_down():
+    lib = DEFAULT_LIBRARY
+    # O4_up: the top row only (the bottom one has the top above it).
+    assert wide_grasps(lib['O4_up'], 0.03) == (Grasp(2, 0, 2),)
+    # L3_up: the bottom row has a unit above it; its top unit is alone.
+    assert wide_grasps(lib['L3_up'], 0.03) == ()
+    # T4: the bar across x has the stem beside it (not in a finger column); the stem's row across y
+    # has the bar's middle unit, so the row is (1,0)-(1,1).
+    assert set(wide_grasps(lib['T4'], 0.025)) == {Grasp(1, 90, 2)}
+    # An L3 lying flat: both arms.
+    assert set(wide_grasps(lib['L3'], 0.03)) == {Grasp(0, 0, 2), Grasp(0, 90, 2)}
+    # S4_up: its top row, whose finger columns are free at its level and above.
+    assert wide_grasps(lib['S4_up'], 0.03) == (Grasp(2, 0, 2),)
+
+
+def test_wide_styles_hold_at_the_tight_grasp_height_never_wider_than_the_hand():
+    styles = wide_grasp_styles(0.07, 0.035)
+    assert styles == ((panda.FINGER_OPEN, pytest.approx(0.035 / 2 - 0.013)),
+                      (pytest.approx(0.039), pytest.approx(0.035 / 2 - 0.013)))
+    assert len(wide_grasp_styles(0.05, 0.025)) == 2
+    assert all(f <= panda.FINGER_OPEN for f, _ in wide_grasp_styles(0.078, 0.039))
+
+
+# ---- the switch off changes nothing -----------------------------------------------------------
+
+def test_with_wide_grasps_off_the_grasps_and_plans_are_as_before():
+    for btype in [*DEFAULT_LIBRARY.values(), *HARD_LIBRARY.values()]:
+        for unit in (0.025, 0.03, 0.04, 0.05):
+            assert block_grasps(btype, unit) == block_grasps(btype, unit, wide=False)
+            assert all(g.span == 1 for g in block_grasps(btype, unit))
+    scene = generate_scene(GeneratorConfig(grid=4), seed=1)
+    alloc = solve(scene, AllocationParams(time_limit_s=5.0))
+    with World(scene) as world:
+        for placement in alloc.placements[:3]:
+            block = next(b for b in scene.blocks if b.type == placement.type)
+            position, yaw = allocated_pose(scene, placement)
+            default = plan_action(world, block.id, position, yaw)
+            off = plan_action(world, block.id, position, yaw, config=GampConfig(wide_grasps=False))
+            on = plan_action(world, block.id, position, yaw, config=WIDE)
+            assert (off.success, off.reason, off.grasp) == (default.success, default.reason, default.grasp)
+            assert default.success, default.reason
+            # A unit grasp that works is taken before any wide one: the same plan.
+            assert on.grasp == default.grasp and on.hand_yaw_deg == default.hand_yaw_deg
+            assert np.array_equal(on.final_joints(), default.final_joints())
+
+
+# ---- a block between neighbours on both sides -------------------------------------------------
+
+U = 0.035
+X, Y = 0.45, 0.10
+PLACE = (X, Y + U, U / 2)
+
+
+def _between_rows() -> Scene:
+    """Two flat I2s built flush at rows 0 and 2 of a 2 x 3 target, a third on the table for row 1:
+    its unit grasps close along y, where the rows stand, and its ends along x are free."""
+    blocks = [{'id': 'n0', 'type': 'I2', 'position': [X, Y, U / 2], 'yaw': 0},
+              {'id': 'n2', 'type': 'I2', 'position': [X, Y + 2 * U, U / 2], 'yaw': 0},
+              {'id': 'm', 'type': 'I2', 'position': [0.45, -0.25, U / 2], 'yaw': 0}]
+    return Scene.from_dict({
+        'format': 'rad-scene/1', 'unit': U, 'block_types': {'I2': [[0, 0, 0], [1, 0, 0]]}, 'blocks': blocks,
+        'targets': [{'name': 't', 'origin': [X, Y, U / 2], 'size': [2, 3, 1],
+                     'filled': [[i, j, 0] for i in range(2) for j in range(3)]}]})
+
+
+@pytest.fixture(scope='module')
+def between():
+    scene = _between_rows()
+    with World(scene) as world:
+        off = plan_action(world, 'm', PLACE, 0)
+        on = plan_action(world, 'm', PLACE, 0, config=WIDE)
+    return scene, off, on
+
+
+def test_a_block_flush_between_two_built_rows_is_placed_only_with_wide_grasps(between):
+    _, off, on = between
+    assert not off.success and off.failure == 'placement' and 'finger hits block n0' in off.reason
+    assert on.success, on.reason
+    assert on.grasp == Grasp(0, 0, 2)
+    grasp = next(g for g in on.motion.gripper if g.action == 'grasp')
+    assert grasp.expected_position == pytest.approx(U)              # the row's outer faces, 70 mm apart
+    assert grasp.position == pytest.approx(U - 0.001)
+
+
+def test_the_twin_carries_a_wide_grasped_block_to_its_place(between):
+    scene, _, on = between
+    with World(scene, twin_world_config()) as world:
+        twin = Twin(world)
+        results = []
+        run = twin.execute_gripper
+        twin.execute_gripper = lambda c, *a, **k: results.append((c, run(c, *a, **k))) or results[-1][1]
+        assert twin.execute_motion(on.motion) == ''
+        got = next(r for c, r in results if c.action == 'grasp')
+        assert got.reached_goal and got.position == pytest.approx(U, abs=1.5e-3)
+        twin.settle(0.3)
+        assert twin.attached is None
+        assert np.linalg.norm(world.block_pose('m')[0] - PLACE) < 0.004
+        for bid in ('n0', 'n2'):                                    # the neighbours stay
+            assert np.linalg.norm(world.block_pose(bid)[0] - scene.block(bid).position) < 0.002
+
+
+def test_a_2x2_square_at_3_cm_is_picked_and_placed_with_wide_grasps():
+    u = 0.03
+    scene = Scene.from_dict({
+        'format': 'rad-scene/1', 'unit': u, 'block_types': {'O4': [[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]]},
+        'blocks': [{'id': 'q', 'type': 'O4', 'position': [0.45, -0.25, u / 2], 'yaw': 0}],
+        'targets': [{'name': 't', 'origin': [0.45, 0.15, u / 2], 'size': [2, 2, 1],
+                     'filled': [[i, j, 0] for i in range(2) for j in range(2)]}]})
+    with World(scene) as world:
+        off = plan_action(world, 'q', (0.45, 0.15, u / 2), 90)
+        on = plan_action(world, 'q', (0.45, 0.15, u / 2), 90, config=WIDE)
+    assert not off.success and 'no top-down grasp' in off.reason
+    assert on.success, on.reason
+    assert on.grasp.span == 2
+
+
+def _box_but_one(unit: float, clearance: float = 0.0) -> Scene:
+    """A solid 4 x 2 x 2 box of flat I2s lying across it (yaw 90), one per column and layer, all built
+    but the top one of column 1, which lies on the table: its place has built neighbours on both
+    sides along x, where its unit grasps close; its ends are the box's outer faces."""
+    blocks = [{'id': f'b{i}{k}', 'type': 'I2', 'position': [BOX[0] + i * unit, BOX[1], unit / 2 + k * unit], 'yaw': 90}
+              for k in range(2) for i in range(4) if (i, k) != (1, 1)]
+    blocks.append({'id': 'm', 'type': 'I2', 'position': [0.45, -0.25, unit / 2], 'yaw': 0})
+    return Scene.from_dict({
+        'format': 'rad-scene/1', 'unit': unit, 'clearance': clearance, 'block_types': {'I2': [[0, 0, 0], [1, 0, 0]]},
+        'blocks': blocks,
+        'targets': [{'name': 't', 'origin': [BOX[0], BOX[1], unit / 2], 'size': [4, 2, 2],
+                     'filled': [[i, j, k] for i in range(4) for j in range(2) for k in range(2)]}]})
+
+
+BOX = (0.42, 0.10)
+
+
+@pytest.mark.parametrize('unit, clearance', [(0.03, 0.0), (0.035, 0.0), (0.035, 0.2)])
+def test_the_last_block_of_a_solid_box_is_set_down_only_with_wide_grasps(unit, clearance):
+    place = (BOX[0] + unit, BOX[1], 1.5 * unit)
+    scene = _box_but_one(unit, clearance)
+    with World(scene) as world:
+        off = plan_action(world, 'm', place, 90)
+        on = plan_action(world, 'm', place, 90, config=WIDE)
+    assert not off.success and 'finger hits block b21' in off.reason
+    assert on.success and on.grasp == Grasp(0, 0, 2), on.reason
+    if (unit, clearance) != (0.03, 0.0):
+        return
+    with World(scene, twin_world_config()) as world:
+        twin = Twin(world)
+        assert twin.execute_motion(on.motion) == ''
+        twin.settle(0.3)
+        assert twin.attached is None
+        assert np.linalg.norm(world.block_pose('m')[0] - place) < 0.004
