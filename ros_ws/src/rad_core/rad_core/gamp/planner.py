@@ -269,6 +269,15 @@ class _Job:
     config: GampConfig
     clock: _Clock
     rng: np.random.Generator
+    # The block's pose now and at the placement, once per call (`__post_init__`).
+    block_yaw: float = field(init=False)
+    rot: np.ndarray = field(init=False)
+    final_rot: np.ndarray = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.block_yaw = math.radians(yaw_of_quaternion(self.block_quat))
+        self.rot = matrix_from_quaternion(self.block_quat)
+        self.final_rot = yaw_matrix(self.yaw_deg)
 
 
 def _try_grasp(job: _Job, grasp: Grasp) -> tuple[tuple | None, str, str]:
@@ -282,12 +291,10 @@ def _try_grasp(job: _Job, grasp: Grasp) -> tuple[tuple | None, str, str]:
         width = span_width(grasp.span, unit, job.clearance)
         styles = wide_grasp_styles(width, unit, config)
     closed_f = max(0.0, width / 2 - config.grip_squeeze)
-    block_yaw = math.radians(yaw_of_quaternion(job.block_quat))
-    rot = matrix_from_quaternion(job.block_quat)
-    turn = math.radians(job.yaw_deg) - block_yaw
-    final_rot = yaw_matrix(job.yaw_deg)
+    rot, final_rot = job.rot, job.final_rot
+    turn = math.radians(job.yaw_deg) - job.block_yaw
     centre = grasp_centre(btype, grasp) * unit
-    closing = block_yaw + math.radians(grasp.yaw)
+    closing = job.block_yaw + math.radians(grasp.yaw)
     pick_reason = place_reason = ''
     for hand_yaw in hand_yaw_options(job.block_pos + rot @ centre, closing):
         pick, why = None, []
