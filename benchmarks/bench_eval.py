@@ -21,15 +21,14 @@ import sys
 import time
 from pathlib import Path
 
-from common import CACHE, RESULTS, shape_scenes, write_page
-from rad_core.domain.generator import GeneratorConfig, generate_scene
+from common import CACHE, RESULTS, scenes, shape_scenes, write_page
 from rad_core.experiment.evaluation import evaluate, get_agent
 
 
 
 def scene_sets():
-    yield '5', [(f'g5-{s}', generate_scene(GeneratorConfig(grid=5, sides=2), s)) for s in range(40)]
-    yield '6', [(f'g6-{s}', generate_scene(GeneratorConfig(grid=6, sides=2), s)) for s in range(20)]
+    yield '5', list(scenes(5, 40, 0.0))
+    yield '6', list(scenes(6, 20, 0.0))
     yield 'held-out shapes', shape_scenes('holdout')
     yield 'tight layouts', shape_scenes('tight')
 
@@ -59,9 +58,9 @@ def main() -> int:
     args = p.parse_args()
     agent = get_agent(args.agent)
     rows, table = [], []
-    for name, scenes in scene_sets():
+    for name, named_scenes in scene_sets():
         t0 = time.perf_counter()
-        result = evaluate(agent, scenes, True, 0)
+        result = evaluate(agent, named_scenes, True, 0)
         print(f"{name}: coverage {result['coverage']:.3f}, f {result['f']:.2f} ({time.perf_counter() - t0:.0f} s)",
               flush=True)
         rows += [{'set': name, **row} for row in result['scenes']]
