@@ -14,7 +14,7 @@ allowed on top and is not listed), so the same object serves every env clone.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Protocol
+from typing import Protocol
 
 import numpy as np
 
@@ -22,9 +22,6 @@ from rad_core.allocation.guide import AllocationGuide
 from rad_core.allocation.placements import Placement
 from rad_core.env.mdp import Action, AssemblyEnv
 from rad_core.gamp.action import SceneAction
-
-if TYPE_CHECKING:
-    from rad_core.gamp.action import SceneAction  # pybullet: GAMP loads the simulator, only a robot space needs it
 
 METHODS = ('milp', 'all', 'rel')
 
