@@ -200,6 +200,10 @@ def plan_assembly(scene: Scene, allocate: Allocate, plan_motion: PlanMotion, seq
         arm = getattr(allocation, 'arm', None)
         plan.reason = 'the allocation places no block' + (f' (what the arm cannot do: {arm.summary()})'
                                                           if arm is not None else '')
+        if allocation.status != 'OPTIMAL' and time.perf_counter() - t0 >= time_limit_s:
+            # CP-SAT cut short answers with its first solution, which may be the empty one.
+            plan.reason = (f'time limit of {time_limit_s:g} s reached: the allocation placed no block '
+                           f'within it ({allocation.status})')
         return _done(plan, t0)
     run = _Planning(plan, env, plan_motion, sequencer, start, verify, precedences, t0 + time_limit_s, pace)
     reallocator = None
