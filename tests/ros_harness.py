@@ -272,6 +272,23 @@ def call_service(node, client, request, timeout: float = 10.0):
     return future.result()
 
 
+def send_goal(node, client, goal, timeout: float = 10.0):
+    """Send an action goal once its server is discovered, spin `node` until it ends; (status, result)."""
+    import rclpy
+
+    if not client.wait_for_server(timeout_sec=timeout):
+        raise TimeoutError(f'action {client._action_name!r} not available after {timeout} s')
+    sent = client.send_goal_async(goal)
+    rclpy.spin_until_future_complete(node, sent, timeout_sec=timeout)
+    if not (sent.done() and sent.result().accepted):
+        raise TimeoutError(f'action {client._action_name!r} did not accept the goal within {timeout} s')
+    done = sent.result().get_result_async()
+    rclpy.spin_until_future_complete(node, done, timeout_sec=timeout)
+    if not done.done():
+        raise TimeoutError(f'action {client._action_name!r} gave no result within {timeout} s')
+    return done.result().status, done.result().result
+
+
 # --- what a process's sockets and the interfaces show ---------------------------------------
 
 def udp_sockets(pid: int) -> list[tuple[str, int]]:

@@ -231,8 +231,8 @@ def test_the_fingers_collide_as_franka_models_them_and_the_hull_is_left_for_the_
     meshes = [m.get('filename') for m in ET.parse(panda.urdf_path()).getroot().iter('mesh')]
     assert meshes and all(m.startswith(str(panda.source_urdf_path().parent)) and Path(m).is_file() for m in meshes)
     # Taken away (a temporary folder's cleaner), it is written again for the next world.
-    _, source, text = panda._urdf_name()
-    monkeypatch.setattr(panda, '_urdf_name', lambda: (tmp_path / 'panda.urdf', source, text))
+    _, source, text = panda._urdf_name('hand')
+    monkeypatch.setattr(panda, '_urdf_name', lambda effector: (tmp_path / 'panda.urdf', source, text))
     first = panda.urdf_path().read_bytes()
     panda.urdf_path().unlink()
     assert panda.urdf_path().read_bytes() == first
@@ -613,7 +613,8 @@ def test_a_plans_motion_is_timed_when_read_and_ends_where_final_joints_says(gene
     position, yaw = allocated_pose(scene, placement)
     r = plan_action(world, block.id, position, yaw)
     assert r.success and r._motion is None
-    start, waypoints, timing, grasp = r._path
+    start, waypoints, timing, grasp, vacuum = r._path
+    assert vacuum is None                                       # the hand's
     end = r.final_joints()
     assert r._motion is None                                    # not timed for that
     eager = plan_motion(start, waypoints, timing, grasp_expected=grasp)

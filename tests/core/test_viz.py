@@ -106,7 +106,7 @@ def test_re_allocations_in_plan_json_are_read_and_shown_in_the_summary():
 
 def test_plan_json_steps_are_read_back_as_the_planners_plan_steps():
     """One PlanStep: what sequencing.planning.plan makes and plan_json carries is what viz reads back."""
-    step = PlanStep('b0', 'L3_up', 'front', 90, [[0, 0, 0], [0, 1, 0]], 2, [0, 0, 0], 1, (1, 180),
+    step = PlanStep('b0', 'L3_up', 'front', 90, [[0, 0, 0], [0, 1, 0]], 2, [0, 0, 0], 1, (1, 180, 1),
                     [0.4, 0.1, 0.025], {'trajectories': [{'joint_names': ['j'], 'points': []}],
                                         'gripper': [{'before': 1, 'action': 'release', 'position': 0.03,
                                                      'max_effort': 20.0}]})

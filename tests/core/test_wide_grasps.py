@@ -1,5 +1,5 @@
-"""Wide grasps (issue 40): the fingers close across a block's whole extent along one axis, behind
-`GampConfig.wide_grasps` (off: the unit grasps only, as before)."""
+"""Wide grasps (issue 40): the fingers close across a block's whole extent along one axis
+(`GampConfig.wide_grasps`, on by default; off: the unit grasps only, the paper's hand)."""
 
 import numpy as np
 import pytest
@@ -23,7 +23,10 @@ from rad_core.gamp.planner import GampConfig, wide_grasp_styles
 from rad_core.sim.twin import Twin, twin_world_config
 from rad_core.sim.world import World
 
+from box_scenes import BOX, box_but_one
+
 WIDE = GampConfig(wide_grasps=True)
+UNIT_ONLY = GampConfig(wide_grasps=False)
 
 
 # ---- which wide grasps a type offers ---------------------------------------------------------
@@ -87,9 +90,9 @@ def test_wide_styles_hold_at_the_tight_grasp_height_never_wider_than_the_hand():
     assert all(f <= panda.FINGER_OPEN for f, _ in wide_grasp_styles(0.078, 0.039))
 
 
-# ---- the switch off changes nothing -----------------------------------------------------------
+# ---- where rows are too wide for the hand, nothing changes -------------------------------------
 
-def test_with_wide_grasps_off_the_grasps_and_plans_are_as_before():
+def test_at_4_and_5_cm_units_plans_with_and_without_wide_grasps_are_the_same():
     for btype in [*DEFAULT_LIBRARY.values(), *HARD_LIBRARY.values()]:
         for unit in (0.025, 0.03, 0.04, 0.05):
             assert block_grasps(btype, unit) == block_grasps(btype, unit, wide=False)
@@ -101,7 +104,7 @@ def test_with_wide_grasps_off_the_grasps_and_plans_are_as_before():
             block = next(b for b in scene.blocks if b.type == placement.type)
             position, yaw = allocated_pose(scene, placement)
             default = plan_action(world, block.id, position, yaw)
-            off = plan_action(world, block.id, position, yaw, config=GampConfig(wide_grasps=False))
+            off = plan_action(world, block.id, position, yaw, config=UNIT_ONLY)
             on = plan_action(world, block.id, position, yaw, config=WIDE)
             assert (off.success, off.reason, off.grasp) == (default.success, default.reason, default.grasp)
             assert default.success, default.reason
@@ -133,7 +136,7 @@ def _between_rows() -> Scene:
 def between():
     scene = _between_rows()
     with World(scene) as world:
-        off = plan_action(world, 'm', PLACE, 0)
+        off = plan_action(world, 'm', PLACE, 0, config=UNIT_ONLY)
         on = plan_action(world, 'm', PLACE, 0, config=WIDE)
     return scene, off, on
 
@@ -173,36 +176,21 @@ def test_a_2x2_square_at_3_cm_is_picked_and_placed_with_wide_grasps():
         'targets': [{'name': 't', 'origin': [0.45, 0.15, u / 2], 'size': [2, 2, 1],
                      'filled': [[i, j, 0] for i in range(2) for j in range(2)]}]})
     with World(scene) as world:
-        off = plan_action(world, 'q', (0.45, 0.15, u / 2), 90)
+        off = plan_action(world, 'q', (0.45, 0.15, u / 2), 90, config=UNIT_ONLY)
         on = plan_action(world, 'q', (0.45, 0.15, u / 2), 90, config=WIDE)
     assert not off.success and 'no top-down grasp' in off.reason
     assert on.success, on.reason
     assert on.grasp.span == 2
 
 
-def _box_but_one(unit: float, clearance: float = 0.0) -> Scene:
-    """A solid 4 x 2 x 2 box of flat I2s lying across it (yaw 90), one per column and layer, all built
-    but the top one of column 1, which lies on the table: its place has built neighbours on both
-    sides along x, where its unit grasps close; its ends are the box's outer faces."""
-    blocks = [{'id': f'b{i}{k}', 'type': 'I2', 'position': [BOX[0] + i * unit, BOX[1], unit / 2 + k * unit], 'yaw': 90}
-              for k in range(2) for i in range(4) if (i, k) != (1, 1)]
-    blocks.append({'id': 'm', 'type': 'I2', 'position': [0.45, -0.25, unit / 2], 'yaw': 0})
-    return Scene.from_dict({
-        'format': 'rad-scene/1', 'unit': unit, 'clearance': clearance, 'block_types': {'I2': [[0, 0, 0], [1, 0, 0]]},
-        'blocks': blocks,
-        'targets': [{'name': 't', 'origin': [BOX[0], BOX[1], unit / 2], 'size': [4, 2, 2],
-                     'filled': [[i, j, k] for i in range(4) for j in range(2) for k in range(2)]}]})
-
-
-BOX = (0.42, 0.10)
 
 
 @pytest.mark.parametrize('unit, clearance', [(0.03, 0.0), (0.035, 0.0), (0.035, 0.2)])
 def test_the_last_block_of_a_solid_box_is_set_down_only_with_wide_grasps(unit, clearance):
     place = (BOX[0] + unit, BOX[1], 1.5 * unit)
-    scene = _box_but_one(unit, clearance)
+    scene = box_but_one(unit, clearance)
     with World(scene) as world:
-        off = plan_action(world, 'm', place, 90)
+        off = plan_action(world, 'm', place, 90, config=UNIT_ONLY)
         on = plan_action(world, 'm', place, 90, config=WIDE)
     assert not off.success and 'finger hits block b21' in off.reason
     assert on.success and on.grasp == Grasp(0, 0, 2), on.reason
@@ -214,3 +202,43 @@ def test_the_last_block_of_a_solid_box_is_set_down_only_with_wide_grasps(unit, c
         twin.settle(0.3)
         assert twin.attached is None
         assert np.linalg.norm(world.block_pose('m')[0] - place) < 0.004
+
+
+# ---- the allocation's hand model knows them ------------------------------------------------------
+
+def test_the_hand_model_counts_on_wide_grasps_where_gamp_takes_them():
+    from rad_core.allocation.arm import HandBlocked, block_unit_centres
+    from rad_core.domain.grid import Grid
+
+    unit = 0.03
+    scene = box_but_one(unit)
+    grid = Grid(scene)
+    occupied = np.zeros(grid.num_cells, dtype=bool)
+    for b, block in enumerate(scene.blocks):
+        ids = grid.lookup(block_unit_centres(scene, b))
+        occupied[ids[ids >= 0]] = True
+    # The last pose: the I2 across the box at column 1 of the top layer, units (1, 0, 1) and (1, 1, 1).
+    last = grid.lookup(np.array([[BOX[0] + unit, BOX[1] + j * unit, 1.5 * unit] for j in range(2)]))
+    assert (last >= 0).all() and not occupied[last].any()
+    assert HandBlocked(scene, grid, UNIT_ONLY).blocked('I2', 90, last, occupied)
+    assert not HandBlocked(scene, grid).blocked('I2', 90, last, occupied)
+    # Its wide grasp's finger columns are the box's outer sides, off the target's grid: no cell that
+    # is ever built blocks it, while each unit grasp has built cells in its way at both hand yaws.
+    hand = HandBlocked(scene, grid)
+    ways = dict(zip(hand.grasps['I2'], hand.cells('I2', 90, last)))
+    assert [g.span for g in ways] == [1, 1, 2]
+    assert all(len(cells) == 0 for g, pair in ways.items() if g.span == 2 for cells in pair)
+    assert all(occupied[cells].any() for g, pair in ways.items() if g.span == 1 for cells in pair)
+
+
+@pytest.mark.parametrize('unit, whole', [(0.03, True), (0.04, False)])
+def test_supply_finds_a_cover_of_the_solid_box_the_hand_places_whole_where_rows_fit_the_hand(unit, whole):
+    from rad_core.allocation.supply import SupplyParams, choose_blocks
+    from rad_core.domain.scene import TargetRegion
+
+    box = TargetRegion('t', (BOX[0], BOX[1], unit / 2), (4, 2, 2),
+                       tuple((i, j, k) for i in range(4) for j in range(2) for k in range(2)))
+    _, report = choose_blocks([box], unit, {'I2': DEFAULT_LIBRARY['I2'], 'cube': DEFAULT_LIBRARY['cube']},
+                              params=SupplyParams(time_limit_s=10.0))
+    assert report.covered == 16
+    assert (report.hand_covered == 16) == whole, report    # at 4 cm: 80 mm rows, wider than the hand takes

@@ -9,6 +9,7 @@
     rad scene supply scene.json [--types I2,L3,... | --inventory FILE] [--objective fewest|cheapest] -o scene.json
     rad allocate scene.json [--time-limit S] [--seed N] [--workers W] [--solver cp-sat|highs]
     rad demo [--scene FILE] [--out DIR] [--rtf X] [--faults none|realistic|FILE] [--cycles N]
+             [--effector hand|suction]
     rad limits RESULT.json [--robot panda|fr3] [--joint-prefix P]
     rad calibrate PAIRS.csv [--out FILE] [--max-rms M] [--mocap-frame NAME]
     rad eval --agent AGENT [--checkpoint FILE] --grid G [--robot] --scenes N --seed S --json FILE
@@ -211,6 +212,8 @@ def cmd_demo(args) -> int:
         argv += ['--faults', args.faults, '--faults-seed', str(args.faults_seed)]
     if args.cycles != 1:
         argv += ['--cycles', str(args.cycles)]
+    if args.effector != 'hand':
+        argv += ['--effector', args.effector]
     os.execv(str(exe), argv)
     return 1
 
@@ -629,6 +632,8 @@ def build_parser(command: str | None = 'train') -> argparse.ArgumentParser:
     p.add_argument('--faults-seed', type=int, default=0, help='seed of the faults')
     p.add_argument('--cycles', type=int, default=1, metavar='N',
                    help='build, take apart and build again N times, with no reset (1: build once)')
+    p.add_argument('--effector', choices=('hand', 'suction'), default='hand',
+                   help="the arm's end effector: Franka's parallel hand, or the vacuum gripper in its place")
     p.set_defaults(func=cmd_demo)
 
     p = sub.add_parser('limits', help="check a result's or plan's arm trajectories against a Franka's limits")

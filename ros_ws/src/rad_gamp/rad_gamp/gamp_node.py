@@ -45,7 +45,8 @@ class GampNode(Node):
         for name, value in (('robot', 'panda'), ('joint_prefix', ''), ('speed_scale', 0.7), ('limits', 'both'),
                             ('acceleration_scale', 1.0), ('grasp_force', 20.0),
                             ('arm_controller', 'joint_trajectory_controller'),
-                            ('gripper_action', 'franka_gripper/gripper_action')):
+                            ('gripper_action', 'franka_gripper/gripper_action'), ('wide_grasps', True),
+                            ('effector', 'hand'), ('vacuum_ns', 'franka_vacuum_gripper')):
             self.declare_parameter(name, value)
         param = lambda name: self.get_parameter(name).value  # noqa: E731
         timing = TimingConfig(robot=str(param('robot')), joint_prefix=str(param('joint_prefix')),
@@ -53,8 +54,11 @@ class GampNode(Node):
                               acceleration_scale=float(param('acceleration_scale')),
                               grasp_force=float(param('grasp_force')))
         timing.validate()    # a bad robot, scale or force stops the node here with the reason
-        self.planner = MotionPlanner(GampConfig(seed=int(param('seed')), timing=timing))
-        self.plant = ActionPlant(self, timing.model, str(param('arm_controller')), str(param('gripper_action')))
+        effector = str(param('effector'))
+        self.planner = MotionPlanner(GampConfig(seed=int(param('seed')), timing=timing,
+                                                wide_grasps=bool(param('wide_grasps')), effector=effector))
+        self.plant = ActionPlant(self, timing.model, str(param('arm_controller')), str(param('gripper_action')),
+                                 vacuum_ns=str(param('vacuum_ns')) if effector == 'suction' else '')
         self.create_service(PlanAction, 'plan_action', self.plan_action_callback)
         self.get_logger().info('grasp and motion planning ready')
 
@@ -94,6 +98,7 @@ class GampNode(Node):
             self.get_logger().info(f'{request.action.block_id}: {result.reason}')
             return response
         response.grasp.unit, response.grasp.yaw_deg = int(result.grasp.unit), int(result.grasp.yaw)
+        response.grasp.span = int(result.grasp.span)
         response.trajectories, response.gripper = motion_to_msgs(result.motion.to_dict(),
                                                                  self.get_parameter('frame_id').value)
         response.moved_aside_blocks, response.moved_aside_poses = moved_aside_to_msgs(result.moved_aside)

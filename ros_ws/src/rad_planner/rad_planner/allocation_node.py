@@ -29,10 +29,12 @@ class AllocationNode(Node):
         self.declare_parameter('num_workers', 1)
         self.declare_parameter('support', 'none')
         self.declare_parameter('prefer', 'none')
+        self.declare_parameter('effector', 'hand')
         self.service = self.create_service(Allocate, 'allocate', self.allocate_callback)
         self.get_logger().info('allocation service ready')
 
-    def params_for(self, request_time_limit: float, support: str = '', prefer: str = '') -> AllocationParams:
+    def params_for(self, request_time_limit: float, support: str = '', prefer: str = '',
+                   effector: str = '') -> AllocationParams:
         for name, value, modes in (('support', support, SUPPORT_MODES), ('prefer', prefer, PREFER_MODES)):
             if value and value not in modes:
                 raise RadError(f'{name} must be one of {", ".join(modes)} or empty (the node\'s), got {value!r}')
@@ -44,13 +46,14 @@ class AllocationNode(Node):
         params = AllocationParams(time_limit_s=float(limit), seed=int(self.get_parameter('seed').value),
                                   num_workers=int(self.get_parameter('num_workers').value),
                                   support=support or str(self.get_parameter('support').value),
-                                  prefer=prefer or str(self.get_parameter('prefer').value))
+                                  prefer=prefer or str(self.get_parameter('prefer').value),
+                                  effector=effector or str(self.get_parameter('effector').value))
         params.validate()
         return params
 
     def allocate_callback(self, request, response):
         try:
-            params = self.params_for(request.time_limit_s, request.support, request.prefer)
+            params = self.params_for(request.time_limit_s, request.support, request.prefer, request.effector)
             scene = scene_from_request(request.scene, request.scene_json)
             result = solve(scene, params, [placement_from_msg(p) for p in request.exclude])
         except RadError as e:

@@ -71,7 +71,8 @@ from rad_core.cell.robot_model import robot_model
 from rad_core.cell.trajectory import limit_violation
 from rad_core.domain.errors import RadError
 from rad_core.domain.scene import Scene
-from rad_core.sequencing.agent.agent_plan import IMPROVE_TIME_S, plan_for_agent
+from rad_core.cell.panda import FINGER_OPEN, check_effector
+from rad_core.sequencing.agent.agent_plan import IMPROVE_TIME_S, effector_solvers, plan_for_agent
 from rad_core.sequencing.decide.agents import parse
 from rad_core.sequencing.decide.sequencer import Ranking
 from rad_core.sequencing.execution.execute import ExecuteConfig, execute_assembly
@@ -129,7 +130,8 @@ class AssemblyNode(Node):
                             ('require_joint_states', True), ('mocap_input', 'rad'), ('mocap_topic', 'rigid_bodies'),
                             ('pose_topic', 'mocap/{body}/pose'), ('mocap_frame', ''), ('body_map_file', ''),
                             ('table_z', 0.0), ('lost_timeout_s', 2.0), ('mocap_noise', 0.0),
-                            ('mocap_yaw_noise_deg', 0.0), ('feeder_service', 'feeder/present')):
+                            ('mocap_yaw_noise_deg', 0.0), ('feeder_service', 'feeder/present'),
+                            ('effector', 'hand'), ('vacuum_ns', 'franka_vacuum_gripper')):
             self.declare_parameter(name, value)
         # Lists typed by what the user writes ([0, 0, 1] is an integer array): checked below instead.
         anything = ParameterDescriptor(dynamic_typing=True)
@@ -137,6 +139,7 @@ class AssemblyNode(Node):
                             ('mocap_to_base_quaternion', [0.0, 0.0, 0.0, 1.0]), ('ignore_bodies', [])):
             self.declare_parameter(name, value, anything)
         self.model = robot_model(str(self.param('robot')), str(self.param('joint_prefix')))
+        check_effector(str(self.param('effector')))     # a bad effector stops the node here with the reason
         # The agent's parts this node runs (verification, re-allocation, the allocation's support);
         # a learned scorer without an explicit support reads it from its model file here, once.
         self.agent = parse(str(self.param('agent')))
@@ -262,13 +265,15 @@ class AssemblyNode(Node):
         if stamp == 0.0 or age > stale:
             raise RadError(f'/joint_states is stale: its stamp is {age:.1f} s old (limit {stale:g} s)'
                            if stamp else '/joint_states carries no stamp')
-        names = self.model.arm_joint_names + self.model.finger_joint_names
+        # The vacuum gripper has no joints: its fingers' places in the joint vector stay open.
+        suction = self.param('effector') == 'suction'
+        names = self.model.arm_joint_names + (() if suction else self.model.finger_joint_names)
         by_name = dict(zip(msg.name, msg.position))
         missing = [n for n in names if n not in by_name]
         if missing:
             raise RadError(f'/joint_states lacks {", ".join(missing)} (robot {self.model.name}, '
                            f'joint_prefix {self.model.prefix!r}); it has {", ".join(msg.name) or "no joints"}')
-        return np.array([by_name[n] for n in names])
+        return np.array([by_name[n] for n in names] + ([FINGER_OPEN, FINGER_OPEN] if suction else []))
 
     def registered_scene(self) -> Scene:
         """The task's blocks where motion capture sees them; RadError for a block no scene can express."""
@@ -335,7 +340,7 @@ class AssemblyNode(Node):
         limit = float(self.param('allocation_time_limit_s')) if time_limit_s is None \
             else min(float(time_limit_s), float(self.param('allocation_time_limit_s')))
         request = Allocate.Request(scene_json=scene.dumps(), time_limit_s=max(limit, 1e-3),
-                                   support=support or self.support)
+                                   support=support or self.support, effector=str(self.param('effector')))
         request.exclude = [placement_to_msg(p) for p in exclude]
         response = self.call(self.allocate_client, request)
         if response.status == 'INVALID_REQUEST':
@@ -374,7 +379,8 @@ class AssemblyNode(Node):
                 raise RadError(f'plan_action answered a trajectory the {self.model.name} would refuse '
                                f'(trajectory {k}): {why}')
             start_q = np.asarray(traj['points'][-1]['positions'])
-        return MotionPlan(True, '', '', (response.grasp.unit, response.grasp.yaw_deg), motion,
+        grasp = (response.grasp.unit, response.grasp.yaw_deg, max(1, response.grasp.span))
+        return MotionPlan(True, '', '', grasp, motion,
                           moved_aside_from_msgs(response.moved_aside_blocks, response.moved_aside_poses),
                           seconds=response.planning_time_s)
 
@@ -383,7 +389,7 @@ class AssemblyNode(Node):
                               support=self.support, seed=int(self.param('seed')), start=start,
                               time_limit_s=time_limit, max_reallocations=int(self.param('max_reallocations')),
                               quick_rank=self.quick_rank, improve_time_s=float(self.param('improve_time_s')),
-                              improve_until_s=improve_until)
+                              improve_until_s=improve_until, solvers=effector_solvers(str(self.param('effector'))))
         self.plan_pub.publish(String(data=json.dumps(plan_json(plan))))
         return plan
 
@@ -408,6 +414,7 @@ class AssemblyNode(Node):
 
     def plant(self, cancelled) -> ActionPlant:
         return ActionPlant(self.io, self.model, str(self.param('arm_controller')), str(self.param('gripper_action')),
+                           vacuum_ns=str(self.param('vacuum_ns')) if self.param('effector') == 'suction' else '',
                            path_tolerance=float(self.param('path_tolerance')),
                            goal_tolerance=float(self.param('goal_tolerance')),
                            goal_time_tolerance=float(self.param('goal_time_tolerance')),

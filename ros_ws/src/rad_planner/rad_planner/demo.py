@@ -1,7 +1,7 @@
 """The main job: bring up the graph, plan and build a scene, write what happened.
 
     demo [--scene FILE] [--out DIR] [--rtf X] [--time-limit S]
-         [--faults none|realistic|FILE] [--faults-seed N] [--cycles N]
+         [--faults none|realistic|FILE] [--faults-seed N] [--cycles N] [--effector hand|suction]
 
 Writes DIR/scene.json, DIR/result.json (rad-result/1), pictures of the build and, when
 the Rerun visualizer is installed, DIR/recording.rrd; node logs in DIR/logs/. The pictures
@@ -113,7 +113,7 @@ def cycle_line(row: dict, n: int) -> str:
 
 
 def run(scene: Scene, out: Path, rtf: float, time_limit: float, faults: str = 'none', faults_seed: int = 0,
-        cycles: int | None = None) -> dict:
+        cycles: int | None = None, effector: str = 'hand') -> dict:
     from rad_msgs.action import ExecuteAssembly, TakeApart
     from rad_msgs.srv import Sequence
     out.mkdir(parents=True, exist_ok=True)
@@ -121,13 +121,18 @@ def run(scene: Scene, out: Path, rtf: float, time_limit: float, faults: str = 'n
     scene_path.write_text(scene.dumps() + '\n')
     twin = {'scene_file': str(scene_path.resolve()), 'real_time_factor': str(rtf)}
     overrides = {'twin': twin, 'viz': {'recording_path': str((out / 'recording.rrd').resolve())}}
+    if effector != 'hand':
+        # Every node that plans, allocates, commands or simulates the end effector is told which.
+        twin['effector'] = effector
+        for node_name in ('gamp', 'assembly', 'allocation'):
+            overrides.setdefault(node_name, {})['effector'] = effector
     if faults != 'none':
         from rad_core.sim.faults import FaultConfig
         twin.update({'faults': faults, 'faults_seed': str(int(faults_seed))})
         # The assembly node is told the tracker's noise, as a user would configure it for their cell.
         config = FaultConfig.parse(faults, int(faults_seed))
-        overrides['assembly'] = {'mocap_noise': str(config.mocap_position_noise),
-                                 'mocap_yaw_noise_deg': str(config.mocap_yaw_noise_deg)}
+        overrides.setdefault('assembly', {}).update(mocap_noise=str(config.mocap_position_noise),
+                                                    mocap_yaw_noise_deg=str(config.mocap_yaw_noise_deg))
     t0 = time.perf_counter()
     graph = start_graph(default_params(), overrides, log_dir=out / 'logs')
     rclpy.init()
@@ -202,6 +207,8 @@ def main(argv=None) -> int:
     parser.add_argument('--faults-seed', type=int, default=0, help="seed of the twin's faults")
     parser.add_argument('--cycles', type=int, metavar='N',
                         help='build, take apart, N times with no reset (default: one build, no take-apart)')
+    parser.add_argument('--effector', choices=('hand', 'suction'), default='hand',
+                        help="the arm's end effector: Franka's hand, or the vacuum gripper in its place")
     args = parser.parse_args(argv)
     try:
         scene = Scene.load(args.scene) if args.scene else generate_scene(*DEFAULT_SCENE)
@@ -214,8 +221,10 @@ def main(argv=None) -> int:
         faults = faults_param(args.faults, args.faults_seed)
         print(f'demo: {len(scene.blocks)} blocks, {scene.num_target_cells} target cells'
               + (f', faults {args.faults}' if faults != 'none' else '')
-              + (f', {args.cycles} cycles' if args.cycles else '') + '; starting the graph', flush=True)
-        run_ = run(scene, args.out, args.rtf, args.time_limit, faults, args.faults_seed, args.cycles)
+              + (f', {args.cycles} cycles' if args.cycles else '')
+              + (f', the {args.effector} gripper' if args.effector != 'hand' else '')
+              + '; starting the graph', flush=True)
+        run_ = run(scene, args.out, args.rtf, args.time_limit, faults, args.faults_seed, args.cycles, args.effector)
     except RadError as e:
         print(f'demo: error: {e}', file=sys.stderr)
         return 2

@@ -12,6 +12,7 @@ import math
 from builtin_interfaces.msg import Duration
 from control_msgs.msg import GripperCommand
 from geometry_msgs.msg import Point, Pose, PoseStamped, Quaternion
+from rad_core.cell.motion import VACUUM_ACTIONS
 from rad_core.domain.errors import RadError
 from rad_core.domain.transforms import yaw_of_quaternion, yaw_quaternion
 from rad_msgs.msg import GripperStep, RigidBodies, RigidBody
@@ -57,7 +58,8 @@ def motion_to_msgs(motion: dict, frame_id: str = '') -> tuple[list[JointTrajecto
     """A motion's arm trajectories and gripper steps as messages (a PlanStep's or PlanAction's fields)."""
     gripper = [GripperStep(before=int(g['before']), action=str(g['action']),
                            command=GripperCommand(position=float(g['position']), max_effort=float(g['max_effort'])),
-                           expected_position=float(g.get('expected_position', math.nan)))
+                           expected_position=float(g.get('expected_position', math.nan)),
+                           vacuum=int(g.get('vacuum', 0)), timeout_ms=int(g.get('timeout_ms', 0)))
                for g in motion.get('gripper') or []]
     return [trajectory_to_msg(t, frame_id) for t in motion['trajectories']], gripper
 
@@ -70,6 +72,8 @@ def motion_from_msgs(trajectories, gripper) -> dict:
              'max_effort': g.command.max_effort}
         if math.isfinite(g.expected_position):
             d['expected_position'] = g.expected_position
+        if g.action in VACUUM_ACTIONS:
+            d.update(vacuum=int(g.vacuum), timeout_ms=int(g.timeout_ms))
         steps.append(d)
     return {'trajectories': [trajectory_from_msg(t) for t in trajectories], 'gripper': steps}
 

@@ -15,7 +15,8 @@ def step_to_msg(step, frame_id: str) -> PlanStep:
     msg = PlanStep(block_id=step.block, type=step.type, target=step.target, yaw_deg=int(step.yaw),
                    cells=cells_msg(step.cells), unit=int(step.unit), rotation=int(step.rotation))
     msg.cell.i, msg.cell.j, msg.cell.k = (int(v) for v in step.cell)
-    msg.grasp.unit, msg.grasp.yaw_deg = (int(v) for v in step.grasp)
+    msg.grasp.unit, msg.grasp.yaw_deg = int(step.grasp[0]), int(step.grasp[1])
+    msg.grasp.span = int(step.grasp[2]) if len(step.grasp) > 2 else 1
     msg.target_pose = pose_msg(step.position, yaw_quaternion(step.yaw))
     if step.motion:
         msg.trajectories, msg.gripper = motion_to_msgs(step.motion, frame_id)

@@ -4,7 +4,10 @@
 arm trajectories as `control_msgs/action/FollowJointTrajectory` goals to
 ``<arm_controller>/follow_joint_trajectory`` (the robot model's 7 arm joints, with
 path and goal tolerances and goal_time_tolerance), gripper commands as
-`control_msgs/action/GripperCommand` goals to ``<gripper_action>``. The controller's
+`control_msgs/action/GripperCommand` goals to ``<gripper_action>``, or with the vacuum gripper
+(``vacuum_ns`` given) its commands as franka_vacuum_gripper Vacuum and DropOff goals to
+``<vacuum_ns>/vacuum`` and ``<vacuum_ns>/dropoff`` (franka_ros's action names; each result's success and
+error are checked, an aborted goal read as its result). The controller's
 answer decides: a rejected goal, or a result whose error_code is not SUCCESSFUL,
 raises RadError naming the code and the controller's error_string; `cancelled()`
 turning true while a goal runs cancels it (the controller stops the arm) and raises.
@@ -23,8 +26,10 @@ from typing import Callable
 from action_msgs.msg import GoalStatus
 from control_msgs.action import FollowJointTrajectory, GripperCommand
 from control_msgs.msg import JointTolerance
+from franka_vacuum_gripper.action import DropOff, Vacuum
+from rad_core.cell.motion import VACUUM_ACTIONS, GripperResult
 from rad_core.cell.motion import GripperCommand as GripperStep
-from rad_core.cell.motion import GripperResult
+from rad_core.cell.panda import FINGER_OPEN
 from rad_core.cell.robot_model import RobotModel
 from rad_core.cell.trajectory import GOAL_TOLERANCE_VIOLATED, PATH_TOLERANCE_VIOLATED, Trajectory, TrajectoryAborted
 from rad_core.domain.errors import RadError
@@ -73,12 +78,18 @@ class ActionPlant:
     def __init__(self, node, model: RobotModel, arm_controller: str, gripper_action: str, *,
                  path_tolerance: float = 0.05, goal_tolerance: float = 0.01, goal_time_tolerance: float = 1.0,
                  gripper_result_is_width: bool = False, server_timeout_s: float = 5.0,
-                 timeout_factor: float = 3.0, cancelled: Callable[[], bool] = lambda: False):
+                 timeout_factor: float = 3.0, cancelled: Callable[[], bool] = lambda: False, vacuum_ns: str = ''):
         self.model = model
         self.arm_name = f'{arm_controller.rstrip("/")}/follow_joint_trajectory'
         self.gripper_name = gripper_action
         self.arm = ActionClient(node, FollowJointTrajectory, self.arm_name)
-        self.gripper = ActionClient(node, GripperCommand, gripper_action)
+        self.vacuum = {}
+        if vacuum_ns:       # the vacuum gripper in the hand's place: no GripperCommand action to talk to
+            ns = vacuum_ns.rstrip('/')
+            self.vacuum = {'vacuum': (ActionClient(node, Vacuum, f'{ns}/vacuum'), f'{ns}/vacuum'),
+                           'drop_off': (ActionClient(node, DropOff, f'{ns}/dropoff'), f'{ns}/dropoff')}
+        else:
+            self.gripper = ActionClient(node, GripperCommand, gripper_action)
         self.path_tolerance, self.goal_tolerance = path_tolerance, goal_tolerance
         self.goal_time_tolerance = goal_time_tolerance
         self.gripper_result_is_width = gripper_result_is_width
@@ -104,6 +115,10 @@ class ActionPlant:
             raise RadError(why)
 
     def move_gripper(self, command: GripperStep) -> GripperResult:
+        if command.action in VACUUM_ACTIONS:
+            return self._move_vacuum(command)
+        if self.vacuum:
+            raise RadError(f'a {command.action!r} gripper command, but this cell carries the vacuum gripper')
         goal = GripperCommand.Goal()
         goal.command.position, goal.command.max_effort = float(command.position), float(command.max_effort)
         travel = 0.08 / 0.05      # the whole stroke at a slow hand's speed
@@ -111,6 +126,19 @@ class ActionPlant:
                            'the gripper', accept_aborted=True)
         position = float(result.position) / (2.0 if self.gripper_result_is_width else 1.0)
         return GripperResult(position, float(result.effort), bool(result.stalled), bool(result.reached_goal))
+
+    def _move_vacuum(self, command: GripperStep) -> GripperResult:
+        """A Vacuum or DropOff goal; its result's success as reached_goal, its error text as error."""
+        if not self.vacuum:
+            raise RadError(f'a {command.action!r} command, but this cell has no vacuum gripper (vacuum_ns)')
+        client, name = self.vacuum[command.action]
+        if command.action == 'vacuum':
+            goal = Vacuum.Goal(vacuum=int(command.vacuum), timeout=int(command.timeout_ms))
+        else:
+            goal = DropOff.Goal(timeout=int(command.timeout_ms))
+        result = self._run(client, name, goal, command.timeout_ms / 1000.0 * self.timeout_factor + 10.0,
+                           'the vacuum gripper', accept_aborted=True)
+        return GripperResult(FINGER_OPEN, reached_goal=bool(result.success), error=str(result.error))
 
     def _run(self, client, name, goal, timeout_s, what, accept_aborted=False):
         if not client.wait_for_server(timeout_sec=self.server_timeout_s):

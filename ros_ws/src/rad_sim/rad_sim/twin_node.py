@@ -9,10 +9,15 @@ Endpoints (relative names, so namespaces and remaps work); <arm_controller> and
        tolerances are honoured; cancel stops the arm where it is
   act  <gripper_action>                control_msgs/GripperCommand: position per finger (m),
        closing is a grasp with max_effort (N); the result reports where the fingers stopped
+       (effector 'hand', the default)
+  act  <vacuum_ns>/vacuum, <vacuum_ns>/dropoff, <vacuum_ns>/stop   franka_vacuum_gripper's Vacuum,
+       DropOff and Stop, as franka_ros's franka_vacuum_gripper node serves libfranka's VacuumGripper
+       (effector 'suction', in place of the hand): a vacuum seals on the flat top face under the cup
+       or fails with the reason; each result says success and an error text
   sub  <arm_controller>/joint_trajectory  trajectory_msgs/JointTrajectory (the controller's
        topic interface, no feedback; checked the same way, a refusal only logged)
-  pub  joint_states                    sensor_msgs/JointState (the model's arm and finger joints),
-                                       publish_rate_hz
+  pub  joint_states                    sensor_msgs/JointState (the model's arm and finger joints; the
+                                       arm's only with the vacuum gripper), publish_rate_hz
   pub  <mocap_prefix>/<body>/pose      geometry_msgs/PoseStamped per block (sensor-data QoS); a
                                        dropped body is not published
   pub  rigid_bodies                    rad_msgs/RigidBodies, all bodies + frame number; a dropped
@@ -51,17 +56,20 @@ import time
 
 import numpy as np
 from control_msgs.action import FollowJointTrajectory, GripperCommand
+from franka_vacuum_gripper.action import DropOff, Stop, Vacuum
 from geometry_msgs.msg import PoseStamped
 from rad_core.cell.mocap import RigidBodyPose
+from rad_core.cell.motion import GripperCommand as GripperStep
 from rad_core.cell.motion import GripperResult
+from rad_core.cell.panda import FINGER_OPEN
 from rad_core.cell.trajectory import TrajectoryRejected
 from rad_core.domain.errors import RadError
 from rad_core.domain.scene import Scene
 from rad_core.domain.transforms import matrix_from_quaternion
 from rad_core.sim.faults import FaultConfig
-from rad_core.sim.twin import BLOCK_PLAY, Tolerances, Twin, TwinConfig, twin_world_config
+from rad_core.sim.twin import BLOCK_PLAY, VACUUM_BUILD_UP_S, Tolerances, Twin, TwinConfig, twin_world_config
 from rad_core.sim.workspace import Workspace
-from rad_core.sim.world import World
+from rad_core.sim.world import World, WorldConfig
 from rad_msgs.msg import RigidBodies
 from rad_msgs.msg import Scene as SceneMsg
 from rad_msgs.srv import GetSceneState, LoadScene, PresentBlock, SetBlockPose
@@ -92,6 +100,8 @@ class TwinNode(Node):
         self.declare_parameter('joint_prefix', '')
         self.declare_parameter('arm_controller', 'joint_trajectory_controller')
         self.declare_parameter('gripper_action', 'franka_gripper/gripper_action')
+        self.declare_parameter('effector', 'hand')
+        self.declare_parameter('vacuum_ns', 'franka_vacuum_gripper')
         self.declare_parameter('faults', 'none')
         self.declare_parameter('faults_seed', 0)
         self.declare_parameter('block_play', BLOCK_PLAY)   # per side face, fraction of a unit (0.5 mm at 5 cm)
@@ -113,7 +123,9 @@ class TwinNode(Node):
             raise RadError('publish_rate_hz and real_time_factor must be positive')
 
         self.workspace = Workspace()
-        self.world = World(config=twin_world_config(play=float(self.get_parameter('block_play').value)))
+        effector = str(self.get_parameter('effector').value)
+        self.world = World(config=twin_world_config(WorldConfig(effector=effector),
+                                                    play=float(self.get_parameter('block_play').value)))
         self.twin = Twin(self.world, TwinConfig(robot=str(self.get_parameter('robot').value),
                                                 joint_prefix=str(self.get_parameter('joint_prefix').value),
                                                 faults=faults))
@@ -135,10 +147,17 @@ class TwinNode(Node):
                                        self.follow_joint_trajectory_callback,
                                        goal_callback=lambda goal: GoalResponse.ACCEPT,
                                        cancel_callback=lambda goal: CancelResponse.ACCEPT)
-        self.gripper_server = ActionServer(self, GripperCommand, str(self.get_parameter('gripper_action').value),
-                                           self.gripper_command_callback,
-                                           goal_callback=lambda goal: GoalResponse.ACCEPT,
-                                           cancel_callback=lambda goal: CancelResponse.ACCEPT)
+        if effector == 'hand':
+            self.gripper_server = ActionServer(self, GripperCommand, str(self.get_parameter('gripper_action').value),
+                                               self.gripper_command_callback,
+                                               goal_callback=lambda goal: GoalResponse.ACCEPT,
+                                               cancel_callback=lambda goal: CancelResponse.ACCEPT)
+        else:
+            ns = str(self.get_parameter('vacuum_ns').value).rstrip('/')
+            self.vacuum_servers = [ActionServer(self, kind, f'{ns}/{name}', callback)
+                                   for kind, name, callback in ((Vacuum, 'vacuum', self.vacuum_callback),
+                                                                (DropOff, 'dropoff', self.dropoff_callback),
+                                                                (Stop, 'stop', self.stop_callback))]
         self.create_service(LoadScene, 'load_scene', self.load_scene_callback)
         self.create_service(Trigger, 'reset', self.reset_callback)
         self.create_service(GetSceneState, 'get_scene_state', self.get_scene_state_callback)
@@ -288,6 +307,39 @@ class TwinNode(Node):
         result.position, result.effort, result.stalled, result.reached_goal = (
             float(r.position), float(r.effort), bool(r.stalled), bool(r.reached_goal))
         (goal_handle.succeed if r.reached_goal else goal_handle.abort)()
+        return result
+
+    async def vacuum_callback(self, goal_handle):
+        """A Vacuum goal (level in 10 mbar, timeout in ms): success once the cup seals and the level is
+        reached, else aborted with the reason in `error`."""
+        goal = goal_handle.request
+        return await self._vacuum_goal(goal_handle, Vacuum.Result(), GripperStep(
+            'vacuum', FINGER_OPEN, 0.0, 0, vacuum=int(goal.vacuum), timeout_ms=int(goal.timeout)))
+
+    async def dropoff_callback(self, goal_handle):
+        """A DropOff goal (timeout in ms): the vacuum released, the held block let go."""
+        return await self._vacuum_goal(goal_handle, DropOff.Result(), GripperStep(
+            'drop_off', FINGER_OPEN, 0.0, 0, timeout_ms=int(goal_handle.request.timeout)))
+
+    async def stop_callback(self, goal_handle):
+        """A Stop goal: the pump stops; the twin lets the held block go at once (a real cup holds it a
+        while longer, until the vacuum leaks away)."""
+        return await self._vacuum_goal(goal_handle, Stop.Result(), GripperStep(
+            'drop_off', FINGER_OPEN, 0.0, 0, timeout_ms=1))
+
+    async def _vacuum_goal(self, goal_handle, result, command):
+        end = self.twin.time + min(command.timeout_ms / 1000.0, VACUUM_BUILD_UP_S)
+        while self.twin.time < end - 1e-9:
+            await _tick(self)
+        try:
+            got = self.twin.vacuum_now(command)
+        except RadError as e:
+            got = GripperResult(FINGER_OPEN, reached_goal=False, error=str(e))
+        result.success, result.error = bool(got.reached_goal), got.error
+        if not got.reached_goal:
+            self.get_logger().error(f'{command.action} failed: {got.error}')
+        self.event(command.action, success=result.success, error=result.error)
+        (goal_handle.succeed if got.reached_goal else goal_handle.abort)()
         return result
 
     def load_scene_callback(self, request, response):

@@ -35,10 +35,11 @@ from rad_core.allocation.placements import Candidate
 from rad_core.domain.blocks import rotation_z
 from rad_core.domain.grid import Grid, blocks_on_grid
 from rad_core.domain.scene import Scene
-from rad_core.gamp.grasps import block_grasps, grasp_lift, grasp_width, no_grasp_reason
+from rad_core.cell import panda
+from rad_core.gamp.grasps import grasp_lift, grasp_width, no_grasp_reason_for, scene_grasps, span_width
 from rad_core.gamp.hand_cells import blocking_offsets
 from rad_core.gamp.ik import out_of_workspace
-from rad_core.gamp.planner import GampConfig, grasp_styles
+from rad_core.gamp.planner import GampConfig, grasp_styles, wide_grasp_styles
 
 
 @dataclass
@@ -63,14 +64,27 @@ class ArmFilter:
         return '; '.join(parts) or 'nothing ruled out'
 
 
-def type_grasps(scene: Scene) -> dict[str, tuple]:
-    """Every block type's top-down grasps at the scene's unit and clearance (as GAMP offers them)."""
-    width = grasp_width(scene.unit, scene.clearance)
-    return {name: block_grasps(btype, width) for name, btype in scene.block_types.items()}
+def type_grasps(scene: Scene, gamp=None) -> dict[str, tuple]:
+    """Every block type's top-down grasps at the scene's unit and clearance, as GAMP with these
+    settings (`GampConfig`, default: the defaults) offers them: wide ones where it takes them, the
+    cup's with the vacuum gripper."""
+    gamp = gamp or GampConfig()
+    return {name: scene_grasps(btype, scene.unit, scene.clearance, gamp.wide_grasps, gamp.effector)
+            for name, btype in scene.block_types.items()}
 
 
-def _no_grasp_reason(scene: Scene, name: str) -> str:
-    return 'no top-down grasp: ' + no_grasp_reason(scene.block_types[name], grasp_width(scene.unit, scene.clearance))
+def grasp_shift(grasp, pose_yaw: int) -> tuple[float, float]:
+    """Where a grasp's target sits beside its first unit's centre, in units along world x and y, for
+    a pose turned by `pose_yaw` (0 for a unit grasp; half the row's length for a wide one)."""
+    if grasp.span == 1:
+        return (0.0, 0.0)
+    along = rotation_z(pose_yaw) @ np.array([1, 0, 0] if grasp.yaw == 0 else [0, 1, 0])
+    half = (grasp.span - 1) / 2
+    return (float(along[0] * half), float(along[1] * half))
+
+
+def _no_grasp_reason(scene: Scene, name: str, effector: str = 'hand') -> str:
+    return 'no top-down grasp: ' + no_grasp_reason_for(scene.block_types[name], scene.unit, scene.clearance, effector)
 
 
 def _unreachable(points: np.ndarray) -> str:
@@ -96,16 +110,20 @@ def block_unit_centres(scene: Scene, b: int) -> np.ndarray:
     return np.asarray(block.position, dtype=float) + np.asarray(offsets, dtype=float) * scene.unit
 
 
-def arm_filter(scene: Scene, grid: Grid, candidates: list[Candidate]) -> tuple[list[Candidate], dict, ArmFilter]:
+def arm_filter(scene: Scene, grid: Grid, candidates: list[Candidate],
+               gamp=None) -> tuple[list[Candidate], dict, ArmFilter]:
     """(the candidates the arm could build, blocks available per type, what was ruled out and why).
 
-    Blocks already on the grid are not counted (as `cpsat.available_counts`)."""
-    grasps = type_grasps(scene)
-    lift = grasp_lift(scene.unit)      # a tight grasp's target, over the unit's centre
+    Blocks already on the grid are not counted (as `cpsat.available_counts`). gamp: GAMP's settings
+    (`GampConfig`, default the defaults): its effector's grasps."""
+    gamp = gamp or GampConfig()
+    grasps = type_grasps(scene, gamp)
+    # A tight grasp's target over the unit's centre; the cup's, on its top face.
+    lift = scene.unit / 2 + gamp.suction_hover if gamp.effector == 'suction' else grasp_lift(scene.unit)
     report = ArmFilter()
     for name, gs in grasps.items():
         if not gs:
-            report.types[name] = _no_grasp_reason(scene, name)
+            report.types[name] = _no_grasp_reason(scene, name, gamp.effector)
     placed = blocks_on_grid(scene, grid)
     counts = {name: 0 for name in scene.block_types}
     for b, block in enumerate(scene.blocks):
@@ -133,13 +151,16 @@ def arm_filter(scene: Scene, grid: Grid, candidates: list[Candidate]) -> tuple[l
     return kept, counts, report
 
 
-def finger_costs(scene: Scene, grid: Grid, candidates: list[Candidate]) -> list[int]:
+def finger_costs(scene: Scene, grid: Grid, candidates: list[Candidate], gamp=None) -> list[int]:
     """Per candidate pose, how hard a top-down hand finds it to hold at its final place: over
     its grasps, the fewest finger sides that land on a target cell of its region (0: some grasp
     closes with both fingers beside cells no block will ever fill; 2: every grasp has target
     cells on both sides, so whichever neighbour is built first blocks it). `prefer='open'`
     minimizes the sum among equally good allocations (`cpsat.build_model`)."""
-    grasps = type_grasps(scene)
+    gamp = gamp or GampConfig()
+    if gamp.effector == 'suction':
+        return [0] * len(candidates)      # the cup needs nothing beside the block
+    grasps = type_grasps(scene, gamp)
     out = []
     for cand in candidates:
         gs = grasps.get(cand.placement.type, ())
@@ -154,8 +175,8 @@ def finger_costs(scene: Scene, grid: Grid, candidates: list[Candidate]) -> list[
             d = rot @ np.array([1, 0, 0] if g.yaw == 0 else [0, 1, 0])
             at = grid.ijk[ids[g.unit]]
             sides = 0
-            for s in (1, -1):
-                c = grid.index(region, at + s * d)
+            for beside in (at + g.span * d, at - d):     # the finger columns beside the row
+                c = grid.index(region, beside)
                 if c is not None and bool(grid.is_target[c]):
                     sides += 1
             best = min(best, sides)
@@ -179,14 +200,29 @@ class HandBlocked:
 
     def __init__(self, scene: Scene, grid: Grid, gamp=None):
         self.grid = grid
-        self.grasps = type_grasps(scene)
-        styles = grasp_styles(grasp_width(scene.unit, scene.clearance), scene.unit, gamp or GampConfig())
-        self.offsets = {}
-        for yaw in (0, 90, 180, 270):
-            common = frozenset.intersection(*(blocking_offsets(scene.unit, scene.clearance, f, yaw, lift)
-                                              for f, lift in styles))
-            self.offsets[yaw] = np.array(sorted(common), dtype=float).reshape(-1, 3)
+        self.scene = scene
+        self.gamp = gamp or GampConfig()
+        self.grasps = type_grasps(scene, self.gamp)
+        self._offsets: dict[tuple, np.ndarray] = {}
         self._cells: dict[tuple, list] = {}
+
+    def offsets(self, hand_yaw: int, span: int = 1, shift: tuple[float, float] = (0.0, 0.0)) -> np.ndarray:
+        """The blocking offsets (n, 3) of a grasp across `span` units whose target sits `shift` units
+        beside its first unit, at this hand yaw: those that block in every way the planner takes it."""
+        key = (hand_yaw, span, shift)
+        found = self._offsets.get(key)
+        if found is None:
+            scene = self.scene
+            if self.gamp.effector == 'suction':
+                styles = ((panda.FINGER_OPEN, scene.unit / 2 + self.gamp.suction_hover),)
+            elif span == 1:
+                styles = grasp_styles(grasp_width(scene.unit, scene.clearance), scene.unit, self.gamp)
+            else:
+                styles = wide_grasp_styles(span_width(span, scene.unit, scene.clearance), scene.unit, self.gamp)
+            common = frozenset.intersection(*(blocking_offsets(scene.unit, scene.clearance, f, hand_yaw, lift, shift,
+                                                               self.gamp.effector) for f, lift in styles))
+            found = self._offsets[key] = np.array(sorted(common), dtype=float).reshape(-1, 3)
+        return found
 
     def cells(self, type_name: str, yaw: int, cell_ids) -> list[tuple[np.ndarray, np.ndarray]]:
         """Per grasp of the pose (its cells in unit order), the grid cells that block it at each
@@ -201,7 +237,9 @@ class HandBlocked:
                 # The hand yaw at the placement: the fingers close along the pose's yaw plus the
                 # grasp's, the hand 90 deg off that, or the half turn of it.
                 yaws = [(key[1] + g.yaw + 90 + half) % 360 for half in (0, 180)]
-                found.append(tuple(self._on_grid(centre + self.offsets[y] * grid.unit) for y in yaws))
+                shift = grasp_shift(g, key[1])
+                found.append(tuple(self._on_grid(centre + self.offsets(y, g.span, shift) * grid.unit)
+                                   for y in yaws))
             self._cells[key] = found
         return found
 

@@ -69,6 +69,8 @@ import numpy as np
 from ortools.sat.python import cp_model
 
 from rad_core.allocation.arm import arm_filter, finger_costs
+from rad_core.cell.panda import check_effector
+from rad_core.gamp.planner import GampConfig
 from rad_core.allocation.constraints import cp_solver, support_options
 from rad_core.allocation.order import hand_order
 from rad_core.allocation.placements import Candidate, enumerate_candidates
@@ -105,7 +107,17 @@ class AllocationParams:
     (blocks spanning fewer levels) or 'open' (poses a top-down hand can hold from free sides:
     `arm.finger_cost`)."""
 
+    effector: str = 'hand'
+    """What the arm carries (`cell.panda.EFFECTORS`): support 'arm' and 'hand' count on its grasps and
+    the cells it needs free ('suction': the cup on a unit's top face, nothing beside the block)."""
+
+    @property
+    def gamp(self):
+        """GAMP's settings the allocation counts on (`GampConfig` with this effector)."""
+        return GampConfig(effector=self.effector)
+
     def validate(self) -> None:
+        check_effector(self.effector)
         if self.support not in SUPPORT_MODES:
             raise RadError(f'support must be one of {", ".join(SUPPORT_MODES)}, got {self.support!r}')
         if self.prefer not in PREFER_MODES:
@@ -242,7 +254,7 @@ def solve(scene: Scene, params: AllocationParams = AllocationParams(), exclude=(
     counts = available_counts(scene, grid)
     arm = None
     if params.support in ('arm', 'hand'):
-        candidates, counts, arm = arm_filter(scene, grid, candidates)
+        candidates, counts, arm = arm_filter(scene, grid, candidates, params.gamp)
     occupied = None
     if params.support != 'none':
         occupied = np.zeros(grid.num_cells, dtype=bool)
@@ -250,7 +262,7 @@ def solve(scene: Scene, params: AllocationParams = AllocationParams(), exclude=(
             occupied[cells] = True
     costs = None
     if params.prefer == 'open':
-        costs = finger_costs(scene, grid, candidates)
+        costs = finger_costs(scene, grid, candidates, params.gamp)
     model, w, scale = build_model(candidates, counts, params.support, grid, occupied, params.prefer, costs)
     incumbent = set(greedy(candidates, counts)) if params.support == 'none' else set()
     for n, var in enumerate(w):
@@ -258,7 +270,7 @@ def solve(scene: Scene, params: AllocationParams = AllocationParams(), exclude=(
     rounds = HAND_ROUNDS if params.support == 'hand' else 1
     best = None
     for solver, status, picked, unplaced in solve_rounds(model, w, candidates, scene, rounds, params.time_limit_s,
-                                                          start, params.seed, params.num_workers):
+                                                          start, params.seed, params.num_workers, params.gamp):
         if status not in (cp_model.OPTIMAL, cp_model.FEASIBLE):
             if best is not None:
                 break               # keep what the solves before found
@@ -296,7 +308,7 @@ def _unsolved(scene: Scene, grid: Grid, solver, status, candidates, incumbent, s
 
 
 def solve_rounds(model, w, candidates: list[Candidate], scene: Scene, rounds: int, time_limit_s: float,
-                 start: float, seed: int = 0, num_workers: int = 1):
+                 start: float, seed: int = 0, num_workers: int = 1, gamp=None):
     """Solve `model` (one bool `w[n]` per candidate), then again without the picked poses the hand
     cannot place beside the others (`hand_unplaced`), at most `rounds` solves, the first with the
     whole `time_limit_s`, the others with what is left of it since `start` (none with 50 ms or
@@ -314,7 +326,9 @@ def solve_rounds(model, w, candidates: list[Candidate], scene: Scene, rounds: in
             yield solver, status, [], []
             return
         picked = [n for n in range(len(candidates)) if solver.boolean_value(w[n])]
-        unplaced = hand_unplaced(scene, [candidates[n].placement for n in picked]) if rounds > 1 and picked else []
+        unplaced = []
+        if rounds > 1 and picked:
+            unplaced = hand_unplaced(scene, [candidates[n].placement for n in picked], gamp)
         yield solver, status, picked, unplaced
         if not unplaced:
             return
@@ -322,12 +336,12 @@ def solve_rounds(model, w, candidates: list[Candidate], scene: Scene, rounds: in
             model.add(w[picked[k]] == 0)
 
 
-def hand_unplaced(scene: Scene, placements) -> list[int]:
+def hand_unplaced(scene: Scene, placements, gamp=None) -> list[int]:
     """The indices of the `placements` (allocation.Placement, of the scene's free cells) that no
     order `allocation.order` finds places beside the others (the support rule 'hand' and
     `rad_core.allocation.supply` rule them out and solve again)."""
     placements = list(placements)
-    placed = set(hand_order(scene, placements).order)
+    placed = set(hand_order(scene, placements, gamp=gamp).order)
     grid = Grid(scene)
     regions = [t.name for t in scene.targets]
     return [k for k, p in enumerate(placements)

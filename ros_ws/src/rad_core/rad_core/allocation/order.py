@@ -214,7 +214,7 @@ def cover_candidates(scene: Scene, grid: Grid, gamp=None):
     applied), the blocks per type the arm can pick, the hand's blocking cells (`HandBlocked`) and
     the indices of the blocks it cannot pick where they lie."""
     fillers = [c for c in enumerate_candidates(scene, grid, positive_only=False) if c.value >= 0]
-    candidates, counts, report = arm_filter(scene, grid, fillers)
+    candidates, counts, report = arm_filter(scene, grid, fillers, gamp)
     unpickable = {b for b, block in enumerate(scene.blocks) if block.id in report.blocks}
     return candidates, counts, HandBlocked(scene, grid, gamp), unpickable
 

@@ -43,7 +43,11 @@ from typing import Mapping, Sequence
 import numpy as np
 from ortools.sat.python import cp_model
 
+from rad_core.allocation.arm import HandBlocked
 from rad_core.allocation.cpsat import build_model, solve_rounds
+from rad_core.allocation.order import candidate_poses, hand_order, solve_order
+from rad_core.cell.panda import check_effector
+from rad_core.gamp.planner import GampConfig
 from rad_core.allocation.placements import enumerate_candidates
 from rad_core.domain import shapes
 from rad_core.domain.blocks import BlockType
@@ -80,6 +84,13 @@ class SupplyParams:
     """Keep to covers a top-down hand can place in some order (module docstring)."""
     hand_rounds: int = 8
     """At most this many solves, each ruling out the pieces the hand could not place."""
+    effector: str = 'hand'
+    """Whose placing `hand` asks about (`cell.panda.EFFECTORS`): the parallel hand or the vacuum gripper."""
+
+    @property
+    def gamp(self):
+        """GAMP's settings the supply counts on (`GampConfig` with this effector)."""
+        return GampConfig(effector=self.effector)
 
     def validate(self, types: Mapping[str, BlockType]) -> None:
         if self.objective not in OBJECTIVES:
@@ -97,6 +108,7 @@ class SupplyParams:
             raise RadError(f'time limit must be a positive number of seconds, got {self.time_limit_s!r}')
         if not (isinstance(self.seed, int) and 0 <= self.seed < 2 ** 31):
             raise RadError(f'seed must be an integer in 0..2^31-1, got {self.seed!r}')
+        check_effector(self.effector)
         if not (isinstance(self.hand_rounds, int) and self.hand_rounds >= 1):
             raise RadError(f'hand_rounds must be a positive integer, got {self.hand_rounds!r}')
 
@@ -117,6 +129,12 @@ class SupplyReport:
     """Target cells of the cover a top-down hand can place in some order (`SupplyParams.hand`);
     None where it was not asked."""
     rounds: int = 1
+    hand_left: tuple = ()
+    """The pieces of the cover no order lets a top-down hand place, each {'type', 'target', 'cells'
+    (the region's cells it fills), 'why'}: which cells, and what stands in the way."""
+    ordered: bool = False
+    """The cover is the order model's (`choose_blocks`: no cover the rounds found could be placed whole,
+    and this one places more): it leaves out the cells no order lets the hand fill."""
 
     @property
     def exact(self) -> bool:
@@ -132,7 +150,8 @@ class SupplyReport:
                 'filler_cells': self.filler_cells, 'coverage': round(self.coverage, 4), 'exact': self.exact,
                 'blocks': sum(self.counts.values()), 'counts': dict(self.counts), 'cost': self.cost,
                 'stands': self.stands, 'hand_covered': self.hand_covered, 'rounds': self.rounds,
-                'solve_time_s': round(self.solve_time_s, 3)}
+                'solve_time_s': round(self.solve_time_s, 3), 'hand_left': [dict(d) for d in self.hand_left],
+                'ordered': self.ordered}
 
     def summary(self) -> str:
         counts = ', '.join(f'{n} {k}' for k, n in sorted(self.counts.items()) if n)
@@ -145,9 +164,16 @@ class SupplyReport:
             text += f', cost {self.cost:g}'
         if not self.stands:
             text += '; no order found in which every block rests when placed'
+        if self.ordered:
+            text += (f'; no cover of more cells could be placed whole by a top-down hand: these are the cells it '
+                     f'can place in some order')
         if self.hand_covered is not None and self.hand_covered < self.covered:
             text += (f'; a top-down hand can place {self.hand_covered} of the {self.covered} covered cells '
                      f'in some order')
+            for d in self.hand_left[:3]:
+                text += f"; {d['type']} on {d['target']} cells {_cells_text(d['cells'])}: {d['why']}"
+            if len(self.hand_left) > 3:
+                text += f'; {len(self.hand_left) - 3} more such pieces'
         return f'{text} [{self.status}]'
 
 
@@ -243,7 +269,7 @@ def choose_blocks(targets: Sequence[TargetRegion], unit: float, types: Mapping[s
     best, rounds = None, 0
     for solver, status, chosen, unplaced in solve_rounds(model, w, candidates, scene,
                                                          params.hand_rounds if params.hand else 1,
-                                                         params.time_limit_s, start, params.seed):
+                                                         params.time_limit_s, start, params.seed, gamp=params.gamp):
         rounds += 1
         if status not in (cp_model.OPTIMAL, cp_model.FEASIBLE):
             if best is not None:
@@ -255,6 +281,13 @@ def choose_blocks(targets: Sequence[TargetRegion], unit: float, types: Mapping[s
         if best is None or score > best[0]:
             best = (score, chosen, solver.status_name(status), hand_covered)
     _, chosen, status_name, hand_covered = best
+    by_order = False
+    if params.hand and hand_covered is not None and hand_covered < _target_cells(grid, candidates, chosen):
+        left = params.time_limit_s - (time.perf_counter() - start)
+        ordered = _ordered_supply(scene, grid, candidates, n_target, max(1.0, left / 3), params.gamp)
+        if ordered is not None and ordered[1] > hand_covered:
+            (chosen, hand_covered), by_order = ordered, True
+            status_name = 'FEASIBLE'
     picked = [candidates[n] for n in chosen]
     placements = [c.placement for c in picked]
     cells = sorted({i for c in picked for i in c.cell_ids})
@@ -265,10 +298,66 @@ def choose_blocks(targets: Sequence[TargetRegion], unit: float, types: Mapping[s
     cost = None
     if params.objective == 'cheapest':
         cost = round(sum(_cost(p.type, params) for p in placements) / COST_SCALE, 6)
+    left = hand_left(scene, grid, placements, params.gamp) if hand_covered is not None and hand_covered < n_covered \
+        else ()
     report = SupplyReport(status_name, n_target, n_covered, len(cells) - n_covered,
                           {k: v for k, v in kinds.items() if v}, cost, stands(placements, targets),
-                          time.perf_counter() - start, hand_covered, rounds)
+                          time.perf_counter() - start, hand_covered, rounds, left, by_order)
     return placements, report
+
+
+def hand_left(scene: Scene, grid: Grid, placements, gamp=None) -> tuple[dict, ...]:
+    """The placements no order of `allocation.order.hand_order` places (supply's `SupplyReport.hand_left`),
+    each with the cells it fills and why: its type has no top-down grasp, or every way of holding it
+    (a grasp at a hand yaw) needs free a cell that another piece of the cover fills."""
+    placed = set(hand_order(scene, placements, gamp=gamp).order)
+    regions = [t.name for t in scene.targets]
+    hand = HandBlocked(scene, grid, gamp)
+    owner = {}
+    for p in placements:
+        for c in p.cells:
+            owner[grid.index(regions.index(p.target), c)] = p
+    out = []
+    for p in placements:
+        ids = [grid.index(regions.index(p.target), c) for c in p.cells]
+        if tuple(sorted(ids)) in placed:
+            continue
+        ways = [w for pair in hand.cells(p.type, p.yaw, ids) for w in pair]
+        if not ways:
+            why = 'its type has no top-down grasp at this unit'
+        else:
+            needed = sorted({int(c) for w in ways for c in w.tolist() if owner.get(int(c)) not in (None, p)})
+            why = (f'each of its {len(ways)} ways of being held (grasp and hand yaw) needs free a cell the cover '
+                   f'fills ({_cells_text([tuple(int(v) for v in grid.ijk[c]) for c in needed[:6]])}'
+                   f'{" ..." if len(needed) > 6 else ""}), and no order places it before all of them')
+        out.append({'type': p.type, 'target': p.target, 'cells': [list(c) for c in p.cells], 'why': why})
+    return tuple(out)
+
+
+def _cells_text(cells) -> str:
+    return ' '.join(f'({i},{j},{k})' for i, j, k in cells)
+
+
+def _target_cells(grid, candidates, chosen: list[int]) -> int:
+    return sum(int(grid.is_target[list(candidates[n].cell_ids)].sum()) for n in chosen)
+
+
+def _ordered_supply(scene: Scene, grid, candidates, n_target: int, time_limit_s: float,
+                    gamp=None) -> tuple[list[int], int] | None:
+    """Where the rounds left cells the hand cannot place: the cover and its order at once
+    (`allocation.order`'s model over every candidate pose, each type as many times as needed, the
+    allocation's stability rule), so a dense target gets the cover whose order places most. (indices
+    into candidates, target cells placed), or None where CP-SAT found none in `time_limit_s` of
+    deterministic time (at most three times that of wall time)."""
+    occupied = np.zeros(grid.num_cells, dtype=bool)
+    counts = {name: n_target for name in scene.block_types}
+    poses, items = candidate_poses(grid, HandBlocked(scene, grid, gamp), occupied, candidates, counts)
+    found = solve_order(grid, occupied, poses, items, counts, time_limit_s, cover=True)
+    if not found.order:
+        return None
+    index = {id(c.placement): n for n, c in enumerate(candidates)}
+    chosen = [index[id(p)] for p in found.placements]
+    return chosen, _target_cells(grid, candidates, chosen)
 
 
 def _placeable_cells(grid, candidates, chosen: list[int], unplaced: list[int]) -> int:

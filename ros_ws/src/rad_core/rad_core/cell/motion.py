@@ -22,12 +22,17 @@ of control_msgs/GripperCommand as a Franka hand's gripper action takes it: the
 hand's opening is twice the position. A grasp commands a position a little inside
 the block and a force (`max_effort`, N); the hand stalls on the block's faces, and
 the width it reports tells whether the block is held (`grasp_problem`).
+
+With the vacuum gripper in the hand's place the same list holds its commands, as franka_ros's
+franka_vacuum_gripper serves them: 'vacuum' (its Vacuum action: `vacuum` in 10 mbar, `timeout_ms`)
+once the cup is on the block, and 'drop_off' (DropOff: `timeout_ms`) at the placement; each answers
+success and an error text, and a vacuum that did not reach its level holds nothing.
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -35,7 +40,8 @@ from rad_core.cell.panda import FINGER_OPEN
 from rad_core.cell.trajectory import Trajectory, reversed_trajectory
 from rad_core.domain.errors import RadError
 
-GRIPPER_ACTIONS = ('close', 'open', 'grasp', 'release')
+GRIPPER_ACTIONS = ('close', 'open', 'grasp', 'release', 'vacuum', 'drop_off')
+VACUUM_ACTIONS = ('vacuum', 'drop_off')
 
 
 @dataclass(frozen=True)
@@ -43,29 +49,44 @@ class GripperCommand:
     """One command to the hand."""
 
     action: str                  # 'close' (the empty hand) | 'open' (before a grasp) | 'grasp' | 'release'
-    position: float              # per finger (m)
+    #                              | 'vacuum' | 'drop_off' (the vacuum gripper)
+    position: float              # per finger (m); the vacuum gripper's: FINGER_OPEN (it has none)
     max_effort: float            # N; the grasp force
     before: int                  # runs before trajectories[before]
     expected_position: float = float('nan')
     """For a grasp: where the fingers stop when they hold the block (its faces, per finger)."""
+    vacuum: int = 0
+    """For 'vacuum': the level to reach, in 10 mbar (the Vacuum goal's `vacuum`)."""
+    timeout_ms: int = 0
+    """For 'vacuum' and 'drop_off': the goal's `timeout` (ms)."""
 
     def to_dict(self) -> dict:
         d = {'before': self.before, 'action': self.action, 'position': float(self.position),
              'max_effort': float(self.max_effort)}
         if np.isfinite(self.expected_position):
             d['expected_position'] = float(self.expected_position)
+        if self.action in VACUUM_ACTIONS:
+            d.update(vacuum=int(self.vacuum), timeout_ms=int(self.timeout_ms))
         return d
 
     @classmethod
     def from_dict(cls, d: dict) -> GripperCommand:
         try:
             cmd = cls(str(d['action']), float(d['position']), float(d['max_effort']), int(d['before']),
-                      float(d.get('expected_position', float('nan'))))
+                      float(d.get('expected_position', float('nan'))), int(d.get('vacuum', 0)),
+                      int(d.get('timeout_ms', 0)))
         except (KeyError, TypeError, ValueError) as e:
             raise RadError(f'not a gripper command: {e}') from None
         if cmd.action not in GRIPPER_ACTIONS:
             raise RadError(f'gripper command: action {cmd.action!r} is not one of {", ".join(GRIPPER_ACTIONS)}')
+        if cmd.action in VACUUM_ACTIONS and not (0 <= cmd.vacuum <= 127 and 0 <= cmd.timeout_ms <= 127):
+            raise RadError(f'gripper command {cmd.action}: vacuum and timeout_ms are int8 goal fields (0..127), '
+                           f'got {cmd.vacuum} and {cmd.timeout_ms}')
         return cmd
+
+    def moved(self, before: int) -> GripperCommand:
+        """The same command before another trajectory."""
+        return replace(self, before=before)
 
 
 @dataclass
@@ -107,8 +128,7 @@ class Motion:
         """This motion followed by `other` (which starts where this one ends)."""
         n = len(self.trajectories)
         return Motion(self.trajectories + other.trajectories,
-                      self.gripper + [GripperCommand(g.action, g.position, g.max_effort, g.before + n,
-                                                     g.expected_position) for g in other.gripper])
+                      self.gripper + [g.moved(g.before + n) for g in other.gripper])
 
     def to_dict(self) -> dict:
         return {'trajectories': [t.to_dict() for t in self.trajectories],
@@ -135,6 +155,8 @@ class GripperResult:
     effort: float = 0.0
     stalled: bool = False
     reached_goal: bool = False
+    error: str = ''
+    """The vacuum gripper's actions: their result's error text (reached_goal is their success)."""
 
 
 def grasp_problem(command: GripperCommand, result: GripperResult, tol: float = 0.003) -> str:
@@ -143,6 +165,11 @@ def grasp_problem(command: GripperCommand, result: GripperResult, tol: float = 0
     Closed past the block's faces: nothing between the fingers (a miss, or the block
     slipped out); stopped short of them: something else in the way.
     """
+    if command.action in VACUUM_ACTIONS:
+        if result.reached_goal:
+            return ''
+        what = 'the vacuum did not hold the block' if command.action == 'vacuum' else 'the drop-off failed'
+        return f'{what}: {result.error or "no reason given"}'
     if command.action != 'grasp' or not np.isfinite(command.expected_position):
         return ''
     width, expected = 2 * result.position, 2 * command.expected_position
@@ -171,7 +198,11 @@ def run_motion(motion: Motion, move_arm, move_gripper, start=None) -> str:
         if isinstance(command, GripperCommand):
             problem = grasp_problem(command, move_gripper(command))
             if problem:
-                move_gripper(GripperCommand('open', motion.opening, 0.0, command.before))
+                if command.action in VACUUM_ACTIONS:
+                    move_gripper(GripperCommand('drop_off', command.position, 0.0, command.before,
+                                                timeout_ms=command.timeout_ms))
+                else:
+                    move_gripper(GripperCommand('open', motion.opening, 0.0, command.before))
                 if start is not None and len(done) == 1:
                     move_arm(reversed_trajectory(done[0], start))
                 return f'grasp failed: {problem}'

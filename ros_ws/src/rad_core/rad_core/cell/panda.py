@@ -38,6 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from rad_core.cell.robot_model import PLANNING_LOWER, PLANNING_UPPER
+from rad_core.domain.errors import RadError
 
 URDF_RELATIVE = 'franka_panda/panda.urdf'
 
@@ -77,39 +78,68 @@ FINGER_BOXES = (
 )
 
 
+EFFECTORS = ('hand', 'suction')
+"""The end effectors rad plans for: Franka's parallel hand, and a vacuum gripper in its place on the
+flange (libfranka's VacuumGripper: the Schmalz cobot pump with one suction cup)."""
+
+SUCTION_HOUSING = (0.08, 0.08, 0.09)
+"""The vacuum gripper's pump housing as a box under the flange (x, y, z size, m), the z size from the
+flange down. Approximate: a cobot pump's outline; give yours here."""
+CUP_RADIUS = 0.01
+"""The suction cup's radius (m): a 20 mm cup. It seals only on a flat face at least this far from
+every edge (`gamp.grasps.suction_grasps`)."""
+CUP_LENGTH = 0.03
+"""From the housing's bottom to the cup's lip (m): the cup and its holder, a cylinder of CUP_RADIUS."""
+SUCTION_TCP = SUCTION_HOUSING[2] + CUP_LENGTH
+"""How far below the flange the cup's lip is (m): the vacuum gripper's grasp target (its TCP)."""
+
+
 def source_urdf_path() -> Path:
     """pybullet_data's franka_panda/panda.urdf (finger collision: the hull of the finger mesh)."""
     import pybullet_data  # a plain data package: no banner, unlike pybullet itself
     return Path(pybullet_data.getDataPath()) / URDF_RELATIVE
 
 
-def urdf_path() -> Path:
-    """The URDF rad loads: pybullet_data's with the fingers' collision as `FINGER_BOXES`.
+def urdf_path(effector: str = 'hand') -> Path:
+    """The URDF rad loads: pybullet_data's with the fingers' collision as `FINGER_BOXES`, or for the
+    'suction' effector the vacuum gripper in the hand's place (`suction_urdf`).
 
     Written per content and pybullet_data folder (its meshes are named by absolute path) into a
     per-user temporary folder, atomically, so processes starting together are safe; written again
     whenever it is gone (a temporary folder's cleaner may take it from a long-running node)."""
-    path, source, text = _urdf_name()
+    check_effector(effector)
+    path, source, text = _urdf_name(effector)
     if not path.exists():
-        _write_urdf(path, source, text)
+        _write_urdf(path, source, text, effector)
     return path
 
 
-@lru_cache(maxsize=1)
-def _urdf_name() -> tuple[Path, Path, bytes]:
+def check_effector(effector: str) -> None:
+    if effector not in EFFECTORS:
+        raise RadError(f'effector must be one of {", ".join(EFFECTORS)}, got {effector!r}')
+
+
+@lru_cache(maxsize=2)
+def _urdf_name(effector: str) -> tuple[Path, Path, bytes]:
     """(where the URDF goes, pybullet_data's URDF, its text)."""
     source = source_urdf_path()
     text = source.read_bytes()
-    digest = hashlib.sha256(text + repr((FINGER_BOXES, str(source.parent))).encode()).hexdigest()[:12]
-    return Path(tempfile.gettempdir()) / f'rad-{os.getuid()}' / f'panda-{digest}.urdf', source, text
+    shapes = (FINGER_BOXES, SUCTION_HOUSING, CUP_RADIUS, CUP_LENGTH) if effector == 'suction' else FINGER_BOXES
+    digest = hashlib.sha256(text + repr((shapes, str(source.parent))).encode()).hexdigest()[:12]
+    name = 'panda' if effector == 'hand' else f'panda-{effector}'
+    return Path(tempfile.gettempdir()) / f'rad-{os.getuid()}' / f'{name}-{digest}.urdf', source, text
 
 
-def _write_urdf(path: Path, source: Path, text: bytes) -> None:
+def _write_urdf(path: Path, source: Path, text: bytes, effector: str = 'hand') -> None:
     root = ET.fromstring(text)
     for mesh in root.iter('mesh'):
         name = mesh.get('filename', '')
         if name.startswith('package://'):
             mesh.set('filename', str(source.parent / name[len('package://'):]))
+    if effector == 'suction':
+        suction_urdf(root)
+        _write_atomically(path, ET.tostring(root))
+        return
     for link in root.iter('link'):
         side = {'panda_leftfinger': 1, 'panda_rightfinger': -1}.get(link.get('name'))
         if side is None:
@@ -120,9 +150,40 @@ def _write_urdf(path: Path, source: Path, text: bytes) -> None:
             collision = ET.SubElement(link, 'collision')
             ET.SubElement(collision, 'origin', xyz=f'{x} {side * y} {z}', rpy=f'{side * roll} 0 0')
             ET.SubElement(ET.SubElement(collision, 'geometry'), 'box', size=' '.join(map(str, size)))
+    _write_atomically(path, ET.tostring(root))
+
+
+def suction_urdf(root: ET.Element) -> None:
+    """Turn the Panda URDF's tree (`root`) into the arm with the vacuum gripper: panda_hand becomes the
+    pump housing (`SUCTION_HOUSING`) and the cup (`CUP_RADIUS`, `CUP_LENGTH`), its visual and collision
+    alike; the fingers keep their joints (rad's joint vectors stay 9 long; nothing moves them) and lose
+    every shape; panda_grasptarget moves to the cup's lip (`SUCTION_TCP`)."""
+    for link in root.iter('link'):
+        name = link.get('name')
+        if name in FINGER_LINKS:
+            for old in link.findall('visual') + link.findall('collision'):
+                link.remove(old)
+        if name != HAND_LINK:
+            continue
+        for old in link.findall('visual') + link.findall('collision'):
+            link.remove(old)
+        hx, hy, hz = SUCTION_HOUSING
+        for tag in ('visual', 'collision'):
+            housing = ET.SubElement(link, tag)
+            ET.SubElement(housing, 'origin', xyz=f'0 0 {hz / 2}', rpy='0 0 0')
+            ET.SubElement(ET.SubElement(housing, 'geometry'), 'box', size=f'{hx} {hy} {hz}')
+            cup = ET.SubElement(link, tag)
+            ET.SubElement(cup, 'origin', xyz=f'0 0 {hz + CUP_LENGTH / 2}', rpy='0 0 0')
+            ET.SubElement(ET.SubElement(cup, 'geometry'), 'cylinder', radius=str(CUP_RADIUS), length=str(CUP_LENGTH))
+    for joint in root.iter('joint'):
+        if joint.get('name') == 'panda_grasptarget_hand':
+            joint.find('origin').set('xyz', f'0 0 {SUCTION_TCP}')
+
+
+def _write_atomically(path: Path, data: bytes) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     with tempfile.NamedTemporaryFile('wb', dir=path.parent, suffix='.tmp', delete=False) as f:
-        f.write(ET.tostring(root))
+        f.write(data)
     os.replace(f.name, path)
 
 
@@ -170,9 +231,10 @@ def top_down_quaternion(hand_yaw: float) -> np.ndarray:
     return np.array([math.cos(h), math.sin(h), 0.0, 0.0])
 
 
-def load_panda(client: int, base_position=(0.0, 0.0, 0.0)) -> int:
-    """Load the Panda into a client (fixed base, self-collision on); returns the body id."""
+def load_panda(client: int, base_position=(0.0, 0.0, 0.0), effector: str = 'hand') -> int:
+    """Load the Panda with its hand or the vacuum gripper (`EFFECTORS`) into a client (fixed base,
+    self-collision on); returns the body id."""
     import pybullet as p  # pybullet: importing it prints a banner on stdout
     flags = p.URDF_USE_SELF_COLLISION | p.URDF_USE_SELF_COLLISION_EXCLUDE_ALL_PARENTS
-    return p.loadURDF(str(urdf_path()), basePosition=list(base_position), useFixedBase=True,
+    return p.loadURDF(str(urdf_path(effector)), basePosition=list(base_position), useFixedBase=True,
                       flags=flags, physicsClientId=client)

@@ -132,3 +132,16 @@ DEFAULT_LIBRARY: dict[str, BlockType] = _lib(
     O4_up=[[0, 0, 0], [1, 0, 0], [0, 0, 1], [1, 0, 1]],
     S4_up=[[0, 0, 0], [1, 0, 0], [1, 0, 1], [2, 0, 1]],
 )
+
+
+def _plate(name: str, width: int, length: int) -> BlockType:
+    return BlockType.from_cells(name, [[i, j, 0] for j in range(width) for i in range(length)])
+
+
+# Bricks one unit high (plates), width x length studs, lying flat with their length along x. A
+# 1 x 2 plate is the I2 and a 1 x 4 the hand-made shapes' bar4 (`shapes.CUSTOM_TYPES`); these are the
+# two-wide ones. No unit of a two-wide plate has both finger columns free, so only a wide grasp
+# (`gamp.grasps.wide_grasps`) takes one: across its width of 2 units, where that fits the open hand
+# (units up to 3.5 cm).
+BRICK_TYPES: dict[str, BlockType] = {t.name: t for t in (_plate('B22', 2, 2), _plate('B23', 2, 3),
+                                                         _plate('B24', 2, 4))}

@@ -27,7 +27,7 @@ from typing import Callable, Mapping, Sequence
 import numpy as np
 
 from rad_core.domain import support
-from rad_core.domain.blocks import DEFAULT_LIBRARY, YAWS, BlockType
+from rad_core.domain.blocks import BRICK_TYPES, DEFAULT_LIBRARY, YAWS, BlockType
 from rad_core.domain.errors import RadError
 from rad_core.domain.scene import Block, Scene, TargetRegion
 
@@ -50,7 +50,8 @@ CUSTOM_TYPES: dict[str, BlockType] = {
         'bar4': [[0, 0, 0], [1, 0, 0], [2, 0, 0], [3, 0, 0]],
     }.items()
 }
-LIBRARY: dict[str, BlockType] = {**DEFAULT_LIBRARY, **CUSTOM_TYPES}
+LIBRARY: dict[str, BlockType] = {**DEFAULT_LIBRARY, **CUSTOM_TYPES, **BRICK_TYPES}
+"""Every named block type: the predecessor's, the hand-made shapes' and the two-wide plates."""
 
 # Types that lie in the x-z plane at yaw 0/180, the only ones a one-cell-deep face takes.
 PLANAR = ('cube', 'I2', 'I3', 'I2_up', 'L3_up', 'T4_up', 'O4_up', 'S4_up')

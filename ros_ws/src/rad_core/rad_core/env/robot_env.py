@@ -43,7 +43,7 @@ from rad_core.domain.transforms import yaw_of_quaternion, yaw_quaternion
 from rad_core.env.mdp import Action, AssemblyEnv, EnvConfig, Outcome, StepResult
 from rad_core.gamp.planner import GampConfig, placement_pose, plan_action
 from rad_core.sim.twin import Twin, TwinConfig
-from rad_core.sim.world import World
+from rad_core.sim.world import World, WorldConfig
 
 # How each outcome counts in the paper's Table II.
 OUTCOME_CLASS = {
@@ -193,7 +193,7 @@ class RobotAssemblyEnv:
 
     def __init__(self, scene: Scene, config: RobotEnvConfig = RobotEnvConfig(), cache: StepCache | None = None):
         self.config = config
-        self.world = World(scene)
+        self.world = World(scene, WorldConfig(effector=config.gamp.effector))
         self.twin = Twin(self.world, config.twin)
         self.cache = (cache if cache is not None else StepCache()) if config.cache else None
         self.load(scene)

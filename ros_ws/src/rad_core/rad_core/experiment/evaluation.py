@@ -135,12 +135,15 @@ PLAN_TIME_LIMIT_S = 600.0
 """The longest an episode's plan may take with the robot (the branch and bound's searches included)."""
 
 
-def robot_planner(agent: str | Agent, allocation: AllocationParams | None = None, reallocation=None):
+def robot_planner(agent: str | Agent, allocation: AllocationParams | None = None, reallocation=None,
+                  effector: str = 'hand'):
     """The in-process planner of the agent's robot episodes (`AgentPlanner`: what /plan_assembly
-    runs); allocation and reallocation as `scene_episode` takes them. Close it when done."""
+    runs); allocation and reallocation as `scene_episode` takes them; effector: what the arm carries
+    (`cell.panda.EFFECTORS`). Close it when done."""
     agent = get_agent(agent)
     return AgentPlanner(agent.spec, time_limit_s=PLAN_TIME_LIMIT_S, allocation=allocation, reallocation=reallocation,
-                        policy=agent.make_policy())     # the network get_agent loaded, not a second copy
+                        policy=agent.make_policy(),     # the network get_agent loaded, not a second copy
+                        effector=effector)
 
 
 def scene_episode(agent: str | Agent, scene: Scene, robot: bool, seed: int, execution: str = 'teleport',
@@ -202,7 +205,7 @@ def robot_episode(planner, scene: Scene, seed: int, execution: str = 'teleport')
     expected; reason: why an invalid action failed; stop_reason: why the plan stopped short."""
     if execution == 'teleport':
         plan = planner(scene, None, seed)
-        registered = build_teleported(scene, plan.steps)
+        registered = build_teleported(scene, plan.steps, effector=planner.effector)
         coverage, lost, steps, replans = measured_coverage(registered.scene), registered.set_aside, len(plan.steps), 0
     elif execution == 'simulate':
         plans = []
@@ -210,7 +213,7 @@ def robot_episode(planner, scene: Scene, seed: int, execution: str = 'teleport')
         def plan_from(now: Scene, start):
             plans.append(planner(now, start, seed))
             return plans[-1]
-        built = build_simulated(scene, plan_from, planner.motion).result
+        built = build_simulated(scene, plan_from, planner.motion, effector=planner.effector).result
         if not plans:
             raise RadError(f'execution ended before a plan was made: {built.reason}')
         plan = plans[0]
@@ -269,7 +272,7 @@ def summarize(rows: list[dict], agent: str = '') -> dict:
 def evaluate(agent: str | Agent, scenes: Iterable[tuple[str, Scene]], robot: bool, seed: int,
              progress: Callable[[dict], None] | None = None, execution: str = 'teleport',
              policy: Policy | None = None, allocation: AllocationParams | None = None,
-             reallocation=None) -> dict:
+             reallocation=None, effector: str = 'hand') -> dict:
     """Run the agent once on every (name, scene); scene i seeds the policy with seed + i.
 
     Returns exactly KEYS: agent (its canonical text, `agents.label`), R, R_std (mean and std
@@ -283,12 +286,14 @@ def evaluate(agent: str | Agent, scenes: Iterable[tuple[str, Scene]], robot: boo
     planner uses the agent's own). allocation: CP-SAT settings,
     e.g. AllocationParams(support='stable') (default: the agent's, usually the paper's MILP).
     reallocation: the `ReallocationConfig` of re-allocating agents (default: its defaults).
+    effector: what the arm carries in robot runs (`cell.panda.EFFECTORS`): GAMP, the allocation and
+    the twin all take it.
     """
     agent = get_agent(agent)
     with_robot = uses_robot(agent, robot)
     stability = planner = None
     if with_robot:
-        planner = robot_planner(agent, allocation, reallocation)
+        planner = robot_planner(agent, allocation, reallocation, effector)
     else:
         policy = policy if policy is not None else agent.make_policy()
         trained_on = getattr(policy, 'actions', agent.actions)

@@ -19,7 +19,7 @@ from rad_core.domain.scene import Scene
 from rad_core.domain.shapes import LayoutConfig, footprint, move_aside_spot
 from rad_core.domain.transforms import yaw_quaternion
 from rad_core.gamp.planner import GampConfig, GampResult, placement_pose, plan_action
-from rad_core.sim.world import World
+from rad_core.sim.world import World, WorldConfig
 
 
 @dataclass(frozen=True)
@@ -133,8 +133,9 @@ class MotionPlanner:
     its cell's pose, moved by `seat_shift` clear of neighbours seen off their cells."""
 
     def __init__(self, config: GampConfig = GampConfig()):
+        config.validate()
         self.config = config
-        self.world = World()
+        self.world = World(config=WorldConfig(effector=config.effector))
 
     def close(self) -> None:
         self.world.close()

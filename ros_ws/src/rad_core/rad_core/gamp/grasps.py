@@ -184,3 +184,48 @@ def grasp_order(btype: BlockType, grasps) -> list[Grasp]:
 
 def _height(offsets: np.ndarray) -> int:
     return int(offsets[:, 2].max() - offsets[:, 2].min())
+
+
+def scene_grasps(btype: BlockType, unit: float, clearance: float = 0.0, wide: bool = True,
+                 effector: str = 'hand') -> tuple[Grasp, ...]:
+    """Every grasp of a block type in a scene of this unit (m) and clearance, best first: with the hand
+    the unit grasps, then (wide) the wide grasps; with the vacuum gripper (effector 'suction') the
+    suction grasps. What GAMP tries (`planner.plan_action`) and the allocation counts on
+    (`allocation.arm.type_grasps`)."""
+    if effector == 'suction':
+        return suction_grasps(btype, unit, clearance)
+    unit_grasps = _unit_grasps(btype, grasp_width(unit, clearance))
+    return unit_grasps + wide_grasps(btype, unit, clearance) if wide else unit_grasps
+
+
+CUP_MARGIN = 0.001
+"""The cup's lip must stay this far (m) inside a unit's top face: a seal needs the whole lip on it."""
+
+
+def cup_fits(unit: float, clearance: float = 0.0) -> bool:
+    """Whether the suction cup (`cell.panda.CUP_RADIUS`) fits a unit's top face, centred on it, with
+    `CUP_MARGIN` to the face's edges (a scene's clearance sets a block's outer faces back)."""
+    return panda.CUP_RADIUS + CUP_MARGIN <= grasp_width(unit, clearance) / 2
+
+
+def suction_grasps(btype: BlockType, unit: float, clearance: float = 0.0) -> tuple[Grasp, ...]:
+    """The vacuum gripper's grasps: the cup centred on the top face of a unit no unit of the same
+    block lies above, where the cup fits that face (`cup_fits`), best first (`grasp_order`: units
+    nearest the centre of mass in plan, then the higher). `Grasp(unit, 0)`: a cup has no closing
+    axis, so the hand's yaw is free (the planner tries the block's own two)."""
+    if not cup_fits(unit, clearance):
+        return ()
+    offsets = np.asarray(btype.offsets, dtype=np.int64)
+    cells = {tuple(o) for o in offsets.tolist()}
+    tops = [u for u, (x, y, z) in enumerate(offsets.tolist())
+            if not any((x, y, z + k) in cells for k in range(1, _height(offsets) + 1))]
+    return tuple(grasp_order(btype, [Grasp(u, 0) for u in tops]))
+
+
+def no_grasp_reason_for(btype: BlockType, unit: float, clearance: float = 0.0, effector: str = 'hand') -> str:
+    """Why `scene_grasps` offers nothing for this block type, unit and effector."""
+    if effector == 'suction':
+        face = grasp_width(unit, clearance)
+        return (f'the {2 * panda.CUP_RADIUS * 1000:.0f} mm suction cup does not fit a {face * 1000:.0f} mm top face '
+                f'with {CUP_MARGIN * 1000:.0f} mm to its edges')
+    return no_grasp_reason(btype, grasp_width(unit, clearance))

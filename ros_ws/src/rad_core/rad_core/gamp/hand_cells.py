@@ -47,17 +47,21 @@ _RIGID = ('panda_link7', 'panda_link8', 'panda_hand', 'panda_leftfinger', 'panda
 
 @lru_cache(maxsize=64)
 def blocking_offsets(unit: float, clearance: float, finger_open: float, hand_yaw_deg: int,
-                     lift: float = 0.0) -> frozenset:
+                     lift: float = 0.0, shift: tuple[float, float] = (0.0, 0.0), effector: str = 'hand') -> frozenset:
     """The integer cell offsets (di, dj, dk) from a held unit whose built cube the hand, its fingers
     open `finger_open` each, or panda_link7 enters by more than `DEPTH`, the hand pointing down at
-    `hand_yaw_deg` (a multiple of 90) with its grasp target `lift` (m) over the held unit's centre."""
+    `hand_yaw_deg` (a multiple of 90) with its grasp target `lift` (m) over the held unit's centre.
+    shift: where the grasp target sits beside that unit's centre, in units along world x and y (a
+    wide grasp's target is the middle of its row: `grasps.grasp_centre`; offsets then count from
+    the row's first unit). effector: the hand, or the vacuum gripper (`cell.panda.EFFECTORS`: its
+    housing and cup, no fingers)."""
     import pybullet as p  # pybullet: importing it prints a banner on stdout
 
     if hand_yaw_deg % 90:
         raise RadError(f'blocking_offsets: hand yaw must be a multiple of 90 deg, got {hand_yaw_deg}')
     cid = p.connect(p.DIRECT)
     try:
-        robot = panda.load_panda(cid)
+        robot = panda.load_panda(cid, effector=effector)
         index = {p.getJointInfo(robot, i, physicsClientId=cid)[12].decode(): i
                  for i in range(p.getNumJoints(robot, physicsClientId=cid))}
         movable = [i for i in range(p.getNumJoints(robot, physicsClientId=cid))
@@ -72,7 +76,8 @@ def blocking_offsets(unit: float, clearance: float, finger_open: float, hand_yaw
         hand = matrix_from_quaternion(np.asarray(got[5]))
         asked = matrix_from_quaternion(panda.top_down_quaternion(math.radians(hand_yaw_deg)))
         turn = hand @ asked.T                  # world offsets for the asked hand -> this hand's
-        at = np.asarray(got[4]) + turn @ (0.0, 0.0, -lift)     # the held unit's centre
+        # The held (first) unit's centre: under the grasp target, `shift` units beside it.
+        at = np.asarray(got[4]) + turn @ (-shift[0] * unit, -shift[1] * unit, -lift)
         # A block's unit box as `physics.block_shape` makes it, its sides set back by the scene's
         # clearance, without its overlap: the smallest it can be.
         side = unit / 2 - PhysicsConfig().side_gap * unit - clearance * unit / 2

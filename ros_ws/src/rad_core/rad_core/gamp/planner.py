@@ -7,7 +7,7 @@ and placement configurations, then the motion between them:
     start -> above grasp -> (down) grasp -> close -> (up) lift -> above placement
           -> (down) place -> open -> (up) retreat
 
-For each predefined grasp (`grasps.block_grasps`, best first) and each of the
+For each predefined grasp (`grasps.scene_grasps`, best first) and each of the
 two hand yaws of the symmetric hand, the pick half is checked first, the grasp target at
 the unit's centre and the fingers open 1 cm off its faces; where a finger hits a neighbour
 there, again with the tight grasp: the fingers 4 mm off, the target 13 mm under the unit's
@@ -51,13 +51,12 @@ from rad_core.domain.transforms import matrix_from_quaternion, yaw_matrix, yaw_o
 from rad_core.gamp.collision import CollisionConfig, attachment_from_world, check_path, make_collision_fn, world_key
 from rad_core.gamp.grasps import (
     Grasp,
-    block_grasps,
     grasp_centre,
     grasp_lift,
     grasp_width,
-    no_grasp_reason,
+    no_grasp_reason_for,
+    scene_grasps,
     span_width,
-    wide_grasps,
 )
 from rad_core.gamp.ik import IkConfig, hand_yaw_options, solve_top_down
 from rad_core.gamp.trajectory import TimingConfig, plan_motion
@@ -103,10 +102,31 @@ class GampConfig:
     `gamp.action.MotionPlanner` (the gamp node's `move_aside` request; `plan_assembly` asks for
     it); `plan_action` itself plans one pick and place."""
     timing: TimingConfig = field(default_factory=TimingConfig)
-    wide_grasps: bool = False
+    wide_grasps: bool = True
     """Also take a block across its whole extent along its x or y axis (`grasps.wide_grasps`), after
     every unit grasp failed: the fingers outside the block, at the tight grasp's height
-    (`wide_grasp_styles`), closing on the row's outer faces. Off: the unit grasps only."""
+    (`wide_grasp_styles`), closing on the row's outer faces. Only rows that fit the open hand have
+    them (2 units up to 3.5 cm, 3 up to 2.5 cm), so scenes at 4 and 5 cm units plan as with unit
+    grasps alone. Off: the unit grasps only (the paper's hand)."""
+    effector: str = 'hand'
+    """What the arm carries (`cell.panda.EFFECTORS`): 'hand', Franka's parallel hand, or 'suction',
+    the vacuum gripper: its cup comes down on the top face of a unit (`grasps.suction_grasps`),
+    `suction_hover` over it, the vacuum holds the block, and a drop-off lets it go at the placement;
+    nothing goes down beside the block."""
+    suction_hover: float = 0.005
+    """The cup's lip stops this far (m) over the top face it takes: clear of the collision margin; the
+    cup's bellows close the gap when the vacuum comes on (the twin seals within its own tolerance)."""
+    vacuum: int = 50
+    """The vacuum a suction grasp asks for, in 10 mbar (franka_vacuum_gripper's Vacuum goal, int8)."""
+    vacuum_timeout_ms: int = 100
+    """How long the vacuum may take to build up (ms; the Vacuum and DropOff goals' int8 timeout)."""
+
+    def validate(self) -> None:
+        panda.check_effector(self.effector)
+        if not (isinstance(self.vacuum, int) and 1 <= self.vacuum <= 127):
+            raise RadError(f'vacuum must be 1..127 (x 10 mbar, an int8 goal field), got {self.vacuum!r}')
+        if not (isinstance(self.vacuum_timeout_ms, int) and 1 <= self.vacuum_timeout_ms <= 127):
+            raise RadError(f'vacuum_timeout_ms must be 1..127 (an int8 goal field), got {self.vacuum_timeout_ms!r}')
 
 
 @dataclass
@@ -133,13 +153,14 @@ class GampResult:
     {'block', 'position' (anchor, m), 'yaw' (deg)}; the motion holds their pick and place first."""
     _motion: Motion | None = field(default=None, repr=False)
     _path: tuple | None = field(default=None, repr=False)
-    """(start, waypoints, timing config, expected grasp width) until the motion is timed."""
+    """(start, waypoints, timing config, expected grasp width, vacuum) until the motion is timed; vacuum:
+    None for the hand, else (level in 10 mbar, timeout in ms) of the vacuum gripper."""
 
     @property
     def motion(self) -> Motion | None:
         if self._motion is None and self._path is not None:
-            start, waypoints, timing, grasp_expected = self._path
-            self._motion = plan_motion(start, waypoints, timing, grasp_expected=grasp_expected)
+            start, waypoints, timing, grasp_expected, vacuum = self._path
+            self._motion = plan_motion(start, waypoints, timing, grasp_expected=grasp_expected, vacuum=vacuum)
             self._path = None
         return self._motion
 
@@ -214,14 +235,14 @@ def plan_action(world: World, block_id: str, position, yaw_deg: float, start=Non
     btype = scene.block_types[scene.block(block_id).type]
     clock = _Clock()
     rng = np.random.default_rng(config.seed)
-    width = grasp_width(unit, scene.clearance)
-    grasps = block_grasps(btype, width)
-    if config.wide_grasps:
-        grasps += wide_grasps(btype, unit, scene.clearance)
+    grasps = scene_grasps(btype, unit, scene.clearance, config.wide_grasps, config.effector)
     result = GampResult(False)
+    if world.effector != config.effector:
+        raise RadError(f'the planning world carries the {world.effector}, the config plans for the {config.effector}')
     if not grasps:
         return _finish(result, 'grasp', f'grasp: block {block_id} has no top-down grasp: '
-                                        f'{no_grasp_reason(btype, width)}', clock, t0)
+                                        f'{no_grasp_reason_for(btype, unit, scene.clearance, config.effector)}',
+                       clock, t0)
 
     pick_failures, place_failures = [], []
     with world.preserved():
@@ -284,13 +305,19 @@ def _try_grasp(job: _Job, grasp: Grasp) -> tuple[tuple | None, str, str]:
     """Plan one grasp, both hand yaws: ((the result's path, hand yaw (deg)) or None, the pick's reason,
     the placement's reason)."""
     world, block_id, btype, unit, config = job.world, job.block_id, job.btype, job.unit, job.config
-    if grasp.span == 1:
+    if config.effector == 'suction':
+        # The finger coordinate stands for the vacuum (the vacuum gripper has no fingers, and its URDF's
+        # finger links no shape): open = off, closed = on, so that plan_motion places its commands.
+        width, closed_f = float('nan'), 0.0
+        styles = ((panda.FINGER_OPEN, unit / 2 + config.suction_hover),)
+    elif grasp.span == 1:
         width = grasp_width(unit, job.clearance)
         styles = grasp_styles(width, unit, config)
     else:
         width = span_width(grasp.span, unit, job.clearance)
         styles = wide_grasp_styles(width, unit, config)
-    closed_f = max(0.0, width / 2 - config.grip_squeeze)
+    if config.effector != 'suction':
+        closed_f = max(0.0, width / 2 - config.grip_squeeze)
     rot, final_rot = job.rot, job.final_rot
     turn = math.radians(job.yaw_deg) - job.block_yaw
     centre = grasp_centre(btype, grasp) * unit
@@ -329,7 +356,8 @@ def _try_grasp(job: _Job, grasp: Grasp) -> tuple[tuple | None, str, str]:
             place_reason = place_reason or str(e)
             world.set_block_pose(block_id, job.block_pos, job.block_quat)
             continue
-        path = (job.start, pick['waypoints'] + place['waypoints'], config.timing, width / 2)
+        vacuum = (config.vacuum, config.vacuum_timeout_ms) if config.effector == 'suction' else None
+        path = (job.start, pick['waypoints'] + place['waypoints'], config.timing, width / 2, vacuum)
         return (path, math.degrees(hand_yaw)), pick_reason, place_reason
     return None, pick_reason, place_reason
 

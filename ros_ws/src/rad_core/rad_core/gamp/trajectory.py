@@ -35,6 +35,7 @@ from ruckig import InputParameter, Result, Ruckig
 from ruckig import Trajectory as RuckigTrajectory
 
 from rad_core.cell.motion import GripperCommand, Motion
+from rad_core.cell.panda import FINGER_OPEN
 from rad_core.cell.robot_model import RobotModel, envelope, robot_model
 from rad_core.cell.trajectory import Trajectory, TrajectoryPoint
 from rad_core.domain.errors import RadError
@@ -137,11 +138,31 @@ def retime(waypoints: Sequence[np.ndarray], model: RobotModel, speed_scale: floa
 
 
 def plan_motion(start: np.ndarray, waypoints: Sequence[np.ndarray], config: TimingConfig = TimingConfig(),
-                grasp_expected: float = float('nan')) -> Motion:
+                grasp_expected: float = float('nan'), vacuum: tuple[int, int] | None = None) -> Motion:
     """The Motion through GAMP's (9,) waypoints from `start` (9,): arm where the arm moves, gripper where only
     the fingers move (closing = 'grasp', expecting the fingers to stop at `grasp_expected`; opening after a grasp
     = 'release'; opening before it = 'open'). The first commands set the hand to the approach's opening if the
-    start's fingers differ from it ('close' first when it is narrower)."""
+    start's fingers differ from it ('close' first when it is narrower).
+
+    vacuum: (level in 10 mbar, timeout in ms) for the vacuum gripper, whose waypoints' finger coordinate
+    stands for the vacuum (`planner._try_grasp`): a grasp is then a 'vacuum' command, a release a 'drop_off',
+    and there is nothing to open."""
+    motion = _plan_motion(start, waypoints, config, grasp_expected)
+    if vacuum is None:
+        return motion
+    level, timeout_ms = vacuum
+    gripper = []
+    for g in motion.gripper:
+        if g.action == 'grasp':
+            gripper.append(GripperCommand('vacuum', FINGER_OPEN, 0.0, g.before, vacuum=level, timeout_ms=timeout_ms))
+        elif g.action == 'release':
+            gripper.append(GripperCommand('drop_off', FINGER_OPEN, 0.0, g.before, timeout_ms=timeout_ms))
+    motion.gripper = gripper
+    return motion
+
+
+def _plan_motion(start: np.ndarray, waypoints: Sequence[np.ndarray], config: TimingConfig,
+                 grasp_expected: float) -> Motion:
     model = config.timing_model
     qs = [np.asarray(start, dtype=float)] + [np.asarray(w, dtype=float) for w in waypoints]
     motion = Motion()

@@ -69,7 +69,7 @@ import numpy as np
 
 from rad_core.cell import panda
 from rad_core.cell.mocap import Registration, RegistrationConfig, RigidBodyPose, register_scene, register_world
-from rad_core.cell.motion import GripperCommand, GripperResult, Motion, run_motion
+from rad_core.cell.motion import VACUUM_ACTIONS, GripperCommand, GripperResult, Motion, run_motion
 from rad_core.cell.robot_model import RobotModel, robot_model
 from rad_core.cell.trajectory import (
     GOAL_TOLERANCE_VIOLATED,
@@ -85,9 +85,17 @@ from rad_core.cell.trajectory import (
 )
 from rad_core.domain.errors import RadError
 from rad_core.domain.scene import Scene
-from rad_core.domain.transforms import yaw_quaternion
+from rad_core.domain.transforms import matrix_from_quaternion, yaw_quaternion
 from rad_core.sim.faults import KINDS, FaultConfig
 from rad_core.sim.world import World, WorldConfig
+
+SEAL_GAP = 0.007
+"""The cup seals on a top face its lip is at most this far (m) above (its bellows close the gap), or 2 mm
+pressed into."""
+SEAL_TILT_DEG = 3.0
+"""A face tilted more than this (deg) leaks: no seal."""
+VACUUM_BUILD_UP_S = 0.05
+"""Simulated seconds a vacuum takes to reach its level on a sealed face."""
 
 BLOCK_PLAY = 0.01
 """Play of a block between its neighbours in the twin (fraction of a unit per side face: 0.5 mm at
@@ -328,11 +336,15 @@ class Twin:
 
     @property
     def joint_names(self) -> tuple[str, ...]:
-        """The model's 7 arm and 2 finger joints, in world order."""
+        """The model's 7 arm and 2 finger joints, in world order; the arm's only with the vacuum gripper
+        (it has no joints: a cell with one publishes none for it)."""
+        if self.world.effector == 'suction':
+            return self.model.arm_joint_names
         return self.model.arm_joint_names + self.model.finger_joint_names
 
     def joint_state(self) -> tuple[tuple[str, ...], np.ndarray, np.ndarray]:
-        return self.joint_names, self.world.joint_positions(), self.world.joint_velocities()
+        n = len(self.joint_names)
+        return self.joint_names, self.world.joint_positions()[:n], self.world.joint_velocities()[:n]
 
     def block_poses(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
         return {bid: self.world.block_pose(bid) for bid in self.world.blocks}
@@ -556,10 +568,99 @@ class Twin:
 
     def execute_gripper(self, command: GripperCommand, callback=None, callback_period: float = 0.02,
                         real_time_factor: float | None = None) -> GripperResult:
-        """Run a gripper command to its end and return what the gripper action would answer."""
+        """Run a gripper command to its end and return what the gripper action would answer: the hand's
+        GripperCommand, or the vacuum gripper's Vacuum / DropOff ('vacuum', 'drop_off')."""
+        if command.action in VACUUM_ACTIONS:
+            return self.execute_vacuum(command, callback, callback_period, real_time_factor)
+        if self.world.effector != 'hand':
+            raise RadError(f'gripper: this robot carries the {self.world.effector} gripper, not a hand: '
+                           f'a {command.action!r} command has no action to go to')
         self.grip(command.position, command.max_effort)
         self._run_until(lambda: self._grip is None, callback, callback_period, real_time_factor)
         return self.gripper_result
+
+    def execute_vacuum(self, command: GripperCommand, callback=None, callback_period: float = 0.02,
+                       real_time_factor: float | None = None) -> GripperResult:
+        """The vacuum gripper's Vacuum or DropOff goal run to its end: `VACUUM_BUILD_UP_S` of simulated
+        time (at most its `timeout_ms`), then `vacuum_now`."""
+        self._check_vacuum_gripper(command)
+        self._run_for(min(command.timeout_ms / 1000.0, VACUUM_BUILD_UP_S), callback, callback_period,
+                      real_time_factor)
+        return self.vacuum_now(command)
+
+    def vacuum_now(self, command: GripperCommand) -> GripperResult:
+        """The end of a Vacuum or DropOff goal, as the real pump answers it (reached_goal is the action's
+        success, error its text): a vacuum holds the block whose flat top face the cup sits on (`seal`),
+        else fails as the pump does when its level is not reached; a drop-off lets the held block go (and
+        succeeds with nothing held, as libfranka's dropOff does)."""
+        self._check_vacuum_gripper(command)
+        if not (1 <= command.timeout_ms <= 127):
+            return self._vacuum_answer(False, f'timeout must be 1..127 ms, got {command.timeout_ms}')
+        if command.action == 'drop_off':
+            self._release()
+            return self._vacuum_answer(True, '')
+        if not (1 <= command.vacuum <= 127):
+            return self._vacuum_answer(False, f'vacuum must be 1..127 (x 10 mbar), got {command.vacuum}')
+        if self.attached is not None:
+            return self._vacuum_answer(True, '')
+        block_id, why = self.seal()
+        if block_id and self.config.faults.miss > 0 and self._rng['miss'].random() < self.config.faults.miss:
+            self._fault('miss', block=block_id)
+            block_id, why = '', 'the vacuum was not reached: the seal leaks'
+        if not block_id:
+            return self._vacuum_answer(False, why)
+        self._attach(block_id, float('nan'))
+        return self._vacuum_answer(True, '')
+
+    def _check_vacuum_gripper(self, command: GripperCommand) -> None:
+        if self.world.effector != 'suction':
+            raise RadError(f'gripper: this robot carries the {self.world.effector}, not a vacuum gripper: '
+                           f'a {command.action!r} command has no action to go to')
+        if command.action not in VACUUM_ACTIONS:
+            raise RadError(f'gripper: {command.action!r} is not a vacuum gripper command ({", ".join(VACUUM_ACTIONS)})')
+
+    def seal(self) -> tuple[str, str]:
+        """(the block the cup seals on, '') or ('', why none): the cup's lip within `SEAL_GAP` above a
+        unit's top face (no unit of the same block above it), its whole rim on that face (the face's
+        edges, set back by the scene's clearance, at least `CUP_RADIUS` from the cup's centre) and the
+        face level within `SEAL_TILT_DEG`."""
+        p, w = self._p, self.world
+        lip = np.asarray(p.getLinkState(w.robot, w.ee_link, computeForwardKinematics=True,
+                                        physicsClientId=w.client)[4])
+        scene, nearest = w.scene, (math.inf, 'the cup touches no block\'s top face')
+        half = scene.unit * (1.0 - scene.clearance) / 2
+        for block_id in w.blocks:
+            btype = scene.block_types[scene.block(block_id).type]
+            position, quaternion = w.block_pose(block_id)
+            rot = matrix_from_quaternion(np.asarray(quaternion))
+            tilt = math.degrees(math.acos(min(1.0, abs(float(rot[2, 2])))))
+            cells = {tuple(o) for o in btype.offsets}
+            for x, y, z in btype.offsets:
+                if (x, y, z + 1) in cells:
+                    continue
+                top = np.asarray(position) + rot @ (np.array([x, y, z + 0.5]) * scene.unit)
+                local = rot.T @ (lip - top)
+                gap, off = float(local[2]), float(max(abs(local[0]), abs(local[1])))
+                if not (-0.002 <= gap <= SEAL_GAP) or off > half:
+                    continue
+                if tilt > SEAL_TILT_DEG:
+                    why = f'block {block_id} is tilted {tilt:.1f} deg: the cup finds no level face'
+                    nearest = min(nearest, (0.0, why))
+                elif off + panda.CUP_RADIUS > half:
+                    why = (f'the cup is {off * 1000:.1f} mm off the centre of block {block_id}\'s top face: '
+                           'its rim passes the edge')
+                    nearest = min(nearest, (off, why))
+                else:
+                    return block_id, ''
+        return '', nearest[1]
+
+    def _vacuum_answer(self, success: bool, error: str) -> GripperResult:
+        self.gripper_result = GripperResult(panda.FINGER_OPEN, 0.0, False, success, error)
+        return self.gripper_result
+
+    def _run_for(self, seconds: float, callback, callback_period, real_time_factor) -> None:
+        end = self.time + seconds
+        self._run_until(lambda: self.time >= end - 1e-9, callback, callback_period, real_time_factor)
 
     def execute_motion(self, motion: Motion, callback=None, real_time_factor: float | None = None) -> str:
         """Run a step's commands in order (`rad_core.cell.motion.run_motion`); '' when all went through, else

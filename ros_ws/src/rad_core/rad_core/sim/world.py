@@ -69,8 +69,11 @@ class WorldConfig:
     """Half size of the static table box (m); its top is z = 0, centred under `table_centre`."""
     table_centre: tuple[float, float] = (0.3, 0.0)
     """x, y of the table's centre (m); grown by `load_scene` if a scene reaches past it."""
+    effector: str = 'hand'
+    """What the arm carries on its flange (`cell.panda.EFFECTORS`): Franka's hand, or the vacuum gripper."""
 
     def __post_init__(self):
+        panda.check_effector(self.effector)
         if not all(math.isfinite(v) and v > 0 for v in self.table_half_extents):
             raise RadError(f'world config table_half_extents: expected positive sizes, got {self.table_half_extents!r}')
 
@@ -97,7 +100,8 @@ class World(ClientOwner):
         self.table = -1
         self._table_box = (tuple(config.table_centre), tuple(config.table_half_extents))
         self._make_table(*self._table_box)
-        self.robot = panda.load_panda(cid)
+        self.robot = panda.load_panda(cid, effector=config.effector)
+        self.effector = config.effector
         self.joint_index: dict[str, int] = {}
         self.link_index: dict[str, int] = {}
         for j in range(p.getNumJoints(self.robot, physicsClientId=cid)):

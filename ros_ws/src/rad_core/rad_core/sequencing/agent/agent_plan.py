@@ -13,6 +13,7 @@ import inspect
 import math
 import time
 from dataclasses import is_dataclass, replace
+from functools import partial
 
 import numpy as np
 
@@ -21,6 +22,7 @@ from rad_core.allocation.order import hand_order, ordered_cover
 from rad_core.domain.errors import RadError
 from rad_core.domain.scene import Scene
 from rad_core.gamp.action import MotionPlanner
+from rad_core.gamp.planner import GampConfig
 from rad_core.sequencing.agent.stages import (COVER_TRIES, ORDERED_COVER_S, REPAIR_ROUNDS, Planning, Solvers, improve,
                                               stages_for)
 from rad_core.sequencing.bounds.robot_ceiling import robot_ceiling
@@ -144,6 +146,16 @@ def remembered_rank(rank):
     return remembered
 
 
+def effector_solvers(effector: str) -> Solvers | None:
+    """The stages' searches (`stages.Solvers`) counting on this effector's grasps and the cells it needs
+    free (`allocation.arm.HandBlocked`); None for the hand (the defaults, this module's names)."""
+    if effector == 'hand':
+        return None
+    gamp = GampConfig(effector=effector)
+    return Solvers(partial(course_line, gamp=gamp), partial(hand_order, gamp=gamp), partial(ordered_cover, gamp=gamp),
+                   robot_ceiling)
+
+
 class AgentPlanner:
     """`plan_for_agent` with in-process parts: CP-SAT (10 s, one worker), GAMP and the agent's
     sequencer. planner(scene, start, seed) -> AssemblyPlan; `motion` and `gamp` for execution.
@@ -156,7 +168,7 @@ class AgentPlanner:
 
     def __init__(self, agent: str | AgentSpec = 'default', allocation_time_limit_s: float = 10.0,
                  time_limit_s: float = 120.0, allocation=None, reallocation=None, policy=None,
-                 improve_time_s: float = IMPROVE_TIME_S):
+                 improve_time_s: float = IMPROVE_TIME_S, effector: str = 'hand'):
         self.spec = parse(agent) if isinstance(agent, str) else agent
         self.agent = label(self.spec)
         self.sequencer = Sequencer(SequencerConfig(agent=self.agent), policy)
@@ -165,13 +177,16 @@ class AgentPlanner:
         self.allocation, self.reallocation = allocation, reallocation
         self.allocation_time_limit_s, self.time_limit_s = allocation_time_limit_s, time_limit_s
         self.improve_time_s = improve_time_s
-        self.gamp = MotionPlanner()
+        self.effector = effector
+        self.gamp = MotionPlanner(GampConfig(effector=effector))
         self.motion = local_motion_planner(self.gamp)
+        self.solvers = effector_solvers(effector)
 
     def allocate(self, scene: Scene, exclude=(), time_limit_s: float | None = None, support: str | None = None,
                  params=None):
 
         params = params or self.allocation or AllocationParams(time_limit_s=self.allocation_time_limit_s)
+        params = replace(params, effector=self.effector)
         cap = params.time_limit_s
         limit = cap if time_limit_s is None else max(1e-3, min(cap, float(time_limit_s)))
         return solve(scene, replace(params, time_limit_s=limit, support=support or self.support), exclude)
@@ -188,7 +203,7 @@ class AgentPlanner:
         return plan_for_agent(self.spec, scene, self.allocate, self.motion, self.sequencer.rank, self.reallocate,
                               support=self.support, seed=seed, start=start, time_limit_s=self.time_limit_s,
                               reallocation=self.reallocation, quick_rank=self.quick_rank,
-                              improve_time_s=self.improve_time_s)
+                              improve_time_s=self.improve_time_s, solvers=self.solvers)
 
     def quick_rank(self, scene: Scene, placements, start=None):
         """The agent's scorer alone (the first plan of an agent that searches)."""

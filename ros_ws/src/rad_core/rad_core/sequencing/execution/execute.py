@@ -64,7 +64,7 @@ import numpy as np
 
 from rad_core.allocation.result import AllocationResult
 from rad_core.cell.mocap import Registration
-from rad_core.cell.motion import GripperCommand, GripperResult, Motion, run_motion
+from rad_core.cell.motion import VACUUM_ACTIONS, GripperCommand, GripperResult, Motion, run_motion
 from rad_core.cell.panda import HOME
 from rad_core.cell.robot_model import PANDA, envelope
 from rad_core.cell.trajectory import Trajectory, TrajectoryAborted
@@ -372,14 +372,22 @@ def _run_step(motion: Motion, move_arm: MoveArm, move_gripper: MoveGripper, step
     q_now = joints()
     if q_now is None:
         raise aborted
-    held = next((g for g in reversed(grips) if g.action in ('grasp', 'release')), None)
-    held = held if held is not None and held.action == 'grasp' else None
+    held = next((g for g in reversed(grips) if g.action in ('grasp', 'release', 'vacuum', 'drop_off')), None)
+    held = held if held is not None and held.action in ('grasp', 'vacuum') else None
+
+    def let_go(action: str, before: int) -> None:
+        """Open the hand ('open', 'release'), or with the vacuum gripper drop off (nothing to open)."""
+        vacuum = next((g for g in motion.gripper if g.action in VACUUM_ACTIONS), None)
+        if vacuum is None:
+            move_gripper(GripperCommand(action, motion.opening, 0.0, before))
+        elif action == 'release' or held is not None:
+            move_gripper(GripperCommand('drop_off', vacuum.position, 0.0, before, timeout_ms=vacuum.timeout_ms))
     try:
         path = back_out_path(sent, np.asarray(q_now, dtype=float)[:7], np.asarray(step_start, dtype=float)[:7])
         first = sent[0] if isinstance(sent[0], Trajectory) else Trajectory.from_dict(sent[0])
         names = first.joint_names
         if held is None:
-            move_gripper(GripperCommand('open', motion.opening, 0.0, 0))
+            let_go('open', 0)
             legs = [path]
         else:
             # Where the hand closed on the block: the end of the trajectory before the grasp.
@@ -388,7 +396,7 @@ def _run_step(motion: Motion, move_arm: MoveArm, move_gripper: MoveGripper, step
                                 .points[-1].positions if before is not None else step_start[:7], dtype=float)
             cut = next((i for i, q in enumerate(path) if np.abs(q - picked).max() < 1e-6), len(path) - 1)
             legs = [path[:cut + 1], path[cut:]]
-        let_go = False
+        wedged = False
         for k, leg in enumerate(legs):
             if len(leg) > 1:
                 try:
@@ -398,18 +406,18 @@ def _run_step(motion: Motion, move_arm: MoveArm, move_gripper: MoveGripper, step
                         raise
                     # The held block is wedged and does not come back out with the hand: let go of it
                     # where it is and back out empty from where the arm stopped.
-                    move_gripper(GripperCommand('open', motion.opening, 0.0, held.before))
-                    let_go = True
+                    let_go('open', held.before)
+                    wedged = True
                     q_here = np.asarray(joints(), dtype=float)[:7]
                     rest = back_out_path(sent, q_here, np.asarray(step_start, dtype=float)[:7])
                     if len(rest) > 1:
                         move_arm(retime(rest, envelope(PANDA), config.back_out_speed, joint_names=names))
                     break
             if k == 0 and held is not None:
-                move_gripper(GripperCommand('release', motion.opening, 0.0, held.before))
+                let_go('release', held.before)
     except RadError as e:
         raise RadError(f'{aborted}; backing out failed: {e}') from None
-    where = '' if held is None else (', let go of the wedged block' if let_go
+    where = '' if held is None else (', let go of the wedged block' if wedged
                                      else ', put the block back where it was picked')
     return f'trajectory aborted: {aborted}; the arm backed out{where} and the hand opened'
 

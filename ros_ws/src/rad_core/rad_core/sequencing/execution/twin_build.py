@@ -23,7 +23,7 @@ from rad_core.domain.scene import Scene
 from rad_core.domain.transforms import yaw_quaternion
 from rad_core.sequencing.execution.execute import ExecuteConfig, execute_assembly
 from rad_core.sim.twin import Tolerances, Twin, TwinConfig, twin_world_config
-from rad_core.sim.world import World
+from rad_core.sim.world import World, WorldConfig
 
 
 @dataclass
@@ -35,12 +35,13 @@ class SimulatedBuild:
     injected: dict = field(default_factory=dict)   # fault (or action) -> how many the twin injected
 
 
-def build_teleported(scene: Scene, steps, settle_s: float = 0.5):
+def build_teleported(scene: Scene, steps, settle_s: float = 0.5, effector: str = 'hand'):
     """Put each step's block (`PlanStep`: block, position, yaw; first the blocks it moves out of
     the way, `moved_aside`) where the plan says and the arm where its motion ends, settle
     `settle_s` simulated seconds after each, and register the world: a `cell.mocap.Registration`
-    (its scene: where every block is; set_aside: blocks no scene can express, with why)."""
-    with World(scene, twin_world_config()) as world:
+    (its scene: where every block is; set_aside: blocks no scene can express, with why). effector:
+    what the arm carries (`cell.panda.EFFECTORS`)."""
+    with World(scene, twin_world_config(WorldConfig(effector=effector))) as world:
         twin = Twin(world)
         for step in steps:
             for d in getattr(step, 'moved_aside', ()):
@@ -56,15 +57,17 @@ def build_teleported(scene: Scene, steps, settle_s: float = 0.5):
         return twin.registration()
 
 
-def build_simulated(scene: Scene, plan, plan_motion, twin_config=None, execute_config=None) -> SimulatedBuild:
+def build_simulated(scene: Scene, plan, plan_motion, twin_config=None, execute_config=None,
+                    effector: str = 'hand') -> SimulatedBuild:
     """Run /execute_assembly's loop in a fresh twin of the scene.
 
     plan(scene, start) -> AssemblyPlan (e.g. an `AgentPlanner`); plan_motion: its motion planner
     (for backing out after an abort); twin_config: a `sim.twin.TwinConfig` (faults; default none);
     execute_config: an `ExecuteConfig` (default: settle 0.5 s, 3 replans). Trajectories run with
     the tolerances the assembly node sends with every goal, so contact aborts them as on a cell.
+    effector: what the arm carries (`cell.panda.EFFECTORS`): the hand's or the vacuum gripper's actions.
     """
-    with World(scene, twin_world_config()) as world:
+    with World(scene, twin_world_config(WorldConfig(effector=effector))) as world:
         twin = Twin(world, twin_config or TwinConfig())
         sim0 = twin.time
 

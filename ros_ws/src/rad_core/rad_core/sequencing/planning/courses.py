@@ -71,16 +71,17 @@ class CourseLine:
     seconds: float = 0.0
 
 
-def course_line(scene: Scene, time_limit_s: float, least_poses: int | None = None) -> CourseLine | None:
+def course_line(scene: Scene, time_limit_s: float, least_poses: int | None = None, gamp=None) -> CourseLine | None:
     """The line built course by course in the planning twin (module docstring) within
     `time_limit_s` (the line so far where it ends first); None where the scene has at most
     `least_poses` candidate poses (default `COURSES_ABOVE`: one ordered cover takes those), and
-    where a queue feeder dictates the blocks' order (the line chooses its blocks)."""
+    where a queue feeder dictates the blocks' order (the line chooses its blocks). gamp: GAMP's
+    settings (`GampConfig`; default the defaults), its effector's among them."""
     if scene.feeder is not None and scene.feeder.order == 'queue':
         return None
     t0 = time.perf_counter()
     deadline = t0 + time_limit_s
-    config = RobotEnvConfig(execution='teleport')
+    config = RobotEnvConfig(execution='teleport', **({'gamp': gamp} if gamp is not None else {}))
     grid, occupied = scene_state(scene)
     candidates, counts, hand, unpickable = cover_candidates(scene, grid, config.gamp)
     least = COURSES_ABOVE if least_poses is None else least_poses

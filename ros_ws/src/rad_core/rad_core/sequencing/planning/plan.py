@@ -54,10 +54,15 @@ class MotionPlan:
     success: bool
     failure: str = ''
     reason: str = ''
-    grasp: tuple[int, int] = (0, 0)   # unit, yaw
+    grasp: tuple[int, ...] = (0, 0, 1)   # unit, yaw, span (1: a unit grasp; `gamp.grasps.Grasp`)
     motion: dict | None = None        # rad_core.cell.motion.Motion.to_dict(): {"trajectories", "gripper"}
     moved_aside: list = field(default_factory=list)   # blocks moved out of the way first (GampResult.moved_aside)
     seconds: float = 0.0              # the planner's own time (the gamp node's planning_time_s), transport left out
+
+
+def _span(grasp) -> int:
+    """A grasp tuple's span: 1 (a unit grasp) where it has none."""
+    return int(grasp[2]) if len(grasp) > 2 else 1
 
 
 @dataclass
@@ -84,7 +89,8 @@ class PlanStep:
     unit: int = 0
     cell: list[int] = field(default_factory=list)
     rotation: int = 0
-    grasp: tuple[int, int] = (0, 0)
+    grasp: tuple[int, ...] = (0, 0, 1)
+    """(unit, yaw, span) of the grasp, as `MotionPlan.grasp`."""
     position: list[float] = field(default_factory=list)
     motion: dict | None = None
     moved_aside: list = field(default_factory=list)
@@ -92,7 +98,8 @@ class PlanStep:
     def to_dict(self) -> dict:
         return {'block': self.block, 'type': self.type, 'target': self.target, 'yaw': self.yaw,
                 'cells': self.cells, 'unit': self.unit, 'cell': self.cell, 'rotation': self.rotation,
-                'grasp': {'unit': self.grasp[0], 'yaw': self.grasp[1]}, 'position': self.position,
+                'grasp': {'unit': self.grasp[0], 'yaw': self.grasp[1], 'span': _span(self.grasp)},
+                'position': self.position,
                 **({'moved_aside': self.moved_aside} if self.moved_aside else {}),
                 **(self.motion or {'trajectories': [], 'gripper': []})}
 
@@ -114,7 +121,7 @@ class PlanStep:
         return cls(str(d['block']), str(d['type']), str(d['target']), int(d['yaw']),
                    [[int(v) for v in c] for c in d['cells']], int(d.get('unit', 0)),
                    [int(v) for v in d.get('cell', ())], int(d.get('rotation', 0)),
-                   (int(grasp.get('unit', 0)), int(grasp.get('yaw', 0))),
+                   (int(grasp.get('unit', 0)), int(grasp.get('yaw', 0)), int(grasp.get('span', 1))),
                    [float(v) for v in d.get('position', ())],
                    {'trajectories': d['trajectories'], 'gripper': d.get('gripper') or []}
                    if d.get('trajectories') else None,
@@ -536,6 +543,6 @@ def local_motion_planner(planner) -> PlanMotion:
         result, _, _ = planner(scene, action, start=start, move_aside=move_aside)
         if not result.success:
             return MotionPlan(False, result.failure, result.reason, seconds=time.perf_counter() - t0)
-        return MotionPlan(True, '', '', (int(result.grasp.unit), int(result.grasp.yaw)),
+        return MotionPlan(True, '', '', (int(result.grasp.unit), int(result.grasp.yaw), int(result.grasp.span)),
                           result.motion.to_dict(), list(result.moved_aside), seconds=time.perf_counter() - t0)
     return plan_motion
