@@ -165,8 +165,8 @@ class SupplyReport:
         if not self.stands:
             text += '; no order found in which every block rests when placed'
         if self.ordered:
-            text += (f'; no cover of more cells could be placed whole by a top-down hand: these are the cells it '
-                     f'can place in some order')
+            text += ('; no cover of more cells could be placed whole by a top-down hand: these are the cells it '
+                     'can place in some order')
         if self.hand_covered is not None and self.hand_covered < self.covered:
             text += (f'; a top-down hand can place {self.hand_covered} of the {self.covered} covered cells '
                      f'in some order')
