@@ -114,3 +114,10 @@ def test_rad_ceiling_says_how_each_search_ended_and_refuses_bad_options(tmp_path
     assert r.returncode == 2 and "unknown rule 'anywhere'" in r.stderr
     r = rad('ceiling', str(square), '--time-limit', '0')
     assert r.returncode == 2 and '--time-limit must be a positive' in r.stderr
+
+
+def test_rad_eval_takes_the_vacuum_gripper_serially_and_refuses_it_on_workers():
+    r = rad('eval', '--agent', 'default', '--robot', '--effector', 'suction', '--workers', '2', '--scenes', '1')
+    assert r.returncode == 2 and '--effector suction runs serially' in r.stderr
+    r = rad('eval', '--agent', 'default', '--robot', '--effector', 'magnet', '--scenes', '1')
+    assert r.returncode == 2 and "invalid choice: 'magnet'" in r.stderr

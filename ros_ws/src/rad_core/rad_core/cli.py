@@ -286,6 +286,8 @@ def cmd_eval(args) -> int:
         raise RadError(f'--workers must be at least 1, got {args.workers}')
     if args.dashboard and (args.workers is None or args.scheduler is not None):
         raise RadError('--dashboard applies to the cluster --workers N starts, not to the serial run or --scheduler')
+    if args.effector != 'hand' and distributed:
+        raise RadError('--effector suction runs serially for now: leave out --workers and --scheduler')
     agent = get_agent(args.agent, args.checkpoint, verify=args.verify, budget=args.budget,
                       reallocate=args.reallocate)
     policy = agent.make_policy()   # a bad checkpoint fails here, before any scene runs
@@ -311,7 +313,7 @@ def cmd_eval(args) -> int:
                                       dashboard=args.dashboard, policy=policy)
     else:
         result = evaluate(agent, scenes, robot, args.seed, progress=bar, execution=args.execution, policy=policy,
-                          allocation=allocation)
+                          allocation=allocation, effector=args.effector)
     elapsed = time.perf_counter() - t0
     mode = f'robot ({args.execution})' if robot else 'no robot'
     if distributed:
@@ -676,6 +678,8 @@ def build_parser(command: str | None = 'train') -> argparse.ArgumentParser:
                    help='robot in the loop (GAMP + twin) for heur; heur-verified always has it, heur-norobot never')
     p.add_argument('--execution', choices=['teleport', 'simulate'], default='teleport',
                    help='robot runs: put the block in place (fast) or simulate the whole arm motion')
+    p.add_argument('--effector', choices=['hand', 'suction'], default='hand',
+                   help="robot runs: the arm's end effector, Franka's hand or the vacuum gripper in its place")
     p.add_argument('--scene-dir', metavar='DIR', help='evaluate every *.json scene in DIR instead of generating')
     p.add_argument('--support', choices=['none', 'stable', 'arm', 'hand'],
                    help="allocation: the paper's MILP (none), every allocated block able to stand (stable), "
