@@ -195,6 +195,11 @@ class HandBlocked:
     planner then refuses it from every arm configuration. Built cells stay built, so a pose
     blocked in a state is blocked in every state after it. Cells off the grid are never built.
 
+    A wide grasp's cells count from the first unit of its row, the hand's target at the row's middle
+    (`grasp_shift`), its fingers opened off the row's outer faces (`planner.wide_grasp_styles`).
+    With the vacuum gripper (`GampConfig.effector` 'suction') the cells are those its housing and
+    cup enter, the cup's lip over the unit's top face; no finger goes down beside the block.
+
     gamp: the planner's settings (`GampConfig`), which say how the fingers may take a unit
     (`planner.grasp_styles`): an offset blocks only where it blocks in every way."""
 

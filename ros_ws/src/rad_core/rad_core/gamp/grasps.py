@@ -1,4 +1,4 @@
-"""The predefined top-down grasps of a block type (the paper's Sec. IV-C).
+"""The predefined top-down grasps of a block type (the paper's Sec. IV-C), and the vacuum gripper's.
 
 A grasp is (unit, yaw): the hand points straight down, the grasp target (the
 point between the fingertips) sits at the centre of unit `unit` (or, in the planner's
@@ -40,6 +40,10 @@ offered where
 2. no unit of the block lies above any unit of the row (the palm comes down on the row); and
 3. no unit of the block lies in the two finger columns just outside the row's ends at the row's
    level or above (a finger would land on it or hit it on the way down).
+
+Suction grasps (`suction_grasps`, the vacuum gripper in the hand's place: `GampConfig.effector`):
+the cup centred on the top face of a unit no unit of the same block lies above, where the cup fits
+that face with `CUP_MARGIN` to its edges (`cup_fits`).
 """
 
 from __future__ import annotations
