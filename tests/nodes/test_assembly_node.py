@@ -226,7 +226,11 @@ def test_execute_builds_the_scene_and_reports_each_step(graph):
     result = execute(graph, ExecuteAssembly.Goal(scene_json=DEMO_SCENE.dumps(), replan=True),
                      lambda m: phases.append(m.feedback.phase))
     assert result.success, result.reason
-    assert result.steps_executed == 4 and result.coverage == 1.0
+    # The twin steps in real time, so a goal's start in simulated time varies from run to run; rarely
+    # a carried block brushes a neighbour, the controller aborts on path tolerance, and the step is
+    # made again after a replan (a step that failed counts as executed). Every such fault must be
+    # recovered, and the four blocks built.
+    assert result.steps_executed - result.replans == 4 and result.coverage == 1.0
     # Feedback is a topic, the result a service: the last feedback ('done') may arrive after it.
     spin_until(graph.node, lambda: 'done' in phases, timeout=5.0)
     assert {'planning', 'executing', 'verifying', 'done'} <= set(phases)
@@ -235,7 +239,9 @@ def test_execute_builds_the_scene_and_reports_each_step(graph):
     assert set(doc_) == {'format', 'scene', 'allocation', 'steps', 'final_blocks', 'coverage', 'timings',
                          'reallocations', 'execution'}
     assert doc_['reallocations'] == []      # the demo scene builds without a stall
-    assert doc_['execution']['faults'] == [] and doc_['execution']['lost_blocks'] == {}   # a twin without faults
+    faults = doc_['execution']['faults']        # a twin without injected faults: a recovered contact at most
+    assert len(faults) == result.replans and all(f['recovered'] for f in faults), faults
+    assert doc_['execution']['lost_blocks'] == {}
     step = doc_['steps'][0]
     assert {'block', 'type', 'target', 'yaw', 'cells', 'trajectories', 'gripper'} <= set(step)
     # The arm trajectories exactly as sent (7 arm joints, accelerations for quintic interpolation) and
@@ -251,8 +257,8 @@ def test_execute_builds_the_scene_and_reports_each_step(graph):
     from rad_msgs.action import TakeApart
     client = ActionClient(graph.node, TakeApart, 'take_apart')
     assert client.wait_for_server(timeout_sec=10.0)
-    sent = client.send_goal_async(TakeApart.Goal(heap_json=DEMO_SCENE.dumps(),
-                                                 build_order=[s['block'] for s in doc_['steps']]))
+    built = [s['block'] for s in doc_['steps'] if not s.get('failure')]
+    sent = client.send_goal_async(TakeApart.Goal(heap_json=DEMO_SCENE.dumps(), build_order=built))
     rclpy.spin_until_future_complete(graph.node, sent, timeout_sec=30.0)
     done = sent.result().get_result_async()
     rclpy.spin_until_future_complete(graph.node, done, timeout_sec=180.0)
