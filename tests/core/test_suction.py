@@ -6,13 +6,13 @@ import xml.etree.ElementTree as ET
 
 import numpy as np
 import pytest
-from rad_core.allocation.arm import HandBlocked, block_unit_centres
+from rad_core.allocation.arm import HandBlocked
+from rad_core.allocation.order import scene_state
 from rad_core.allocation.supply import SupplyParams, choose_blocks
 from rad_core.cell import panda
 from rad_core.cell.motion import GripperCommand, GripperResult, Motion, run_motion
 from rad_core.domain.blocks import DEFAULT_LIBRARY
 from rad_core.domain.errors import RadError
-from rad_core.domain.grid import Grid
 from rad_core.domain.scene import TargetRegion
 from rad_core.experiment.evaluation import evaluate
 from rad_core.gamp import plan_action
@@ -152,11 +152,7 @@ def test_gamp_refuses_a_world_that_carries_another_effector():
 def test_the_hand_model_of_the_cup_needs_nothing_beside_the_block():
     unit = 0.04
     scene = box_but_one(unit)
-    grid = Grid(scene)
-    occupied = np.zeros(grid.num_cells, dtype=bool)
-    for b, _ in enumerate(scene.blocks):
-        ids = grid.lookup(block_unit_centres(scene, b))
-        occupied[ids[ids >= 0]] = True
+    grid, occupied = scene_state(scene)
     last = grid.lookup(np.array([[BOX[0] + unit, BOX[1] + j * unit, 1.5 * unit] for j in range(2)]))
     assert HandBlocked(scene, grid).blocked('I2', 90, last, occupied)
     assert not HandBlocked(scene, grid, SUCTION).blocked('I2', 90, last, occupied)

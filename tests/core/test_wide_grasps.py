@@ -207,16 +207,12 @@ def test_the_last_block_of_a_solid_box_is_set_down_only_with_wide_grasps(unit, c
 # ---- the allocation's hand model knows them ------------------------------------------------------
 
 def test_the_hand_model_counts_on_wide_grasps_where_gamp_takes_them():
-    from rad_core.allocation.arm import HandBlocked, block_unit_centres
-    from rad_core.domain.grid import Grid
+    from rad_core.allocation.arm import HandBlocked
+    from rad_core.allocation.order import scene_state
 
     unit = 0.03
     scene = box_but_one(unit)
-    grid = Grid(scene)
-    occupied = np.zeros(grid.num_cells, dtype=bool)
-    for b, block in enumerate(scene.blocks):
-        ids = grid.lookup(block_unit_centres(scene, b))
-        occupied[ids[ids >= 0]] = True
+    grid, occupied = scene_state(scene)
     # The last pose: the I2 across the box at column 1 of the top layer, units (1, 0, 1) and (1, 1, 1).
     last = grid.lookup(np.array([[BOX[0] + unit, BOX[1] + j * unit, 1.5 * unit] for j in range(2)]))
     assert (last >= 0).all() and not occupied[last].any()

@@ -35,11 +35,10 @@ from rad_core.allocation.placements import Candidate
 from rad_core.domain.blocks import rotation_z
 from rad_core.domain.grid import Grid, blocks_on_grid
 from rad_core.domain.scene import Scene
-from rad_core.cell import panda
 from rad_core.gamp.grasps import grasp_lift, grasp_width, no_grasp_reason_for, scene_grasps, span_width
 from rad_core.gamp.hand_cells import blocking_offsets
 from rad_core.gamp.ik import out_of_workspace
-from rad_core.gamp.planner import GampConfig, grasp_styles, wide_grasp_styles
+from rad_core.gamp.planner import GampConfig, grasp_styles, suction_styles, wide_grasp_styles
 
 
 @dataclass
@@ -119,7 +118,7 @@ def arm_filter(scene: Scene, grid: Grid, candidates: list[Candidate],
     gamp = gamp or GampConfig()
     grasps = type_grasps(scene, gamp)
     # A tight grasp's target over the unit's centre; the cup's, on its top face.
-    lift = scene.unit / 2 + gamp.suction_hover if gamp.effector == 'suction' else grasp_lift(scene.unit)
+    lift = suction_styles(scene.unit, gamp)[0][1] if gamp.effector == 'suction' else grasp_lift(scene.unit)
     report = ArmFilter()
     for name, gs in grasps.items():
         if not gs:
@@ -219,7 +218,7 @@ class HandBlocked:
         if found is None:
             scene = self.scene
             if self.gamp.effector == 'suction':
-                styles = ((panda.FINGER_OPEN, scene.unit / 2 + self.gamp.suction_hover),)
+                styles = suction_styles(scene.unit, self.gamp)
             elif span == 1:
                 styles = grasp_styles(grasp_width(scene.unit, scene.clearance), scene.unit, self.gamp)
             else:

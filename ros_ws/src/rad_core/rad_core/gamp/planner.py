@@ -309,7 +309,7 @@ def _try_grasp(job: _Job, grasp: Grasp) -> tuple[tuple | None, str, str]:
         # The finger coordinate stands for the vacuum (the vacuum gripper has no fingers, and its URDF's
         # finger links no shape): open = off, closed = on, so that plan_motion places its commands.
         width, closed_f = float('nan'), 0.0
-        styles = ((panda.FINGER_OPEN, unit / 2 + config.suction_hover),)
+        styles = suction_styles(unit, config)
     elif grasp.span == 1:
         width = grasp_width(unit, job.clearance)
         styles = grasp_styles(width, unit, config)
@@ -396,6 +396,13 @@ def wide_grasp_styles(width: float, unit: float, config: GampConfig = GampConfig
         if tight != out[0]:
             out.append(tight)
     return tuple(out)
+
+
+def suction_styles(unit: float, config: GampConfig = GampConfig()) -> tuple[tuple[float, float], ...]:
+    """How the planner takes a unit with the vacuum gripper, as `grasp_styles` gives it for the hand: the
+    finger coordinate at open (it stands for the vacuum off: the gripper has no fingers) and the cup's
+    lip `suction_hover` over the unit's top face."""
+    return ((panda.FINGER_OPEN, unit / 2 + config.suction_hover),)
 
 
 def _remembered_pick(bodies, world, block_id, grasp_point, hand_yaw, start, open_f, closed_f, rise, config,
