@@ -90,6 +90,9 @@ def test_rad_ceiling_says_how_each_search_ended_and_refuses_bad_options(tmp_path
     r = rad('ceiling', str(square), '--time-limit', '60')
     assert r.returncode == 0 and 'square: ceiling 0.750, the ceiling over every allocation (it reached the bound)' \
         in r.stdout
+    # The vacuum gripper needs nothing beside the block: it closes the square.
+    r = rad('ceiling', str(square), '--time-limit', '60', '--effector', 'suction')
+    assert r.returncode == 0 and 'square: ceiling 1.000' in r.stdout, r.stdout + r.stderr
     # Generated g = 5 seed 23: five of six cells, below a bound of every cell. The allocations
     # searched to the end below it, which proves nothing about allocations never taken...
     g5 = tmp_path / 'g5.json'

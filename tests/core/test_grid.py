@@ -22,3 +22,13 @@ def test_points_are_looked_up_together_and_one_off_the_grid_gives_none():
     assert grid.cell_at(grid.centres[5] + 0.2 * grid.unit) is None          # between cells
     off = np.vstack([grid.centres[some], grid.centres[:1] - [0, 0, grid.unit]])   # under the table top
     assert grid.cells_at(off) is None
+
+
+def test_the_columns_above_cells_run_to_the_regions_top_and_leave_out_the_cells_themselves():
+    grid = Grid(generate_scene(GeneratorConfig(grid=4, sides=2), 3))
+    assert grid.regions[0].size == (4, 1, 4)
+    base = [grid.index(0, (1, 0, 0)), grid.index(0, (2, 0, 0)), grid.index(0, (2, 0, 1))]
+    above = grid.columns_above(base).tolist()
+    want = sorted([grid.index(0, (1, 0, k)) for k in range(1, 4)] + [grid.index(0, (2, 0, k)) for k in range(2, 4)])
+    assert above == want
+    assert grid.columns_above([grid.index(0, (0, 0, 3))]).tolist() == []      # the top layer

@@ -75,6 +75,34 @@ def test_poses_needing_no_order_give_no_precedences_and_built_cells_count():
     assert len(found.order) == 2
 
 
+def test_a_block_is_placed_before_any_block_over_its_cells_and_never_under_a_built_one():
+    # Three cubes in a row one cell deep and a bar over them resting on the two ends: the bar can
+    # stand on the ends alone, but the middle cube comes down through the bar's cell over it.
+    from rad_core.allocation.order import hand_ways
+    from rad_core.allocation.placements import Placement
+    blocks = [{'id': f'c{k}', 'type': 'cube', 'position': [0.35 + 0.1 * k, -0.3, U / 2], 'yaw': 0}
+              for k in range(3)] + [{'id': 'bar', 'type': 'I3', 'position': [0.4, -0.45, U / 2], 'yaw': 0}]
+    scene = make_scene(blocks=blocks, unit=U, types={'cube': [[0, 0, 0]], 'I3': [[0, 0, 0], [1, 0, 0], [2, 0, 0]]},
+                       targets=[{'name': 't', 'origin': [0.45, 0.1, U / 2], 'size': [3, 1, 2],
+                                 'filled': [[i, 0, k] for i in range(3) for k in range(2)]}])
+    placements = [Placement('I3', 't', 0, ((0, 0, 1), (1, 0, 1), (2, 0, 1)))] + [
+        Placement('cube', 't', 0, ((i, 0, 0),)) for i in (0, 2, 1)]
+    found = hand_order(scene, placements)
+    grid = Grid(scene)
+    bar = tuple(sorted(grid.index(0, (i, 0, 1)) for i in range(3)))
+    assert len(found.order) == 4 and found.order[-1] == bar
+    path = [p for p in found.precedences if p.reason == "the carried block's way down"]
+    assert {p.first for p in path} == {(grid.index(0, (i, 0, 0)),) for i in range(3)}
+    assert all(p.then == bar for p in path)
+    # With the bar built, the middle cell has no way in left.
+    occupied = np.zeros(grid.num_cells, dtype=bool)
+    occupied[list(bar)] = True
+    middle = [grid.index(0, (1, 0, 0))]
+    assert hand_ways(grid, HandBlocked(scene, grid), occupied, 'cube', 0, middle) is None
+    occupied[list(bar)] = False
+    assert hand_ways(grid, HandBlocked(scene, grid), occupied, 'cube', 0, middle)
+
+
 @pytest.mark.slow
 def test_order_repair_with_the_hands_order_builds_held_out_spire_cup_whole():
     # Refusals alone taught contradictory precedences here (two tall blocks back to back, each

@@ -230,3 +230,18 @@ def test_anytime_points_are_read_shown_and_bad_ones_refused():
     assert 'scorer plan best at 0.80 s, coverage 0.830' in text and 'search plan best at 2.90 s' in text
     with pytest.raises(RadError, match='anytime must be a list'):
         viz.parse_plan(json.dumps({'anytime': [{'t': 'soon', 'coverage': 1.0}]}))
+
+
+def test_the_vacuum_gripper_is_drawn_in_the_hands_place(tmp_path):
+    import rerun as rr
+    path = tmp_path / 'suction.rrd'
+    rec = rr.RecordingStream('rad_test')
+    rec.save(path)
+    viz.PandaModel(effector='suction').log_model(rec)
+    rec.flush()
+    rec.disconnect()
+    entities = _entities(path)
+    assert '/world/panda/visual_geometries/panda_hand/visual_0' in entities       # the pump housing
+    assert not any('finger' in e and 'visual_geometries' in e for e in entities)   # no fingers drawn
+    with pytest.raises(RadError, match='effector'):
+        viz.PandaModel(effector='magnet')

@@ -15,7 +15,7 @@
     rad eval --agent AGENT [--checkpoint FILE] --grid G [--robot] --scenes N --seed S --json FILE
              [--workers N [--dashboard] | --scheduler ADDR [--workers N]]
     rad ceiling SCENE.json [...] [--time-limit S] [--agent AGENT] [--support arm,hand] [--allocations-only]
-                [--json FILE]
+                [--effector hand|suction] [--json FILE]
     rad dataset build --grids 3 --scenes 50000 -o data/train-g3.jsonl.gz [--shapes train]
     rad train --method milp-dqn|dqn|dqn-rel --out runs/NAME [--resume] [--<config field> VALUE ...]
               [--actors N [--chunk-steps S] [--refresh-every K] | --seeds S1,S2,...] [--scheduler ADDR]
@@ -347,11 +347,12 @@ def cmd_ceiling(args) -> int:
         row = {'name': name}
         known = 0.0
         if agent is not None:
-            built = evaluate(agent, [(name, scene)], robot=True, seed=args.seed + k)['scenes'][0]
+            built = evaluate(agent, [(name, scene)], robot=True, seed=args.seed + k,
+                             effector=args.effector)['scenes'][0]
             row['agent'], row['agent_coverage'] = agent.name, built['coverage']
             known = float(built['coverage'])
         found = robot_ceiling(scene, args.time_limit, support=supports, incumbent=known,
-                              every_pose=not args.allocations_only)
+                              every_pose=not args.allocations_only, effector=args.effector)
         row.update(ceiling=found.coverage, proof=found.proof, complete=found.complete, bound=found.bound,
                    states=found.states, seconds=round(found.elapsed_s, 3), reason=found.reason,
                    line=[{'block': scene.blocks[a.block].id, 'unit': a.unit, 'cell': a.cell, 'rotation': a.rotation}
@@ -711,6 +712,8 @@ def build_parser(command: str | None = 'train') -> argparse.ArgumentParser:
                         "exhausted below the bound (default arm,hand); then every pose, while time is left")
     p.add_argument('--allocations-only', action='store_true',
                    help='do not search every pose after the allocations (small targets finish there)')
+    p.add_argument('--effector', choices=('hand', 'suction'), default='hand',
+                   help="the arm's end effector: Franka's parallel hand, or the vacuum gripper in its place")
     p.add_argument('--seed', type=int, default=0, help="the agent's seed (scene i: seed + i)")
     p.add_argument('--json', metavar='FILE', help='write each scene\'s ceiling, how its search ended and its line here')
     p.set_defaults(func=cmd_ceiling)

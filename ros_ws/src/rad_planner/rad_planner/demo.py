@@ -124,7 +124,7 @@ def run(scene: Scene, out: Path, rtf: float, time_limit: float, faults: str = 'n
     if effector != 'hand':
         # Every node that plans, allocates, commands or simulates the end effector is told which.
         twin['effector'] = effector
-        for node_name in ('gamp', 'assembly', 'allocation'):
+        for node_name in ('gamp', 'assembly', 'allocation', 'viz'):
             overrides.setdefault(node_name, {})['effector'] = effector
     if faults != 'none':
         from rad_core.sim.faults import FaultConfig

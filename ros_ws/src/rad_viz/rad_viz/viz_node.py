@@ -62,6 +62,7 @@ class VizNode(Node):
         self.declare_parameter('viewer_port', 9876)
         self.declare_parameter('application_id', 'rad')
         self.declare_parameter('log_rate_hz', 20.0)
+        self.declare_parameter('effector', 'hand')
         rate = float(self.get_parameter('log_rate_hz').value)
         if not rate > 0:
             raise RadError(f'log_rate_hz must be positive, got {rate}')
@@ -75,7 +76,7 @@ class VizNode(Node):
         else:
             self.get_logger().warning('recording_path, connect_url and spawn_viewer are all off: logging nothing')
 
-        self.robot = viz.PandaModel()
+        self.robot = viz.PandaModel(effector=str(self.get_parameter('effector').value))
         self.scene = None
         self.known_blocks: set[str] = set()
         self.plan = None

@@ -66,9 +66,10 @@ class HandOrder:
 
 def hand_ways(grid: Grid, hand, occupied: np.ndarray, type_name: str, yaw: int, ids) -> list[np.ndarray] | None:
     """The ways a pose can still be held (the blocking cells of each grasp at each hand yaw, none
-    of them built), or None where every way is blocked already (`HandBlocked.blocked`); [] for a
-    type without a top-down grasp (GAMP says why)."""
-    if hand.blocked(type_name, yaw, ids, occupied):
+    of them built), or None where every way is blocked already (`HandBlocked.blocked`) or a cell over
+    the pose is built (the carried block comes down through its columns); [] for a type without a
+    top-down grasp (GAMP says why)."""
+    if hand.blocked(type_name, yaw, ids, occupied) or occupied[grid.columns_above(ids)].any():
         return None
     return [w for pair in hand.cells(type_name, yaw, ids) for w in pair if not occupied[w].any()]
 
@@ -80,8 +81,9 @@ def order_model(grid: Grid, occupied: np.ndarray, poses: list[tuple], counts: di
 
     poses: (cells sorted, ways from `hand_ways`, target cells it fills, type name) of free poses.
     Each placed pose, when its turn comes, has a way of being held none of whose blocking cells a
-    pose before it fills, and rests on the table, a built cell or a pose before it under one of its
-    units (the MDP refuses a block that would rest on nothing). Where poses overlap (candidates,
+    pose before it fills, comes before every pose with a cell over it (the carried block comes down
+    through the columns over its cells: `path_precedences`), and rests on the table, a built cell or
+    a pose before it under one of its units (the MDP refuses a block that would rest on nothing). Where poses overlap (candidates,
     not an allocation), at most one fills a cell, and counts caps the poses of each type.
     Maximizes the target cells placed.
 
@@ -119,6 +121,8 @@ def order_model(grid: Grid, occupied: np.ndarray, poses: list[tuple], counts: di
         if used:          # none for a type without a top-down grasp: GAMP says why
             model.add_bool_or([v for v, _ in used]).only_enforce_if(placed[n])
         held_by.append(used)
+        for m in path_precedences(grid, cells, owners, n):
+            model.add(order[n] < order[m]).only_enforce_if([placed[n], placed[m]])
         if cover:
             _stands(model, grid, occupied, cells, n, placed, order, owners)
             continue
@@ -148,6 +152,12 @@ def order_model(grid: Grid, occupied: np.ndarray, poses: list[tuple], counts: di
     else:
         model.maximize(filled)
     return model, placed, order, held_by
+
+
+def path_precedences(grid: Grid, cells, owners: dict[int, list[int]], n: int) -> list[int]:
+    """The poses (indices into `owners`' lists) with a cell over pose n's cells, in their columns: n is
+    placed before them, or its carried block would come down onto them."""
+    return sorted({m for c in grid.columns_above(cells).tolist() for m in owners.get(c, ())} - {n})
 
 
 def _stands(model, grid: Grid, occupied: np.ndarray, cells, n: int, placed, order, owners) -> None:
@@ -267,8 +277,11 @@ def solve_order(grid: Grid, occupied: np.ndarray, poses: list[tuple], items: lis
     chosen = sorted((n for n in range(len(poses)) if solver.boolean_value(placed[n])),
                     key=lambda n: (solver.value(order[n]), n))
     owner = {c: n for n in chosen for c in poses[n][0]}
+    owners = {c: [n] for c, n in owner.items()}
     out = []
     for n in chosen:
+        out += [Precedence(poses[n][0], poses[m][0], "the carried block's way down")
+                for m in path_precedences(grid, poses[n][0], owners, n)]
         for var, blocking in held_by[n]:
             if solver.boolean_value(var):
                 for m in sorted({owner[c] for c in blocking.tolist() if c in owner} - {n}):

@@ -45,6 +45,19 @@ class Grid:
         # The grid cell directly under each cell, -1 where there is none.
         down = np.array([0.0, 0.0, self.unit])
         self.below_idx = self.lookup(self.centres - down)
+        # The grid cell directly over each cell, -1 where there is none.
+        self.above_idx = self.lookup(self.centres + down)
+
+    def columns_above(self, cell_ids) -> np.ndarray:
+        """The cells over `cell_ids` in their columns, up to the grid's top, less `cell_ids` themselves
+        (sorted): where a block placed from above on `cell_ids` passes on its way down."""
+        own = {int(c) for c in cell_ids}
+        out, frontier = set(), [int(c) for c in own]
+        while frontier:
+            up = self.above_idx[frontier]
+            frontier = [int(c) for c in up if c >= 0 and int(c) not in out]
+            out.update(frontier)
+        return np.array(sorted(out - own), dtype=np.int64)
 
     @cached_property
     def face_neighbours(self) -> np.ndarray:

@@ -38,7 +38,7 @@ import numpy as np
 
 from rad_core.allocation.placements import Placement
 from rad_core.allocation.result import AllocationResult
-from rad_core.cell.panda import source_urdf_path
+from rad_core.cell.panda import check_effector, source_urdf_path, urdf_path
 from rad_core.domain.blocks import unit_boxes
 from rad_core.domain.colours import GREEN, PINK, TABLE, type_colour
 from rad_core.domain.errors import RadError
@@ -462,12 +462,17 @@ def log_plan(rec, scene: Scene, plan: PlanDoc, stamp_s: float, previous: PlanDoc
 
 
 class PandaModel:
-    """The Panda of pybullet_data as a rerun.urdf tree: meshes logged once, joints driven by joint states."""
+    """The Panda of pybullet_data as a rerun.urdf tree: meshes logged once, joints driven by joint states.
+    effector: what the arm carries (`cell.panda.EFFECTORS`): the hand, or the vacuum gripper's housing and
+    cup in its place (the URDF the twin loads, `cell.panda.urdf_path`); urdf: draw this file instead."""
 
-    def __init__(self, urdf: str | Path | None = None):
+    def __init__(self, urdf: str | Path | None = None, effector: str = 'hand'):
         import rerun.urdf as ru  # rerun: only a viewer pays for its import
 
-        path = Path(urdf) if urdf is not None else source_urdf_path()     # what is drawn: its visual meshes
+        check_effector(effector)
+        if urdf is None:     # what is drawn: its visual meshes
+            urdf = source_urdf_path() if effector == 'hand' else urdf_path(effector)
+        path = Path(urdf)
         # panda.urdf names its meshes package://meshes/...: the package root is the URDF's folder.
         packages = os.environ.get('ROS_PACKAGE_PATH', '')
         if str(path.parent) not in packages.split(os.pathsep):

@@ -13,9 +13,11 @@ import time
 
 from rad_core.allocation import AllocationParams, solve
 from rad_core.allocation.bounds import ArmCoverageBound
+from rad_core.cell.panda import check_effector
 from rad_core.domain.errors import RadError
 from rad_core.env.mdp import Action, Outcome
 from rad_core.env.robot_env import RobotAssemblyEnv, RobotEnvConfig
+from rad_core.gamp.planner import GampConfig
 from rad_core.sequencing.decide.actions import AllocationActions
 from rad_core.sequencing.decide.deciders import Check, simulated_check
 from rad_core.sequencing.decide.exact import ExactResult, _placements, exact_search
@@ -120,7 +122,7 @@ class _FailedMoves:
 
 def robot_ceiling(scene, time_limit_s: float = 60.0, support: str | tuple[str, ...] = ('arm', 'hand'),
                   reallocation=None, max_states: int = 100_000, incumbent: float = 0.0,
-                  every_pose: bool = True, ordered: bool = True) -> ExactResult:
+                  every_pose: bool = True, ordered: bool = True, effector: str = 'hand') -> ExactResult:
     """What the best order of the scene's allocation, and of its re-allocations at dead ends,
     builds with the robot: the branch and bound from the empty scene in a planning twin
     (teleporting execution), children most target cells first, re-allocating where no move
@@ -156,13 +158,17 @@ def robot_ceiling(scene, time_limit_s: float = 60.0, support: str | tuple[str, .
     ordered: the bound asks for a hand order too (`ArmCoverageBound`, and at the root the course
     bound): where no order of the target's poses lets the hand place the last ones (a flush, closed
     course), the bound is below 1 and an answer at it is the true ceiling without the every-pose
-    search; False: the bound without it (slower to finish, kept to compare)."""
+    search; False: the bound without it (slower to finish, kept to compare).
+    effector: what the arm carries (`cell.panda.EFFECTORS`): the planning twin's GAMP, the bound's
+    blocking cells and every allocation count on its grasps."""
+    check_effector(effector)
     supports = (support,) if isinstance(support, str) else tuple(support)
     if not supports:
         raise RadError('robot_ceiling: give at least one support rule')
-    config = reallocation or ReallocationConfig(params=AllocationParams(support=reallocation_support(supports[0])))
+    config = reallocation or ReallocationConfig(params=AllocationParams(
+        support=reallocation_support(supports[0]), effector=effector))
     deadline = time.monotonic() + time_limit_s
-    with RobotAssemblyEnv(scene, RobotEnvConfig(execution='teleport')) as renv:
+    with RobotAssemblyEnv(scene, RobotEnvConfig(execution='teleport', gamp=GampConfig(effector=effector))) as renv:
         renv.reset()
         env = renv.env
         arm_bound = _root_bound(scene, renv, time_limit_s, ordered)
@@ -173,7 +179,7 @@ def robot_ceiling(scene, time_limit_s: float = 60.0, support: str | tuple[str, .
             return arm_bound(env)
 
         answer = _search_allocations(scene, supports, env, memo, deadline, max_states, incumbent,
-                                     on_dead_end, bound_of)
+                                     on_dead_end, bound_of, effector)
         left = deadline - time.monotonic()
         if every_pose and answer.complete and answer.proof == 'exhausted' and left > 0:
             answer = _search_every_pose(answer, env, memo, arm_bound, left, max_states, incumbent, bound_of)
@@ -211,13 +217,14 @@ def _reallocate_at_dead_end(env, check, config: ReallocationConfig):
 
 
 def _search_allocations(scene, supports: tuple[str, ...], env, memo: _FailedMoves, deadline: float,
-                        max_states: int, incumbent: float, on_dead_end, bound_of) -> ExactResult:
+                        max_states: int, incumbent: float, on_dead_end, bound_of,
+                        effector: str = 'hand') -> ExactResult:
     """The branch and bound over each support rule's allocation in turn (`robot_ceiling`'s support),
     each from the best found so far, while the searches before were exhausted below the bound and
     time is left; the same allocation twice is searched once."""
     answer, searched = None, set()
     for rule in supports:
-        placements = solve(scene, AllocationParams(support=rule)).placements
+        placements = solve(scene, AllocationParams(support=rule, effector=effector)).placements
         key = frozenset(placements)
         left = deadline - time.monotonic()
         if answer is not None and (key in searched or left <= 0):
