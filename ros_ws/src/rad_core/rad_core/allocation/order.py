@@ -83,8 +83,9 @@ def order_model(grid: Grid, occupied: np.ndarray, poses: list[tuple], counts: di
     Each placed pose, when its turn comes, has a way of being held none of whose blocking cells a
     pose before it fills, comes before every pose with a cell over it (the carried block comes down
     through the columns over its cells: `path_precedences`), and rests on the table, a built cell or
-    a pose before it under one of its units (the MDP refuses a block that would rest on nothing). Where poses overlap (candidates,
-    not an allocation), at most one fills a cell, and counts caps the poses of each type.
+    a pose before it under one of its units (the MDP refuses a block that would rest on nothing).
+    Where poses overlap (candidates, not an allocation), at most one fills a cell, and counts caps the
+    poses of each type.
     Maximizes the target cells placed.
 
     cover: `ordered_cover`'s stricter rules for a plan (the bound keeps the MDP's): each pose
