@@ -9,6 +9,7 @@ from rad_core.allocation.arm import HandBlocked
 from rad_core.allocation.order import hand_order
 from rad_core.domain.grid import Grid
 from rad_core.domain.scene import Scene
+from rad_core.gamp.planner import GampConfig
 
 from scenes import scene as make_scene
 
@@ -95,6 +96,33 @@ def test_a_pose_under_a_built_cell_has_no_way_in():
     assert not HandBlocked(scene, grid).blocked('I2', 0, pose, occupied)   # a grasp is free...
     assert hand_ways(grid, HandBlocked(scene, grid), occupied, 'I2', 0, pose) is None   # ...the way down is not
     assert hand_order(scene, [Placement('I2', 't', 0, ((1, 0, 0), (2, 0, 0)))]).order == []
+
+
+def test_the_way_down_finds_no_order_for_a_pinwheel_and_supply_asks_for_it():
+    # A solid 3 x 3 x 2 box from four stepped pieces around a standing I2, each piece's upper step
+    # over the next one's lower step: a cycle, so whichever comes last would come down through the
+    # one before. Only the orders that know the carried block's way down see it; supply asks for them.
+    from rad_core.allocation.placements import enumerate_candidates
+    from rad_core.domain.blocks import DEFAULT_LIBRARY
+    lib = {n: [list(o) for o in DEFAULT_LIBRARY[n].offsets] for n in ('S4_up', 'I2_up')}
+    blocks = [{'id': f's{k}', 'type': 'S4_up', 'position': [0.3 + 0.12 * k, -0.35, U / 2], 'yaw': 0}
+              for k in range(4)] + [{'id': 'i0', 'type': 'I2_up', 'position': [0.35, -0.5, U / 2], 'yaw': 0}]
+    target = {'name': 't', 'origin': [0.45, 0.1, U / 2], 'size': [3, 3, 2],
+              'filled': [[i, j, k] for i in range(3) for j in range(3) for k in range(2)]}
+    scene = make_scene(blocks=blocks, unit=U, types=lib, targets=[target])
+    grid = Grid(scene)
+    wheel = [{(2, 0, 0), (1, 0, 0), (1, 0, 1), (0, 0, 1)}, {(2, 2, 0), (2, 1, 0), (2, 1, 1), (2, 0, 1)},
+             {(0, 2, 0), (1, 2, 0), (1, 2, 1), (2, 2, 1)}, {(0, 0, 0), (0, 1, 0), (0, 1, 1), (0, 2, 1)},
+             {(1, 1, 0), (1, 1, 1)}]
+    pick = {frozenset(c.placement.cells): c.placement for c in enumerate_candidates(scene, grid)}
+    placements = [pick[frozenset(cells)] for cells in wheel]
+    suction = GampConfig(effector='suction')       # nothing beside the block: only the way down orders
+    assert len(hand_order(scene, placements, gamp=suction).order) == 5
+    found = hand_order(scene, placements, gamp=suction, way_down=True)
+    assert len(found.order) == 4 and found.coverage == pytest.approx(14 / 18)
+    assert {p.reason for p in found.precedences} == {"the carried block's way down"}
+    from rad_core.allocation.cpsat import hand_unplaced
+    assert len(hand_unplaced(scene, placements, suction, way_down=True)) == 1
 
 
 @pytest.mark.slow

@@ -308,14 +308,15 @@ def _unsolved(scene: Scene, grid: Grid, solver, status, candidates, incumbent, s
 
 
 def solve_rounds(model, w, candidates: list[Candidate], scene: Scene, rounds: int, time_limit_s: float,
-                 start: float, seed: int = 0, num_workers: int = 1, gamp=None):
+                 start: float, seed: int = 0, num_workers: int = 1, gamp=None, way_down: bool = False):
     """Solve `model` (one bool `w[n]` per candidate), then again without the picked poses the hand
     cannot place beside the others (`hand_unplaced`), at most `rounds` solves, the first with the
     whole `time_limit_s`, the others with what is left of it since `start` (none with 50 ms or
     less). Yields (solver, status, picked candidate indices, indices into picked the hand cannot
     place) per solve; ends after a solve with no answer (picked empty), or with nothing to rule
     out. One round: the plain solve, the hand not asked. The support rule 'hand' and
-    `rad_core.allocation.supply` choose among the answers, each by its own measure."""
+    `rad_core.allocation.supply` choose among the answers, each by its own measure. way_down: the
+    order's (`allocation.order.order_model`)."""
     for round_ in range(rounds):
         left = time_limit_s - (time.perf_counter() - start)
         if round_ and left <= 0.05:
@@ -328,7 +329,7 @@ def solve_rounds(model, w, candidates: list[Candidate], scene: Scene, rounds: in
         picked = [n for n in range(len(candidates)) if solver.boolean_value(w[n])]
         unplaced = []
         if rounds > 1 and picked:
-            unplaced = hand_unplaced(scene, [candidates[n].placement for n in picked], gamp)
+            unplaced = hand_unplaced(scene, [candidates[n].placement for n in picked], gamp, way_down)
         yield solver, status, picked, unplaced
         if not unplaced:
             return
@@ -336,12 +337,12 @@ def solve_rounds(model, w, candidates: list[Candidate], scene: Scene, rounds: in
             model.add(w[picked[k]] == 0)
 
 
-def hand_unplaced(scene: Scene, placements, gamp=None) -> list[int]:
+def hand_unplaced(scene: Scene, placements, gamp=None, way_down: bool = False) -> list[int]:
     """The indices of the `placements` (allocation.Placement, of the scene's free cells) that no
     order `allocation.order` finds places beside the others (the support rule 'hand' and
     `rad_core.allocation.supply` rule them out and solve again)."""
     placements = list(placements)
-    placed = set(hand_order(scene, placements, gamp=gamp).order)
+    placed = set(hand_order(scene, placements, gamp=gamp, way_down=way_down).order)
     grid = Grid(scene)
     regions = [t.name for t in scene.targets]
     return [k for k, p in enumerate(placements)

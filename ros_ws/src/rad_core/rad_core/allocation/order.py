@@ -75,18 +75,20 @@ def hand_ways(grid: Grid, hand, occupied: np.ndarray, type_name: str, yaw: int, 
 
 
 def order_model(grid: Grid, occupied: np.ndarray, poses: list[tuple], counts: dict[str, int] | None = None,
-                cover: bool = False, rest: bool = True):
+                cover: bool = False, rest: bool = True, way_down: bool = False):
     """The CP-SAT model of an order of poses: which are placed (`placed[n]`), their positions
     (`order[n]`), and per pose the ways it is held (`held_by[n]`: (variable, blocking cells)).
 
     poses: (cells sorted, ways from `hand_ways`, target cells it fills, type name) of free poses.
     Each placed pose, when its turn comes, has a way of being held none of whose blocking cells a
     pose before it fills, and rests on the table, a built cell or a pose before it under one of its
-    units (the MDP refuses a block that would rest on nothing). The carried block's way down (the
-    columns over the pose's cells) is not ordered here, only ruled out where built (`hand_ways`):
-    as precedences it changed which cover CP-SAT picks and lost 4 of the 78 scenes of
-    `benchmarks/bench_eval.py` to the hand model's other misses; GAMP refuses such a placement and
-    order repair learns the precedence from the refusal.
+    units (the MDP refuses a block that would rest on nothing). way_down: and comes before every pose
+    with a cell in the columns over its cells (the carried block comes down through them:
+    `path_precedences`); supply asks for it, since a cover without such an order (four stepped pieces
+    in a pinwheel, each over the next) can never be built. The planner's stages do not: there the
+    rule changed which cover CP-SAT picks and lost 4 of the 78 scenes of `benchmarks/bench_eval.py` to
+    the hand model's other misses, while GAMP refuses such a placement and order repair learns the
+    precedence from the refusal. A pose under a built cell has no way in either way (`hand_ways`).
     Where poses overlap (candidates, not an allocation), at most one fills a cell, and counts caps the
     poses of each type.
     Maximizes the target cells placed.
@@ -125,6 +127,9 @@ def order_model(grid: Grid, occupied: np.ndarray, poses: list[tuple], counts: di
         if used:          # none for a type without a top-down grasp: GAMP says why
             model.add_bool_or([v for v, _ in used]).only_enforce_if(placed[n])
         held_by.append(used)
+        if way_down:
+            for m in path_precedences(grid, cells, owners, n):
+                model.add(order[n] < order[m]).only_enforce_if([placed[n], placed[m]])
         if cover:
             _stands(model, grid, occupied, cells, n, placed, order, owners)
             continue
@@ -156,6 +161,12 @@ def order_model(grid: Grid, occupied: np.ndarray, poses: list[tuple], counts: di
     return model, placed, order, held_by
 
 
+def path_precedences(grid: Grid, cells, owners: dict[int, list[int]], n: int) -> list[int]:
+    """The poses (indices into `owners`' lists) with a cell over pose n's cells, in their columns: n is
+    placed before them, or its carried block would come down onto them."""
+    return sorted({m for c in grid.columns_above(cells).tolist() for m in owners.get(c, ())} - {n})
+
+
 def _stands(model, grid: Grid, occupied: np.ndarray, cells, n: int, placed, order, owners) -> None:
     """Pose n, where placed, stands on one of its sufficient support sets
     (`allocation.constraints.support_options`): every unit of the set on the table, a built cell, or a
@@ -179,9 +190,9 @@ def _stands(model, grid: Grid, occupied: np.ndarray, cells, n: int, placed, orde
         model.add(placed[n] == 0)
 
 
-def hand_order(scene: Scene, placements, time_limit_s: float = 1.0, gamp=None) -> HandOrder:
+def hand_order(scene: Scene, placements, time_limit_s: float = 1.0, gamp=None, way_down: bool = False) -> HandOrder:
     """An order in which the hand can place the most target cells of `placements` (the allocation's
-    poses of the scene's free cells; module docstring), with its precedences."""
+    poses of the scene's free cells; module docstring), with its precedences (way_down: `order_model`'s)."""
     grid, occupied = scene_state(scene)
     regions = [t.name for t in scene.targets]
     hand = HandBlocked(scene, grid, gamp)
@@ -195,7 +206,7 @@ def hand_order(scene: Scene, placements, time_limit_s: float = 1.0, gamp=None) -
             continue                      # every way of holding it is blocked already
         poses.append((tuple(sorted(int(c) for c in ids)), ways, int(grid.is_target[ids].sum()), p.type))
         items.append(p)
-    return solve_order(grid, occupied, poses, items, None, time_limit_s)
+    return solve_order(grid, occupied, poses, items, None, time_limit_s, way_down=way_down)
 
 
 def ordered_cover(scene: Scene, time_limit_s: float = 2.0, gamp=None, avoid=()) -> HandOrder:
@@ -250,16 +261,17 @@ def scene_state(scene: Scene) -> tuple[Grid, np.ndarray]:
 
 
 def solve_order(grid: Grid, occupied: np.ndarray, poses: list[tuple], items: list, counts, time_limit_s: float,
-           cover: bool = False, avoid=()) -> HandOrder:
+                cover: bool = False, avoid=(), way_down: bool = False) -> HandOrder:
     """`order_model` solved: the poses it places in its order, their precedences (each before the
     poses filling the blocking cells of the way it is held), the coverage, the items of those poses.
     cover: `ordered_cover`'s solve: `order_model`'s cover rules, and CP-SAT's deterministic time
     (about seconds of one core), so that the answer does not depend on how busy the machine is
-    (wall time only as a backstop). avoid: sets of poses (cells sorted) not to be placed all together."""
+    (wall time only as a backstop). avoid: sets of poses (cells sorted) not to be placed all together.
+    way_down: `order_model`'s, and its precedences among those of the answer."""
 
     if not poses:
         return HandOrder()
-    model, placed, order, held_by = order_model(grid, occupied, poses, counts, cover=cover)
+    model, placed, order, held_by = order_model(grid, occupied, poses, counts, cover=cover, way_down=way_down)
     index = {pose[0]: n for n, pose in enumerate(poses)}
     for before in avoid:
         ns = [index[cells] for cells in before if cells in index]
@@ -273,8 +285,12 @@ def solve_order(grid: Grid, occupied: np.ndarray, poses: list[tuple], items: lis
     chosen = sorted((n for n in range(len(poses)) if solver.boolean_value(placed[n])),
                     key=lambda n: (solver.value(order[n]), n))
     owner = {c: n for n in chosen for c in poses[n][0]}
+    owners = {c: [n] for c, n in owner.items()}
     out = []
     for n in chosen:
+        if way_down:
+            out += [Precedence(poses[n][0], poses[m][0], "the carried block's way down")
+                    for m in path_precedences(grid, poses[n][0], owners, n)]
         for var, blocking in held_by[n]:
             if solver.boolean_value(var):
                 for m in sorted({owner[c] for c in blocking.tolist() if c in owner} - {n}):

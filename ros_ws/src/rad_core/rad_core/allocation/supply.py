@@ -13,8 +13,9 @@ every block rests on the table, a chosen block or a filled cell when placed), le
 
 With `SupplyParams.hand` (the default) the cover must also be one a top-down hand can build:
 `allocation.order` looks for an order in which each chosen piece, when its turn comes, has
-a way of being held that no piece placed before it is in the way of, and rests on something.
-The pieces it cannot place are ruled out and the model solved again, for at most `hand_rounds`
+a way of being held that no piece placed before it is in the way of, rests on something, and
+comes before every piece over its cells (the carried block comes down through their columns:
+four stepped pieces in a pinwheel, each over the next, have no order). The pieces it cannot place are ruled out and the model solved again, for at most `hand_rounds`
 rounds within the time limit; the cover whose order places the most target cells is kept (ties:
 the earlier round, the better by the levels above). Without this, a solid 2 x 2 tower becomes
 six 2 x 2 slabs standing back to back, and the hand can take none of the second slabs of a pair
@@ -269,7 +270,8 @@ def choose_blocks(targets: Sequence[TargetRegion], unit: float, types: Mapping[s
     best, rounds = None, 0
     for solver, status, chosen, unplaced in solve_rounds(model, w, candidates, scene,
                                                          params.hand_rounds if params.hand else 1,
-                                                         params.time_limit_s, start, params.seed, gamp=params.gamp):
+                                                         params.time_limit_s, start, params.seed, gamp=params.gamp,
+                                                         way_down=True):
         rounds += 1
         if status not in (cp_model.OPTIMAL, cp_model.FEASIBLE):
             if best is not None:
@@ -310,7 +312,7 @@ def hand_left(scene: Scene, grid: Grid, placements, gamp=None) -> tuple[dict, ..
     """The placements no order of `allocation.order.hand_order` places (supply's `SupplyReport.hand_left`),
     each with the cells it fills and why: its type has no top-down grasp, or every way of holding it
     (a grasp at a hand yaw) needs free a cell that another piece of the cover fills."""
-    placed = set(hand_order(scene, placements, gamp=gamp).order)
+    placed = set(hand_order(scene, placements, gamp=gamp, way_down=True).order)
     regions = [t.name for t in scene.targets]
     hand = HandBlocked(scene, grid, gamp)
     owner = {}
@@ -352,7 +354,7 @@ def _ordered_supply(scene: Scene, grid, candidates, n_target: int, time_limit_s:
     occupied = np.zeros(grid.num_cells, dtype=bool)
     counts = {name: n_target for name in scene.block_types}
     poses, items = candidate_poses(grid, HandBlocked(scene, grid, gamp), occupied, candidates, counts)
-    found = solve_order(grid, occupied, poses, items, counts, time_limit_s, cover=True)
+    found = solve_order(grid, occupied, poses, items, counts, time_limit_s, cover=True, way_down=True)
     if not found.order:
         return None
     index = {id(c.placement): n for n, c in enumerate(candidates)}
