@@ -15,11 +15,12 @@ With `SupplyParams.hand` (the default) the cover must also be one a top-down han
 `allocation.order` looks for an order in which each chosen piece, when its turn comes, has
 a way of being held that no piece placed before it is in the way of, rests on something, and
 comes before every piece over its cells (the carried block comes down through their columns:
-four stepped pieces in a pinwheel, each over the next, have no order). The pieces it cannot place are ruled out and the model solved again, for at most `hand_rounds`
-rounds within the time limit; the cover whose order places the most target cells is kept (ties:
-the earlier round, the better by the levels above). Without this, a solid 2 x 2 tower becomes
-six 2 x 2 slabs standing back to back, and the hand can take none of the second slabs of a pair
-(a flush slab on one side, 10 cm across the other). The order is a guess that ignores the arm's
+four stepped pieces in a pinwheel, each over the next, have no order). The pieces it cannot place
+are ruled out and the model solved again, for at most `hand_rounds` rounds within the time limit;
+the cover whose order places the most target cells is kept (ties: the earlier round, the better
+by the levels above). Without this, a solid 2 x 2 tower becomes six 2 x 2 slabs standing back to
+back, and the hand can take none of the second slabs of a pair (a flush slab on one side, 10 cm
+across the other). The order is a guess that ignores the arm's
 other links and the pick (`hand_order`); GAMP still checks every step.
 
 An inventory caps how many blocks of each type there are; without one the count of each
