@@ -645,3 +645,19 @@ def test_never_touching_pairs_stay_apart_over_their_joints_ranges():
                                          physicsClientId=cid)
                 nearest = min(nearest, min((pt[8] for pt in pts), default=0.2))
             assert nearest > slack + 0.01, (a, b, nearest)
+
+
+def test_vertical_moves_step_finely_among_neighbours_and_coarsely_above():
+    from rad_core.gamp.planner import GampConfig, column_heights
+    heights = column_heights(0.12, 0.045)
+    assert heights[-1] == pytest.approx(0.12) and heights == sorted(heights)
+    steps = np.diff([0.0, *heights])
+    low = [h for h in heights if h <= 0.045 + 1e-9]
+    assert low[-1] == pytest.approx(0.045) and max(np.diff([0.0, *low])) <= 0.01 + 1e-9
+    assert max(steps) <= GampConfig().cartesian_step + 1e-9 and len(heights) == len(low) + 2
+    # near_step 0: the coarse steps alone, as before; a band above the top stops at the top.
+    assert column_heights(0.12, 0.045, GampConfig(near_step=0.0)) == pytest.approx([0.04, 0.08, 0.12])
+    assert column_heights(0.03, 0.05)[-1] == pytest.approx(0.03)
+    for bad in (dict(near_step=-0.01), dict(near_margin=-1.0), dict(cartesian_step=0.0)):
+        with pytest.raises(RadError, match='step|margin'):
+            GampConfig(**bad).validate()

@@ -80,7 +80,7 @@ class GampConfig:
     """Where the carried block (or the open fingers) is among the blocks, the held block's height over the
     grasp or the placement and `near_margin` above it, vertical moves get an IK waypoint every this many
     metres: a straight joint-space segment between two waypoints bows off the vertical (about 1.4 mm over
-    4 cm on a Panda), and flush neighbours leave a block a fraction of a millimetre each side."""
+    4 cm on a Panda), and flush neighbours leave a block a fraction of a millimetre each side. 0: none."""
     near_margin: float = 0.01
     """How far (m) above the held block's height the `near_step` waypoints go on."""
     finger_clearance: float = 0.01
@@ -130,6 +130,11 @@ class GampConfig:
 
     def validate(self) -> None:
         panda.check_effector(self.effector)
+        if not self.cartesian_step > 0:
+            raise RadError(f'cartesian_step must be a positive length (m), got {self.cartesian_step!r}')
+        if not (self.near_step >= 0 and self.near_margin >= 0):
+            raise RadError(f'near_step and near_margin must be lengths >= 0 (m; near_step 0: no finer steps), '
+                           f'got {self.near_step!r} and {self.near_margin!r}')
         if not (isinstance(self.vacuum, int) and 1 <= self.vacuum <= 127):
             raise RadError(f'vacuum must be 1..127 (x 10 mbar, an int8 goal field), got {self.vacuum!r}')
         if not (isinstance(self.vacuum_timeout_ms, int) and 1 <= self.vacuum_timeout_ms <= 127):
