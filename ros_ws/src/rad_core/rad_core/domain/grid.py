@@ -51,13 +51,13 @@ class Grid:
     def columns_above(self, cell_ids) -> np.ndarray:
         """The cells over `cell_ids` in their columns, up to the grid's top, less `cell_ids` themselves
         (sorted): where a block placed from above on `cell_ids` passes on its way down."""
-        own = {int(c) for c in cell_ids}
-        out, frontier = set(), [int(c) for c in own]
-        while frontier:
-            up = self.above_idx[frontier]
-            frontier = [int(c) for c in up if c >= 0 and int(c) not in out]
-            out.update(frontier)
-        return np.array(sorted(out - own), dtype=np.int64)
+        own = np.asarray(cell_ids, dtype=np.int64)
+        layers, up = [], self.above_idx[own]
+        while (up >= 0).any():
+            up = up[up >= 0]
+            layers.append(up)
+            up = self.above_idx[up]
+        return np.setdiff1d(np.concatenate(layers), own) if layers else np.zeros(0, dtype=np.int64)
 
     @cached_property
     def face_neighbours(self) -> np.ndarray:

@@ -515,9 +515,8 @@ def column_heights(top: float, near: float, config: GampConfig = GampConfig()) -
     if near > 0:
         n = max(1, math.ceil(near / config.near_step - 1e-9))
         low = [near * k / n for k in range(1, n + 1)]
-    base = near
-    n = max(1, math.ceil((top - base) / config.cartesian_step - 1e-9)) if top > base else 0
-    return low + [base + (top - base) * k / n for k in range(1, n + 1)]
+    n = max(1, math.ceil((top - near) / config.cartesian_step - 1e-9)) if top > near else 0
+    return low + [near + (top - near) * k / n for k in range(1, n + 1)]
 
 
 def _tops(world: World, exclude: str) -> float:
