@@ -7,6 +7,7 @@ in the base frame). Each of two assembly nodes listens to one and registers the 
 /plan_assembly requests without a scene.
 """
 
+import re
 import time
 
 import numpy as np
@@ -123,7 +124,10 @@ def test_drivers_messages_register_in_the_calibrated_frame_and_lost_or_misframed
     spin_until(cell.node, lambda: False, timeout=0.3)            # frames without it reach the node
     r = cell.plan('m4r2')
     assert not r.success and "lost block 'c0' (rigid body 'Block_0') not seen for" in r.reason, r.reason
-    assert 0.9 < time.monotonic() - t0 < 10.0
+    # The node's own last sight of the body may precede t0 on a loaded machine (its executor was busy),
+    # so the wait is judged by the age it reports, which must exceed lost_timeout_s (1 s).
+    age = float(re.search(r"'Block_0'\) not seen for ([0-9.]+) s", r.reason).group(1))
+    assert age >= 1.0 and time.monotonic() - t0 < 10.0, r.reason
     cell.state['drop'] = set()
     assert spin_until(cell.node, lambda: cell.plan('m4r2').success, timeout=10.0)
 
