@@ -16,7 +16,9 @@ pose, when its turn comes, has a way of being held (a grasp at a hand yaw, as
 `allocation.arm.HandBlocked.cells` gives them) none of whose blocking cells is built, and rests
 on something (the table, a built cell or a pose before it under one of its units: the MDP
 refuses a block that would rest on nothing). CP-SAT finds the order placing the most target
-cells (all of them where it can). Its answer as precedences: each placed pose before every pose
+cells (all of them where it can). The order is then walked with what is built taken as a whole
+(`domain.statics.order_statics`): a pose whose load would tip what holds it waits until a pose
+after it holds it down, or is left out. Its answer as precedences: each placed pose before every pose
 that fills a blocking cell of the way it is held. The blocking cells are those the hand, its
 fingers or panda_link7 always enter (`gamp.hand_cells`); the arm's other links, the carried
 block and the pick are left to GAMP, so the order is a guess that a plan still checks step by
@@ -35,6 +37,7 @@ from rad_core.allocation.constraints import cp_solver, support_options
 from rad_core.allocation.placements import enumerate_candidates
 from rad_core.domain.grid import Grid, blocks_on_grid
 from rad_core.domain.scene import Scene
+from rad_core.domain.statics import order_statics
 
 
 @dataclass(frozen=True)
@@ -284,6 +287,8 @@ def solve_order(grid: Grid, occupied: np.ndarray, poses: list[tuple], items: lis
         return HandOrder()
     chosen = sorted((n for n in range(len(poses)) if solver.boolean_value(placed[n])),
                     key=lambda n: (solver.value(order[n]), n))
+    walk, _ = order_statics(grid, [poses[n][0] for n in chosen], occupied)
+    chosen = [chosen[k] for k in walk]          # the structure stands as a whole after each pose
     owner = {c: n for n in chosen for c in poses[n][0]}
     owners = {c: [n] for c, n in owner.items()}
     out = []

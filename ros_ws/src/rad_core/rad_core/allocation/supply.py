@@ -15,7 +15,9 @@ With `SupplyParams.hand` (the default) the cover must also be one a top-down han
 `allocation.order` looks for an order in which each chosen piece, when its turn comes, has
 a way of being held that no piece placed before it is in the way of, rests on something, and
 comes before every piece over its cells (the carried block comes down through their columns:
-four stepped pieces in a pinwheel, each over the next, have no order). The pieces it cannot place
+four stepped pieces in a pinwheel, each over the next, have no order), and leaves what is built
+standing as a whole (`domain.statics`: plates stacked each further out tip the lowest once the top
+one is on, though each rests on the one below). The pieces it cannot place
 are ruled out and the model solved again, for at most `hand_rounds` rounds within the time limit;
 the cover whose order places the most target cells is kept (ties: the earlier round, the better
 by the levels above). Without this, a solid 2 x 2 tower becomes six 2 x 2 slabs standing back to
@@ -26,7 +28,8 @@ other links and the pick (`hand_order`); GAMP still checks every step.
 An inventory caps how many blocks of each type there are; without one the count of each
 type is free. So the allocation the planner solves later, over exactly these blocks, finds
 a cover as good (this one is a feasible answer to it). The chosen pieces are checked with
-`shapes.stable_order` too, a check that does not depend on the solver.
+`shapes.stable_order` too, a check that does not depend on the solver, and the structure as a
+whole after each piece (`domain.statics`).
 
 `lay_out_blocks` then puts them on the table as the hand-made shapes' scenes do
 (`shapes.lay_out`: every unit 0.32..0.63 m from the base within 75 degrees of +x, 5 cm
@@ -56,6 +59,7 @@ from rad_core.domain.blocks import BlockType
 from rad_core.domain.errors import RadError
 from rad_core.domain.grid import Grid
 from rad_core.domain.scene import MAX_BLOCKS, Block, Scene, TargetRegion
+from rad_core.domain.statics import order_statics
 from rad_core.domain.voxels import MAX_UNIT
 
 OBJECTIVES = ('fewest', 'cheapest')
@@ -165,7 +169,8 @@ class SupplyReport:
         if self.cost is not None:
             text += f', cost {self.cost:g}'
         if not self.stands:
-            text += '; no order found in which every block rests when placed'
+            text += ('; no order found in which every block rests when placed and what is built stands as a '
+                     'whole')
         if self.ordered:
             text += ('; no cover of more cells could be placed whole by a top-down hand: these are the cells it '
                      'can place in some order')
@@ -304,7 +309,7 @@ def choose_blocks(targets: Sequence[TargetRegion], unit: float, types: Mapping[s
     left = hand_left(scene, grid, placements, params.gamp) if hand_covered is not None and hand_covered < n_covered \
         else ()
     report = SupplyReport(status_name, n_target, n_covered, len(cells) - n_covered,
-                          {k: v for k, v in kinds.items() if v}, cost, stands(placements, targets),
+                          {k: v for k, v in kinds.items() if v}, cost, stands(grid, placements, targets),
                           time.perf_counter() - start, hand_covered, rounds, left, by_order)
     return placements, report
 
@@ -326,10 +331,13 @@ def hand_left(scene: Scene, grid: Grid, placements, gamp=None) -> tuple[dict, ..
         if tuple(sorted(ids)) in placed:
             continue
         ways = [w for pair in hand.cells(p.type, p.yaw, ids) for w in pair]
+        needed = sorted({int(c) for w in ways for c in w.tolist() if owner.get(int(c)) not in (None, p)})
         if not ways:
             why = 'its type has no top-down grasp at this unit'
+        elif not needed:
+            why = ('with it on, what is built would not stand (`domain.statics`: the load it adds tips what '
+                   'holds it), in every order tried')
         else:
-            needed = sorted({int(c) for w in ways for c in w.tolist() if owner.get(int(c)) not in (None, p)})
             why = (f'each of its {len(ways)} ways of being held (grasp and hand yaw) needs free a cell the cover '
                    f'fills ({_cells_text([tuple(int(v) for v in grid.ijk[c]) for c in needed[:6]])}'
                    f'{" ..." if len(needed) > 6 else ""}), and no order places it before all of them')
@@ -376,12 +384,18 @@ def _cost(type_name: str, params: SupplyParams) -> int:
     return int(round(float(params.costs.get(type_name, 1.0)) * COST_SCALE))
 
 
-def stands(placements, targets: Sequence[TargetRegion]) -> bool:
+def stands(grid: Grid, placements, targets: Sequence[TargetRegion]) -> bool:
     """Whether the pieces of every region can be placed in some order, each resting when placed
-    (`shapes.stable_order`: its centre of mass over what holds it, with a margin)."""
+    (`shapes.stable_order`: its centre of mass over what holds it, with a margin), the structure
+    standing as a whole after each (`domain.statics`: the load of the pieces on it included)."""
+    names = [t.name for t in targets]
     for t in targets:
-        pieces = [p.cells for p in placements if p.target == t.name]
-        if pieces and shapes.stable_order(pieces) is None:
+        mine = [p for p in placements if p.target == t.name]
+        order = shapes.stable_order([p.cells for p in mine]) if mine else []
+        if order is None:
+            return False
+        ids = [[grid.index(names.index(t.name), c) for c in mine[n].cells] for n in order]
+        if order_statics(grid, ids)[1]:
             return False
     return True
 
