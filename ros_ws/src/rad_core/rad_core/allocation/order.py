@@ -65,6 +65,9 @@ class HandOrder:
     """The poses of `order` as the allocation's `Placement`s, in the same order."""
     value: int = 0
     """c^T g of those poses: target cells less non-target ones (fillers)."""
+    tipping: list[tuple[int, ...]] = field(default_factory=list)
+    """Poses CP-SAT's order placed that would tip what holds them, in every walk tried
+    (`domain.statics.order_statics`): left out of `order`."""
 
 
 def hand_ways(grid: Grid, hand, occupied: np.ndarray, type_name: str, yaw: int, ids) -> list[np.ndarray] | None:
@@ -287,7 +290,8 @@ def solve_order(grid: Grid, occupied: np.ndarray, poses: list[tuple], items: lis
         return HandOrder()
     chosen = sorted((n for n in range(len(poses)) if solver.boolean_value(placed[n])),
                     key=lambda n: (solver.value(order[n]), n))
-    walk, _ = order_statics(grid, [poses[n][0] for n in chosen], occupied)
+    walk, waiting = order_statics(grid, [poses[n][0] for n in chosen], occupied)
+    tipping = [poses[chosen[k]][0] for k in waiting]
     chosen = [chosen[k] for k in walk]          # the structure stands as a whole after each pose
     owner = {c: n for n in chosen for c in poses[n][0]}
     owners = {c: [n] for c, n in owner.items()}
@@ -305,4 +309,4 @@ def solve_order(grid: Grid, occupied: np.ndarray, poses: list[tuple], items: lis
     filled = int((grid.is_target & occupied).sum()) + sum(poses[n][2] for n in chosen)
     value = sum(2 * poses[n][2] - len(poses[n][0]) for n in chosen)
     return HandOrder([poses[n][0] for n in chosen], out, filled / total if total else 1.0,
-                     [items[n] for n in chosen], value)
+                     [items[n] for n in chosen], value, tipping)

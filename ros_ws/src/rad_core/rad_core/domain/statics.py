@@ -25,6 +25,7 @@ from typing import Sequence
 import numpy as np
 
 from rad_core.domain.grid import Grid
+from rad_core.domain.support import convex_hull
 
 MARGIN = 0.05
 """How far (cell units) inside a contact square's edges its corner forces act."""
@@ -84,20 +85,22 @@ def structure_statics(grid: Grid, pieces: Sequence[Sequence[int]], ground=None, 
                      solver.Constraint(0.0, 0.0), solver.Constraint(0.0, 0.0)])
     d = 0.5 - margin
     inf = solver.infinity()
+    patches: dict[tuple[int, int], list] = {}       # (upper piece, lower piece or -1): corner points
     for n, cells in enumerate(pieces):
         for c, m in zip(cells, _under(grid, owner, cells)):
-            if m == -2 or m == n:
-                continue
-            for dx in (-d, d):
-                for dy in (-d, d):
-                    f = solver.NumVar(0.0, inf, '')
-                    x, y = xy[c, 0] + dx, xy[c, 1] + dy
-                    for k, sign in ((n, 1.0), (int(m), -1.0)):
-                        if k < 0:
-                            continue                  # the table takes whatever it is given
-                        rows[k][0].SetCoefficient(f, sign)
-                        rows[k][1].SetCoefficient(f, sign * (y - com[k][1]))
-                        rows[k][2].SetCoefficient(f, sign * (x - com[k][0]))
+            if m != -2 and m != n:
+                patches.setdefault((n, int(m)), []).extend(
+                    (xy[c, 0] + dx, xy[c, 1] + dy) for dx in (-d, d) for dy in (-d, d))
+    for (n, m), corners in patches.items():
+        # Forces anywhere on a contact patch are forces at the corners of its convex hull.
+        for x, y in convex_hull(np.asarray(corners)):
+            f = solver.NumVar(0.0, inf, '')
+            for k, sign in ((n, 1.0), (m, -1.0)):
+                if k < 0:
+                    continue                  # the table (or ground) takes whatever it is given
+                rows[k][0].SetCoefficient(f, sign)
+                rows[k][1].SetCoefficient(f, sign * (y - com[k][1]))
+                rows[k][2].SetCoefficient(f, sign * (x - com[k][0]))
     slack = []
     for n, equations in enumerate(rows):
         for ct in equations:
@@ -125,24 +128,76 @@ def order_statics(grid: Grid, pieces: Sequence[Sequence[int]], ground=None,
     of a walk that keeps the structure standing.
 
     The pieces go on `ground` (cells built before, as fixed as the table) in the order given; one
-    that would leave a structure that does not stand waits, and is tried again after each piece
-    placed after it (a block further back may hold it down). The walk does not ask whether a piece
-    that waited can still be reached (GAMP does, step by step)."""
-    placed, walk, waiting = [], [], []
+    that would leave a structure that does not stand waits, and is tried again once a piece placed
+    after it could hold it down: one on a piece its own load reaches, or under it. The walk does
+    not ask whether a piece that waited can still be reached (GAMP does, step by step).
+
+    A piece every unit of which rests on something, on pieces that each rest so all the way down,
+    leaves a standing structure standing (its weight goes straight down, column by column), so
+    the program is solved only for pieces whose load reaches an overhang."""
+    walk_ = _Walk(grid, ground, margin)
+    walk, waiting = [], []
+    pieces = [np.asarray(p, dtype=int).ravel() for p in pieces]
     for n, cells in enumerate(pieces):
-        trial = placed + [np.asarray(cells, dtype=int).ravel()]
-        if not structure_statics(grid, trial, ground, margin):
+        added, _ = walk_.add(cells)
+        if not added:
             waiting.append(n)
             continue
-        placed = trial
         walk.append(n)
-        progress = True
-        while progress and waiting:
-            progress = False
+        new = [len(walk) - 1]                       # the walk's own indices: walk[i] is pieces' index
+        while new and waiting:
+            # A piece can hold down what waits only through the pieces its load reaches.
+            reach = set(new).union(*(walk_.closure(walk_.placed[i]) for i in new))
+            new = []
             for k in list(waiting):
-                trial = placed + [np.asarray(pieces[k], dtype=int).ravel()]
-                if structure_statics(grid, trial, ground, margin):
-                    placed, progress = trial, True
+                if reach & walk_.closure(pieces[k]) and walk_.add(pieces[k])[0]:
                     walk.append(k)
                     waiting.remove(k)
+                    new.append(len(walk) - 1)
     return walk, waiting
+
+
+class _Walk:
+    """A standing structure that pieces are added to, one at a time, each only if it still stands."""
+
+    def __init__(self, grid: Grid, ground, margin: float):
+        self.grid, self.ground, self.margin = grid, ground, margin
+        self.owner = _owner(grid, [], ground)
+        self.placed: list[np.ndarray] = []
+
+    def _under_pieces(self, cells: np.ndarray, n: int) -> tuple[set[int], bool]:
+        """(the placed pieces right under cells, whether a unit of them is over nothing)."""
+        under = _under(self.grid, self.owner, cells)
+        return {int(m) for m in under if m >= 0 and m != n}, bool((under == -2).any())
+
+    def closure(self, cells: np.ndarray) -> set[int]:
+        """The placed pieces the load of `cells` reaches: those right under them, and under those."""
+        start, _ = self._under_pieces(cells, -3)
+        seen, todo = set(start), list(start)
+        while todo:
+            below, _ = self._under_pieces(self.placed[todo.pop()], -3)
+            todo += [m for m in below - seen]
+            seen |= below
+        return seen
+
+    def _reaches_overhang(self, start: set[int]) -> bool:
+        seen, todo = set(start), list(start)
+        while todo:
+            q = todo.pop()
+            below, over_nothing = self._under_pieces(self.placed[q], q)
+            if over_nothing:
+                return True
+            todo += [m for m in below - seen]
+            seen |= below
+        return False
+
+    def add(self, cells: np.ndarray) -> tuple[bool, bool]:
+        """(added, whether its load reaches an overhang: it may hold down what waits)."""
+        n = len(self.placed)
+        below, over_nothing = self._under_pieces(cells, n)
+        heavy = over_nothing or self._reaches_overhang(below)
+        if heavy and not structure_statics(self.grid, self.placed + [cells], self.ground, self.margin):
+            return False, heavy
+        self.placed.append(cells)
+        self.owner[cells] = n
+        return True, heavy

@@ -54,7 +54,7 @@ def com_inside(squares: np.ndarray, com: np.ndarray, margin: float = 0.05) -> bo
     a rigid block on those supports alone cannot tip. A centre exactly over an edge
     tips in physics too (see physics.py), hence the margin."""
     corners = np.concatenate([squares + [dx, dy] for dx in (-0.5, 0.5) for dy in (-0.5, 0.5)])
-    hull = _convex_hull(corners)
+    hull = convex_hull(corners)
     for a, b in zip(hull, np.roll(hull, -1, axis=0)):
         edge = b - a
         # Hull is counter-clockwise: inside is to the left of every edge.
@@ -64,7 +64,8 @@ def com_inside(squares: np.ndarray, com: np.ndarray, margin: float = 0.05) -> bo
     return True
 
 
-def _convex_hull(points: np.ndarray) -> np.ndarray:
+def convex_hull(points: np.ndarray) -> np.ndarray:
+    """The convex hull of 2-D points, counter-clockwise, without collinear points (monotone chain)."""
     pts = sorted(set(map(tuple, np.round(points, 9))))
     if len(pts) < 3:
         return np.asarray(pts, dtype=float)
