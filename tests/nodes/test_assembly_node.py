@@ -114,6 +114,29 @@ def test_plans_from_json_and_from_motion_capture(graph):
             assert [g.action for g in step.gripper][-2:] == ['grasp', 'release']
             assert step.block_id in {b.id for b in DEMO_SCENE.blocks}
         assert Scene.loads(r.scene_json).to_dict()['targets'] == DEMO_SCENE.to_dict()['targets']
+    # The graph is healthy, and /diagnostics says so item by item.
+    statuses = diagnostics(graph.node)
+    assert set(statuses) == HEALTH and all(level == 0 for level, _ in statuses.values()), statuses
+    assert statuses['motion capture'][1].endswith('bodies tracked') and statuses['arm'][1] == 'idle'
+
+
+HEALTH = {'joint states', 'motion capture', 'arm', 'arm controller', 'gripper', 'sequencer',
+          'grasp and motion planning', 'allocation'}
+
+
+def diagnostics(node, name: str = 'assembly', timeout: float = 10.0) -> dict:
+    """{check: (level as int, message)} of the next /diagnostics array the named node publishes."""
+    from diagnostic_msgs.msg import DiagnosticArray
+    got = []
+    sub = node.create_subscription(DiagnosticArray, '/diagnostics', got.append, 10)
+    try:
+        assert spin_until(node, lambda: any(s.name.startswith(f'{name}: ') for m in got for s in m.status),
+                          timeout=timeout), 'no /diagnostics from ' + name
+    finally:
+        node.destroy_subscription(sub)
+    msg = next(m for m in got if any(s.name.startswith(f'{name}: ') for s in m.status))
+    return {s.name.split(': ', 1)[1]: (int.from_bytes(s.level, 'little') if isinstance(s.level, bytes) else s.level,
+                                       s.message) for s in msg.status}
 
 
 def test_the_node_graph_and_the_in_process_planner_take_the_same_actions(graph):
@@ -434,6 +457,14 @@ def test_plan_assembly_needs_fresh_and_complete_joint_states(node_process, ros_n
             spin_until(ros_node, lambda: False, timeout=1.0)     # the node hears the new messages
         return call_service(ros_node, client, PlanAssembly.Request(scene_json=SMALL.dumps()), timeout=60.0)
 
+    # Alone, the node says on /diagnostics what is missing.
+    statuses = diagnostics(ros_node)
+    assert set(statuses) == HEALTH, statuses
+    for check in ('joint states', 'arm controller', 'gripper', 'sequencer', 'grasp and motion planning',
+                  'allocation'):
+        assert statuses[check][0] == 2, (check, statuses[check])       # ERROR
+    assert 'no /joint_states received' in statuses['joint states'][1]
+    assert 'no sequencer (/sequence)' in statuses['sequencer'][1] and statuses['motion capture'][0] == 1   # WARN
     r = plan_with(None)
     assert not r.success and 'no /joint_states received' in r.reason, r.reason
     r = plan_with(JOINT_NAMES[:7])                      # the arm only, as an arm controller's state broadcaster
@@ -441,12 +472,46 @@ def test_plan_assembly_needs_fresh_and_complete_joint_states(node_process, ros_n
     r = plan_with(JOINT_NAMES[:8])
     assert not r.success and 'lacks panda_finger_joint2 (' in r.reason, r.reason
     r = plan_with(JOINT_NAMES, age=10.0)                 # heard now, but stamped 10 s ago
-    assert not r.success and 'stale' in r.reason and '10.' in r.reason, r.reason
+    assert not r.success and 'stale' in r.reason and '10.' in r.reason and 'use_sim_time' in r.reason, r.reason
+    r = plan_with(JOINT_NAMES, age=-10.0)                # a robot computer whose clock runs ahead
+    assert not r.success and 'ahead of this node' in r.reason and 'chrony' in r.reason, r.reason
     # Fresh and complete (in any order): the request gets past the robot's state to /allocate (not running).
     r = plan_with(list(reversed(JOINT_NAMES)))
     assert not r.success and 'joint_states' not in r.reason and 'allocate' in r.reason, r.reason
     assert proc.is_running()
     assert proc.stop() == 0, proc.output_tail()
+
+
+def test_on_the_twins_clock_stamps_follow_it_and_a_node_on_sim_time_takes_them(node_process, ros_node, tmp_path):
+    """The twin publishes /clock from its simulated time (from 0, 3x wall time here) and stamps joint states
+    with it. An assembly node with use_sim_time takes them as fresh; one on the wall clock calls them stale."""
+    from rad_msgs.srv import PlanAssembly
+    from rosgraph_msgs.msg import Clock
+    from sensor_msgs.msg import JointState
+    path = tmp_path / 'scene.json'
+    path.write_text(SMALL.dumps())
+    wall = {'assembly:__node': 'assembly_wall', 'plan_assembly': 'plan_wall', 'execute_assembly': 'execute_wall',
+            'take_apart': 'take_apart_wall', 'plan_json': 'plan_json_wall'}
+    procs = [node_process('rad_sim', 'twin_node', *ros_args({'scene_file': str(path), 'real_time_factor': 3.0,
+                                                             'publish_clock': True})),
+             node_process('rad_planner', 'assembly_node', *ros_args({'use_sim_time': True, 'service_timeout_s': 3.0})),
+             node_process('rad_planner', 'assembly_node', *ros_args({'service_timeout_s': 3.0}, wall))]
+    clocks, stamps = [], []
+    ros_node.create_subscription(Clock, '/clock', lambda m: clocks.append(m.clock.sec + m.clock.nanosec * 1e-9), 10)
+    ros_node.create_subscription(JointState, 'joint_states',
+                                 lambda m: stamps.append(m.header.stamp.sec + m.header.stamp.nanosec * 1e-9), 10)
+    assert spin_until(ros_node, lambda: len(clocks) > 20 and len(stamps) > 20, timeout=30.0)
+    assert all(b > a for a, b in zip(clocks, clocks[1:])) and clocks[0] < 3600.0      # simulated, from 0
+    assert set(stamps[5:15]) <= set(clocks), 'joint states not stamped with the published clock'
+    on_sim = wait_for_service(ros_node, PlanAssembly, 'plan_assembly', timeout=30.0)
+    on_wall = wait_for_service(ros_node, PlanAssembly, 'plan_wall', timeout=30.0)
+    request = PlanAssembly.Request(scene_json=SMALL.dumps())
+    r = call_service(ros_node, on_sim, request, timeout=60.0)
+    assert not r.success and 'joint_states' not in r.reason and 'allocate' in r.reason, r.reason
+    r = call_service(ros_node, on_wall, request, timeout=60.0)
+    assert not r.success and '/joint_states is stale' in r.reason and 'use_sim_time' in r.reason, r.reason
+    for proc in procs:
+        assert proc.stop() == 0, proc.output_tail()
 
 
 # ---- execution through the arm controller's and the hand's actions --------------------------------
@@ -503,6 +568,22 @@ def test_cancelling_execution_cancels_the_arm_goal_and_the_arm_stops(node_proces
         rclpy.spin_until_future_complete(ros_node, got, timeout_sec=10.0)
         why = got.result().result.reason if got.result() is not None else 'no result'
         raise AssertionError(f'the arm never moved: phases {phases}, result: {why}')
+    # One goal at a time on the arm: a second execution and a take-apart end at once, saying which goal
+    # drives it, and the first goes on.
+    from rad_msgs.action import TakeApart
+    take_apart = ActionClient(ros_node, TakeApart, 'take_apart')
+    assert take_apart.wait_for_server(timeout_sec=10.0)
+    first = bytes(handle.goal_id.uuid).hex()
+    for client, goal in ((g.actions, ExecuteAssembly.Goal(scene_json=DEMO_SCENE.dumps())),
+                         (take_apart, TakeApart.Goal(heap_json=DEMO_SCENE.dumps()))):
+        sent_again = client.send_goal_async(goal)
+        rclpy.spin_until_future_complete(ros_node, sent_again, timeout_sec=10.0)
+        refused = sent_again.result().get_result_async()
+        rclpy.spin_until_future_complete(ros_node, refused, timeout_sec=10.0)
+        assert refused.done() and refused.result().status == GoalStatus.STATUS_ABORTED
+        reason = refused.result().result.reason
+        assert f'the arm is busy: /execute_assembly goal {first}' in reason, reason
+    assert not handle.get_result_async().done()
     moving_at = np.asarray(joints[-1].position[:7])
     t_cancel = time.monotonic()
     cancel = handle.cancel_goal_async()

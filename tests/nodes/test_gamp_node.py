@@ -133,3 +133,42 @@ def test_a_pick_blocked_by_a_neighbour_moves_it_aside_first_and_says_where(gamp)
     spread = generate_scene(GeneratorConfig(grid=3), 5)        # nothing in the way: nothing moved
     free = plan(spread, *first_action(spread), move_aside=True)
     assert free.success and list(free.moved_aside_blocks) == [] and list(free.moved_aside_poses) == []
+
+
+def test_parameters_set_on_the_running_node_apply_to_the_next_plan_or_are_refused(gamp, ros_node):
+    """speed_scale changes the next trajectory's duration; values out of range and parameters read only
+    at start are refused, with the reason, and change nothing."""
+    from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
+    from rcl_interfaces.srv import DescribeParameters, SetParameters
+    proc, plan = gamp
+    setter = wait_for_service(ros_node, SetParameters, '/gamp/set_parameters', timeout=10.0)
+    describe = wait_for_service(ros_node, DescribeParameters, '/gamp/describe_parameters', timeout=10.0)
+
+    def set_param(name, value):
+        v = (ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=value) if isinstance(value, float)
+             else ParameterValue(type=ParameterType.PARAMETER_STRING, string_value=value))
+        r = call_service(ros_node, setter, SetParameters.Request(parameters=[Parameter(name=name, value=v)]))
+        return r.results[0]
+
+    def duration(r):
+        last = [t.points[-1].time_from_start for t in r.trajectories]
+        return sum(d.sec + d.nanosec * 1e-9 for d in last)
+
+    (speed, robot), = [call_service(ros_node, describe, DescribeParameters.Request(
+        names=['speed_scale', 'robot'])).descriptors]
+    assert not speed.read_only and speed.floating_point_range[0].to_value == 1.0 and robot.read_only
+    scene = generate_scene(GeneratorConfig(grid=3), 5)
+    action = first_action(scene)
+    fast = plan(scene, *action)
+    assert fast.success, fast.reason
+    refused = set_param('speed_scale', 1.5)
+    assert not refused.successful and 'range' in refused.reason.lower(), refused.reason
+    refused = set_param('robot', 'fr3')
+    assert not refused.successful and 'read-only' in refused.reason.lower(), refused.reason
+    again = plan(scene, *action)
+    assert abs(duration(again) - duration(fast)) < 1e-6        # nothing changed
+    done = set_param('speed_scale', 0.35)
+    assert done.successful, done.reason
+    slow = plan(scene, *action)
+    assert slow.success and duration(slow) > 1.3 * duration(fast), (duration(slow), duration(fast))
+    assert proc.is_running()

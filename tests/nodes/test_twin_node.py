@@ -162,6 +162,32 @@ def test_publishes_joint_states_and_every_block_as_motion_capture(twin):
     assert state.success and Scene.loads(state.scene_json).to_dict() == twin.scene.to_dict()
 
 
+def test_publishes_the_robot_description_and_each_blocks_frame_for_rviz(twin):
+    import re
+    from pathlib import Path
+
+    from rclpy.qos import DurabilityPolicy, QoSProfile
+    from std_msgs.msg import String
+    from tf2_msgs.msg import TFMessage
+    described, tf = [], []
+    twin.node.create_subscription(String, 'robot_description', described.append,
+                                  QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
+    twin.node.create_subscription(TFMessage, '/tf', tf.append, 10)
+    assert spin_until(twin.node, lambda: described and len(tf) >= 2, timeout=10.0)
+    urdf = described[0].data
+    joints = set(re.findall(r'<joint name="([^"]+)"', urdf))
+    assert set(JOINT_NAMES) <= joints, joints            # the names joint_states carries
+    meshes = re.findall(r'filename="([^"]+)"', urdf)
+    assert meshes and all(m.startswith('file:///') and Path(m[len('file://'):]).exists() for m in meshes)
+    frames = {t.child_frame_id: t for msg in tf for t in msg.transforms}
+    assert set(frames) == {f'block/{b.id}' for b in twin.scene.blocks}
+    for block in twin.scene.blocks:
+        t = frames[f'block/{block.id}']
+        assert t.header.frame_id == 'world'
+        assert np.allclose([t.transform.translation.x, t.transform.translation.y, t.transform.translation.z],
+                           block.position, atol=0.003)
+
+
 def test_executes_a_trajectory_on_the_topic_and_reports_done(twin):
     from rad_ros.motion import trajectory_to_msg
     target = arm_target(j1=0.3)

@@ -139,3 +139,72 @@ def test_streams_live_to_a_loopback_rerun_server_and_survives_a_missing_one(node
     assert live.stop(timeout=15.0) == 0, live.output_tail()
     assert server.is_running()
     assert '/world/panda/visual_geometries/panda_hand/visual_0' in entities(tmp_path / 'b.rrd')
+
+
+def test_markers_for_rviz_show_the_scene_within_5_s_then_the_plan_and_moved_blocks(node_process, ros_node,
+                                                                                    scene_file):
+    """markers_node: a latched MarkerArray of the target cells and every block in the base frame within 5 s
+    of the twin's scene; the allocation's poses and the next step once a plan is published; a block moved
+    in the twin is drawn where motion capture sees it."""
+    from rad_msgs.srv import SetBlockPose
+    from rad_ros.motion import pose_msg
+    from rclpy.qos import DurabilityPolicy, QoSProfile
+    from std_msgs.msg import String
+    from visualization_msgs.msg import Marker, MarkerArray
+    from ros_harness import call_service, wait_for_service
+
+    scene, path = scene_file
+    latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    got = []
+    ros_node.create_subscription(MarkerArray, 'markers', got.append, latched)
+    markers = node_process('rad_viz', 'markers_node')
+    markers.wait_for_output('markers ready', timeout=30.0)
+    twin = node_process('rad_sim', 'twin_node', *ros_args({'scene_file': str(path)}))
+    twin.wait_for_output('twin ready', timeout=30.0)
+    t0 = time.monotonic()
+    assert spin_until(ros_node, lambda: got, timeout=10.0)
+    assert time.monotonic() - t0 < 5.0
+
+    def by_ns(msg):
+        out = {}
+        for m in msg.markers:
+            out.setdefault(m.ns, []).append(m)
+        return out
+
+    first = by_ns(got[-1])
+    assert got[-1].markers[0].action == Marker.DELETEALL
+    assert sum(len(m.points) for m in first['target']) == scene.num_target_cells
+    assert len(first['blocks']) == len(scene.blocks) and 'allocation' not in first
+    assert {m.header.frame_id for m in got[-1].markers} == {'world'}
+    plan = json.loads(plan_json(scene))
+    pub = ros_node.create_publisher(String, 'plan_json', latched)
+    pub.publish(String(data=json.dumps(plan)))
+    assert spin_until(ros_node, lambda: 'allocation' in by_ns(got[-1]), timeout=10.0)
+    drawn = by_ns(got[-1])
+    assert len(drawn['allocation']) == len(plan['steps']) and len(drawn['next_step']) == 1
+    first_cell = plan['steps'][0]['cells'][0]
+    region = scene.target(plan['steps'][0]['target'])
+    centre = region.cell_center(tuple(first_cell), scene.unit)
+    assert any(abs(p.x - centre[0]) + abs(p.y - centre[1]) + abs(p.z - centre[2]) < 1e-6
+               for p in drawn['next_step'][0].points)
+    # A block moved in the twin is drawn where motion capture then sees it.
+    from rad_msgs.msg import RigidBodies
+    from rclpy.qos import qos_profile_sensor_data
+    seen = {}
+    ros_node.create_subscription(RigidBodies, 'rigid_bodies',
+                                 lambda m: seen.update({b.rigid_body_name: b.pose.position for b in m.rigidbodies}),
+                                 qos_profile_sensor_data)
+    block = scene.blocks[0]
+    client = wait_for_service(ros_node, SetBlockPose, 'set_block_pose', timeout=10.0)
+    moved = (block.position[0], block.position[1] - 0.05, block.position[2])
+    r = call_service(ros_node, client, SetBlockPose.Request(block_id=block.id, pose=pose_msg(moved, (0, 0, 0, 1))))
+    assert r.success, r.reason
+    spin_until(ros_node, lambda: False, timeout=1.5)          # it settles; motion capture reports it
+    at = seen[block.id]
+    assert abs(at.y - block.position[1]) > 0.03                # it did move
+
+    def drawn_there():
+        blocks = by_ns(got[-1]).get('blocks', [])
+        return any(abs(p.x - at.x) + abs(p.y - at.y) + abs(p.z - at.z) < 3e-3 for m in blocks for p in m.points)
+    assert spin_until(ros_node, drawn_there, timeout=10.0)
+    assert markers.is_running() and twin.is_running()

@@ -1,16 +1,13 @@
-"""ros2 launch rad_gamp gamp.launch.py [params_file:=...] (full ROS 2 Jazzy installs)."""
+"""ros2 launch rad_gamp gamp.launch.py [params_file:=...] [namespace:=...] [use_sim_time:=true] [log_level:=debug]
+(full ROS 2 Jazzy installs)."""
 
 from ament_index_python.packages import get_package_share_directory
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument
-from launch.substitutions import LaunchConfiguration
-from launch_ros.actions import Node
+from rad_ros.launching import arguments, node
 
 
 def generate_launch_description():
     default = get_package_share_directory('rad_gamp') + '/config/gamp.yaml'
-    return LaunchDescription([
-        DeclareLaunchArgument('params_file', default_value=default),
-        Node(package='rad_gamp', executable='gamp_node', name='gamp',
-             parameters=[LaunchConfiguration('params_file')], output='screen'),
+    return LaunchDescription(arguments(default) + [
+        node('rad_gamp', 'gamp_node', 'gamp'),
     ])

@@ -17,6 +17,7 @@ request's scene into it; the world is never stepped, only probed.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import threading
 import time
@@ -33,21 +34,37 @@ from rad_msgs.srv import PlanAction
 from rad_ros.conversions import scene_from_request
 from rad_ros.motion import motion_to_msgs, moved_aside_to_msgs, pose_from_msg
 from rad_ros.node_main import main_for
+from rad_ros.params import Param, declare, on_set
 from rad_ros.plant import ActionPlant
 from rclpy.node import Node
+
+
+TIMING = ('speed_scale', 'acceleration_scale', 'grasp_force')
+"""The parameters that change the next plan's timing while the node runs; the others are read at start."""
+
+PARAMS = [
+    Param('frame_id', 'world', 'frame of the planned trajectories\' headers'),
+    Param('seed', 0, "GAMP's random seed (IK restarts)"),
+    Param('robot', 'panda', "the robot model whose joints, limits and names plans use: 'panda' or 'fr3'"),
+    Param('joint_prefix', '', 'prefix of the joint names (a namespaced robot description)'),
+    Param('speed_scale', 0.7, "fraction of the robot's velocity limits trajectories use; from the next plan",
+          dynamic=True, range=(0.01, 1.0)),
+    Param('limits', 'both', "'both' (the robot's and rad's own margins) or 'robot' (the robot's alone)"),
+    Param('acceleration_scale', 1.0, "fraction of the robot's acceleration and jerk limits; from the next plan",
+          dynamic=True, range=(0.01, 1.0)),
+    Param('grasp_force', 20.0, "the hand's grasp force (N); from the next plan", dynamic=True, range=(1.0, 70.0)),
+    Param('arm_controller', 'joint_trajectory_controller', 'the arm controller (its follow_joint_trajectory action)'),
+    Param('gripper_action', 'franka_gripper/gripper_action', "the hand's GripperCommand action"),
+    Param('wide_grasps', True, "grasps across a block's whole row where it fits the open hand"),
+    Param('effector', 'hand', "what the arm carries: 'hand' or 'suction'"),
+    Param('vacuum_ns', 'franka_vacuum_gripper', "the vacuum gripper node's namespace (effector 'suction')"),
+]
 
 
 class GampNode(Node):
     def __init__(self):
         super().__init__('gamp')
-        self.declare_parameter('frame_id', 'world')
-        self.declare_parameter('seed', 0)
-        for name, value in (('robot', 'panda'), ('joint_prefix', ''), ('speed_scale', 0.7), ('limits', 'both'),
-                            ('acceleration_scale', 1.0), ('grasp_force', 20.0),
-                            ('arm_controller', 'joint_trajectory_controller'),
-                            ('gripper_action', 'franka_gripper/gripper_action'), ('wide_grasps', True),
-                            ('effector', 'hand'), ('vacuum_ns', 'franka_vacuum_gripper')):
-            self.declare_parameter(name, value)
+        declare(self, PARAMS)
         param = lambda name: self.get_parameter(name).value  # noqa: E731
         timing = TimingConfig(robot=str(param('robot')), joint_prefix=str(param('joint_prefix')),
                               limits=str(param('limits')), speed_scale=float(param('speed_scale')),
@@ -57,10 +74,21 @@ class GampNode(Node):
         effector = str(param('effector'))
         self.planner = MotionPlanner(GampConfig(seed=int(param('seed')), timing=timing,
                                                 wide_grasps=bool(param('wide_grasps')), effector=effector))
+        on_set(self, self.retime)
         self.plant = ActionPlant(self, timing.model, str(param('arm_controller')), str(param('gripper_action')),
                                  vacuum_ns=str(param('vacuum_ns')) if effector == 'suction' else '')
         self.create_service(PlanAction, 'plan_action', self.plan_action_callback)
         self.get_logger().info('grasp and motion planning ready')
+
+    def retime(self, changes: dict) -> None:
+        """speed_scale, acceleration_scale or grasp_force set while the node runs: the next plan uses
+        them (RadError, refusing the change, for values the robot model does not take)."""
+        timing = dataclasses.replace(self.planner.config.timing, **{k: float(v) for k, v in changes.items()
+                                                                   if k in TIMING})
+        timing.validate()
+        self.planner.config = dataclasses.replace(self.planner.config, timing=timing)
+        if changes:
+            self.get_logger().info('timing now ' + ', '.join(f'{k} {v:g}' for k, v in changes.items()))
 
     def plan(self, request):
         scene = scene_from_request(request.scene, request.scene_json)

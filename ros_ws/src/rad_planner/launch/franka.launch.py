@@ -1,4 +1,5 @@
 """ros2 launch rad_planner franka.launch.py [params_file:=...] [use_twin:=true] [robot:=fr3|panda]
+[namespace:=...] [log_level:=debug]
 
 rad next to franka_ros2 (full ROS 2 Jazzy installs). use_twin:=false (the default) starts every
 node but the twin: franka_ros2 serves the arm's FollowJointTrajectory and the hand's
@@ -13,16 +14,16 @@ from ament_index_python.packages import get_package_share_directory
 from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument, OpaqueFunction
 from launch.substitutions import LaunchConfiguration
-from launch_ros.actions import Node
+from rad_ros.launching import arguments, node
 
 NODES = (('rad_sim', 'twin_node', 'twin'), ('rad_planner', 'allocation_node', 'allocation'),
          ('rad_gamp', 'gamp_node', 'gamp'), ('rad_planner', 'sequencer_node', 'sequencer'),
-         ('rad_planner', 'assembly_node', 'assembly'), ('rad_viz', 'viz_node', 'viz'))
+         ('rad_planner', 'assembly_node', 'assembly'), ('rad_viz', 'viz_node', 'viz'),
+         ('rad_viz', 'markers_node', 'markers'))
 ROBOT_NODES = ('twin', 'gamp', 'assembly')   # the nodes with a `robot` parameter
 
 
 def _nodes(context):
-    params = LaunchConfiguration('params_file').perform(context)
     use_twin = LaunchConfiguration('use_twin').perform(context).strip().lower() in ('true', '1', 'yes')
     robot = LaunchConfiguration('robot').perform(context).strip()
     nodes = []
@@ -34,16 +35,13 @@ def _nodes(context):
             overrides['robot'] = robot
         if name == 'assembly' and use_twin:
             overrides['gripper_result_is_width'] = False   # the twin reports per finger
-        parameters = [params] + ([overrides] if overrides else [])
-        nodes.append(Node(package=pkg, executable=exe, name=name, parameters=parameters, output='screen'))
+        nodes.append(node(pkg, exe, name, overrides or None))
     return nodes
 
 
 def generate_launch_description():
     default = get_package_share_directory('rad_planner') + '/config/franka.yaml'
-    return LaunchDescription([
-        DeclareLaunchArgument('params_file', default_value=default,
-                              description='parameter file, one section per node (default: the FR3 cell profile)'),
+    return LaunchDescription(arguments(default) + [
         DeclareLaunchArgument('use_twin', default_value='false',
                               description='true: start the twin in place of franka_ros2 (simulation)'),
         DeclareLaunchArgument('robot', default_value='',

@@ -1,22 +1,45 @@
-"""ros2 launch rad_planner graph.launch.py [params_file:=...] (full ROS 2 Jazzy installs).
+"""ros2 launch rad_planner graph.launch.py [params_file:=...] [namespace:=...] [use_sim_time:=true]
+[log_level:=debug] [rviz:=true] [effector:=suction] (full ROS 2 Jazzy installs).
 
-The same graph `graph` starts on machines without ros2 launch.
+The whole graph with the twin, robot_state_publisher (the twin's URDF, so TF has the robot) and,
+with rviz:=true, RViz with rad_viz's config (robot, block frames, /markers). The same graph `graph`
+starts on machines without ros2 launch. use_sim_time:=true also makes the twin publish /clock.
 """
 
 from ament_index_python.packages import get_package_share_directory
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument
+from launch.actions import DeclareLaunchArgument, OpaqueFunction
+from launch.conditions import IfCondition
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
+from launch_ros.parameter_descriptions import ParameterValue
+from rad_ros.launching import arguments, node
 
 NODES = (('rad_sim', 'twin_node', 'twin'), ('rad_planner', 'allocation_node', 'allocation'),
          ('rad_gamp', 'gamp_node', 'gamp'), ('rad_planner', 'sequencer_node', 'sequencer'),
-         ('rad_planner', 'assembly_node', 'assembly'), ('rad_viz', 'viz_node', 'viz'))
+         ('rad_planner', 'assembly_node', 'assembly'), ('rad_viz', 'viz_node', 'viz'),
+         ('rad_viz', 'markers_node', 'markers'))
+
+
+def robot_state_publisher(context):
+    from rad_sim.twin_node import robot_description
+    effector = LaunchConfiguration('effector').perform(context)
+    return [node('robot_state_publisher', 'robot_state_publisher', 'robot_state_publisher',
+                 {'robot_description': ParameterValue(robot_description(effector), value_type=str)})]
 
 
 def generate_launch_description():
-    params = LaunchConfiguration('params_file')
     default = get_package_share_directory('rad_planner') + '/config/graph.yaml'
-    return LaunchDescription([DeclareLaunchArgument('params_file', default_value=default)] + [
-        Node(package=pkg, executable=exe, name=name, parameters=[params], output='screen')
-        for pkg, exe, name in NODES])
+    rviz = get_package_share_directory('rad_viz') + '/config/rad.rviz'
+    # The twin publishes /clock where the graph runs on simulated time; robot_state_publisher publishes
+    # the robot description, so the twin does not.
+    twin = {'publish_clock': ParameterValue(LaunchConfiguration('use_sim_time'), value_type=bool),
+            'publish_robot_description': False}
+    return LaunchDescription(
+        arguments(default)
+        + [DeclareLaunchArgument('rviz', default_value='false', description='start RViz with rad.rviz'),
+           DeclareLaunchArgument('effector', default_value='hand', description="the twin's URDF: hand or suction")]
+        + [node(pkg, exe, name, twin if name == 'twin' else None) for pkg, exe, name in NODES]
+        + [OpaqueFunction(function=robot_state_publisher),
+           Node(package='rviz2', executable='rviz2', name='rviz2', arguments=['-d', rviz], output='screen',
+                condition=IfCondition(LaunchConfiguration('rviz')))])

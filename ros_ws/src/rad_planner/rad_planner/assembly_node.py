@@ -27,9 +27,14 @@ request with a reason naming it.
                          the plan is repaired from the rest (rad_core.cell.mocap.register_world)
   act  take_apart        rad_msgs/TakeApart: the structure back onto the table, each motion verified
                          (rad_planner.take_apart, rad_core.sequencing.execution.disassembly)
+                         One goal of the two at a time drives the arm: a goal sent while another
+                         runs ends at once, aborted, its reason naming that goal (rad_ros.arm_lock)
   pub  plan_json         std_msgs/String (latched): the latest plan, for the visualizer
   pub  /tf_static        tf2_msgs/TFMessage (latched): the calibration frame_id -> mocap_frame, when
                          motion capture reports in a frame of its own
+  pub  /diagnostics      diagnostic_msgs/DiagnosticArray, each second: joint states' freshness, motion
+                         capture tracking, which goal drives the arm, and whether the arm controller, the
+                         gripper, the sequencer, GAMP and the allocation answer (rad_ros.diagnostics)
   cli  <feeder_service>  rad_msgs/PresentBlock (default feeder/present, the twin's): before each pick of a
                          block from the scene's feeder, the feeder presents it at its station
   sub  <mocap_topic>     rad_msgs/RigidBodies (mocap_input 'rad', the twin's) or mocap4r2_msgs/RigidBodies
@@ -78,9 +83,13 @@ from rad_core.sequencing.decide.sequencer import Ranking
 from rad_core.sequencing.execution.execute import ExecuteConfig, execute_assembly
 from rad_core.sequencing.planning.plan import MotionPlan
 from rad_core.sequencing.planning.reallocation import reallocation_support
+from control_msgs.action import FollowJointTrajectory, GripperCommand
+from franka_vacuum_gripper.action import Vacuum
 from rad_msgs.action import ExecuteAssembly
 from rad_msgs.msg import Scene as SceneMsg
 from rad_msgs.srv import Allocate, PlanAction, PlanAssembly, PresentBlock, Sequence
+from rad_ros.arm_lock import ArmLock, goal_name
+from rad_ros.diagnostics import ERROR, OK, WARN, Checks, answers
 from rad_ros.conversions import (
     allocation_from_response,
     placement_to_msg,
@@ -96,7 +105,7 @@ from rad_ros.plant import ActionPlant
 from rad_ros.qos import LATCHED
 from rad_ros.sequencer_msgs import action_to_msg, ranking_from_response, sequence_request
 from rcl_interfaces.msg import ParameterDescriptor
-from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.action import ActionClient, ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor, SingleThreadedExecutor
 from rclpy.node import Node
@@ -183,12 +192,14 @@ class AssemblyNode(Node):
         if self.task is not None:
             self.watch_bodies(self.task)
         self.io.create_subscription(SceneMsg, 'scene', self.scene_callback, LATCHED)
+        checks = self.health_checks()
         self.io_executor = SingleThreadedExecutor(context=self.context)
         self.io_executor.add_node(self.io)
         self.io_stop = threading.Event()
         self.io_thread = threading.Thread(target=self.spin_io, daemon=True)
         self.io_thread.start()
         group = ReentrantCallbackGroup()
+        self.arm_lock = ArmLock()         # /execute_assembly and /take_apart: one goal at a time
         self.plan_pub = self.create_publisher(String, 'plan_json', LATCHED)
         if self.frames.calibrated:
             self.tf_static_pub = self.create_publisher(TFMessage, '/tf_static', LATCHED)
@@ -199,7 +210,46 @@ class AssemblyNode(Node):
                                           cancel_callback=lambda goal: CancelResponse.ACCEPT,
                                           callback_group=group)
         self.take_apart_server = serve_take_apart(self)
+        self.diagnostics = Checks(self, checks)
         self.get_logger().info('assembly planner ready')
+
+    def health_checks(self) -> dict:
+        """What /diagnostics reports each second: the robot's state, motion capture, the arm, and each
+        node and controller this one asks (`rad_ros.diagnostics`)."""
+        controller = f'{str(self.param("arm_controller")).rstrip("/")}/follow_joint_trajectory'
+        arm = ActionClient(self.io, FollowJointTrajectory, controller)
+        if self.param('effector') == 'suction':
+            name = f'{str(self.param("vacuum_ns")).rstrip("/")}/vacuum'
+            gripper = ('vacuum gripper', answers(f'vacuum gripper ({name})',
+                                                 ActionClient(self.io, Vacuum, name).server_is_ready))
+        else:
+            name = str(self.param('gripper_action'))
+            gripper = ('gripper', answers(f'gripper ({name})',
+                                          ActionClient(self.io, GripperCommand, name).server_is_ready))
+        return {'joint states': self.joint_health, 'motion capture': self.mocap_health,
+                'arm': lambda: (OK, f'driven by {self.arm_lock.holder}' if self.arm_lock.holder else 'idle', {}),
+                'arm controller': answers(f'arm controller ({controller})', arm.server_is_ready),
+                gripper[0]: gripper[1],
+                'sequencer': answers('sequencer (/sequence)', self.sequence_client.service_is_ready),
+                'grasp and motion planning': answers('GAMP (/plan_action)', self.plan_client.service_is_ready),
+                'allocation': answers('allocation (/allocate)', self.allocate_client.service_is_ready)}
+
+    def joint_health(self):
+        try:
+            joints = self.current_joints()
+        except RadError as e:
+            return ERROR, str(e), {}
+        return OK, 'fresh', {'joints': len(joints)}
+
+    def mocap_health(self):
+        with self.tracker.lock:
+            last, bodies = self.tracker.last_message, len(self.tracker.tracks)
+        if last is None:
+            return WARN, 'no motion capture heard yet (plans from a request\'s scene need none)', {}
+        age = self.tracker.clock() - last
+        if age > self.tracker.lost_timeout_s:
+            return ERROR, f'no motion capture for {age:.1f} s', {'bodies': bodies}
+        return OK, f'{bodies} bodies tracked', {'bodies': bodies, 'age_s': round(age, 3)}
 
     def spin_io(self):
         # spin_once in a loop rather than spin: this rclpy's Executor.shutdown destroys the wait's
@@ -262,9 +312,15 @@ class AssemblyNode(Node):
         stale = float(self.param('stale_after_s'))
         stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
         age = self.get_clock().now().nanoseconds * 1e-9 - stamp
-        if stamp == 0.0 or age > stale:
-            raise RadError(f'/joint_states is stale: its stamp is {age:.1f} s old (limit {stale:g} s)'
-                           if stamp else '/joint_states carries no stamp')
+        if stamp == 0.0:
+            raise RadError('/joint_states carries no stamp')
+        if age > stale or age < -stale:
+            clocks = ('the robot\'s computer and this one must keep the same time (chrony or PTP); a simulator '
+                      'that publishes /clock needs use_sim_time:=true on every node'
+                      + (' (this node uses simulated time)' if self.get_parameter('use_sim_time').value else ''))
+            raise RadError(f'/joint_states is stale: its stamp is {age:.1f} s old (limit {stale:g} s): {clocks}'
+                           if age > 0 else f'/joint_states is stamped {-age:.1f} s ahead of this node\'s clock '
+                           f'(limit {stale:g} s): {clocks}')
         # The vacuum gripper has no joints: its fingers' places in the joint vector stay open.
         suction = self.param('effector') == 'suction'
         names = self.model.arm_joint_names + (() if suction else self.model.finger_joint_names)
@@ -458,6 +514,19 @@ class AssemblyNode(Node):
 
     # ---- /execute_assembly -------------------------------------------------------------
     def execute_callback(self, goal_handle):
+        """One goal at a time on the arm (`rad_ros.arm_lock`), then `_execute`."""
+        goal_id = goal_name(goal_handle)
+        busy = self.arm_lock.take('/execute_assembly', goal_id)
+        if busy:
+            self.get_logger().warning(f'execute_assembly goal {goal_id} refused: {busy}')
+            goal_handle.abort()
+            return ExecuteAssembly.Result(success=False, reason=busy)
+        try:
+            return self._execute(goal_handle)
+        finally:
+            self.arm_lock.give(goal_id)
+
+    def _execute(self, goal_handle):
         """Glue for rad_core.sequencing.execution.execute: the plant is the arm controller's and the hand's
         actions, joint states and motion capture; feedback and cancel go through the goal handle."""
         goal = goal_handle.request

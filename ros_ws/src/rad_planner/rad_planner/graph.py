@@ -1,13 +1,14 @@
 """Bring the whole rad node graph up with one parameter file, without ros2 launch.
 
-    graph [--params FILE] [--no-viz] [--no-twin] [-p node.param:=value ...]
+    graph [--params FILE] [--no-viz] [--no-twin] [--sim-time] [-p node.param:=value ...]
 
 Starts, as separate processes, each installed node exactly as `ros2 run` would
 (the executable under <prefix>/lib/<package>/), all with the same parameter file
 (each node reads its own section), and stops them all together on Ctrl-C. On a full
 ROS 2 install, `ros2 launch rad_planner graph.launch.py` does the same. --no-twin starts
 every node but the twin, for a real cell (franka_ros2 serves the arm and the hand; see
-rad_planner/config/franka.yaml and franka.launch.py).
+rad_planner/config/franka.yaml and franka.launch.py). --sim-time runs every node on the twin's
+simulated time (the twin publishes /clock; every node gets use_sim_time:=true).
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ NODES = (
     ('rad_planner', 'sequencer_node', 'sequencer'),
     ('rad_planner', 'assembly_node', 'assembly'),
     ('rad_viz', 'viz_node', 'viz'),
+    ('rad_viz', 'markers_node', 'markers'),      # RViz's markers
 )
 
 
@@ -110,6 +112,13 @@ def parse_overrides(items: list[str]) -> dict[str, dict[str, str]]:
     return out
 
 
+def sim_time(overrides: dict[str, dict[str, str]]) -> dict[str, dict[str, str]]:
+    """The overrides with every node on simulated time and the twin publishing /clock."""
+    out = {name: {'use_sim_time': 'true', **overrides.get(name, {})} for _, _, name in NODES}
+    out['twin'] = {'publish_clock': 'true', **out['twin']}
+    return {**overrides, **out}
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog='graph', description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -117,6 +126,8 @@ def main(argv=None) -> int:
     parser.add_argument('--no-viz', action='store_true', help='do not start the Rerun visualizer')
     parser.add_argument('--no-twin', action='store_true',
                         help='do not start the twin (a real cell: the robot\'s driver serves the arm and the hand)')
+    parser.add_argument('--sim-time', action='store_true',
+                        help="every node on the twin's simulated time (/clock, use_sim_time)")
     parser.add_argument('--log-dir', type=Path, help='write each node\'s output to DIR/<node>.log')
     parser.add_argument('-p', dest='overrides', action='append', default=[], metavar='NODE.PARAM:=VALUE')
     args = parser.parse_args(argv)
@@ -124,7 +135,10 @@ def main(argv=None) -> int:
     if not params.is_file():
         print(f'graph: no parameter file {params}', file=sys.stderr)
         return 2
-    graph = start_graph(params, parse_overrides(args.overrides), viz=not args.no_viz, log_dir=args.log_dir,
+    overrides = parse_overrides(args.overrides)
+    if args.sim_time:
+        overrides = sim_time(overrides)
+    graph = start_graph(params, overrides, viz=not args.no_viz, log_dir=args.log_dir,
                         skip=('twin',) if args.no_twin else ())
     print(f'graph: started {", ".join(graph.processes)} with {params}; Ctrl-C stops them', flush=True)
     signal.signal(signal.SIGTERM, signal.default_int_handler)

@@ -11,7 +11,7 @@
 The server lives on the assembly node (`serve_take_apart(node)`), whose plant, joint
 states, registration (`registered_world` where the node has it: fallen blocks set aside)
 and parameters (settle_s, position_tol, max_replans, time_limit_s, the tracker's noise)
-it shares with /execute_assembly.
+it shares with /execute_assembly, and its arm: one goal of the two at a time (`rad_ros.arm_lock`).
 """
 
 from __future__ import annotations
@@ -26,6 +26,7 @@ from rad_core.sequencing.execution.disassembly import TableConfig, take_apart
 from rad_core.sequencing.execution.execute import ExecuteConfig
 from rad_core.sequencing.planning.plan import MotionPlan
 from rad_msgs.action import TakeApart
+from rad_ros.arm_lock import goal_name
 from rad_ros.motion import pose_msg
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
@@ -55,6 +56,18 @@ def serve_take_apart(node) -> ActionServer:
     plan_place = place_planner(node)
 
     def execute_callback(goal_handle):
+        goal_id = goal_name(goal_handle)
+        busy = node.arm_lock.take('/take_apart', goal_id)
+        if busy:
+            node.get_logger().warning(f'take_apart goal {goal_id} refused: {busy}')
+            goal_handle.abort()
+            return TakeApart.Result(success=False, reason=busy)
+        try:
+            return run(goal_handle)
+        finally:
+            node.arm_lock.give(goal_id)
+
+    def run(goal_handle):
         goal = goal_handle.request
         result = TakeApart.Result()
         feedback = TakeApart.Feedback()

@@ -23,7 +23,14 @@ Endpoints (relative names, so namespaces and remaps work); <arm_controller> and
   pub  rigid_bodies                    rad_msgs/RigidBodies, all bodies + frame number; a dropped
                                        body has tracking_valid false and its last reported pose
   pub  scene                           rad_msgs/Scene, latched: the scene last loaded
+  pub  robot_description               std_msgs/String, latched: the URDF simulated (meshes as file://
+                                       URIs), for RViz (robot 'panda'; publish_robot_description)
+  pub  /tf                             tf2_msgs/TFMessage: frame_id -> block/<id>, each block's true pose
+                                       (its anchor unit's centre), at 10 Hz
   pub  ~/events                        std_msgs/String: accepted / rejected (with the reason) / done
+  pub  /clock                          rosgraph_msgs/Clock: the simulated time from 0, each tick, where
+                                       publish_clock is true; every stamp above is then simulated time,
+                                       and the graph's nodes run with use_sim_time:=true
   srv  load_scene                      rad_msgs/LoadScene
   srv  reset                           std_srvs/Trigger: back to the scene last loaded
   srv  get_scene_state                 rad_msgs/GetSceneState: the scene as it is now
@@ -43,25 +50,26 @@ seed wins). A dropped frame is a tick with no motion-capture publication (joint
 states still go out); every injected slip, miss, nudge and placement error is
 also published on ~/events ({'event': 'fault', ...}).
 
-Physics runs all the time at real_time_factor x wall time, in the timer callback,
-so service calls and trajectories interleave with it on one thread; the action
-goals are coroutines on that thread that wait for the twin to finish them.
+Physics runs all the time at real_time_factor x wall time (the simulated time /clock gives), in
+the timer callback, so service calls and trajectories interleave with it on one thread; the
+action goals are coroutines on that thread that wait for the twin to finish them.
 """
 
 from __future__ import annotations
 
 import json
 import math
+import re
 import time
 
 import numpy as np
 from control_msgs.action import FollowJointTrajectory, GripperCommand
 from franka_vacuum_gripper.action import DropOff, Stop, Vacuum
-from geometry_msgs.msg import PoseStamped
+from geometry_msgs.msg import PoseStamped, TransformStamped
 from rad_core.cell.mocap import RigidBodyPose
 from rad_core.cell.motion import GripperCommand as GripperStep
 from rad_core.cell.motion import GripperResult
-from rad_core.cell.panda import FINGER_OPEN
+from rad_core.cell.panda import FINGER_OPEN, urdf_path
 from rad_core.cell.trajectory import TrajectoryRejected
 from rad_core.domain.errors import RadError
 from rad_core.domain.scene import Scene
@@ -77,15 +85,41 @@ from rad_ros.conversions import scene_from_request, scene_to_msg
 from rad_ros.motion import duration_to_s, pose_from_msg, pose_stamped, rigid_bodies_msg, trajectory_from_msg
 from rad_ros.node_main import main_for
 from rad_ros.qos import LATCHED
+from builtin_interfaces.msg import Time
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from rclpy.task import Future
+from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
+from tf2_msgs.msg import TFMessage
 from trajectory_msgs.msg import JointTrajectory
+
+
+TF_RATE_HZ = 10.0
+"""How often each block's transform goes out on /tf (at most the publish rate)."""
+
+
+def robot_description(effector: str) -> str:
+    """The URDF the twin simulates, its meshes as file:// URIs (what RViz's robot model resolves)."""
+    text = urdf_path(effector).read_text()
+    return re.sub(r'filename="(/[^"]+)"', r'filename="file://\1"', text)
+
+
+def block_tf(bodies, frame_id: str, stamp) -> TFMessage:
+    """Each block's true pose as a transform frame_id -> block/<id> (anchor unit's centre)."""
+    out = TFMessage()
+    for b in bodies:
+        t = TransformStamped(child_frame_id=f'block/{b.name}')
+        t.header.frame_id, t.header.stamp = frame_id, stamp
+        t.transform.translation.x, t.transform.translation.y, t.transform.translation.z = map(float, b.position)
+        (t.transform.rotation.x, t.transform.rotation.y, t.transform.rotation.z,
+         t.transform.rotation.w) = map(float, b.quaternion)
+        out.transforms.append(t)
+    return out
 
 
 class TwinNode(Node):
@@ -94,6 +128,12 @@ class TwinNode(Node):
         self.declare_parameter('scene_file', '')
         self.declare_parameter('publish_rate_hz', 50.0)
         self.declare_parameter('real_time_factor', 1.0)
+        self.declare_parameter('publish_robot_description', True, ParameterDescriptor(
+            description='publish the URDF on robot_description (off where robot_state_publisher does)',
+            read_only=True))
+        self.declare_parameter('publish_clock', False, ParameterDescriptor(
+            description='publish /clock from the simulated time and stamp everything with it '
+                        '(run every node of the graph with use_sim_time:=true)', read_only=True))
         self.declare_parameter('frame_id', 'world')
         self.declare_parameter('mocap_prefix', 'mocap')
         self.declare_parameter('robot', 'panda')
@@ -137,7 +177,15 @@ class TwinNode(Node):
         self.frame_number = 0
         self.pose_pubs: dict[str, object] = {}
 
+        self.sim_time = 0.0                        # s of simulated time since the twin started
+        self.clock_pub = (self.create_publisher(Clock, '/clock', 10)
+                          if self.get_parameter('publish_clock').value else None)
         self.joint_pub = self.create_publisher(JointState, 'joint_states', 10)
+        if self.get_parameter('publish_robot_description').value:
+            self.description_pub = self.create_publisher(String, 'robot_description', LATCHED)
+            self.description_pub.publish(String(data=robot_description(effector)))
+        self.tf_pub = self.create_publisher(TFMessage, '/tf', 10)
+        self.tf_every = max(1, round(rate / TF_RATE_HZ))
         self.bodies_pub = self.create_publisher(RigidBodies, 'rigid_bodies', qos_profile_sensor_data)
         self.scene_pub = self.create_publisher(SceneMsg, 'scene', LATCHED)
         self.events_pub = self.create_publisher(String, '~/events', 10)
@@ -197,6 +245,7 @@ class TwinNode(Node):
         # Never try to catch up more than a quarter second of lag in one tick.
         dt = min(now - self.last_tick, 0.25) * self.rtf
         self.last_tick = now
+        self.sim_time += dt
         gripping = self.gripper_done is not None and self.twin.gripper_result is None
         finished = self.twin.advance(dt)
         if finished is not None:
@@ -210,8 +259,17 @@ class TwinNode(Node):
         for wake in wakers:
             wake.set_result(None)
 
+    def stamp(self):
+        """Now: the simulated time where the twin publishes /clock, else the node's clock."""
+        if self.clock_pub is None:
+            return self.get_clock().now().to_msg()
+        ns = int(round(self.sim_time * 1e9))
+        return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
     def publish_state(self) -> None:
-        stamp = self.get_clock().now().to_msg()
+        stamp = self.stamp()
+        if self.clock_pub is not None:
+            self.clock_pub.publish(Clock(clock=stamp))
         names, positions, velocities = self.twin.joint_state()
         msg = JointState(name=list(names), position=[float(v) for v in positions],
                          velocity=[float(v) for v in velocities])
@@ -226,6 +284,8 @@ class TwinNode(Node):
         self.frame_number += 1
         if self.twin.drop_frame():
             return
+        if self.frame_number % self.tf_every == 0:
+            self.tf_pub.publish(block_tf(self.twin.bodies(exact=True), self.frame_id, stamp))
         bodies = [self.to_mocap(b) for b in self.twin.bodies()]
         self.bodies_pub.publish(rigid_bodies_msg(bodies, self.frame_number, stamp, self.mocap_frame))
         for body in bodies:
