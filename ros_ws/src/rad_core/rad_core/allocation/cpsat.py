@@ -340,17 +340,13 @@ def solve_rounds(model, w, candidates: list[Candidate], scene: Scene, rounds: in
 def hand_unplaced(scene: Scene, placements, gamp=None, way_down: bool = False) -> list[int]:
     """The indices of the `placements` (allocation.Placement, of the scene's free cells) that no
     order `allocation.order` finds places beside the others (the support rule 'hand' and
-    `rad_core.allocation.supply` rule them out and solve again). Poses the order places but that
-    would tip what holds them (`HandOrder.tipping`) count only where nothing else is left out:
-    most lean on a pose left out, and come back once that one is replaced."""
+    `rad_core.allocation.supply` rule them out and solve again; `HandOrder.left_out`: poses that
+    would tip what holds them count only where nothing else is left out)."""
     placements = list(placements)
-    found = hand_order(scene, placements, gamp=gamp, way_down=way_down)
-    placed, tipping = set(found.order), set(found.tipping)
     grid = Grid(scene)
     regions = [t.name for t in scene.targets]
     keys = [tuple(sorted(grid.index(regions.index(p.target), c) for c in p.cells)) for p in placements]
-    left = [k for k, key in enumerate(keys) if key not in placed and key not in tipping]
-    return left or [k for k, key in enumerate(keys) if key in tipping]
+    return hand_order(scene, placements, gamp=gamp, way_down=way_down).left_out(keys)
 
 
 def _filled_targets(scene: Scene, grid: Grid) -> int:

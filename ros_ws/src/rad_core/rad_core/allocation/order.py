@@ -69,6 +69,14 @@ class HandOrder:
     """Poses CP-SAT's order placed that would tip what holds them, in every walk tried
     (`domain.statics.order_statics`): left out of `order`."""
 
+    def left_out(self, poses) -> list[int]:
+        """Indices of `poses` (grid cells, sorted) this order does not place: those CP-SAT's order
+        leaves out; where it leaves none out, those that would tip. Most tipping poses lean on a
+        pose left out, and stand again once that one is replaced."""
+        placed, tipping = set(self.order), set(self.tipping)
+        left = [k for k, key in enumerate(poses) if key not in placed and key not in tipping]
+        return left or [k for k, key in enumerate(poses) if key in tipping]
+
 
 def hand_ways(grid: Grid, hand, occupied: np.ndarray, type_name: str, yaw: int, ids) -> list[np.ndarray] | None:
     """The ways a pose can still be held (the blocking cells of each grasp at each hand yaw, none

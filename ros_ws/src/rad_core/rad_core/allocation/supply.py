@@ -318,18 +318,19 @@ def hand_left(scene: Scene, grid: Grid, placements, gamp=None) -> tuple[dict, ..
     """The placements no order of `allocation.order.hand_order` places (supply's `SupplyReport.hand_left`),
     each with the cells it fills and why: its type has no top-down grasp, or every way of holding it
     (a grasp at a hand yaw) needs free a cell that another piece of the cover fills."""
-    placed = set(hand_order(scene, placements, gamp=gamp, way_down=True).order)
     regions = [t.name for t in scene.targets]
+    keys = [tuple(sorted(grid.index(regions.index(p.target), c) for c in p.cells)) for p in placements]
+    left = set(hand_order(scene, placements, gamp=gamp, way_down=True).left_out(keys))
     hand = HandBlocked(scene, grid, gamp)
     owner = {}
     for p in placements:
         for c in p.cells:
             owner[grid.index(regions.index(p.target), c)] = p
     out = []
-    for p in placements:
-        ids = [grid.index(regions.index(p.target), c) for c in p.cells]
-        if tuple(sorted(ids)) in placed:
+    for k, p in enumerate(placements):
+        if k not in left:
             continue
+        ids = [grid.index(regions.index(p.target), c) for c in p.cells]
         ways = [w for pair in hand.cells(p.type, p.yaw, ids) for w in pair]
         needed = sorted({int(c) for w in ways for c in w.tolist() if owner.get(int(c)) not in (None, p)})
         if not ways:
