@@ -88,7 +88,7 @@ from franka_vacuum_gripper.action import Vacuum
 from rad_msgs.action import ExecuteAssembly
 from rad_msgs.msg import Scene as SceneMsg
 from rad_msgs.srv import Allocate, PlanAction, PlanAssembly, PresentBlock, Sequence
-from rad_ros.arm_lock import ArmLock, goal_name
+from rad_ros.arm_lock import ArmLock
 from rad_ros.diagnostics import ERROR, OK, WARN, Checks, answers
 from rad_ros.conversions import (
     allocation_from_response,
@@ -205,7 +205,9 @@ class AssemblyNode(Node):
             self.tf_static_pub = self.create_publisher(TFMessage, '/tf_static', LATCHED)
             self.tf_static_pub.publish(calibration_tf(self.frames, self.get_clock().now().to_msg()))
         self.create_service(PlanAssembly, 'plan_assembly', self.plan_assembly_callback, callback_group=group)
-        self.action_server = ActionServer(self, ExecuteAssembly, 'execute_assembly', self.execute_callback,
+        self.action_server = ActionServer(self, ExecuteAssembly, 'execute_assembly',
+                                          self.arm_lock.serve(self, '/execute_assembly', ExecuteAssembly.Result,
+                                                              self._execute),
                                           goal_callback=lambda goal: GoalResponse.ACCEPT,
                                           cancel_callback=lambda goal: CancelResponse.ACCEPT,
                                           callback_group=group)
@@ -513,19 +515,6 @@ class AssemblyNode(Node):
         return response
 
     # ---- /execute_assembly -------------------------------------------------------------
-    def execute_callback(self, goal_handle):
-        """One goal at a time on the arm (`rad_ros.arm_lock`), then `_execute`."""
-        goal_id = goal_name(goal_handle)
-        busy = self.arm_lock.take('/execute_assembly', goal_id)
-        if busy:
-            self.get_logger().warning(f'execute_assembly goal {goal_id} refused: {busy}')
-            goal_handle.abort()
-            return ExecuteAssembly.Result(success=False, reason=busy)
-        try:
-            return self._execute(goal_handle)
-        finally:
-            self.arm_lock.give(goal_id)
-
     def _execute(self, goal_handle):
         """Glue for rad_core.sequencing.execution.execute: the plant is the arm controller's and the hand's
         actions, joint states and motion capture; feedback and cancel go through the goal handle."""

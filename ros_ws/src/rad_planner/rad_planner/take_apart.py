@@ -26,7 +26,6 @@ from rad_core.sequencing.execution.disassembly import TableConfig, take_apart
 from rad_core.sequencing.execution.execute import ExecuteConfig
 from rad_core.sequencing.planning.plan import MotionPlan
 from rad_msgs.action import TakeApart
-from rad_ros.arm_lock import goal_name
 from rad_ros.motion import pose_msg
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
@@ -54,18 +53,6 @@ def heap_of(node, goal) -> Scene:
 def serve_take_apart(node) -> ActionServer:
     """Mount /take_apart on an assembly node (rad_planner.assembly_node.AssemblyNode)."""
     plan_place = place_planner(node)
-
-    def execute_callback(goal_handle):
-        goal_id = goal_name(goal_handle)
-        busy = node.arm_lock.take('/take_apart', goal_id)
-        if busy:
-            node.get_logger().warning(f'take_apart goal {goal_id} refused: {busy}')
-            goal_handle.abort()
-            return TakeApart.Result(success=False, reason=busy)
-        try:
-            return run(goal_handle)
-        finally:
-            node.arm_lock.give(goal_id)
 
     def run(goal_handle):
         goal = goal_handle.request
@@ -118,7 +105,7 @@ def serve_take_apart(node) -> ActionServer:
             (goal_handle.succeed if result.success else goal_handle.abort)()
         return result
 
-    return ActionServer(node, TakeApart, 'take_apart', execute_callback,
+    return ActionServer(node, TakeApart, 'take_apart', node.arm_lock.serve(node, '/take_apart', TakeApart.Result, run),
                         goal_callback=lambda goal: GoalResponse.ACCEPT,
                         cancel_callback=lambda goal: CancelResponse.ACCEPT,
                         callback_group=ReentrantCallbackGroup())

@@ -43,6 +43,22 @@ class ArmLock:
             if self._holder is not None and self._holder[1] == goal_id:
                 self._holder = None
 
+    def serve(self, node, action: str, result_type, run: Callable):
+        """An action server's execute callback: `run(goal_handle)` while this goal holds the arm;
+        a goal that finds it taken ends at once, aborted, the reason in its result."""
+        def callback(goal_handle):
+            goal_id = goal_name(goal_handle)
+            busy = self.take(action, goal_id)
+            if busy:
+                node.get_logger().warning(f'{action.lstrip("/")} goal {goal_id} refused: {busy}')
+                goal_handle.abort()
+                return result_type(success=False, reason=busy)
+            try:
+                return run(goal_handle)
+            finally:
+                self.give(goal_id)
+        return callback
+
     @property
     def holder(self) -> str:
         """'<action> goal <id>' of the goal driving the arm, '' when none does."""

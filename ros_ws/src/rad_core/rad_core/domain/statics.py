@@ -170,32 +170,26 @@ class _Walk:
         under = _under(self.grid, self.owner, cells)
         return {int(m) for m in under if m >= 0 and m != n}, bool((under == -2).any())
 
+    def _down(self, start: set[int]) -> tuple[set[int], bool]:
+        """(the placed pieces reached going down from `start`, start included; whether one of them
+        has a unit over nothing)."""
+        seen, todo, over = set(start), list(start), False
+        while todo:
+            below, over_nothing = self._under_pieces(self.placed[todo.pop()], -3)
+            over |= over_nothing
+            todo += [m for m in below - seen]
+            seen |= below
+        return seen, over
+
     def closure(self, cells: np.ndarray) -> set[int]:
         """The placed pieces the load of `cells` reaches: those right under them, and under those."""
-        start, _ = self._under_pieces(cells, -3)
-        seen, todo = set(start), list(start)
-        while todo:
-            below, _ = self._under_pieces(self.placed[todo.pop()], -3)
-            todo += [m for m in below - seen]
-            seen |= below
-        return seen
-
-    def _reaches_overhang(self, start: set[int]) -> bool:
-        seen, todo = set(start), list(start)
-        while todo:
-            q = todo.pop()
-            below, over_nothing = self._under_pieces(self.placed[q], q)
-            if over_nothing:
-                return True
-            todo += [m for m in below - seen]
-            seen |= below
-        return False
+        return self._down(self._under_pieces(cells, -3)[0])[0]
 
     def add(self, cells: np.ndarray) -> tuple[bool, bool]:
         """(added, whether its load reaches an overhang: it may hold down what waits)."""
         n = len(self.placed)
         below, over_nothing = self._under_pieces(cells, n)
-        heavy = over_nothing or self._reaches_overhang(below)
+        heavy = over_nothing or self._down(below)[1]
         if heavy and not structure_statics(self.grid, self.placed + [cells], self.ground, self.margin):
             return False, heavy
         self.placed.append(cells)
