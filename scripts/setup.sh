@@ -80,11 +80,13 @@ flock 9
 # The build needs the venv prefix on AMENT_PREFIX_PATH/CMAKE_PREFIX_PATH, but not
 # this workspace's own previous install, hence RAD_ENV_NO_WORKSPACE.
 RAD_ENV_NO_WORKSPACE=1 source "$ROOT/scripts/env.sh"
-# ros_ws/src/{control_msgs,tf2_msgs,mocap4r2_msgs,franka_vacuum_gripper} define upstream interfaces (control_msgs a
-# subset) that PyPI has no wheel for; each is built only where the environment lacks it. A full
-# ROS 2 install (/opt/ros/jazzy sourced, the Docker image) provides the real ones: skip ours
-# there, and drop a copy built earlier so that it cannot shadow the system's.
-SYSTEM_PROVIDED_IF_PRESENT=(control_msgs tf2_msgs mocap4r2_msgs franka_vacuum_gripper)
+# ros_ws/src/{control_msgs,tf2_msgs,mocap4r2_msgs,franka_vacuum_gripper,object_recognition_msgs,moveit_msgs}
+# define upstream interfaces (control_msgs, object_recognition_msgs and moveit_msgs subsets) that PyPI has
+# no wheel for; each is built only where the environment lacks it. A full ROS 2 install (/opt/ros/jazzy
+# sourced, the Docker image; MoveIt 2 brings moveit_msgs and object_recognition_msgs) provides the real
+# ones: skip ours there, and drop a copy built earlier so that it cannot shadow the system's.
+SYSTEM_PROVIDED_IF_PRESENT=(control_msgs tf2_msgs mocap4r2_msgs franka_vacuum_gripper object_recognition_msgs
+                            moveit_msgs)
 ws_install="$(cd ros_ws/install 2>/dev/null && pwd -P || echo "$(cd ros_ws && pwd -P)/install")"
 IFS=: read -ra ament_prefixes <<<"${AMENT_PREFIX_PATH:-}"
 provided_from() {  # provided_from PACKAGE: "system" when a prefix outside this workspace has it

@@ -19,3 +19,15 @@ def test_a_launch_file_compiles_and_starts_rad_nodes_with_the_shared_arguments(p
            and any(k.arg == 'package' and isinstance(k.value, ast.Constant) and str(k.value.value).startswith('rad_')
                    for k in n.keywords)]
     assert not raw, f'{path.name} starts a rad node without rad_ros.launching.node'
+
+
+@pytest.mark.parametrize('path', LAUNCH_FILES, ids=lambda p: p.name)
+def test_a_launch_file_of_the_graph_starts_its_managed_nodes_unconfigured_under_a_lifecycle_manager(path):
+    """A graph (one with the assembly node) is brought up in order by a lifecycle manager; a launch
+    file of one node (twin.launch.py) leaves that node to start itself (autostart)."""
+    text = path.read_text()
+    if "'assembly_node'" not in text:
+        pytest.skip(f'{path.name} starts no graph')
+    assert "'lifecycle_manager'" in text, f'{path.name} starts managed nodes without rad_planner lifecycle_manager'
+    assert "'autostart'" in text and 'False' in text, \
+        f'{path.name} leaves autostart on where a lifecycle manager brings nodes up'

@@ -14,7 +14,8 @@ ROSDEP = {'numpy': 'python3-numpy', 'scipy': 'python3-scipy', 'yaml': 'python3-y
           'pybullet': 'python3-pybullet', 'pybullet_data': 'python3-pybullet', 'ortools': 'python3-ortools',
           'ruckig': 'python3-ruckig', 'trimesh': 'python3-trimesh', 'rerun': 'python3-rerun-sdk',
           'matplotlib': 'python3-matplotlib', 'dask': 'python3-dask', 'distributed': 'python3-dask',
-          'tensorboardX': 'python3-tensorboardx', 'pytest': 'python3-pytest'}
+          'tensorboardX': 'python3-tensorboardx', 'pytest': 'python3-pytest',
+          'mcap': 'python3-mcap'}
 BUILD_ONLY = {'setuptools'}        # setup.py's
 
 

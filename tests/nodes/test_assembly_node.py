@@ -120,7 +120,7 @@ def test_plans_from_json_and_from_motion_capture(graph):
     assert statuses['motion capture'][1].endswith('bodies tracked') and statuses['arm'][1] == 'idle'
 
 
-HEALTH = {'joint states', 'motion capture', 'arm', 'arm controller', 'gripper', 'sequencer',
+HEALTH = {'lifecycle', 'joint states', 'motion capture', 'arm', 'arm controller', 'gripper', 'sequencer',
           'grasp and motion planning', 'allocation'}
 
 

@@ -160,7 +160,7 @@ def test_markers_for_rviz_show_the_scene_within_5_s_then_the_plan_and_moved_bloc
     markers = node_process('rad_viz', 'markers_node')
     markers.wait_for_output('markers ready', timeout=30.0)
     twin = node_process('rad_sim', 'twin_node', *ros_args({'scene_file': str(path)}))
-    twin.wait_for_output('twin ready', timeout=30.0)
+    twin.wait_for_output(r'\[twin\]: active', timeout=30.0)
     t0 = time.monotonic()
     assert spin_until(ros_node, lambda: got, timeout=10.0)
     assert time.monotonic() - t0 < 5.0

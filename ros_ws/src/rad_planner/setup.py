@@ -28,6 +28,8 @@ setup(
             'graph = rad_planner.graph:main',
             'demo = rad_planner.demo:main',
             'calibration_recorder = rad_planner.calibration_recorder:main',
+            'lifecycle_manager = rad_planner.lifecycle_manager:main',
+            'bag = rad_planner.bag:main',
         ],
     },
 )

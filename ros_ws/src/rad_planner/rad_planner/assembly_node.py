@@ -97,6 +97,7 @@ from rad_ros.conversions import (
     scene_from_request,
     scene_msg_is_empty,
 )
+from rad_ros.lifecycle import ManagedNode
 from rad_ros.mocap_input import MocapInput, calibration_tf
 from rad_ros.motion import motion_from_msgs, moved_aside_from_msgs
 from rad_ros.node_main import run_node
@@ -108,7 +109,6 @@ from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.action import ActionClient, ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor, SingleThreadedExecutor
-from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 from tf2_msgs.msg import TFMessage
@@ -120,11 +120,19 @@ from rad_planner.take_apart import serve_take_apart
 # complete plan starts after it, and an answer that needs no longer first plan comes within it plus 10 %
 # (2.5 s). The first plan itself has time_limit_s. A request's own time_limit_s is a hard deadline.
 ANYTIME_DEADLINE_S = 2.25
+# How long deactivate waits for a stopped goal to end (the arm stops within a control step; the goal
+# then waits for motion capture to settle and re-registers).
+DEACTIVATE_WAIT_S = 15.0
 # The share of a request's time limit kept back from the planner (see plan_assembly_callback).
 DEADLINE_MARGIN = 0.05
 
 
-class AssemblyNode(Node):
+class AssemblyNode(ManagedNode):
+    """The planner and executor as a managed node: configure reads the parameters and opens its
+    clients, servers and subscriptions; only while active does /plan_assembly plan and do
+    /execute_assembly and /take_apart goals drive the arm (otherwise each answers with the reason);
+    deactivate stops a running goal (the arm stops where it is) and waits for it to end."""
+
     def __init__(self):
         super().__init__('assembly')
         for name, value in (('time_limit_s', 120.0), ('anytime_deadline_s', ANYTIME_DEADLINE_S),
@@ -147,6 +155,10 @@ class AssemblyNode(Node):
         for name, value in (('mocap_to_base_translation', [0.0, 0.0, 0.0]),
                             ('mocap_to_base_quaternion', [0.0, 0.0, 0.0, 1.0]), ('ignore_bodies', [])):
             self.declare_parameter(name, value, anything)
+        self.io = None
+        self.halting = threading.Event()   # set while deactivate stops the running goal
+
+    def configure(self) -> None:
         self.model = robot_model(str(self.param('robot')), str(self.param('joint_prefix')))
         check_effector(str(self.param('effector')))     # a bad effector stops the node here with the reason
         # The agent's parts this node runs (verification, re-allocation, the allocation's support);
@@ -200,20 +212,46 @@ class AssemblyNode(Node):
         self.io_thread.start()
         group = ReentrantCallbackGroup()
         self.arm_lock = ArmLock()         # /execute_assembly and /take_apart: one goal at a time
-        self.plan_pub = self.create_publisher(String, 'plan_json', LATCHED)
+        self.plan_pub = self.own(self.create_publisher(String, 'plan_json', LATCHED))
         if self.frames.calibrated:
-            self.tf_static_pub = self.create_publisher(TFMessage, '/tf_static', LATCHED)
+            self.tf_static_pub = self.own(self.create_publisher(TFMessage, '/tf_static', LATCHED))
             self.tf_static_pub.publish(calibration_tf(self.frames, self.get_clock().now().to_msg()))
-        self.create_service(PlanAssembly, 'plan_assembly', self.plan_assembly_callback, callback_group=group)
-        self.action_server = ActionServer(self, ExecuteAssembly, 'execute_assembly',
-                                          self.arm_lock.serve(self, '/execute_assembly', ExecuteAssembly.Result,
-                                                              self._execute),
-                                          goal_callback=lambda goal: GoalResponse.ACCEPT,
-                                          cancel_callback=lambda goal: CancelResponse.ACCEPT,
-                                          callback_group=group)
-        self.take_apart_server = serve_take_apart(self)
+        self.own(self.create_service(PlanAssembly, 'plan_assembly', self.plan_assembly_callback, callback_group=group))
+        self.own(ActionServer(self, ExecuteAssembly, 'execute_assembly',
+                              self.arm_lock.serve(self, '/execute_assembly', ExecuteAssembly.Result, self._execute,
+                                                  self.refusal),
+                              goal_callback=lambda goal: GoalResponse.ACCEPT,
+                              cancel_callback=lambda goal: CancelResponse.ACCEPT,
+                              callback_group=group))
+        self.own(serve_take_apart(self))
         self.diagnostics = Checks(self, checks)
-        self.get_logger().info('assembly planner ready')
+        self.own(self.diagnostics.pub)
+        self.own(self.diagnostics.timer)
+        self.get_logger().info('assembly planner configured')
+
+    def deactivate(self) -> None:
+        """A goal that drives the arm is stopped (as a cancel stops it) and waited for."""
+        if not self.arm_lock.holder:
+            return
+        self.get_logger().warning(f'deactivating: stopping {self.arm_lock.holder}')
+        self.halting.set()
+        try:
+            if not self.arm_lock.wait_free(DEACTIVATE_WAIT_S):
+                self.get_logger().error(f'{self.arm_lock.holder} still runs {DEACTIVATE_WAIT_S:g} s after the stop')
+        finally:
+            self.halting.clear()
+
+    def cleanup(self) -> None:
+        self.stop_io()
+        super().cleanup()
+
+    def refusal(self) -> str:
+        """Why a goal or request cannot run now ('' while active)."""
+        return '' if self.is_active else self.inactive_reason()
+
+    def stop_requested(self, goal_handle) -> bool:
+        """The goal was cancelled, or the node is being deactivated."""
+        return goal_handle.is_cancel_requested or self.halting.is_set()
 
     def health_checks(self) -> dict:
         """What /diagnostics reports each second: the robot's state, motion capture, the arm, and each
@@ -228,7 +266,8 @@ class AssemblyNode(Node):
             name = str(self.param('gripper_action'))
             gripper = ('gripper', answers(f'gripper ({name})',
                                           ActionClient(self.io, GripperCommand, name).server_is_ready))
-        return {'joint states': self.joint_health, 'motion capture': self.mocap_health,
+        return {'lifecycle': lambda: ((OK if self.is_active else WARN), self.lifecycle_state(), {}),
+                'joint states': self.joint_health, 'motion capture': self.mocap_health,
                 'arm': lambda: (OK, f'driven by {self.arm_lock.holder}' if self.arm_lock.holder else 'idle', {}),
                 'arm controller': answers(f'arm controller ({controller})', arm.server_is_ready),
                 gripper[0]: gripper[1],
@@ -263,11 +302,17 @@ class AssemblyNode(Node):
         except ExternalShutdownException:
             pass
 
-    def destroy_node(self):
+    def stop_io(self) -> None:
+        if self.io is None:
+            return
         self.io_stop.set()
         self.io_thread.join(timeout=2.0)
         self.io_executor.shutdown(timeout_sec=0)
         self.io.destroy_node()
+        self.io = None
+
+    def destroy_node(self):
+        self.stop_io()
         super().destroy_node()
 
     def param(self, name):
@@ -482,6 +527,9 @@ class AssemblyNode(Node):
     # ---- /plan_assembly ------------------------------------------------------------
     def plan_assembly_callback(self, request, response):
         t0 = time.perf_counter()
+        if not self.is_active:
+            response.success, response.reason = False, self.inactive_reason()
+            return response
         try:
             limit = self.time_limit(request.time_limit_s)
             # No limit asked for: the first complete plan, improved until the anytime deadline.
@@ -533,11 +581,11 @@ class AssemblyNode(Node):
             scene, _ = self.scene_of(goal.scene, goal.scene_json)
             config = ExecuteConfig(float(self.param('settle_s')), float(self.param('position_tol')),
                                    int(self.param('max_replans')), bool(goal.replan), mocap_noise=self.noise[0])
-            plant = self.plant(lambda: goal_handle.is_cancel_requested)
+            plant = self.plant(lambda: self.stop_requested(goal_handle))
             run = execute_assembly(scene, lambda current, start: self.plan(current, limit, start),
                                    plant.move_arm, plant.move_gripper,
                                    self.registered_world, config, joints=lambda: self.start_joints([]),
-                                   cancelled=lambda: goal_handle.is_cancel_requested, report=report,
+                                   cancelled=lambda: self.stop_requested(goal_handle), report=report,
                                    plan_motion=self.plan_motion, present=self.present_block)
         except RadError as e:
             result.success, result.reason = False, str(e)
@@ -551,6 +599,8 @@ class AssemblyNode(Node):
             goal_handle.abort()
             return result
         result.success, result.reason, result.replans = run.success, run.reason, run.replans
+        if self.halting.is_set() and not goal_handle.is_cancel_requested:
+            result.reason = f'the assembly node was deactivated: {run.reason}'
         result.steps_executed = len(run.steps)
         result.coverage = run.coverage
         result.result_json = json.dumps(run.document({'total': time.perf_counter() - t0}))

@@ -59,7 +59,7 @@ def serve_take_apart(node) -> ActionServer:
         result = TakeApart.Result()
         feedback = TakeApart.Feedback()
         t0 = time.perf_counter()
-        cancelled = lambda: goal_handle.is_cancel_requested  # noqa: E731
+        cancelled = lambda: node.stop_requested(goal_handle)  # noqa: E731
 
         def report(step, planned, block, phase, message):
             feedback.step, feedback.steps_planned, feedback.block_id = step, planned, block
@@ -92,6 +92,8 @@ def serve_take_apart(node) -> ActionServer:
             return result
         stats = run.drift_stats()
         result.success, result.reason = run.success, run.reason
+        if node.halting.is_set() and not goal_handle.is_cancel_requested:
+            result.reason = f'the assembly node was deactivated: {run.reason}'
         result.steps_executed, result.replans = len(run.steps), run.run.replans
         result.lost = list(run.lost)
         result.drift_mean_m, result.drift_max_m = stats['mean_mm'] / 1e3, stats['max_mm'] / 1e3
@@ -105,7 +107,8 @@ def serve_take_apart(node) -> ActionServer:
             (goal_handle.succeed if result.success else goal_handle.abort)()
         return result
 
-    return ActionServer(node, TakeApart, 'take_apart', node.arm_lock.serve(node, '/take_apart', TakeApart.Result, run),
+    return ActionServer(node, TakeApart, 'take_apart', node.arm_lock.serve(node, '/take_apart', TakeApart.Result, run,
+                                                                            node.refusal),
                         goal_callback=lambda goal: GoalResponse.ACCEPT,
                         cancel_callback=lambda goal: CancelResponse.ACCEPT,
                         callback_group=ReentrantCallbackGroup())

@@ -43,12 +43,13 @@ class ArmLock:
             if self._holder is not None and self._holder[1] == goal_id:
                 self._holder = None
 
-    def serve(self, node, action: str, result_type, run: Callable):
+    def serve(self, node, action: str, result_type, run: Callable, refusal: Callable[[], str] = lambda: ''):
         """An action server's execute callback: `run(goal_handle)` while this goal holds the arm;
-        a goal that finds it taken ends at once, aborted, the reason in its result."""
+        a goal that finds it taken, or arrives while `refusal()` gives a reason (the node is not
+        active), ends at once, aborted, the reason in its result."""
         def callback(goal_handle):
             goal_id = goal_name(goal_handle)
-            busy = self.take(action, goal_id)
+            busy = refusal() or self.take(action, goal_id)
             if busy:
                 node.get_logger().warning(f'{action.lstrip("/")} goal {goal_id} refused: {busy}')
                 goal_handle.abort()
@@ -58,6 +59,15 @@ class ArmLock:
             finally:
                 self.give(goal_id)
         return callback
+
+    def wait_free(self, timeout_s: float) -> bool:
+        """Wait until no goal drives the arm; False when one still does after `timeout_s`."""
+        end = self._clock() + timeout_s
+        while self.holder:
+            if self._clock() > end:
+                return False
+            time.sleep(0.05)
+        return True
 
     @property
     def holder(self) -> str:

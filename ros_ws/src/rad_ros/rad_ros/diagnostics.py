@@ -24,7 +24,7 @@ class Checks:
     def __init__(self, node, checks: dict[str, Check], period_s: float = 1.0, callback_group=None):
         self.node, self.checks = node, checks
         self.pub = node.create_publisher(DiagnosticArray, '/diagnostics', 10)
-        node.create_timer(period_s, self.publish, callback_group=callback_group)
+        self.timer = node.create_timer(period_s, self.publish, callback_group=callback_group)
 
     def statuses(self) -> list[DiagnosticStatus]:
         out = []

@@ -17,9 +17,10 @@ converted), pybind11 turns it into another exception (seen: a RuntimeError from
 take_message); once a stop has been asked for, such an error is part of the
 shutdown, not a crash, and the node still exits 0.
 
-A node that cannot start for a reason a user can fix (a RadError from its
-constructor: a bad parameter, a checkpoint that does not load) says so in one line
-on stderr and exits 1, without a traceback.
+A managed node (`rad_ros.lifecycle.ManagedNode`) with `autostart` true is configured and activated
+here, before the executor spins. A node that cannot start for a reason a user can fix (a RadError
+from its constructor or its configure: a bad parameter, a checkpoint that does not load) says so in
+one line on stderr and exits 1, without a traceback.
 """
 
 from __future__ import annotations
@@ -32,6 +33,7 @@ from pathlib import Path
 
 import rclpy
 from rad_core.domain.errors import RadError
+from rad_ros.lifecycle import ManagedNode
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.signals import SignalHandlerOptions
 
@@ -62,6 +64,8 @@ def run_node(node_factory, args=None, executor_factory=None) -> int:
     try:
         try:
             node = node_factory()
+            if isinstance(node, ManagedNode) and node.get_parameter('autostart').value:
+                node.bring_up()
         except RadError as e:
             print(f'{Path(sys.argv[0]).name}: cannot start: {e}', file=sys.stderr, flush=True)
             return 1

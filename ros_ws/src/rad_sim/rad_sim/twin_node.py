@@ -82,13 +82,13 @@ from rad_msgs.msg import RigidBodies
 from rad_msgs.msg import Scene as SceneMsg
 from rad_msgs.srv import GetSceneState, LoadScene, PresentBlock, SetBlockPose
 from rad_ros.conversions import scene_from_request, scene_to_msg
+from rad_ros.lifecycle import ManagedNode
 from rad_ros.motion import duration_to_s, pose_from_msg, pose_stamped, rigid_bodies_msg, trajectory_from_msg
 from rad_ros.node_main import main_for
 from rad_ros.qos import LATCHED
 from builtin_interfaces.msg import Time
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
-from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from rclpy.task import Future
 from rosgraph_msgs.msg import Clock
@@ -122,7 +122,12 @@ def block_tf(bodies, frame_id: str, stamp) -> TFMessage:
     return out
 
 
-class TwinNode(Node):
+class TwinNode(ManagedNode):
+    """The twin as a managed node: configure builds the world and its endpoints (and loads
+    scene_file); active, physics runs and state is published; inactive, the world stands still,
+    nothing is published, arm and gripper goals are rejected (as joint_trajectory_controller rejects
+    them when it is not running) and the services still answer (a paused simulator can be set up)."""
+
     def __init__(self):
         super().__init__('twin')
         self.declare_parameter('scene_file', '')
@@ -149,6 +154,12 @@ class TwinNode(Node):
         any_type = ParameterDescriptor(dynamic_typing=True)     # [0, 0, 1] as well as [0.0, 0.0, 1.0]
         self.declare_parameter('mocap_to_base_translation', [0.0, 0.0, 0.0], any_type)
         self.declare_parameter('mocap_to_base_quaternion', [0.0, 0.0, 0.0, 1.0], any_type)
+        self.world = None
+        self.arm_done: Future | None = None       # completed by the timer when the running trajectory ends
+        self.gripper_done: Future | None = None
+        self.wakers: list[Future] = []             # action coroutines waiting for the next tick
+
+    def configure(self) -> None:
         self.frame_id = self.get_parameter('frame_id').value
         seed = self.get_parameter('faults_seed').value
         if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
@@ -170,55 +181,77 @@ class TwinNode(Node):
                                                 joint_prefix=str(self.get_parameter('joint_prefix').value),
                                                 faults=faults))
         self.faults_published = 0
-        self.arm_done: Future | None = None       # completed by the timer when the running trajectory ends
-        self.wakers: list[Future] = []             # action coroutines waiting for the next tick
-        self.gripper_done: Future | None = None
         self.scene: Scene | None = None
         self.frame_number = 0
         self.pose_pubs: dict[str, object] = {}
 
         self.sim_time = 0.0                        # s of simulated time since the twin started
-        self.clock_pub = (self.create_publisher(Clock, '/clock', 10)
+        self.clock_pub = (self.own(self.create_publisher(Clock, '/clock', 10))
                           if self.get_parameter('publish_clock').value else None)
-        self.joint_pub = self.create_publisher(JointState, 'joint_states', 10)
+        self.joint_pub = self.own(self.create_publisher(JointState, 'joint_states', 10))
         if self.get_parameter('publish_robot_description').value:
-            self.description_pub = self.create_publisher(String, 'robot_description', LATCHED)
+            self.description_pub = self.own(self.create_publisher(String, 'robot_description', LATCHED))
             self.description_pub.publish(String(data=robot_description(effector)))
-        self.tf_pub = self.create_publisher(TFMessage, '/tf', 10)
+        self.tf_pub = self.own(self.create_publisher(TFMessage, '/tf', 10))
         self.tf_every = max(1, round(rate / TF_RATE_HZ))
-        self.bodies_pub = self.create_publisher(RigidBodies, 'rigid_bodies', qos_profile_sensor_data)
-        self.scene_pub = self.create_publisher(SceneMsg, 'scene', LATCHED)
-        self.events_pub = self.create_publisher(String, '~/events', 10)
+        self.bodies_pub = self.own(self.create_publisher(RigidBodies, 'rigid_bodies', qos_profile_sensor_data))
+        self.scene_pub = self.own(self.create_publisher(SceneMsg, 'scene', LATCHED))
+        self.events_pub = self.own(self.create_publisher(String, '~/events', 10))
         controller = str(self.get_parameter('arm_controller').value).rstrip('/')
-        self.create_subscription(JointTrajectory, f'{controller}/joint_trajectory', self.trajectory_callback, 10)
-        self.arm_server = ActionServer(self, FollowJointTrajectory, f'{controller}/follow_joint_trajectory',
-                                       self.follow_joint_trajectory_callback,
-                                       goal_callback=lambda goal: GoalResponse.ACCEPT,
-                                       cancel_callback=lambda goal: CancelResponse.ACCEPT)
+        self.own(self.create_subscription(JointTrajectory, f'{controller}/joint_trajectory',
+                                          self.trajectory_callback, 10))
+        self.own(ActionServer(self, FollowJointTrajectory, f'{controller}/follow_joint_trajectory',
+                              self.follow_joint_trajectory_callback, goal_callback=self.goal_callback,
+                              cancel_callback=lambda goal: CancelResponse.ACCEPT))
         if effector == 'hand':
-            self.gripper_server = ActionServer(self, GripperCommand, str(self.get_parameter('gripper_action').value),
-                                               self.gripper_command_callback,
-                                               goal_callback=lambda goal: GoalResponse.ACCEPT,
-                                               cancel_callback=lambda goal: CancelResponse.ACCEPT)
+            self.own(ActionServer(self, GripperCommand, str(self.get_parameter('gripper_action').value),
+                                  self.gripper_command_callback, goal_callback=self.goal_callback,
+                                  cancel_callback=lambda goal: CancelResponse.ACCEPT))
         else:
             ns = str(self.get_parameter('vacuum_ns').value).rstrip('/')
-            self.vacuum_servers = [ActionServer(self, kind, f'{ns}/{name}', callback)
-                                   for kind, name, callback in ((Vacuum, 'vacuum', self.vacuum_callback),
-                                                                (DropOff, 'dropoff', self.dropoff_callback),
-                                                                (Stop, 'stop', self.stop_callback))]
-        self.create_service(LoadScene, 'load_scene', self.load_scene_callback)
-        self.create_service(Trigger, 'reset', self.reset_callback)
-        self.create_service(GetSceneState, 'get_scene_state', self.get_scene_state_callback)
-        self.create_service(SetBlockPose, 'set_block_pose', self.set_block_pose_callback)
-        self.create_service(PresentBlock, 'feeder/present', self.present_block_callback)
+            for kind, name, callback in ((Vacuum, 'vacuum', self.vacuum_callback),
+                                         (DropOff, 'dropoff', self.dropoff_callback),
+                                         (Stop, 'stop', self.stop_callback)):
+                self.own(ActionServer(self, kind, f'{ns}/{name}', callback, goal_callback=self.goal_callback))
+        for kind, name, callback in ((LoadScene, 'load_scene', self.load_scene_callback),
+                                     (Trigger, 'reset', self.reset_callback),
+                                     (GetSceneState, 'get_scene_state', self.get_scene_state_callback),
+                                     (SetBlockPose, 'set_block_pose', self.set_block_pose_callback),
+                                     (PresentBlock, 'feeder/present', self.present_block_callback)):
+            self.own(self.create_service(kind, name, callback))
 
         path = self.get_parameter('scene_file').value
         if path:
             self.load(Scene.load(path))
         self.last_tick = time.monotonic()
-        self.create_timer(1.0 / rate, self.tick_callback)
+        self.own(self.create_timer(1.0 / rate, self.tick_callback))
         self.get_logger().info(f'{faults.describe()}; motion capture in frame {self.mocap_frame!r}')
-        self.get_logger().info('twin ready' + (f' with {path}' if path else ' (no scene loaded)'))
+        self.get_logger().info('twin configured' + (f' with {path}' if path else ' (no scene loaded)'))
+
+    def activate(self) -> None:
+        self.last_tick = time.monotonic()     # the world stood still while inactive
+
+    def deactivate(self) -> None:
+        """Running goals end: the arm stops where it is, the hand where it is."""
+        if self.arm_done is not None and not self.arm_done.done():
+            self.twin.cancel()
+            self.arm_done.set_result({'error_code': FollowJointTrajectory.Result.INVALID_GOAL,
+                                      'error_string': 'the controller was deactivated: the arm stopped where it was'})
+        if self.gripper_done is not None and not self.gripper_done.done():
+            stopped = self.twin.cancel_gripper()
+            self.gripper_done.set_result(stopped or GripperResult(float(self.world.joint_positions()[7:].mean())))
+
+    def cleanup(self) -> None:
+        self.wake_all()
+        super().cleanup()
+        self.pose_pubs.clear()
+        self.world = self.twin = self.scene = None
+
+    def goal_callback(self, goal) -> GoalResponse:
+        if self.is_active:
+            return GoalResponse.ACCEPT
+        self.get_logger().error(f'goal rejected: {self.inactive_reason()}')
+        return GoalResponse.REJECT
 
     # ---- world ------------------------------------------------------------
     def load(self, scene: Scene) -> None:
@@ -234,13 +267,16 @@ class TwinNode(Node):
         for block in scene.blocks:
             if block.id not in self.pose_pubs:
                 topic = f'{self.get_parameter("mocap_prefix").value}/{block.id}/pose'
-                self.pose_pubs[block.id] = self.create_publisher(PoseStamped, topic, qos_profile_sensor_data)
+                self.pose_pubs[block.id] = self.own(self.create_publisher(PoseStamped, topic, qos_profile_sensor_data))
         self.scene_pub.publish(scene_to_msg(scene, self.frame_id))
 
     def event(self, kind: str, **fields) -> None:
         self.events_pub.publish(String(data=json.dumps({'event': kind, **fields})))
 
     def tick_callback(self) -> None:
+        if not self.is_active:
+            self.wake_all()                    # goals ended by deactivate finish
+            return
         now = time.monotonic()
         # Never try to catch up more than a quarter second of lag in one tick.
         dt = min(now - self.last_tick, 0.25) * self.rtf
@@ -255,6 +291,9 @@ class TwinNode(Node):
         if gripping and self.twin.gripper_result is not None and not self.gripper_done.done():
             self.gripper_done.set_result(self.twin.gripper_result)
         self.publish_state()
+        self.wake_all()
+
+    def wake_all(self) -> None:
         wakers, self.wakers = self.wakers, []
         for wake in wakers:
             wake.set_result(None)
@@ -295,6 +334,10 @@ class TwinNode(Node):
 
     # ---- callbacks ----------------------------------------------------------
     def trajectory_callback(self, msg: JointTrajectory) -> None:
+        if not self.is_active:
+            self.get_logger().error(f'trajectory rejected: {self.inactive_reason()}')
+            self.event('rejected', reason=self.inactive_reason())
+            return
         try:
             info = self.twin.start(trajectory_from_msg(msg))
         except (RadError, ValueError) as e:
@@ -391,6 +434,11 @@ class TwinNode(Node):
         end = self.twin.time + min(command.timeout_ms / 1000.0, VACUUM_BUILD_UP_S)
         while self.twin.time < end - 1e-9:
             await _tick(self)
+            if not self.is_active:
+                result.success = False
+                result.error = f'the vacuum gripper was deactivated before {command.action} ended'
+                goal_handle.abort()
+                return result
         try:
             got = self.twin.vacuum_now(command)
         except RadError as e:
