@@ -124,7 +124,7 @@ def test_the_scene_goes_to_stdout_and_the_summary_to_stderr(tmp_path, capsys):
 
 @pytest.mark.parametrize('argv, problem', [
     (['scene', 'from-mesh', 'MODEL_FBX'], "unknown mesh format '.fbx'"),
-    (['scene', 'from-mesh', 'OPEN_STL', '--scale', '1'], 'not watertight'),
+    (['scene', 'from-mesh', 'FLAT_STL', '--scale', '1'], 'flat'),
     (['scene', 'from-mesh', 'BIG_STL', '--scale', '1'], '--scale 0.40 or less'),
     (['scene', 'from-mesh', 'TEE_STL', '--size', '3', '--types', 'I2', '--inventory', 'INV'], 'not both'),
     (['scene', 'from-mesh', 'TEE_STL', '--size', '3', '--types', 'I3'], 'no target cell can be covered'),
@@ -132,12 +132,10 @@ def test_the_scene_goes_to_stdout_and_the_summary_to_stderr(tmp_path, capsys):
     (['scene', 'supply', 'PLACED'], 'already sit in the target'),
 ])
 def test_bad_input_is_exit_code_2_and_one_line(tmp_path, capsys, argv, problem):
-    files = {'MODEL_FBX': tmp_path / 'm.fbx', 'OPEN_STL': tmp_path / 'open.stl', 'BIG_STL': tmp_path / 'big.stl',
+    files = {'MODEL_FBX': tmp_path / 'm.fbx', 'FLAT_STL': tmp_path / 'flat.stl', 'BIG_STL': tmp_path / 'big.stl',
              'TEE_STL': tmp_path / 'tee.stl', 'INV': tmp_path / 'inv.json', 'PLACED': tmp_path / 'placed.json'}
     files['MODEL_FBX'].write_text('x')
-    box = trimesh.creation.box(extents=(0.1, 0.1, 0.1))
-    box.update_faces(np.arange(len(box.faces)) > 1)
-    box.export(files['OPEN_STL'])
+    trimesh.Trimesh([[0, 0, 0], [0.1, 0, 0], [0, 0.1, 0]], [[0, 1, 2]]).export(files['FLAT_STL'])
     trimesh.creation.box(extents=(1.0, 0.2, 0.3)).export(files['BIG_STL'])
     letter_t(files['TEE_STL'])
     files['INV'].write_text('{"cube": 1}')

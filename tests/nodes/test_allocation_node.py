@@ -90,17 +90,11 @@ def test_message_and_json_together_and_bad_time_limits_are_refused(allocation):
     assert call(scene.dumps(), time_limit_s=1.0).success
 
 
-def test_node_parameters_are_used(node_process, ros_node):
-    from rad_msgs.srv import Allocate
+def test_a_bad_default_from_the_parameters_stops_the_node_with_the_reason(node_process):
     proc = node_process('rad_planner', 'allocation_node', *ros_args({'time_limit_s': -2.0}))
-    client = wait_for_service(ros_node, Allocate, 'allocate', timeout=20.0)
-    request = Allocate.Request(scene_json=Scene.from_dict(doc()).dumps())
-    response = call_service(ros_node, client, request, timeout=30.0)
-    # A negative default from the parameter file is caught when used, with a reason.
-    assert not response.success and 'time_limit_s must be a positive' in response.reason
-    request.time_limit_s = 2.0
-    assert call_service(ros_node, client, request, timeout=30.0).success
-    assert proc.stop() == 0, proc.output_tail()
+    assert proc.wait(timeout=30.0) == 1
+    assert 'cannot start: time_limit_s must be a positive number of seconds, got -2.0' in proc.stderr(), \
+        proc.output_tail()
 
 
 def test_ros2run_script_starts_the_node_with_a_params_file(process, ros_node, tmp_path):

@@ -499,3 +499,20 @@ def test_the_feeder_presents_a_block_motion_capture_then_sees(twin, ros_node):
     assert Scene.loads(twin.state().scene_json).feeder.blocks == fed.feeder.blocks   # presented, not taken
     assert twin.load(LoadScene.Request(scene_json=twin.scene.dumps())).success
     assert 'has no feeder' in present(twin.scene.blocks[0].id).reason
+
+
+@pytest.mark.parametrize('robot, prefix', [('panda', ''), ('fr3', ''), ('panda', 'fer')])
+def test_the_robot_description_names_every_joint_as_joint_states_does(robot, prefix):
+    """robot_state_publisher matches joint_states to the URDF by name: every joint the twin publishes
+    is a joint of the description it publishes, and no joint keeps another robot's prefix."""
+    import re as regex
+    from rad_core.cell.robot_model import robot_model
+    from rad_sim.twin_node import robot_description
+    model = robot_model(robot, prefix)
+    text = robot_description('hand', model.prefix)
+    joints = set(regex.findall(r'<joint name="([^"]+)"', text))
+    assert set(model.arm_joint_names + model.finger_joint_names) <= joints, joints
+    assert all(j.startswith(f'{model.prefix}_') for j in joints), joints
+    links = set(regex.findall(r'link="([^"]+)"', text))
+    assert links and all(link.startswith(f'{model.prefix}_') for link in links), links
+    assert 'file:///' in text

@@ -165,6 +165,8 @@ def cmd_scene_from_mesh(args) -> int:
     from rad_core.domain.voxels import mesh_models, place_regions, region_names  # numpy: this command only
     models = mesh_models(region_names(args.models), args.unit, size=args.size, scale=args.scale, up=args.up,
                          hollow=args.hollow)
+    for model in models:
+        _say(args, f'{model.path}: {model.report.summary()}')
     return _supply_and_write(args, place_regions(models, args.unit), args.unit)
 
 
@@ -592,10 +594,13 @@ def build_parser(command: str | None = 'train') -> argparse.ArgumentParser:
     p.add_argument('--scenes', type=int, default=1000)
     p.add_argument('--seed', type=int, default=0)
     p.set_defaults(func=cmd_scene_stats)
-    p = scene.add_parser('from-mesh', help='a target from a mesh (STL, OBJ, PLY), with the blocks to build it',
+    p = scene.add_parser('from-mesh', help='a target from a mesh (STL, OBJ, PLY, OFF, GLB/GLTF), with the blocks '
+                                           'to build it',
                          description='Voxelize meshes at the unit (a cell is a target cell when its centre is inside '
-                                     'the solid), place them as target regions in front of the robot, choose and lay '
-                                     'out the blocks (docs/formats.md).')
+                                     'the solid; a mesh with holes or several overlapping shells is repaired and '
+                                     'flood-filled from outside, and a line says what was done), place them as '
+                                     'target regions in front of the robot, choose and lay out the blocks '
+                                     '(docs/formats.md).')
     p.add_argument('models', nargs='+', metavar='MODEL',
                    help='mesh file, or NAME=FILE to name its region; several files: regions back to back along y')
     _add_target_args(p)

@@ -18,20 +18,32 @@ from rad_core.domain.errors import RadError
 from rad_msgs.srv import Allocate
 from rad_ros.conversions import fill_allocation_response, placement_from_msg, scene_from_request
 from rad_ros.node_main import main_for
+from rad_ros.params import Param, declare, on_set
 from rclpy.node import Node
+
+PARAMS = [Param('time_limit_s', 10.0, "CP-SAT's time limit when a request gives none (s)", True),
+          Param('seed', 0, "CP-SAT's random seed", True),
+          Param('num_workers', 1, "CP-SAT's search workers (1..64)", True),
+          Param('support', 'none', f"the support rule when a request gives none: {', '.join(SUPPORT_MODES)}", True),
+          Param('prefer', 'none', f"what to prefer among equal covers: {', '.join(PREFER_MODES)}", True),
+          Param('effector', 'hand', 'hand or suction, when a request gives none', True)]
+NAMES = [p.name for p in PARAMS]
+"""Every parameter applies to the next request; a value AllocationParams does not take is refused."""
 
 
 class AllocationNode(Node):
     def __init__(self):
         super().__init__('allocation')
-        self.declare_parameter('time_limit_s', 10.0)
-        self.declare_parameter('seed', 0)
-        self.declare_parameter('num_workers', 1)
-        self.declare_parameter('support', 'none')
-        self.declare_parameter('prefer', 'none')
-        self.declare_parameter('effector', 'hand')
+        declare(self, PARAMS)
+        self.params_for(0.0)          # the values given at start, checked (RadError: the node does not start)
+        on_set(self, self.check)
         self.service = self.create_service(Allocate, 'allocate', self.allocate_callback)
         self.get_logger().info('allocation service ready')
+
+    def check(self, changes: dict) -> None:
+        """A change of the defaults, as the next request would use them; RadError refuses it."""
+        current = {name: self.get_parameter(name).value for name in NAMES}
+        AllocationParams(**{**current, **changes}).validate()
 
     def params_for(self, request_time_limit: float, support: str = '', prefer: str = '',
                    effector: str = '') -> AllocationParams:

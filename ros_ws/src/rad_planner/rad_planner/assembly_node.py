@@ -101,11 +101,11 @@ from rad_ros.lifecycle import ManagedNode
 from rad_ros.mocap_input import MocapInput, calibration_tf
 from rad_ros.motion import motion_from_msgs, moved_aside_from_msgs
 from rad_ros.node_main import run_node
+from rad_ros.params import Param, declare
 from rad_ros.plan_msgs import fill_plan_response, plan_json
 from rad_ros.plant import ActionPlant
 from rad_ros.qos import LATCHED
 from rad_ros.sequencer_msgs import action_to_msg, ranking_from_response, sequence_request
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.action import ActionClient, ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor, SingleThreadedExecutor
@@ -127,6 +127,60 @@ DEACTIVATE_WAIT_S = 15.0
 DEADLINE_MARGIN = 0.05
 
 
+
+def _p(name, default, description, dynamic=False, range=None, any_type=False) -> Param:
+    return Param(name, default, description, dynamic, range, any_type)
+
+
+# Read for each request (dynamic: `ros2 param set` applies to the next one), or when the node configures
+# (read-only: set them in the parameter file or on the command line).
+PARAMS = [
+    _p('time_limit_s', 120.0, "a request's time limit when it gives none (s)", True, (0.1, 3600.0)),
+    _p('anytime_deadline_s', ANYTIME_DEADLINE_S, 'no improvement of a first plan starts after this (s), when a '
+       'request gives no time limit', True, (0.01, 600.0)),
+    _p('allocation_time_limit_s', 10.0, "CP-SAT's time limit per allocation (s)", True, (0.1, 600.0)),
+    _p('seed', 0, 'seed of the planner', True, (0, 2 ** 31 - 1)),
+    _p('task_file', '', "the task scene (JSON); '' = the latched scene topic"),
+    _p('service_timeout_s', 60.0, 'how long a call to GAMP or the allocation may take (s)', True, (0.1, 3600.0)),
+    _p('stale_after_s', 2.0, 'joint states and motion capture older than this are stale (s)', False, (0.01, 60.0)),
+    _p('settle_s', 0.5, 'wait after a placement before registering (s)', True, (0.0, 30.0)),
+    _p('position_tol', 0.005, 'a placed block further than this from its pose is a deviation (m)', True,
+       (0.0001, 0.1)),
+    _p('max_replans', 3, 'replans per execution', True, (0, 100)),
+    _p('step_timeout_factor', 3.0, "a motion may take this times its planned duration", True, (1.0, 100.0)),
+    _p('frame_id', 'world', "the robot's base frame"),
+    _p('sequencer_timeout_s', 20.0, 'how long /sequence may take (s)', True, (0.1, 600.0)),
+    _p('agent', 'default', 'the agent whose verification, re-allocation and support this node runs'),
+    _p('max_reallocations', 10, 're-allocations per plan when nothing can be built next', True, (0, 1000)),
+    _p('improve_time_s', IMPROVE_TIME_S, 'time for improving a first complete plan (s)', True, (0.0, 3600.0)),
+    _p('robot', 'panda', 'panda or fr3'),
+    _p('joint_prefix', '', "joint names' prefix ('' = the robot's)"),
+    _p('arm_controller', 'joint_trajectory_controller', "the arm controller's name (its follow_joint_trajectory)"),
+    _p('gripper_action', 'franka_gripper/gripper_action', "the hand's GripperCommand action"),
+    _p('gripper_result_is_width', False, "the gripper's result position is the width between the fingers "
+       '(franka_gripper), not per finger', True),
+    _p('path_tolerance', 0.05, 'path tolerance sent with each arm goal (rad)', True, (0.0, 1.0)),
+    _p('goal_tolerance', 0.01, 'goal tolerance sent with each arm goal (rad)', True, (0.0, 1.0)),
+    _p('goal_time_tolerance', 1.0, 'goal time tolerance sent with each arm goal (s)', True, (0.0, 60.0)),
+    _p('require_joint_states', True, 'false: plan from home when no joint states are heard', True),
+    _p('mocap_input', 'rad', "motion capture's message: rad, mocap4r2 or pose_stamped"),
+    _p('mocap_topic', 'rigid_bodies', 'the rigid bodies topic (rad, mocap4r2)'),
+    _p('pose_topic', 'mocap/{body}/pose', 'one PoseStamped per body, {body} replaced (pose_stamped)'),
+    _p('mocap_frame', '', "motion capture's frame ('' = frame_id)"),
+    _p('body_map_file', '', 'YAML mapping body names to blocks and pivots'),
+    _p('table_z', 0.0, "the table top's height in frame_id (m)"),
+    _p('lost_timeout_s', 2.0, 'how long a block that is not seen is waited for (s)', False, (0.0, 600.0)),
+    _p('mocap_noise', 0.0, "the tracker's position noise, standard deviation (m)", False, (0.0, 0.05)),
+    _p('mocap_yaw_noise_deg', 0.0, "the tracker's yaw noise, standard deviation (deg)", False, (0.0, 45.0)),
+    _p('feeder_service', 'feeder/present', "the feeder's PresentBlock service"),
+    _p('effector', 'hand', 'hand or suction'),
+    _p('vacuum_ns', 'franka_vacuum_gripper', "the vacuum gripper's namespace (effector suction)"),
+    _p('mocap_to_base_translation', [0.0, 0.0, 0.0], 'calibration: p_base = R p_mocap + t, t (m)', any_type=True),
+    _p('mocap_to_base_quaternion', [0.0, 0.0, 0.0, 1.0], 'calibration: R as a quaternion [x, y, z, w]',
+       any_type=True),
+    _p('ignore_bodies', [], 'motion-capture bodies to skip', any_type=True),
+]
+
 class AssemblyNode(ManagedNode):
     """The planner and executor as a managed node: configure reads the parameters and opens its
     clients, servers and subscriptions; only while active does /plan_assembly plan and do
@@ -135,26 +189,7 @@ class AssemblyNode(ManagedNode):
 
     def __init__(self):
         super().__init__('assembly')
-        for name, value in (('time_limit_s', 120.0), ('anytime_deadline_s', ANYTIME_DEADLINE_S),
-                            ('allocation_time_limit_s', 10.0), ('seed', 0),
-                            ('task_file', ''), ('service_timeout_s', 60.0), ('stale_after_s', 2.0),
-                            ('settle_s', 0.5), ('position_tol', 0.005), ('max_replans', 3),
-                            ('step_timeout_factor', 3.0), ('frame_id', 'world'), ('sequencer_timeout_s', 20.0),
-                            ('agent', 'default'), ('max_reallocations', 10), ('improve_time_s', IMPROVE_TIME_S),
-                            ('robot', 'panda'), ('joint_prefix', ''), ('arm_controller', 'joint_trajectory_controller'),
-                            ('gripper_action', 'franka_gripper/gripper_action'), ('gripper_result_is_width', False),
-                            ('path_tolerance', 0.05), ('goal_tolerance', 0.01), ('goal_time_tolerance', 1.0),
-                            ('require_joint_states', True), ('mocap_input', 'rad'), ('mocap_topic', 'rigid_bodies'),
-                            ('pose_topic', 'mocap/{body}/pose'), ('mocap_frame', ''), ('body_map_file', ''),
-                            ('table_z', 0.0), ('lost_timeout_s', 2.0), ('mocap_noise', 0.0),
-                            ('mocap_yaw_noise_deg', 0.0), ('feeder_service', 'feeder/present'),
-                            ('effector', 'hand'), ('vacuum_ns', 'franka_vacuum_gripper')):
-            self.declare_parameter(name, value)
-        # Lists typed by what the user writes ([0, 0, 1] is an integer array): checked below instead.
-        anything = ParameterDescriptor(dynamic_typing=True)
-        for name, value in (('mocap_to_base_translation', [0.0, 0.0, 0.0]),
-                            ('mocap_to_base_quaternion', [0.0, 0.0, 0.0, 1.0]), ('ignore_bodies', [])):
-            self.declare_parameter(name, value, anything)
+        declare(self, PARAMS)
         self.io = None
         self.halting = threading.Event()   # set while deactivate stops the running goal
 

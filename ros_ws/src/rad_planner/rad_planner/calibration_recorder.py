@@ -34,6 +34,7 @@ from rad_core.cell.robot_model import robot_model
 from rad_core.domain.errors import RadError
 from rad_core.sim.world import World
 from rad_ros.node_main import main_for
+from rad_ros.params import Param, declare
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import JointState
@@ -42,15 +43,24 @@ from std_srvs.srv import Trigger
 KEEP_S = 5.0
 """s of input history kept (at least the rest window)."""
 
+# All read when the recorder starts: read-only.
+PARAMS = [Param('robot', 'panda', 'panda or fr3'),
+          Param('joint_prefix', '', "joint names' prefix ('' = the robot's)"),
+          Param('marker_topic', 'mocap/flange_marker/pose', "the flange marker's PoseStamped topic"),
+          Param('marker_offset', [0.0, 0.0, 0.0], "the marker's offset from the flange, flange frame (m)",
+                any_type=True),
+          Param('csv_file', 'calibration_pairs.csv', 'where recorded pairs are appended'),
+          Param('mocap_frame', '', "motion capture's frame, checked against each marker message ('' = any)"),
+          Param('rest_window_s', 0.5, 'the robot and the marker must rest this long (s)', range=(0.01, 60.0)),
+          Param('joint_tol', 0.001, 'joint motion allowed while resting (rad)', range=(0.0, 0.1)),
+          Param('marker_tol', 0.001, 'marker motion allowed while resting (m)', range=(0.0, 0.1)),
+          Param('stale_after_s', 0.5, 'inputs older than this are stale (s)', range=(0.01, 60.0))]
+
 
 class CalibrationRecorder(Node):
     def __init__(self):
         super().__init__('calibration_recorder')
-        for name, value in (('robot', 'panda'), ('joint_prefix', ''), ('marker_topic', 'mocap/flange_marker/pose'),
-                            ('marker_offset', [0.0, 0.0, 0.0]), ('csv_file', 'calibration_pairs.csv'),
-                            ('mocap_frame', ''), ('rest_window_s', 0.5), ('joint_tol', 0.001),
-                            ('marker_tol', 0.001), ('stale_after_s', 0.5)):
-            self.declare_parameter(name, value)
+        declare(self, PARAMS)
         self.model = robot_model(str(self.param('robot')), str(self.param('joint_prefix')))
         self.rest = RestConfig(float(self.param('rest_window_s')), float(self.param('joint_tol')),
                                float(self.param('marker_tol')), float(self.param('stale_after_s')))

@@ -29,16 +29,24 @@ from rad_core.domain.errors import RadError
 from rad_core.sequencing.decide.sequencer import DEFAULT_AGENT, Sequencer, SequencerConfig
 from rad_msgs.srv import Sequence
 from rad_ros.node_main import main_for
+from rad_ros.params import Param, declare
 from rad_ros.sequencer_msgs import fill_sequence_response, sequence_inputs
 from rclpy.node import Node
+
+# All read when the node starts (the agent and its network are loaded then): read-only.
+PARAMS = [Param('agent', DEFAULT_AGENT, 'the ranking agent (rad_core.sequencing.decide.agents)'),
+          Param('policy', '', "a learned policy's name ('' = the agent's)"),
+          Param('checkpoint', '', "a learned policy's weights file ('' = the shipped ones)"),
+          Param('budget', 0, 'MCTS simulations per decision (0 = the agent\'s)', range=(0, 100000)),
+          Param('seed', 0, 'seed of the search', range=(0, 2 ** 31 - 1)),
+          Param('search_time_s', 0.0, 'time per decision for the search (s; 0 = the agent\'s)', range=(0.0, 600.0)),
+          Param('torch_threads', 1, 'threads torch may use (at least 1)')]
 
 
 class SequencerNode(Node):
     def __init__(self):
         super().__init__('sequencer')
-        for name, value in (('agent', DEFAULT_AGENT), ('policy', ''), ('checkpoint', ''), ('budget', 0), ('seed', 0),
-                            ('search_time_s', 0.0), ('torch_threads', 1)):
-            self.declare_parameter(name, value)
+        declare(self, PARAMS)
         threads = int(self.param('torch_threads'))
         if threads < 1:
             raise RadError(f'torch_threads must be at least 1, got {threads}')

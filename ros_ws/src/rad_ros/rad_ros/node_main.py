@@ -34,6 +34,7 @@ from pathlib import Path
 import rclpy
 from rad_core.domain.errors import RadError
 from rad_ros.lifecycle import ManagedNode
+from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.signals import SignalHandlerOptions
 
@@ -66,7 +67,7 @@ def run_node(node_factory, args=None, executor_factory=None) -> int:
             node = node_factory()
             if isinstance(node, ManagedNode) and node.get_parameter('autostart').value:
                 node.bring_up()
-        except RadError as e:
+        except (RadError, ParameterException) as e:    # ParameterException: a value outside its range
             print(f'{Path(sys.argv[0]).name}: cannot start: {e}', file=sys.stderr, flush=True)
             return 1
         executor = (executor_factory or SingleThreadedExecutor)()

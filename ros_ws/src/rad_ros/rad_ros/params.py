@@ -27,9 +27,12 @@ class Param:
     description: str = ''
     dynamic: bool = False
     range: tuple | None = None
+    any_type: bool = False
+    """Typed by what the user writes ([0, 0, 1] as well as [0.0, 0.0, 1.0]); the node checks the value."""
 
     def descriptor(self) -> ParameterDescriptor:
-        d = ParameterDescriptor(name=self.name, description=self.description, read_only=not self.dynamic)
+        d = ParameterDescriptor(name=self.name, description=self.description, read_only=not self.dynamic,
+                                dynamic_typing=self.any_type)
         if self.range is not None:
             lo, hi = self.range
             if isinstance(self.default, float):

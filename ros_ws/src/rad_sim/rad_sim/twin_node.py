@@ -83,11 +83,11 @@ from rad_msgs.msg import Scene as SceneMsg
 from rad_msgs.srv import GetSceneState, LoadScene, PresentBlock, SetBlockPose
 from rad_ros.conversions import scene_from_request, scene_to_msg
 from rad_ros.lifecycle import ManagedNode
+from rad_ros.params import Param, declare, on_set
 from rad_ros.motion import duration_to_s, pose_from_msg, pose_stamped, rigid_bodies_msg, trajectory_from_msg
 from rad_ros.node_main import main_for
 from rad_ros.qos import LATCHED
 from builtin_interfaces.msg import Time
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.qos import qos_profile_sensor_data
 from rclpy.task import Future
@@ -103,9 +103,13 @@ TF_RATE_HZ = 10.0
 """How often each block's transform goes out on /tf (at most the publish rate)."""
 
 
-def robot_description(effector: str) -> str:
-    """The URDF the twin simulates, its meshes as file:// URIs (what RViz's robot model resolves)."""
+def robot_description(effector: str, prefix: str = 'panda') -> str:
+    """The URDF the twin simulates, its meshes as file:// URIs (what RViz's robot model resolves), its
+    links and joints named with `prefix` (the robot model's: 'fr3' names them fr3_link0, fr3_joint1, ...,
+    as joint_states does)."""
     text = urdf_path(effector).read_text()
+    if prefix != 'panda':
+        text = re.sub(r'\b(name|link|joint)="panda_', rf'\1="{prefix}_', text)
     return re.sub(r'filename="(/[^"]+)"', r'filename="file://\1"', text)
 
 
@@ -122,6 +126,33 @@ def block_tf(bodies, frame_id: str, stamp) -> TFMessage:
     return out
 
 
+
+# Read when the twin configures (read-only), but for real_time_factor, which applies at once.
+PARAMS = [
+    Param('scene_file', '', "the scene loaded at configure ('' = none: call load_scene)"),
+    Param('publish_rate_hz', 50.0, 'how often joint states and motion capture go out', range=(1.0, 1000.0)),
+    Param('real_time_factor', 1.0, 'simulated seconds per wall-clock second; applies at once', True, (0.01, 100.0)),
+    Param('publish_robot_description', True, 'publish the URDF on robot_description (off where '
+          'robot_state_publisher does)'),
+    Param('publish_clock', False, 'publish /clock from the simulated time and stamp everything with it (run '
+          'every node of the graph with use_sim_time:=true)'),
+    Param('frame_id', 'world', "the robot's base frame"),
+    Param('mocap_prefix', 'mocap', 'motion capture publishes <mocap_prefix>/<body>/pose'),
+    Param('robot', 'panda', 'panda or fr3: joint names and limits'),
+    Param('joint_prefix', '', "joint names' prefix ('' = the robot's)"),
+    Param('arm_controller', 'joint_trajectory_controller', "the arm controller's name"),
+    Param('gripper_action', 'franka_gripper/gripper_action', "the hand's GripperCommand action"),
+    Param('effector', 'hand', 'hand, or suction (the vacuum gripper)'),
+    Param('vacuum_ns', 'franka_vacuum_gripper', "the vacuum gripper's namespace"),
+    Param('faults', 'none', "the cell's faults: none, realistic, or a JSON/YAML file of FaultConfig fields"),
+    Param('faults_seed', 0, 'seed of the faults (a file\'s own seed wins)'),
+    Param('block_play', BLOCK_PLAY, 'play per side face, as a fraction of a unit', range=(0.0, 0.2)),
+    Param('mocap_frame', '', "motion capture's frame ('' = frame_id)"),
+    Param('mocap_to_base_translation', [0.0, 0.0, 0.0], 'calibration: p_base = R p_mocap + t, t (m)', any_type=True),
+    Param('mocap_to_base_quaternion', [0.0, 0.0, 0.0, 1.0], 'calibration: R as a quaternion [x, y, z, w]',
+          any_type=True),
+]
+
 class TwinNode(ManagedNode):
     """The twin as a managed node: configure builds the world and its endpoints (and loads
     scene_file); active, physics runs and state is published; inactive, the world stands still,
@@ -130,30 +161,8 @@ class TwinNode(ManagedNode):
 
     def __init__(self):
         super().__init__('twin')
-        self.declare_parameter('scene_file', '')
-        self.declare_parameter('publish_rate_hz', 50.0)
-        self.declare_parameter('real_time_factor', 1.0)
-        self.declare_parameter('publish_robot_description', True, ParameterDescriptor(
-            description='publish the URDF on robot_description (off where robot_state_publisher does)',
-            read_only=True))
-        self.declare_parameter('publish_clock', False, ParameterDescriptor(
-            description='publish /clock from the simulated time and stamp everything with it '
-                        '(run every node of the graph with use_sim_time:=true)', read_only=True))
-        self.declare_parameter('frame_id', 'world')
-        self.declare_parameter('mocap_prefix', 'mocap')
-        self.declare_parameter('robot', 'panda')
-        self.declare_parameter('joint_prefix', '')
-        self.declare_parameter('arm_controller', 'joint_trajectory_controller')
-        self.declare_parameter('gripper_action', 'franka_gripper/gripper_action')
-        self.declare_parameter('effector', 'hand')
-        self.declare_parameter('vacuum_ns', 'franka_vacuum_gripper')
-        self.declare_parameter('faults', 'none')
-        self.declare_parameter('faults_seed', 0)
-        self.declare_parameter('block_play', BLOCK_PLAY)   # per side face, fraction of a unit (0.5 mm at 5 cm)
-        self.declare_parameter('mocap_frame', '')
-        any_type = ParameterDescriptor(dynamic_typing=True)     # [0, 0, 1] as well as [0.0, 0.0, 1.0]
-        self.declare_parameter('mocap_to_base_translation', [0.0, 0.0, 0.0], any_type)
-        self.declare_parameter('mocap_to_base_quaternion', [0.0, 0.0, 0.0, 1.0], any_type)
+        declare(self, PARAMS)
+        on_set(self, self.apply)
         self.world = None
         self.arm_done: Future | None = None       # completed by the timer when the running trajectory ends
         self.gripper_done: Future | None = None
@@ -191,7 +200,7 @@ class TwinNode(ManagedNode):
         self.joint_pub = self.own(self.create_publisher(JointState, 'joint_states', 10))
         if self.get_parameter('publish_robot_description').value:
             self.description_pub = self.own(self.create_publisher(String, 'robot_description', LATCHED))
-            self.description_pub.publish(String(data=robot_description(effector)))
+            self.description_pub.publish(String(data=robot_description(effector, self.twin.model.prefix)))
         self.tf_pub = self.own(self.create_publisher(TFMessage, '/tf', 10))
         self.tf_every = max(1, round(rate / TF_RATE_HZ))
         self.bodies_pub = self.own(self.create_publisher(RigidBodies, 'rigid_bodies', qos_profile_sensor_data))
@@ -227,6 +236,12 @@ class TwinNode(ManagedNode):
         self.own(self.create_timer(1.0 / rate, self.tick_callback))
         self.get_logger().info(f'{faults.describe()}; motion capture in frame {self.mocap_frame!r}')
         self.get_logger().info('twin configured' + (f' with {path}' if path else ' (no scene loaded)'))
+
+    def apply(self, changes: dict) -> None:
+        """real_time_factor set while the twin runs: the simulation runs at the new rate from the next tick."""
+        if 'real_time_factor' in changes:
+            self.rtf = float(changes['real_time_factor'])
+            self.get_logger().info(f'real_time_factor now {self.rtf:g}')
 
     def activate(self) -> None:
         self.last_tick = time.monotonic()     # the world stood still while inactive

@@ -29,6 +29,7 @@ from rad_msgs.msg import RigidBodies
 from rad_msgs.msg import Scene as SceneMsg
 from rad_ros.conversions import scene_from_msg
 from rad_ros.node_main import main_for
+from rad_ros.params import Param, declare
 from rad_ros.qos import LATCHED
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
@@ -53,16 +54,19 @@ def stamp_s(header, fallback: float) -> float:
     return t if t > 0 else fallback
 
 
+# All read when the node starts: read-only.
+PARAMS = [Param('recording_path', 'recording.rrd', "the .rrd file the graph is saved to ('' = none)"),
+          Param('connect_url', '', "a running Rerun viewer's URL to stream to ('' = none)"),
+          Param('spawn_viewer', False, 'start a Rerun viewer and stream to it'),
+          Param('viewer_port', 9876, "the spawned viewer's port", range=(1024, 65535)),
+          Param('application_id', 'rad', "Rerun's application id"),
+          Param('log_rate_hz', 20.0, 'how often joint states and bodies are logged, at most', range=(0.1, 1000.0)),
+          Param('effector', 'hand', "the robot's effector drawn: hand or suction")]
+
 class VizNode(Node):
     def __init__(self):
         super().__init__('viz')
-        self.declare_parameter('recording_path', 'recording.rrd')
-        self.declare_parameter('connect_url', '')
-        self.declare_parameter('spawn_viewer', False)
-        self.declare_parameter('viewer_port', 9876)
-        self.declare_parameter('application_id', 'rad')
-        self.declare_parameter('log_rate_hz', 20.0)
-        self.declare_parameter('effector', 'hand')
+        declare(self, PARAMS)
         rate = float(self.get_parameter('log_rate_hz').value)
         if not rate > 0:
             raise RadError(f'log_rate_hz must be positive, got {rate}')

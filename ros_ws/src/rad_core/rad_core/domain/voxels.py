@@ -1,17 +1,30 @@
-"""Targets from files: surface meshes (STL, OBJ, PLY) and voxel grids (.npy, binvox) as target regions.
+"""Targets from files: surface meshes (STL, OBJ, PLY, OFF, GLB/GLTF) and voxel grids (.npy, binvox) as
+target regions.
 
 A user's own shape reaches rad as a file; this module turns it into the cells of a
 `TargetRegion`, resting on the table in front of the robot, where the hand-made shapes
 (`rad_core.domain.shapes`) and generated scenes put theirs. What blocks build it is
 `rad_core.allocation.supply`'s business.
 
-Voxelization rule: a cell is a target cell when its centre lies inside the solid the
-mesh encloses, the rule the generator uses for its polygons. The cells are laid so that
-the model's bounding box is centred in theirs, so a box exactly N cells long gives N
-cells, never N + 1 (a surface sampler marks both cells a face lying on their border
-touches). Inside/outside is trimesh's ray-parity test, so the mesh must be watertight;
-`hollow` keeps the solid's shell (cells with a face towards the outside), and for a
-mesh that is not watertight it takes the cells its surface passes through instead.
+Cells: they are laid so that the model's bounding box is centred in theirs, so a box exactly N
+cells long gives N cells, never N + 1. Which cells are solid depends on the mesh (`solid_cells`,
+which says what it found and did in a `MeshReport`):
+- one closed shell (every edge on two triangles, after merging repeated vertices): a cell is
+  solid when its centre is inside (trimesh's ray-parity test), the rule the generator uses for
+  its polygons ('contains');
+- several closed shells: the same centre rule per shell, a cell solid when it is inside more
+  shells that face outwards than shells that face inwards, so shells that touch or overlap are
+  united, a shell inside another facing inwards is a cavity, and a shell with all its normals
+  flipped still counts ('bodies');
+- anything else (open edges, shells that share edges, triangles that cross): the holes left are
+  capped with a fan of triangles, the surface is marked on a grid `sub` times finer than the cells
+  (every sub-cell that a triangle touches), the outside is flood-filled from the grid's border, and
+  a cell is solid when more than half of it is not outside, a sub-cell the surface touches
+  counting half ('flood fill'). A gap narrower than a sub-cell closes by itself; the half rule
+  keeps the solid from growing a cell layer fatter than the model, so a box exactly N cells long
+  still gives N cells. Enclosed cavities are filled.
+`hollow` keeps the solid's shell (cells with a face towards the outside); where nothing is
+enclosed it takes the cells the surface passes through ('surface').
 
 Scale: `size` N makes the longest side of all the models together N cells (several
 models keep their proportions); `scale` S says how many metres one mesh unit is (1 for a
@@ -40,7 +53,7 @@ from rad_core.domain.shapes import STRUCTURE_X
 # Widest cube the open hand takes (rad_core.gamp.grasps.MAX_GRASP_WIDTH: 0.08 m less 5 mm a side).
 MAX_UNIT = 0.07
 
-MESH_FORMATS = ('.stl', '.obj', '.ply')
+MESH_FORMATS = ('.stl', '.obj', '.ply', '.off', '.glb', '.gltf')
 VOXEL_FORMATS = ('.npy', '.binvox')
 UP_AXES = ('x', 'y', 'z')
 
@@ -72,12 +85,44 @@ class TargetLimits:
 
 
 @dataclass(frozen=True)
+class MeshReport:
+    """What making one mesh's cells found and did (`solid_cells`).
+
+    bodies: connected pieces of surface; open_edges: edges with one triangle on them as read
+    (vertices repeated along texture seams count); open_after: those left after the repairs and
+    the caps; repairs: what was changed, in words; method: 'contains', 'bodies', 'flood fill' or
+    'surface' (the module docstring says which mesh gets which); cells: the filled cells.
+    """
+
+    bodies: int
+    open_edges: int
+    open_after: int
+    repairs: tuple[str, ...]
+    method: str
+    cells: int
+
+    def summary(self) -> str:
+        """One line: the cells and how, the mesh as read, the repairs."""
+        shells = f'{self.bodies} bod{"y" if self.bodies == 1 else "ies"}'
+        if self.open_edges == 0:
+            state = f'{shells}, no open edge'
+        elif self.open_after == self.open_edges:
+            state = f'{shells}, {self.open_edges} open edges'
+        else:
+            state = f'{shells}, {self.open_edges} open edges ({self.open_after} after repairs)'
+        repaired = f'; {", ".join(self.repairs)}' if self.repairs else ''
+        return f'{self.cells} cells by {self.method}: {state}{repaired}'
+
+
+@dataclass(frozen=True)
 class Model:
-    """One file's cells: a boolean occupancy grid [i, j, k], k up, cropped to its filled cells."""
+    """One file's cells: a boolean occupancy grid [i, j, k], k up, cropped to its filled cells;
+    for a mesh, the report of how they were made."""
 
     name: str
     path: str
     cells: np.ndarray
+    report: MeshReport | None = None
 
 
 # ---- reading files ----------------------------------------------------------
@@ -118,7 +163,8 @@ def _suffix(path: str, formats: Sequence[str], kind: str) -> str:
 
 
 def load_mesh(path: str):
-    """The file's triangles as one trimesh.Trimesh; RadError naming the problem otherwise."""
+    """The file's triangles as one trimesh.Trimesh (a file of several parts, such as a GLB scene, gives
+    them all, each where the file puts it); RadError naming the problem otherwise."""
     import trimesh  # trimesh: only a mesh import pays for its import
     suffix = _suffix(path, MESH_FORMATS, 'mesh')
     try:
@@ -126,14 +172,25 @@ def load_mesh(path: str):
     except Exception as e:   # noqa: BLE001 - trimesh raises anything on a broken file
         raise RadError(f'{path}: not a readable {suffix[1:].upper()} mesh ({type(e).__name__}: {e})') from None
     if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
-        raise RadError(f'{path}: the mesh has no triangles')
-    extent = mesh.extents
+        raise RadError(f'{path}: the file holds no triangles: export the model\'s surface as a triangle mesh')
     if not np.all(np.isfinite(mesh.vertices)):
-        raise RadError(f'{path}: the mesh has vertices that are not finite numbers')
+        raise RadError(f'{path}: the mesh has vertices that are not finite numbers: export it again')
+    extent = mesh.extents
     if np.any(extent <= 1e-12 * max(1.0, float(extent.max()))):
         axis = 'xyz'[int(np.argmin(extent))]
-        raise RadError(f'{path}: the mesh is flat (no extent along {axis}): it encloses no volume')
+        raise RadError(f'{path}: the mesh is flat (no extent along {axis}): it encloses no volume; give it a '
+                       f'thickness in a modeller, or use a voxel file')
+    if _flat(mesh.vertices[np.unique(mesh.faces)]):
+        raise RadError(f'{path}: the mesh is flat (all its points lie in one plane): it encloses no volume; give '
+                       f'it a thickness in a modeller, or use a voxel file')
     return mesh
+
+
+def _flat(points: np.ndarray) -> bool:
+    """Whether the points lie in one plane (their spread across it is a billionth of their largest)."""
+    centred = points - points.mean(axis=0)
+    spread = np.linalg.svd(centred, compute_uv=False)
+    return bool(spread[-1] <= 1e-9 * spread[0])
 
 
 def open_edges(mesh) -> int:
@@ -215,32 +272,201 @@ def cell_counts(extents: np.ndarray, pitch: float) -> np.ndarray:
 
 
 def voxelize(mesh, pitch: float, hollow: bool = False, where: str = 'mesh') -> np.ndarray:
-    """The mesh's cells of edge `pitch` (mesh units), the bounding box centred in theirs.
+    """The mesh's cells of edge `pitch` (mesh units), the bounding box centred in theirs (`solid_cells`)."""
+    return solid_cells(mesh, pitch, hollow, where)[0]
 
-    Solid: cells whose centre is inside (the mesh must be watertight). Hollow: the solid's
-    shell, or for an open mesh the cells its surface passes through.
+
+def solid_cells(mesh, pitch: float, hollow: bool = False, where: str = 'mesh') -> tuple[np.ndarray, MeshReport]:
+    """The mesh's cells of edge `pitch` (mesh units), the bounding box centred in theirs, and the report.
+
+    Solid by the mesh's kind (module docstring): 'contains' for one closed shell, 'bodies' for
+    several, 'flood fill' for anything else. Hollow: the solid's shell, or where the surface
+    encloses nothing, the cells it passes through. RadError (naming `where`) when a solid is asked
+    and the surface encloses nothing.
     """
     lo, hi = mesh.bounds
     counts = cell_counts(hi - lo, pitch)
     corner = (lo + hi) / 2 - pitch * counts / 2
     n_open = open_edges(mesh)
-    if n_open == 0 and mesh.is_watertight:
-        inside = mesh.contains(cell_centres(corner, counts, pitch)).reshape(tuple(counts))
-        return shell(inside) if hollow else inside
-    if not hollow:
-        raise RadError(f'{where}: the mesh is not watertight ({n_open} open edges), so it has no inside to '
-                       f'fill: close its holes (e.g. in a mesh editor) or give --hollow to take its surface only')
-    return _surface_cells(mesh, corner, counts, pitch)
+    mesh, repairs = _repaired(mesh)
+    bodies = int(mesh.body_count)
+
+    def done(grid, method, open_after):
+        if hollow and method != 'surface':
+            grid = shell(grid)
+        return grid, MeshReport(bodies, n_open, open_after, tuple(repairs), method, int(grid.sum()))
+
+    closed = False              # closed shells thinner than a cell have no cell centre inside: their surface's below
+    if mesh.is_watertight:
+        shells = mesh.split(only_watertight=False) if bodies > 1 else [mesh]
+        closed = len(shells) == 1 or all(s.is_watertight for s in shells)
+        if len(shells) == 1:
+            inside = _contains(mesh, cell_centres(corner, counts, pitch)).reshape(tuple(counts))
+            if inside.any():
+                return done(inside, 'contains', 0)
+        elif all(s.is_watertight for s in shells):
+            inside = _inside_shells(shells, corner, counts, pitch)
+            if inside.any():
+                return done(inside, 'bodies', 0)
+    triangles = mesh.triangles
+    caps, holes, open_after = _hole_caps(mesh)
+    if holes:
+        repairs.append(f'capped {holes} hole{"s" if holes > 1 else ""}')
+        triangles = np.concatenate([triangles, caps])
+    sub = _sub_cells(counts)
+    solid, surface, enclosed = _flood_fill(triangles, corner, counts, pitch, sub)
+    if enclosed and solid.any():
+        return done(solid, 'flood fill', open_after)
+    thin = (enclosed or closed) and surface.any()
+    if thin and not hollow:
+        # Walls thinner than a cell (a tray, a channel): no cell centre is inside them, so the cells
+        # the surface passes through stand for them, one cell thick.
+        repairs.append('thinner than a cell: the cells its surface passes through')
+    if thin or hollow:
+        return done(surface, 'surface', open_after)
+    raise RadError(f'{where}: the surface encloses no volume at {pitch:.4g} mesh units per cell (a gap wider than '
+                   f'{pitch / sub:.3g} units, or a single sheet): give --hollow to take its surface only, or '
+                   f'close it in a mesh editor')
 
 
-def _surface_cells(mesh, corner: np.ndarray, counts: np.ndarray, pitch: float) -> np.ndarray:
-    """Cells the surface passes through: points every quarter cell on every triangle."""
-    from trimesh import remesh  # trimesh: only a mesh import pays for its import
-    vertices, _ = remesh.subdivide_to_size(mesh.vertices, mesh.faces, max_edge=pitch / 4, max_iter=20)
-    idx = np.floor((vertices - corner) / pitch).astype(int)
-    idx = np.clip(idx, 0, counts - 1)
-    grid = np.zeros(tuple(counts), dtype=bool)
-    grid[idx[:, 0], idx[:, 1], idx[:, 2]] = True
+def _repaired(mesh):
+    """A copy of the mesh's triangles with repeated vertices merged (a texture seam repeats them) and
+    degenerate and repeated triangles dropped; and what was changed, in words.
+
+    Holes are left to `_hole_caps` and the flood fill: trimesh.repair.fill_holes splits a hole of four
+    edges along either diagonal, which for a rim that is not flat can put the patch across the solid."""
+    import trimesh  # trimesh: only a mesh import pays for its import
+    out = trimesh.Trimesh(vertices=mesh.vertices, faces=mesh.faces, process=False)
+    repairs = []
+    used = len(np.unique(out.faces))
+    out.merge_vertices(merge_tex=True, merge_norm=True)
+    if len(np.unique(out.faces)) < used:
+        repairs.append(f'merged {used - len(np.unique(out.faces))} repeated vertices')
+    keep = out.nondegenerate_faces()
+    unique = np.zeros(len(out.faces), dtype=bool)
+    unique[out.unique_faces()] = True
+    keep &= unique
+    if not keep.all():
+        repairs.append(f'dropped {int((~keep).sum())} degenerate or repeated triangles')
+        out.update_faces(keep)
+        out.remove_unreferenced_vertices()
+    return out, repairs
+
+
+# Triangles times points above which `_contains` casts its rays along z: trimesh's slanted rays meet
+# a box of candidate triangles that grows with the mesh, and cost memory and time in proportion.
+_SLANTED_RAYS_WORK = 2e7
+
+
+def _contains(mesh, points: np.ndarray) -> np.ndarray:
+    """Which points are inside the closed mesh, by trimesh's ray-parity test. Up to `_SLANTED_RAYS_WORK`
+    its default slanted rays; beyond, rays along z, in chunks (a ray's candidates are then the
+    triangles above and below the point): the answers differ only for a point on the surface."""
+    if len(mesh.faces) * len(points) <= _SLANTED_RAYS_WORK:
+        return mesh.contains(points)
+    from trimesh.ray.ray_util import contains_points  # trimesh: only a mesh import pays for its import
+    chunk = 20_000
+    return np.concatenate([contains_points(mesh.ray, points[i:i + chunk], check_direction=(0.0, 0.0, 1.0))
+                           for i in range(0, len(points), chunk)])
+
+
+def _inside_shells(shells, corner: np.ndarray, counts: np.ndarray, pitch: float) -> np.ndarray:
+    """Cells whose centre is inside more outward-facing closed shells than inward-facing ones, or inside
+    only inward-facing ones (a shell with all its normals flipped). A shell whose triangles disagree
+    on which side is out counts as outward-facing."""
+    centres = cell_centres(corner, counts, pitch)
+    outward = np.zeros(len(centres), dtype=int)
+    inward = np.zeros(len(centres), dtype=int)
+    for body in shells:
+        lo, hi = body.bounds
+        near = np.all((centres >= lo) & (centres <= hi), axis=1)
+        if not near.any():
+            continue
+        inside = np.zeros(len(centres), dtype=bool)
+        inside[near] = _contains(body, centres[near])
+        if body.is_winding_consistent and body.volume < 0:
+            inward += inside
+        else:
+            outward += inside
+    solid = (outward > inward) | ((outward == 0) & (inward > 0))
+    return solid.reshape(tuple(counts))
+
+
+def _hole_caps(mesh) -> tuple[np.ndarray, int, int]:
+    """Triangles that close the mesh's holes, a fan from the centroid of every loop of open edges;
+    the number of loops; and the open edges that no loop closes."""
+    import networkx as nx  # trimesh's own dependency: only a mesh import pays for its import
+    from trimesh import grouping  # trimesh: only a mesh import pays for its import
+    boundary = mesh.edges_sorted[grouping.group_rows(mesh.edges_sorted, require_count=1)]
+    if len(boundary) == 0:
+        return np.zeros((0, 3, 3)), 0, 0
+    loops = nx.cycle_basis(nx.from_edgelist(boundary.tolist()))
+    if not loops:
+        return np.zeros((0, 3, 3)), 0, len(boundary)
+    sizes = np.array([len(loop) for loop in loops])
+    ring = np.concatenate([np.asarray(loop, dtype=np.int64) for loop in loops])
+    starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+    following = np.arange(len(ring)) + 1
+    following[starts + sizes - 1] = starts
+    points = mesh.vertices[ring]
+    centroids = np.add.reduceat(points, starts, axis=0) / sizes[:, None]
+    caps = np.stack([np.repeat(centroids, sizes, axis=0), points, points[following]], axis=1)
+    n = len(mesh.vertices)
+    closed = np.sort(np.stack([ring, ring[following]], axis=1), axis=1)
+    still_open = ~np.isin(boundary[:, 0] * n + boundary[:, 1], closed[:, 0] * n + closed[:, 1])
+    return caps, len(loops), int(still_open.sum())
+
+
+def _sub_cells(counts: np.ndarray) -> int:
+    """Sub-cells per cell edge of the flood fill's grid: 4, 6 or 8 (even, so that eight meet at a cell's
+    centre), the most that keep the longest side within about 128."""
+    return int(np.clip(128 // int(np.max(counts)), 4, 8)) // 2 * 2
+
+
+def _flood_fill(triangles: np.ndarray, corner: np.ndarray, counts: np.ndarray, pitch: float,
+                sub: int) -> tuple[np.ndarray, np.ndarray, bool]:
+    """The solid cells by a flood fill of the outside (module docstring), the cells the surface passes
+    through, and whether the surface encloses anything (a sub-cell neither outside nor on it)."""
+    from scipy import ndimage  # scipy: only a mesh import pays for its import
+    step = pitch / sub
+    shape = tuple(int(c) * sub + 4 for c in counts)          # two empty sub-cells round the cells
+    surface = _rasterize((triangles - (corner - 2 * step)) / step, shape)
+    labels, _ = ndimage.label(~surface)                      # faces shared: six neighbours
+    outside = labels == labels[0, 0, 0]
+    inner = (slice(2, -2),) * 3
+    on = surface[inner]
+    enclosed = ~outside[inner] & ~on
+    blocks = tuple(v for c in counts for v in (int(c), sub))
+    middle = slice(sub // 2 - 1, sub // 2 + 1)                # the 2 x 2 x 2 sub-cells round a cell's centre
+    weight = (enclosed.astype(np.float32) + 0.5 * on).reshape(blocks)
+    centre = weight[:, middle, :, middle, :, middle].sum(axis=(1, 3, 5))
+    solid = (centre > 4) | ((centre == 4) & (weight.sum(axis=(1, 3, 5)) >= 0.5 * sub ** 3))
+    return solid, on.reshape(blocks).any(axis=(1, 3, 5)), bool(enclosed.any())
+
+
+def _rasterize(triangles: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
+    """The sub-cells (of edge 1, corner at the origin) that any of the triangles touches, and none
+    farther than half a sub-cell from them: each triangle is cut into a grid of similar triangles
+    with edges of at most half a sub-cell, and every sub-cell within half a sub-cell (along each
+    axis) of a grid point is marked. Every point of a triangle lies within half a sub-cell of a grid
+    point, so a sub-cell the surface crosses is never missed."""
+    grid = np.zeros(shape, dtype=bool)
+    edges = np.linalg.norm(triangles - np.roll(triangles, 1, axis=1), axis=2).max(axis=1)
+    parts = np.maximum(1, np.ceil(edges / 0.5)).astype(int)
+    top = np.array(shape) - 1
+    for n in np.unique(parts):
+        i, j = np.triu_indices(n + 1)
+        weights = np.stack([(n - j) / n, (j - i) / n, i / n], axis=1)        # every (a, b, c) >= 0, sum 1
+        group = triangles[parts == n]
+        chunk = max(1, 1_000_000 // len(weights))
+        for k in range(0, len(group), chunk):
+            points = np.einsum('mv,tvd->tmd', weights, group[k:k + chunk]).reshape(-1, 3)
+            low = np.clip(np.floor(points - 0.5).astype(np.intp), 0, top)
+            high = np.clip(np.floor(points + 0.5).astype(np.intp), 0, top)
+            for x in (low[:, 0], high[:, 0]):
+                for y in (low[:, 1], high[:, 1]):
+                    for z in (low[:, 2], high[:, 2]):
+                        grid[x, y, z] = True
     return grid
 
 
@@ -314,11 +540,12 @@ def mesh_models(files: Sequence[tuple[str, str]], unit: float, size: int | None 
     _check_fits(extents, pitch, unit, limits, [p for _, p, _ in meshes], size, scale)
     models = []
     for name, path, mesh in meshes:
-        cells = crop(voxelize(mesh, pitch, hollow, where=path))
+        cells, report = solid_cells(mesh, pitch, hollow, where=path)
+        cells = crop(cells)
         if not cells.any():
             raise RadError(f'{path}: no cell centre lies inside the model at {pitch:.4g} mesh units per cell '
                            f'(it is thinner than a cell): use a larger --size or --scale')
-        models.append(Model(name, path, cells))
+        models.append(Model(name, path, cells, report))
     _check_total(models)
     return models
 
