@@ -15,7 +15,7 @@ ROSDEP = {'numpy': 'python3-numpy', 'scipy': 'python3-scipy', 'yaml': 'python3-y
           'ruckig': 'python3-ruckig', 'trimesh': 'python3-trimesh', 'rerun': 'python3-rerun-sdk',
           'matplotlib': 'python3-matplotlib', 'dask': 'python3-dask', 'distributed': 'python3-dask',
           'tensorboardX': 'python3-tensorboardx', 'pytest': 'python3-pytest',
-          'mcap': 'python3-mcap'}
+          'mcap': 'python3-mcap', 'networkx': 'python3-networkx'}
 BUILD_ONLY = {'setuptools'}        # setup.py's
 
 

@@ -159,3 +159,31 @@ def test_help_and_scene_check_do_not_load_the_mesh_library(tmp_path):
     loaded = set(json.loads(r.stdout.strip().splitlines()[-1]))
     assert loaded.isdisjoint({'trimesh', 'rtree', 'ortools', 'numpy', 'scipy'}), loaded
     assert 'rad_core' in loaded                      # the check sees what was imported
+
+
+def test_a_model_too_deep_is_turned_a_quarter_and_the_line_says_so(tmp_path, capsys):
+    # 4 x 17 x 3 cells at 2 cm: 17 deep exceed the 15 the reach allows across y = 0; turned, 17 wide fit.
+    np.save(tmp_path / 'slab.npy', np.ones((4, 17, 3), dtype=bool))
+    out = tmp_path / 'slab.json'
+    rc, stdout, _ = run(['scene', 'from-voxels', tmp_path / 'slab.npy', '--unit', '0.02', '--no-supply', '-o', out],
+                        capsys)
+    assert rc == 0
+    assert 'turned 90 degrees to fit the reach: 17 cells deep becomes 17 wide' in stdout
+    [region] = Scene.loads(out.read_text()).targets
+    assert region.size == (17, 4, 3)
+    # --yaw 0 fixes the file's orientation, which does not fit: refused in one line naming --yaw 90.
+    rc, _, stderr = run(['scene', 'from-voxels', tmp_path / 'slab.npy', '--unit', '0.02', '--yaw', '0',
+                         '--no-supply', '-o', tmp_path / 'no.json'], capsys)
+    lines = stderr.strip().splitlines()
+    assert rc == 2 and len(lines) == 1 and '--yaw 90 fits' in lines[0], stderr
+    assert not (tmp_path / 'no.json').exists()
+
+
+def test_a_tall_tower_moves_nearer_the_robot_and_the_line_says_where(tmp_path, capsys):
+    # 12 cells of 5 cm are beyond the reach at x = 0.5 m (11), within it nearer the robot.
+    np.save(tmp_path / 'tower.npy', np.ones((2, 2, 12), dtype=bool))
+    out = tmp_path / 'tower.json'
+    rc, stdout, _ = run(['scene', 'from-voxels', tmp_path / 'tower.npy', '--no-supply', '-o', out], capsys)
+    assert rc == 0 and 'nearer the robot' in stdout
+    [region] = Scene.loads(out.read_text()).targets
+    assert 0.3 < region.origin[0] < 0.5 - 0.025

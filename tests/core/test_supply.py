@@ -111,10 +111,54 @@ def test_the_allocation_over_the_supplied_blocks_covers_as_much():
     assert len(scene.blocks) == sum(report.counts.values())
 
 
-def test_too_many_blocks_for_the_table_is_an_error_with_advice():
-    big = np.ones((8, 6, 1), dtype=bool)
+def test_blocks_that_do_not_fit_on_the_table_wait_in_a_feeder_unless_the_table_is_asked_for():
+    big = np.ones((8, 6, 1), dtype=bool)                     # 48 cubes: more than the table holds in reach
     with pytest.raises(RadError, match=r'do not fit on the table within the arm.s reach.*--size'):
-        sp.supply(regions(big), UNIT, types('cube'))
+        sp.supply(regions(big), UNIT, types('cube'), params=sp.SupplyParams(start='table'))
+    scene, report = sp.supply(regions(big), UNIT, types('cube'))
+    assert scene.feeder is not None and set(scene.feeder.blocks) == {b.id for b in scene.blocks}
+    assert len(scene.blocks) == 48 and report.exact
+    small, _ = sp.supply(regions(bar(2)), UNIT, types('I2'), params=sp.SupplyParams(start='feeder'))
+    assert small.feeder is not None and small.feeder.station == (0.42, -0.3)
+    with pytest.raises(RadError, match='supply must be one of'):
+        sp.supply(regions(bar(2)), UNIT, types('I2'), params=sp.SupplyParams(start='tray'))
+
+
+def test_the_course_by_course_cover_is_feasible_and_rests_as_it_goes():
+    """course_cover: disjoint poses, within the counts, each resting on the table or on poses chosen
+    before it; on a solid box with cubes offered it covers every cell."""
+    from rad_core.allocation.constraints import rests_now
+    from rad_core.allocation.placements import enumerate_candidates
+    from rad_core.domain.grid import Grid
+    from rad_core.domain.scene import Scene
+    box = np.ones((3, 3, 3), dtype=bool)
+    box[1, 1, 0] = False                                     # a cell under the middle: something must bridge it
+    scene = Scene(UNIT, types('cube', 'I3', 'L3'), (), tuple(regions(box)), 0.0)
+    grid = Grid(scene)
+    candidates = [c for c in enumerate_candidates(scene, grid, positive_only=False) if c.value >= 0]
+    counts = {'cube': 2, 'I3': 30, 'L3': 30}
+    chosen = sp.course_cover(grid, candidates, counts)
+    occupied = np.zeros(grid.num_cells, dtype=bool)
+    used = {n: 0 for n in counts}
+    for n in chosen:
+        ids = list(candidates[n].cell_ids)
+        assert not occupied[ids].any() and rests_now(grid, ids, occupied)
+        occupied[ids] = True
+        used[candidates[n].placement.type] += 1
+    assert all(used[k] <= counts[k] for k in counts)
+    assert occupied[grid.is_target].sum() >= 24                # all but what two cubes cannot make up
+    assert not occupied[~grid.is_target].any()
+
+
+def test_a_large_target_gets_a_cover_even_when_the_solver_finds_none_in_time():
+    """No 'no answer' where blocks can cover: a 300-cell target with a time limit CP-SAT cannot
+    answer within gets the course-by-course cover, most of its cells, and a feeder for its blocks."""
+    big = np.ones((10, 6, 5), dtype=bool)
+    targets = place_regions([Model('big', '', big)], 0.02)
+    scene, report = sp.supply(targets, 0.02, types('cube', 'I2', 'I3', 'L3'),
+                              params=sp.SupplyParams(time_limit_s=0.05, hand=False))
+    assert report.covered >= 0.9 * report.target_cells, report.summary()
+    assert scene.feeder is not None and len(scene.blocks) == sum(report.counts.values())
 
 
 def test_a_same_seed_gives_the_same_scene_and_another_moves_the_blocks():

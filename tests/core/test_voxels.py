@@ -1,8 +1,10 @@
 """Targets from files (rad_core.domain.voxels): meshes and voxel grids give the cells they should,
 placed where the arm builds, and bad files are errors that name the problem and the fix."""
 
+import json
 import math
 import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -14,6 +16,7 @@ from rad_core.domain.shapes import STRUCTURE_X
 from trimesh.exchange import binvox
 
 UNIT = 0.05
+MESHES = Path(__file__).resolve().parents[2] / 'data' / 'meshes'
 
 
 def cells_of(grid) -> set:
@@ -364,3 +367,149 @@ def test_pybullet_lego_brick_gives_its_walls(tmp_path):
     assert layers.max() == 24 * 24 and layers[:10].max() < 0.25 * 24 * 24   # a closed top on walls and a tube
     assert not grid[6, 6, 3]                                                # inside the hollow
     assert model(_pybullet('lego/lego.obj'), size=6, up='y').cells.any()
+
+
+# ---- fit: yaw, place, height, refusal -------------------------------------------------
+
+def box_npy(tmp_path, shape, name='box') -> str:
+    path = tmp_path / f'{name}.npy'
+    np.save(path, np.ones(shape, dtype=bool))
+    return str(path)
+
+
+def test_a_4_by_17_box_is_turned_a_quarter_to_fit_and_the_report_says_so(tmp_path):
+    # 17 cells deep exceed the 15 the reach allows across y = 0 at 2 cm; 17 wide fit (20).
+    path = save(trimesh.creation.box(extents=(0.08, 0.34, 0.06)), tmp_path / 'slab.stl')
+    [model] = voxels.mesh_models([('m', path)], 0.02, scale=1.0)
+    assert model.yaw == 90 and model.cells.shape == (17, 4, 3) and model.cells.all()
+    line = voxels.fit_report([model], 0.02)
+    assert 'turned 90 degrees to fit the reach: 17 cells deep becomes 17 wide' in line
+    assert 'x = 0.5 m' in line
+    [region] = voxels.place_regions([model], 0.02)
+    assert region.size == (17, 4, 3) and region.origin[0] == pytest.approx(STRUCTURE_X - 0.02 * 8)
+    # A voxel grid is turned the same way, by a rotation (counter-clockwise seen from above).
+    grid = np.zeros((4, 17, 3), dtype=bool)
+    grid[:, :, 0] = True
+    grid[0, 0, :] = True                    # a post on the floor's corner (0, 0)
+    np.save(tmp_path / 'slab.npy', grid)
+    [turned] = voxels.voxel_models([('v', str(tmp_path / 'slab.npy'))], 0.02)
+    assert turned.yaw == 90 and np.array_equal(turned.cells, np.rot90(grid, 1, axes=(0, 1)))
+    assert turned.cells[16, 0, 2] and not turned.cells[0, 0, 2]       # (i, j) -> (16 - j, i)
+
+
+def test_a_fixed_yaw_that_does_not_fit_is_refused_naming_the_one_that_does(tmp_path):
+    path = save(trimesh.creation.box(extents=(0.08, 0.34, 0.06)), tmp_path / 'slab.stl')
+    with pytest.raises(RadError, match=r'at --yaw 0: 17 cells deep \(y\), 15 fit.*--yaw 90 fits') as e:
+        voxels.mesh_models([('m', path)], 0.02, scale=1.0, yaw=0)
+    assert '\n' not in str(e.value)
+    assert voxels.mesh_models([('m', path)], 0.02, scale=1.0, yaw=270)[0].cells.shape == (17, 4, 3)
+    with pytest.raises(RadError, match='--yaw must be one of 0, 90, 180, 270'):
+        voxels.mesh_models([('m', path)], 0.02, scale=1.0, yaw=45)
+
+
+def test_a_yaw_of_180_turns_without_mirroring(tmp_path):
+    grid = np.zeros((3, 2, 1), dtype=bool)
+    grid[0, 0, 0] = grid[1, 0, 0] = grid[2, 0, 0] = grid[0, 1, 0] = True      # an L
+    np.save(tmp_path / 'l.npy', grid)
+    [model] = voxels.voxel_models([('v', str(tmp_path / 'l.npy'))], UNIT, yaw=180)
+    assert model.yaw == 180 and cells_of(model.cells) == {(0, 1, 0), (1, 1, 0), (2, 1, 0), (2, 0, 0)}
+    assert 'turned 180 degrees (--yaw)' in voxels.fit_report([model], UNIT, given_yaw=True)
+
+
+def test_a_target_that_fits_no_yaw_names_the_largest_unit_that_fits(tmp_path):
+    # 22 x 17 cells: 22 wide exceed 20 and 17 deep exceed 15 at 2 cm; turned, 22 deep exceed 15.
+    path = box_npy(tmp_path, (22, 17, 3))
+    with pytest.raises(RadError) as e:
+        voxels.voxel_models([('v', path)], 0.02)
+    message = str(e.value)
+    assert '\n' not in message and 'in any yaw' in message and '22 cells wide (x), 20 fit' in message
+    unit = float(re.search(r'--unit ([0-9.]+) or less', message).group(1))
+    assert unit == 0.017
+    assert voxels.voxel_models([('v', path)], unit)[0].cells.shape == (22, 17, 3)   # it does fit there
+    with pytest.raises(RadError, match='in any yaw'):
+        voxels.voxel_models([('v', path)], unit + 0.001)
+    # A mesh at --size: the largest unit at that size and the --size that fits at the unit given.
+    mesh = save(trimesh.creation.box(extents=(0.44, 0.34, 0.06)), tmp_path / 'slab.stl')
+    with pytest.raises(RadError) as e:
+        voxels.mesh_models([('m', mesh)], 0.02, size=22)
+    message = str(e.value)
+    unit = float(re.search(r'--unit ([0-9.]+) or less at this size', message).group(1))
+    size = int(re.search(r'--size (\d+) or less', message).group(1))
+    assert voxels.mesh_models([('m', mesh)], unit, size=22)[0].cells.shape == (22, 17, 3)
+    assert voxels.mesh_models([('m', mesh)], 0.02, size=size)[0].cells.shape[0] == size
+    with pytest.raises(RadError, match='in any yaw'):
+        voxels.mesh_models([('m', mesh)], 0.02, size=size + 1)
+
+
+def test_more_cells_a_side_than_a_region_holds_fit_no_unit(tmp_path):
+    with pytest.raises(RadError, match=r"25 cells wide \(x\), 24 fit \(a region's 24 cells a side\).*no unit"):
+        voxels.voxel_models([('v', box_npy(tmp_path, (25, 1, 1)))], 0.01)
+
+
+def test_the_gallery_meshes_keep_the_file_orientation_and_x_05(tmp_path):
+    # As before the fit existed: yaw 0, the region centred on x = STRUCTURE_X (scenes byte for byte the same).
+    gallery = json.loads(MESHES.joinpath('meshes.json').read_text())
+    for name, entry in gallery.items():
+        models = voxels.mesh_models([(name, str(MESHES / entry['file']))], UNIT, size=entry['size'], up=entry['up'])
+        [region] = voxels.place_regions(models, UNIT)
+        w, d, _ = models[0].cells.shape
+        assert models[0].yaw == 0, name
+        assert region.origin == pytest.approx((STRUCTURE_X - UNIT * (w - 1) / 2, -UNIT * (d - 1) / 2, UNIT / 2)), name
+        assert 'x = 0.5 m, y = 0, as in the file' in voxels.fit_report(models, UNIT), name
+
+
+def test_a_tall_thin_tower_is_as_high_as_the_reach_allows(tmp_path):
+    # At 2 cm: 22 cells (0.44 m) stand at x = 0.5 m; the old fixed limit was 17.
+    [tower] = voxels.voxel_models([('t', box_npy(tmp_path, (2, 2, 22)))], 0.02)
+    assert tower.yaw == 0 and voxels.placement([tower], 0.02).x == STRUCTURE_X
+    # 24 cells is a region's limit, whatever the reach: it says so.
+    with pytest.raises(RadError, match=r"25 cells high \(z\), 24 fit \(a region's 24 cells a side"):
+        voxels.voxel_models([('t', box_npy(tmp_path, (2, 2, 25)))], 0.02)
+    # At 5 cm: 12 cells stand only nearer the robot; it moves there and says so.
+    [tall] = voxels.voxel_models([('t', box_npy(tmp_path, (2, 2, 12)))], UNIT)
+    fit = voxels.placement([tall], UNIT)
+    assert fit.moved and voxels.TargetLimits().nearest_x + UNIT <= fit.x < STRUCTURE_X
+    assert voxels.reach_cells(2, 2, UNIT, fit.x)[0] >= 12 > voxels.reach_cells(2, 2, UNIT, fit.x + 0.001)[0]
+    [region] = voxels.place_regions([tall], UNIT)
+    assert region.origin[0] == pytest.approx(fit.x - UNIT / 2)
+    assert 'nearer the robot' in voxels.fit_report([tall], UNIT)
+    # 14 cells fit nowhere in the area: the reach is named, and the unit that fits.
+    with pytest.raises(RadError, match=r"14 cells high \(z\), 13 fit \(the arm's top-down reach.*--unit 0.04"):
+        voxels.voxel_models([('t', box_npy(tmp_path, (2, 2, 14)))], UNIT)
+
+
+def test_whatever_fitted_the_fixed_limits_still_fits_at_x_05():
+    # The limits before the reach: 0.40 x 0.30 x 0.35 m, and at most 24 cells a side.
+    limits = voxels.TargetLimits()
+    for mm in range(10, 71):
+        unit = mm / 1000
+        old = [min(int(math.floor(m / unit + 1e-9)), 24) for m in (0.40, 0.30, 0.35)]
+        if old[0] * old[1] * old[2] > 4096:
+            old[2] = 4096 // (old[0] * old[1])
+        fit = voxels.fit_target([tuple(old)], unit, limits)
+        assert fit.yaw == 0 and fit.x == STRUCTURE_X, unit
+
+
+def test_the_reach_numbers_are_the_arm_s():
+    from rad_core.gamp.grasps import GRASP_BELOW_TOP
+    from rad_core.gamp.ik import SHOULDER
+    from rad_core.gamp.planner import GampConfig
+    from rad_core.sim.workspace import Workspace
+    assert voxels.SHOULDER_Z == SHOULDER[2] and voxels.APPROACH == GampConfig().approach_height
+    assert voxels.GRASP_BELOW_TOP == GRASP_BELOW_TOP and voxels.WORKSPACE_TOP == Workspace().upper[2]
+
+
+def test_the_top_down_reach_is_within_what_the_ik_solves():
+    # What `top_down_reach` promises the IK reaches, hand pointing down, across the area targets
+    # stand in; and 5 cm higher it no longer does (the model is not far inside the real reach).
+    from rad_core.gamp.ik import IkConfig, solve_top_down
+    from rad_core.sim.world import World
+    world, config = World(), IkConfig(random_seeds=8)
+
+    def reaches(x, y, z):
+        return any(solve_top_down(world, (x, y, z), yaw, config=config).ok for yaw in (0.0, math.pi / 2))
+
+    for x, y in ((0.3, 0.0), (0.5, 0.0), (0.7, 0.0), (0.3, 0.15), (0.5, 0.15), (0.7, 0.15)):
+        z = voxels.top_down_reach(math.hypot(x, y))
+        assert reaches(x, y, z), (x, y, z)
+        assert not reaches(x, y, z + 0.05), (x, y, z)

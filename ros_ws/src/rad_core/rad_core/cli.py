@@ -4,8 +4,9 @@
     rad scene check scene.json
     rad scene render scene.json -o scene.png [--allocation allocation.json] [--robot]
     rad scene stats --grid G --sides S --scenes N
-    rad scene from-mesh MODEL [NAME=MODEL ...] --unit U [--size N | --scale S] [--up z] [--hollow] -o scene.json
-    rad scene from-voxels FILE.npy|FILE.binvox [...] --unit U [--up z] [--hollow] -o scene.json
+    rad scene from-mesh MODEL [NAME=MODEL ...] --unit U [--size N | --scale S] [--up z] [--yaw 0|90|180|270]
+        [--hollow] -o scene.json
+    rad scene from-voxels FILE.npy|FILE.binvox [...] --unit U [--up z] [--yaw 0|90|180|270] [--hollow] -o scene.json
     rad scene supply scene.json [--types I2,L3,... | --inventory FILE] [--objective fewest|cheapest] -o scene.json
     rad allocate scene.json [--time-limit S] [--seed N] [--workers W] [--solver cp-sat|highs]
     rad demo [--scene FILE] [--out DIR] [--rtf X] [--faults none|realistic|FILE] [--cycles N]
@@ -143,9 +144,12 @@ def _supply_and_write(args, targets, unit: float, clearance: float = 0.0, scene=
                    f'(rad scene supply lays them out)')
         return 0
     params = SupplyParams(objective=args.objective, costs=costs, time_limit_s=args.time_limit, seed=args.seed,
-                          hand=not args.any_order)
+                          hand=not args.any_order, start=args.supply)
     result, report = supply(targets, unit, types, inventory, params, clearance)
     _write_text(result.dumps(), args.output)
+    if result.feeder is not None:
+        _say(args, f'the {len(result.blocks)} blocks wait in a feeder presenting them at {result.feeder.station} '
+                   + ('(they do not fit on the table within the arm\'s reach)' if args.supply == 'auto' else ''))
     if args.report:
         _write_text(jsonfmt.dumps(report.to_dict()), args.report)
     _say(args, report.summary())
@@ -162,18 +166,22 @@ def _say(args, line: str) -> None:
 
 
 def cmd_scene_from_mesh(args) -> int:
-    from rad_core.domain.voxels import mesh_models, place_regions, region_names  # numpy: this command only
+    from rad_core.domain.voxels import fit_report, mesh_models, place_regions, region_names  # numpy: this command only
     models = mesh_models(region_names(args.models), args.unit, size=args.size, scale=args.scale, up=args.up,
-                         hollow=args.hollow)
+                         hollow=args.hollow, yaw=args.yaw)
     for model in models:
         _say(args, f'{model.path}: {model.report.summary()}')
-    return _supply_and_write(args, place_regions(models, args.unit), args.unit)
+    regions = place_regions(models, args.unit)
+    _say(args, fit_report(models, args.unit, given_yaw=args.yaw is not None))
+    return _supply_and_write(args, regions, args.unit)
 
 
 def cmd_scene_from_voxels(args) -> int:
-    from rad_core.domain.voxels import place_regions, region_names, voxel_models  # numpy: this command only
-    models = voxel_models(region_names(args.files), args.unit, up=args.up, hollow=args.hollow)
-    return _supply_and_write(args, place_regions(models, args.unit), args.unit)
+    from rad_core.domain.voxels import fit_report, place_regions, region_names, voxel_models  # numpy: this command only
+    models = voxel_models(region_names(args.files), args.unit, up=args.up, hollow=args.hollow, yaw=args.yaw)
+    regions = place_regions(models, args.unit)
+    _say(args, fit_report(models, args.unit, given_yaw=args.yaw is not None))
+    return _supply_and_write(args, regions, args.unit)
 
 
 def cmd_scene_supply(args) -> int:
@@ -527,6 +535,9 @@ def _add_target_args(p: argparse.ArgumentParser) -> None:
     p.add_argument('--unit', type=float, default=0.05, help='cell edge (the cube edge), metres (default: 0.05)')
     p.add_argument('--up', choices=['x', 'y', 'z'], default='z', help="the model's axis that points up (default: z)")
     p.add_argument('--hollow', action='store_true', help='only the surface shell, not the solid inside')
+    p.add_argument('--yaw', type=int, choices=(0, 90, 180, 270), metavar='0|90|180|270',
+                   help='turn the model this many degrees about z, counter-clockwise seen from above (default: '
+                        'as in the file, a quarter turn where only that fits the reach; the line printed says)')
 
 
 def _add_supply_args(p: argparse.ArgumentParser, no_supply: bool = True) -> None:
@@ -542,6 +553,9 @@ def _add_supply_args(p: argparse.ArgumentParser, no_supply: bool = True) -> None
     p.add_argument('--any-order', action='store_true',
                    help='take the best cover even where a top-down hand cannot place all of it in any order '
                         '(default: rule out the pieces it cannot and solve again, rad_core.allocation.supply)')
+    p.add_argument('--supply', choices=('auto', 'table', 'feeder'), default='auto',
+                   help='where the blocks start: on the table, in a feeder presenting them at a station right of '
+                        'the target, or auto (the table where they fit within reach, else the feeder)')
     p.add_argument('--report', metavar='FILE', help='write how well the blocks cover (JSON) here')
     p.add_argument('--clearance', type=float, metavar='C',
                    help="gap between neighbouring blocks, a fraction of the unit (0.2: the paper's 1 cm at 5 cm; "

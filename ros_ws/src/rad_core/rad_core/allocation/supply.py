@@ -33,7 +33,12 @@ whole after each piece (`domain.statics`).
 
 `lay_out_blocks` then puts them on the table as the hand-made shapes' scenes do
 (`shapes.lay_out`: every unit 0.32..0.63 m from the base within 75 degrees of +x, 5 cm
-between blocks for the open gripper's fingers, 7 cm clear of the target regions).
+between blocks for the open gripper's fingers, 7 cm clear of the target regions); where they do not
+fit (`SupplyParams.start` 'auto'), or always ('feeder'), a feeder presents them at a station instead
+(`feeder_blocks`).
+
+A large target's model can outlast the time limit in presolve: `course_cover`, a cover laid course by
+course from the bottom, is CP-SAT's first solution (a hint) and the answer where CP-SAT finds none.
 """
 
 from __future__ import annotations
@@ -49,7 +54,8 @@ import numpy as np
 from ortools.sat.python import cp_model
 
 from rad_core.allocation.arm import HandBlocked
-from rad_core.allocation.cpsat import build_model, solve_rounds
+from rad_core.allocation.constraints import rests_now
+from rad_core.allocation.cpsat import build_model, hand_unplaced, solve_rounds
 from rad_core.allocation.order import candidate_poses, hand_order, solve_order
 from rad_core.cell.panda import check_effector
 from rad_core.gamp.planner import GampConfig
@@ -58,13 +64,17 @@ from rad_core.domain import shapes
 from rad_core.domain.blocks import BlockType
 from rad_core.domain.errors import RadError
 from rad_core.domain.grid import Grid
-from rad_core.domain.scene import MAX_BLOCKS, Block, Scene, TargetRegion
+from rad_core.domain.scene import MAX_BLOCKS, Block, Feeder, Scene, TargetRegion, station_position
 from rad_core.domain.statics import order_statics
 from rad_core.domain.voxels import MAX_UNIT
 
 OBJECTIVES = ('fewest', 'cheapest')
+SUPPLY_STARTS = ('auto', 'table', 'feeder')
 # Costs are compared in thousandths, so CP-SAT's objective stays integral.
 COST_SCALE = 1000
+ORDERED_MAX_CELLS = 200
+"""Targets of more cells skip the order model's cover (`_ordered_supply`): its model, every candidate
+pose at every step, takes minutes to build beyond that, whatever the time limit."""
 
 
 def library(scene: Scene | None = None) -> dict[str, BlockType]:
@@ -92,6 +102,12 @@ class SupplyParams:
     """At most this many solves, each ruling out the pieces the hand could not place."""
     effector: str = 'hand'
     """Whose placing `hand` asks about (`cell.panda.EFFECTORS`): the parallel hand or the vacuum gripper."""
+    start: str = 'auto'
+    """Where the blocks start (`SUPPLY_STARTS`): on the 'table', in a 'feeder' presenting them at
+    `station`, or 'auto': the table where they fit within reach, else the feeder (as `rad scene
+    generate --supply auto`)."""
+    station: tuple[float, float] = (0.42, -0.3)
+    """The feeder's station (x, y), m: right of the target, within reach (the generator's)."""
 
     @property
     def gamp(self):
@@ -117,6 +133,8 @@ class SupplyParams:
         check_effector(self.effector)
         if not (isinstance(self.hand_rounds, int) and self.hand_rounds >= 1):
             raise RadError(f'hand_rounds must be a positive integer, got {self.hand_rounds!r}')
+        if self.start not in SUPPLY_STARTS:
+            raise RadError(f'supply must be one of {", ".join(SUPPLY_STARTS)}, got {self.start!r}')
 
 
 @dataclass(frozen=True)
@@ -265,6 +283,12 @@ def choose_blocks(targets: Sequence[TargetRegion], unit: float, types: Mapping[s
     counts = {n: n_target for n in types} if inventory is None else {n: int(inventory.get(n, 0)) for n in types}
     occupied = np.zeros(grid.num_cells, dtype=bool)
     model, w, _ = build_model(candidates, counts, 'stable', grid, occupied)
+    # The first cover, in well under a second at any size: CP-SAT starts from it (a hint) and improves it
+    # while time is left; where CP-SAT finds no answer in time (presolve of a large model can take it
+    # all), it is the answer.
+    first = course_cover(grid, candidates, counts)
+    for n in set(first):
+        model.add_hint(w[n], True)
     # Lexicographic objective (module docstring): each level outweighs everything below it.
     unit_cost = [_cost(c.placement.type, params) for c in candidates]
     covered = [int(grid.is_target[list(c.cell_ids)].sum()) for c in candidates]
@@ -280,17 +304,24 @@ def choose_blocks(targets: Sequence[TargetRegion], unit: float, types: Mapping[s
                                                          way_down=True):
         rounds += 1
         if status not in (cp_model.OPTIMAL, cp_model.FEASIBLE):
+            if best is None and first:
+                # No answer in time: the course-by-course cover, judged by the same measure.
+                unplaced = _hand_unplaced(scene, candidates, first, params) if params.hand else []
+                hand_covered = _placeable_cells(grid, candidates, first, unplaced) if params.hand else None
+                best = ((hand_covered or 0, -rounds), first, 'FEASIBLE (course by course)', hand_covered)
             if best is not None:
                 break               # the rounds before found covers: keep the best of them
             raise RadError(f'the supply model found no answer in {params.time_limit_s:g} s '
-                           f'({solver.status_name(status)}): give it a longer --time-limit')
+                           f'({solver.status_name(status)}) and no block rests on the table in the target: '
+                           f'give it a longer --time-limit or other block types')
         hand_covered = _placeable_cells(grid, candidates, chosen, unplaced) if params.hand and chosen else None
         score = (hand_covered if hand_covered is not None else 0, -rounds)
         if best is None or score > best[0]:
             best = (score, chosen, solver.status_name(status), hand_covered)
     _, chosen, status_name, hand_covered = best
     by_order = False
-    if params.hand and hand_covered is not None and hand_covered < _target_cells(grid, candidates, chosen):
+    if (params.hand and hand_covered is not None and hand_covered < _target_cells(grid, candidates, chosen)
+            and n_target <= ORDERED_MAX_CELLS):
         left = params.time_limit_s - (time.perf_counter() - start)
         ordered = _ordered_supply(scene, grid, candidates, n_target, max(1.0, left / 3), params.gamp)
         if ordered is not None and ordered[1] > hand_covered:
@@ -312,6 +343,36 @@ def choose_blocks(targets: Sequence[TargetRegion], unit: float, types: Mapping[s
                           {k: v for k, v in kinds.items() if v}, cost, stands(grid, placements, targets),
                           time.perf_counter() - start, hand_covered, rounds, left, by_order)
     return placements, report
+
+
+def course_cover(grid: Grid, candidates, counts: Mapping[str, int]) -> list[int]:
+    """A cover built course by course, as a mason would (indices into candidates): from the lowest
+    course up, each pose whose cells are all target cells not yet covered and that rests on the table
+    or on what is chosen below it (the 'stable' rule, `constraints.rests_now`), larger blocks first;
+    then, where target cells are left, poses that use cells off the target to hold them up. Feasible
+    for the supply model by construction (disjoint, within `counts`, each resting when placed in
+    this order)."""
+    occupied = np.zeros(grid.num_cells, dtype=bool)
+    left = dict(counts)
+    chosen: list[int] = []
+    lowest = [int(grid.ijk[list(c.cell_ids), 2].min()) for c in candidates]
+    on_target = [bool(grid.is_target[list(c.cell_ids)].all()) for c in candidates]
+    for exact in (True, False):
+        order = sorted((n for n, c in enumerate(candidates) if on_target[n] == exact and c.value > 0),
+                       key=lambda n: (lowest[n], -candidates[n].value, -len(candidates[n].cell_ids), n))
+        for n in order:
+            cand = candidates[n]
+            ids = list(cand.cell_ids)
+            if left.get(cand.placement.type, 0) <= 0 or occupied[ids].any() or not rests_now(grid, ids, occupied):
+                continue
+            chosen.append(n)
+            occupied[ids] = True
+            left[cand.placement.type] -= 1
+    return chosen
+
+
+def _hand_unplaced(scene: Scene, candidates, chosen: list[int], params: SupplyParams) -> list[int]:
+    return hand_unplaced(scene, [candidates[n].placement for n in chosen], params.gamp, way_down=True)
 
 
 def hand_left(scene: Scene, grid: Grid, placements, gamp=None) -> tuple[dict, ...]:
@@ -423,6 +484,21 @@ def lay_out_blocks(kinds: Sequence[str], types: Mapping[str, BlockType], targets
                    f'target): use a smaller target (--size) or larger block types')
 
 
+def feeder_blocks(kinds: Sequence[str], types: Mapping[str, BlockType], targets: Sequence[TargetRegion],
+                  unit: float, station: tuple[float, float]) -> tuple[list[Block], Feeder]:
+    """Every block in a feeder presenting them at `station` (the plan asks for any), as the generator's
+    and the large shapes' scenes have them; RadError where the station's footprint, 5 cm round the
+    largest block, would overlap a target region."""
+    reach = max(float(np.ptp(types[k].offsets, axis=0)[:2].max()) + 1 for k in set(kinds)) * unit / 2 + 0.05
+    for t in targets:
+        lo, hi = t.bounds(unit)
+        if lo[0] - reach < station[0] < hi[0] + reach and lo[1] - reach < station[1] < hi[1] + reach:
+            raise RadError(f'the feeder\'s station {tuple(station)} lies within {reach:.2f} m of target region '
+                           f'{t.name!r}: the blocks do not fit on the table and the feeder has no room')
+    blocks = [Block(f'b{n}', kind, station_position(types[kind], station, 0, unit), 0) for n, kind in enumerate(kinds)]
+    return blocks, Feeder(tuple(float(v) for v in station), tuple(b.id for b in blocks))
+
+
 def supply(targets: Sequence[TargetRegion], unit: float, types: Mapping[str, BlockType],
            inventory: Mapping[str, int] | None = None, params: SupplyParams = SupplyParams(),
            clearance: float = 0.0) -> tuple[Scene, SupplyReport]:
@@ -441,9 +517,17 @@ def supply(targets: Sequence[TargetRegion], unit: float, types: Mapping[str, Blo
         raise RadError(f'no target cell can be covered with the blocks offered ({offered or "none"}): offer more '
                        f'or other types, e.g. --types cube,I2,L3')
     kinds = [p.type for p in placements]
-    blocks = lay_out_blocks(kinds, types, targets, unit, params.seed)
+    blocks, feeder = None, None
+    if params.start != 'feeder':
+        try:
+            blocks = lay_out_blocks(kinds, types, targets, unit, params.seed)
+        except RadError:
+            if params.start == 'table':
+                raise
+    if blocks is None:
+        blocks, feeder = feeder_blocks(kinds, types, targets, unit, params.station)
     used = [n for n in types if n in set(kinds)]
-    scene = Scene(unit, {n: types[n] for n in used}, tuple(blocks), tuple(targets), clearance)
+    scene = Scene(unit, {n: types[n] for n in used}, tuple(blocks), tuple(targets), clearance, feeder=feeder)
     return Scene.from_dict(scene.to_dict()), report
 
 

@@ -33,8 +33,20 @@ model in metres, 0.001 for one in millimetres). A voxel file has one cell per vo
 Orientation: `up` names the model's axis that points up (`x`, `y` or `z`; many modellers
 and OBJ files use `y`); it is turned onto +z by a rotation, never a mirror.
 
-Limits: a target must lie where the arm builds (`TargetLimits`); a model larger than that
-is refused with the scale or size that would fit.
+Fit (`fit_target`): a target must lie where the arm builds it. Its footprint stays within
+`TargetLimits` (0.40 m along x, 0.30 m along y, in front of the robot), each region within
+MAX_REGION_AXIS cells a side and all within MAX_GRID_CELLS; its top cells must be within the arm's
+top-down reach (`reach_cells`): the hand comes down on every cell from `APPROACH` above its grasp
+target, and the higher the structure the nearer the robot it must stand. The model may be turned
+about z by quarter turns (the cells are a lattice aligned with the robot's base):
+- yaw: the file's orientation (0) where it fits at x = STRUCTURE_X; else a quarter turn (90) where
+  that fits there; else the file's orientation moved nearer the robot; else the turned one moved.
+  A turn of 180 or 270 degrees is never needed for the fit (the limits are symmetric about
+  y = 0), only given (`yaw`);
+- place: centred on y = 0 and on x = STRUCTURE_X (0.5 m) where the reach allows its height there;
+  else as near x = STRUCTURE_X as the reach allows, moved towards the robot (the reach over a
+  height only grows nearer the robot, down to the footprint's near edge at 0.30 m).
+A model that fits no yaw is refused naming the largest unit and the --size (and --scale) that fit.
 """
 
 from __future__ import annotations
@@ -67,21 +79,74 @@ _UP = {
 
 @dataclass(frozen=True)
 class TargetLimits:
-    """How large a target may be, in metres, for the arm to build all of it.
+    """Where a target's footprint may lie, in metres, for the arm to build all of it.
 
-    The structure is centred on x = STRUCTURE_X (0.5 m) in front of the robot, so a width of
-    0.40 m spans 0.30..0.70 m, the depth straddles y = 0; tops above max_height are out of a
-    top-down placement's reach. The hand-made shapes stay within 0.30 x 0.20 x 0.30 m.
+    The footprint is centred on y = 0 and, by default, on x = STRUCTURE_X (0.5 m): a width (x) of
+    0.40 m spans 0.30..0.70 m, the depth (y) straddles y = 0. A tall target may move nearer the
+    robot, its near edge no nearer than STRUCTURE_X - max_width / 2. How high it may be follows
+    the arm's reach at its place (`reach_cells`). The hand-made shapes stay within 0.30 x 0.20 m.
     """
 
     max_width: float = 0.40
     max_depth: float = 0.30
-    max_height: float = 0.35
+
+    @property
+    def nearest_x(self) -> float:
+        """The nearest to the robot a footprint's edge may be (m along x)."""
+        return STRUCTURE_X - self.max_width / 2
 
     def cells(self, unit: float) -> np.ndarray:
-        """Most cells along x, y, z at this unit (also within a region's limit)."""
-        m = np.floor(np.array([self.max_width, self.max_depth, self.max_height]) / unit + 1e-9)
-        return np.minimum(m, MAX_REGION_AXIS).astype(int)
+        """Most cells along x, y, z at this unit: the footprint's, and the height a footprint that
+        large allows at x = STRUCTURE_X (a narrower or nearer one allows more)."""
+        w = min(int(math.floor(self.max_width / unit + 1e-9)), MAX_REGION_AXIS)
+        d = int(math.floor(self.max_depth / unit + 1e-9))
+        return np.array([w, d, reach_cells(w, d, unit, STRUCTURE_X)[0]])
+
+
+# The arm's top-down reach, from the Panda's URDF (rad_core.cell.panda) and checked against the IK
+# (`gamp.ik.solve_top_down`) in tests/core/test_voxels.py. With the hand pointing straight down, the
+# wrist (joint 6) stands WRIST_ABOVE over the grasp target (flange 0.107 m + grasp target 0.105 m) and
+# WRIST_BACK nearer the robot (joint 7's 0.088 m offset), and the wrist reaches ARM_REACH from the
+# shoulder (joint 2, SHOULDER_Z over the base: `gamp.ik.SHOULDER`) with the elbow all but straight
+# (links of 0.316 and 0.384 m with their 0.0825 m offsets: 0.719 m; the IK reaches 0.712..0.720 m
+# between x = 0.25 and 0.75 m; ARM_REACH keeps 0.02 m of that in hand).
+SHOULDER_Z = 0.333
+WRIST_ABOVE = 0.212
+WRIST_BACK = 0.088
+ARM_REACH = 0.70
+# The hand comes down on a placement, and leaves it, from this far over its grasp target
+# (`gamp.planner.GampConfig.approach_height`).
+APPROACH = 0.12
+# A tight grasp's target stands this far under the unit's top (`gamp.grasps.GRASP_BELOW_TOP`).
+GRASP_BELOW_TOP = 0.013
+# The twin takes no cell centre higher than this (`sim.workspace.Workspace.upper[2]`, m).
+WORKSPACE_TOP = 1.0
+
+
+def top_down_reach(r: float) -> float:
+    """The highest grasp target (m over the table) a top-down hand reaches at horizontal distance r (m)
+    from the robot's base axis; -inf beyond the reach."""
+    across = r - WRIST_BACK
+    if abs(across) > ARM_REACH:
+        return -math.inf
+    return SHOULDER_Z - WRIST_ABOVE + math.sqrt(ARM_REACH ** 2 - across ** 2)
+
+
+def reach_cells(width: int, depth: int, unit: float, x: float) -> tuple[int, str]:
+    """How many cells high a footprint of width x depth cells centred on (x, 0) may be, and what
+    caps it: the top-down reach over its farthest top cell (that cell's grasp target plus
+    `APPROACH` within `top_down_reach`), a region's MAX_REGION_AXIS cells, the workspace's top."""
+    far = math.hypot(x + unit * (width - 1) / 2, unit * (depth - 1) / 2)
+    lift = max(0.0, unit / 2 - GRASP_BELOW_TOP)
+    # Top cell k (from 1) has its centre at (k - 1/2) unit.
+    reach = int(math.floor((top_down_reach(far) - APPROACH - lift) / unit + 0.5 + 1e-9)) \
+        if math.isfinite(top_down_reach(far)) else 0
+    space = int(math.floor(WORKSPACE_TOP / unit + 0.5 + 1e-9))
+    caps = [(max(0, reach), f'the arm\'s top-down reach over its far corner {far:.2f} m out, '
+                            f'{APPROACH:g} m approach included'),
+            (MAX_REGION_AXIS, f'a region\'s {MAX_REGION_AXIS} cells a side'),
+            (space, f'the workspace\'s top at {WORKSPACE_TOP:g} m')]
+    return min(caps, key=lambda c: c[0])
 
 
 @dataclass(frozen=True)
@@ -116,13 +181,15 @@ class MeshReport:
 
 @dataclass(frozen=True)
 class Model:
-    """One file's cells: a boolean occupancy grid [i, j, k], k up, cropped to its filled cells;
-    for a mesh, the report of how they were made."""
+    """One file's cells: a boolean occupancy grid [i, j, k], k up, cropped to its filled cells, turned
+    by `yaw`; for a mesh, the report of how they were made."""
 
     name: str
     path: str
     cells: np.ndarray
     report: MeshReport | None = None
+    yaw: int = 0
+    """Degrees the file's model was turned about z (`fit_target`), counter-clockwise seen from above."""
 
 
 # ---- reading files ----------------------------------------------------------
@@ -514,11 +581,22 @@ def _face_quad(cell, axis: int, step: int) -> list[list[int]]:
 
 # ---- models to regions ------------------------------------------------------
 
+YAWS = (0, 90, 180, 270)
+
+# Quarter turns about z, counter-clockwise seen from above: (x, y) -> (-y, x) per 90 degrees.
+_YAW = {yaw: np.round(np.array([[math.cos(math.radians(yaw)), -math.sin(math.radians(yaw)), 0],
+                                [math.sin(math.radians(yaw)), math.cos(math.radians(yaw)), 0],
+                                [0, 0, 1]])) for yaw in YAWS}
+
+
 def mesh_models(files: Sequence[tuple[str, str]], unit: float, size: int | None = None, scale: float | None = None,
-                up: str = 'z', hollow: bool = False, limits: TargetLimits = TargetLimits()) -> list[Model]:
-    """Each (region name, mesh file) as a Model at one common pitch (see the module docstring)."""
+                up: str = 'z', hollow: bool = False, limits: TargetLimits = TargetLimits(),
+                yaw: int | None = None) -> list[Model]:
+    """Each (region name, mesh file) as a Model at one common pitch (see the module docstring), all
+    turned by one yaw: `yaw` (degrees, a multiple of 90) or, where None, the one `fit_target` chooses."""
     _check_up(up)
     _check_unit(unit)
+    _check_yaw(yaw)
     if size is not None and scale is not None:
         raise RadError('give --size or --scale, not both')
     meshes = []
@@ -537,25 +615,29 @@ def mesh_models(files: Sequence[tuple[str, str]], unit: float, size: int | None 
         if not (math.isfinite(scale) and scale > 0):
             raise RadError(f'--scale must be a positive number of metres per mesh unit, got {scale!r}')
         pitch = unit / scale
-    _check_fits(extents, pitch, unit, limits, [p for _, p, _ in meshes], size, scale)
+    fit = _check_fits(extents, pitch, unit, limits, [p for _, p, _ in meshes], size, scale, yaw)
     models = []
     for name, path, mesh in meshes:
+        if fit.yaw:
+            mesh.apply_transform(_homogeneous(_YAW[fit.yaw]))
         cells, report = solid_cells(mesh, pitch, hollow, where=path)
         cells = crop(cells)
         if not cells.any():
             raise RadError(f'{path}: no cell centre lies inside the model at {pitch:.4g} mesh units per cell '
                            f'(it is thinner than a cell): use a larger --size or --scale')
-        models.append(Model(name, path, cells, report))
+        models.append(Model(name, path, cells, report, fit.yaw))
     _check_total(models)
     return models
 
 
 def voxel_models(files: Sequence[tuple[str, str]], unit: float, up: str = 'z', hollow: bool = False,
-                 limits: TargetLimits = TargetLimits()) -> list[Model]:
-    """Each (region name, voxel file) as a Model, one cell per voxel."""
+                 limits: TargetLimits = TargetLimits(), yaw: int | None = None) -> list[Model]:
+    """Each (region name, voxel file) as a Model, one cell per voxel, all turned by one yaw: `yaw`
+    (degrees, a multiple of 90) or, where None, the one `fit_target` chooses."""
     _check_up(up)
     _check_unit(unit)
-    models = []
+    _check_yaw(yaw)
+    grids = []
     for name, path in files:
         grid = orient_cells(load_voxel_grid(path), up)
         if hollow:
@@ -563,32 +645,89 @@ def voxel_models(files: Sequence[tuple[str, str]], unit: float, up: str = 'z', h
         grid = crop(grid)
         if not grid.any():
             raise RadError(f'{path}: the voxel grid is empty (no filled voxel)')
-        most = limits.cells(unit)
-        if np.any(np.array(grid.shape) > most):
-            raise RadError(f'{path}: its filled voxels span {_dims(grid.shape)} cells; at unit {unit} m a target '
-                           f'may span {_dims(most)} ({_limits_text(limits)}): use a smaller model or a smaller '
-                           f'--unit')
-        models.append(Model(name, path, grid))
-    _check_total(models)
-    return models
+        grids.append((name, path, grid))
+    boxes = [tuple(int(v) for v in g.shape) for _, _, g in grids]
+    fit = _fit_or_none(boxes, unit, limits, yaw)
+    if not isinstance(fit, Fit):
+        where, counts = _culprit(boxes, unit, limits, [p for _, p, _ in grids], yaw)
+        best = largest_unit(boxes, unit, limits)
+        fix = f'use --unit {best:.3f} or less' if best else 'no unit from 0.010 m fits: use a smaller model'
+        raise _refusal(fit, where, f'its filled voxels span {_dims(counts)} cells', boxes, unit, limits, yaw, fix)
+    return [Model(name, path, np.rot90(grid, fit.yaw // 90, axes=(0, 1)) if fit.yaw else grid, yaw=fit.yaw)
+            for name, path, grid in grids]
+
+
+@dataclass(frozen=True)
+class Fit:
+    """How a target stands (`fit_target`): its turn about z (degrees, counter-clockwise seen from above),
+    the x of its centre (m; y is 0), its box turned (cells along x, y, z), the most cells high its place
+    allows and what caps that; turned: why it was turned, in words ('' where it was not)."""
+
+    yaw: int
+    x: float
+    box: tuple[int, int, int]
+    most_high: int
+    cap: str
+    turned: str = ''
+
+    @property
+    def moved(self) -> bool:
+        """Whether it stands nearer the robot than x = STRUCTURE_X."""
+        return self.x < STRUCTURE_X - 1e-9
+
+
+def fit_target(boxes: Sequence[tuple[int, int, int]], unit: float, limits: TargetLimits = TargetLimits(),
+               yaw: int | None = None) -> Fit:
+    """Where and how models of these boxes (cells along x, y, z, as the files have them; several: back to
+    back along y, one yaw for all) stand, by the module docstring's rule; `yaw` fixes the turn.
+    RadError naming what exceeds the limits otherwise."""
+    _check_yaw(yaw)
+    fit = _fit_or_none(boxes, unit, limits, yaw)
+    if isinstance(fit, Fit):
+        return fit
+    best = largest_unit(boxes, unit, limits)
+    fix = f'use --unit {best:.3f} or less' if best else 'no unit from 0.010 m fits: use smaller models'
+    raise _refusal(fit, 'the target', f'its boxes span {_dims(_group(boxes, 0))} cells', boxes, unit, limits,
+                   yaw, fix)
+
+
+def largest_unit(boxes: Sequence[tuple[int, int, int]], unit: float, limits: TargetLimits = TargetLimits(),
+                 yaw: int | None = None) -> float | None:
+    """The largest cell edge, in whole mm up to `unit` and from 0.010 m, at which these boxes fit (in
+    `yaw`, or in any yaw); None where none does."""
+    for mm in range(int(math.floor(unit * 1000 + 1e-6)), 9, -1):
+        if isinstance(_fit_or_none(boxes, mm / 1000, limits, yaw), Fit):
+            return mm / 1000
+    return None
+
+
+def placement(models: Sequence[Model], unit: float, limits: TargetLimits = TargetLimits()) -> Fit:
+    """Where the models stand as they are (turned already): back to back along y, centred on y = 0 and on
+    x = STRUCTURE_X, or nearer the robot where only there the reach allows their height.
+    RadError naming what exceeds the limits otherwise."""
+    boxes = [tuple(int(v) for v in m.cells.shape) for m in models]
+    fit = _try(boxes, unit, limits, 0)
+    if isinstance(fit, Fit):
+        return Fit(models[0].yaw if models else 0, fit.x, fit.box, fit.most_high, fit.cap)
+    what = f'the {len(models)} regions together' if len(models) > 1 else f'the region {models[0].name!r}'
+    raise RadError(f'{what}: {_dims(_group(boxes, 0))} cells of {unit:g} m exceed what the arm builds: '
+                   f'{"; ".join(t for _, t in fit)}: use fewer, smaller or thinner models')
 
 
 def place_regions(models: Sequence[Model], unit: float,
                   limits: TargetLimits = TargetLimits()) -> tuple[TargetRegion, ...]:
     """The models as regions back to back along y, the first at +y (the robot's left), the whole
-    centred on (STRUCTURE_X, 0), each centred on x = STRUCTURE_X and resting on the table.
+    centred on (x, 0) where `placement` puts it (x = STRUCTURE_X unless the reach wants it nearer),
+    each centred on that x and resting on the table.
 
     Two one-cell-deep faces named left and right so land where the generator puts its two sides.
     """
+    x = placement(models, unit, limits).x
     depth = sum(m.cells.shape[1] for m in models)
-    most = limits.cells(unit)
-    if depth > most[1]:
-        raise RadError(f'the {len(models)} regions together are {depth} cells deep (y); at unit {unit} m a target '
-                       f'may be {most[1]} ({_limits_text(limits)}): use fewer or thinner models')
     out, top = [], depth / 2
     for m in models:
         w, d, _ = m.cells.shape
-        x0 = STRUCTURE_X - unit * (w - 1) / 2
+        x0 = x - unit * (w - 1) / 2
         y0 = unit * (top - d + 0.5)
         top -= d
         origin = tuple(round(float(v), 6) for v in (x0, y0, unit / 2))
@@ -597,27 +736,181 @@ def place_regions(models: Sequence[Model], unit: float,
     return tuple(out)
 
 
+def fit_report(models: Sequence[Model], unit: float, limits: TargetLimits = TargetLimits(),
+               given_yaw: bool = False) -> str:
+    """One line: the target's cells, where it stands, how it is turned and why, how high it may be there."""
+    fit = placement(models, unit, limits)
+    w, d, h = fit.box
+    line = f'target: {w} x {d} x {h} cells of {unit:g} m centred on x = {fit.x:g} m, y = 0'
+    if not fit.yaw:
+        line += ', as in the file'
+    else:
+        if given_yaw:
+            line += f', turned {fit.yaw} degrees (--yaw)'
+        else:
+            back = [_turned(tuple(int(v) for v in m.cells.shape), -fit.yaw) for m in models]
+            chosen = _fit_or_none(back, unit, limits, None)
+            why = chosen.turned if isinstance(chosen, Fit) and chosen.yaw == fit.yaw else ''
+            line += f', turned {fit.yaw} degrees' + (f' {why}' if why else '')
+    if fit.moved:
+        at_structure = reach_cells(w, d, unit, STRUCTURE_X)[0]
+        line += (f', moved {STRUCTURE_X - fit.x:.3f} m nearer the robot (at x = {STRUCTURE_X:g} m the reach '
+                 f'allows {at_structure} cells high)')
+    return line + f'; up to {fit.most_high} cells high here ({fit.cap})'
+
+
+def _check_yaw(yaw) -> None:
+    if yaw is not None and yaw not in YAWS:
+        raise RadError(f'--yaw must be one of {", ".join(str(y) for y in YAWS)} (degrees: the cells are a '
+                       f'lattice aligned with the robot\'s base), got {yaw!r}')
+
+
+def _turned(box: tuple[int, int, int], yaw: int) -> tuple[int, int, int]:
+    """A box's cells along x, y, z after a turn of `yaw` degrees about z."""
+    return (box[1], box[0], box[2]) if yaw % 180 else tuple(box)
+
+
+def _group(boxes: Sequence[tuple[int, int, int]], yaw: int) -> tuple[int, int, int]:
+    """The box of the models turned by `yaw` and laid back to back along y."""
+    turned = [_turned(b, yaw) for b in boxes]
+    return (max(b[0] for b in turned), sum(b[1] for b in turned), max(b[2] for b in turned))
+
+
+def _try(boxes: Sequence[tuple[int, int, int]], unit: float, limits: TargetLimits,
+         yaw: int) -> Fit | list[tuple[str, str]]:
+    """The place of these boxes turned by `yaw`: x = STRUCTURE_X where it fits there, else the x nearest it
+    (in whole mm, towards the robot) where it does; or what does not fit, as (axis, words) pairs."""
+    w, d, h = _group(boxes, yaw)
+    problems = []
+    most_w = int(math.floor(limits.max_width / unit + 1e-9))
+    most_d = int(math.floor(limits.max_depth / unit + 1e-9))
+    if w > min(most_w, MAX_REGION_AXIS):
+        cap = (f'{limits.max_width:g} m of reach along x' if most_w <= MAX_REGION_AXIS
+               else f'a region\'s {MAX_REGION_AXIS} cells a side')
+        problems.append(('x', f'{w} cells wide (x), {min(most_w, MAX_REGION_AXIS)} fit ({cap})'))
+    if d > most_d:
+        problems.append(('y', f'{d} cells deep (y), {most_d} fit ({limits.max_depth:g} m of reach across y = 0)'))
+    thickest = max(_turned(b, yaw)[1] for b in boxes)
+    if thickest > MAX_REGION_AXIS:
+        problems.append(('y', f'{thickest} cells deep (y) in one region, {MAX_REGION_AXIS} fit (a region\'s '
+                              f'{MAX_REGION_AXIS} cells a side)'))
+    total = sum(int(np.prod(b)) for b in boxes)
+    if total > MAX_GRID_CELLS:
+        problems.append(('cells', f'{total} cells in the regions\' boxes, {MAX_GRID_CELLS} fit (a scene\'s grid)'))
+    if problems:
+        return problems
+    most_h, cap = reach_cells(w, d, unit, STRUCTURE_X)
+    if h <= most_h:
+        return Fit(yaw, STRUCTURE_X, (w, d, h), most_h, cap)
+    near = int(math.ceil((limits.nearest_x + unit * w / 2) * 1000 - 1e-6))
+    if near >= round(STRUCTURE_X * 1000) or reach_cells(w, d, unit, near / 1000)[0] < h:
+        most_near, cap_near = reach_cells(w, d, unit, min(near / 1000, STRUCTURE_X))
+        return [('z', f'{h} cells high (z), {max(most_h, most_near)} fit ({cap_near}, with its near edge at '
+                      f'{limits.nearest_x:g} m, as near the robot as a target stands)')]
+    # The reach over a height only grows nearer the robot: the farthest x (in mm) that allows h.
+    lo, hi = near, int(round(STRUCTURE_X * 1000))          # lo fits, hi does not
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if reach_cells(w, d, unit, mid / 1000)[0] >= h:
+            lo = mid
+        else:
+            hi = mid
+    most_h, cap = reach_cells(w, d, unit, lo / 1000)
+    return Fit(yaw, lo / 1000, (w, d, h), most_h, cap)
+
+
+def _fit_or_none(boxes: Sequence[tuple[int, int, int]], unit: float, limits: TargetLimits,
+                 yaw: int | None) -> Fit | dict[int, list[tuple[str, str]]]:
+    """The fit in `yaw`, or where None by the rule (module docstring): the file's orientation at
+    x = STRUCTURE_X, the quarter turn there, the file's orientation moved, the quarter turn moved. Else
+    what does not fit per yaw tried."""
+    if yaw is not None:
+        fit = _try(boxes, unit, limits, yaw)
+        return fit if isinstance(fit, Fit) else {yaw: fit}
+    tries = {y: _try(boxes, unit, limits, y) for y in (0, 90)}
+    fits = [f for f in tries.values() if isinstance(f, Fit)]
+    if not fits:
+        return tries
+    best = next((f for f in fits if not f.moved), fits[0])
+    if best.yaw:
+        reason = _turn_reason(tries[0], boxes) if not isinstance(tries[0], Fit) else \
+            f'to stand at x = {STRUCTURE_X:g} m (the file\'s orientation fits only nearer the robot)'
+        best = Fit(best.yaw, best.x, best.box, best.most_high, best.cap, reason)
+    return best
+
+
+def _turn_reason(problems, boxes) -> str:
+    """Why a quarter turn: what did not fit in the file's orientation, and what it becomes."""
+    w, d, h = _group(boxes, 0)
+    w90, d90, _ = _group(boxes, 90)
+    axes = {axis for axis, _ in problems} if isinstance(problems, list) else set()
+    if 'y' in axes:
+        return f'to fit the reach: {d} cells deep becomes {w90} wide'
+    if 'x' in axes:
+        return f'to fit the reach: {w} cells wide becomes {d90} deep'
+    return 'to fit the reach'
+
+
+def _culprit(boxes, unit: float, limits: TargetLimits, paths, yaw: int | None = None) -> tuple[str, tuple]:
+    """Which to name in a refusal: the one file, or the first that does not fit alone, else all together."""
+    if len(paths) == 1:
+        return paths[0], boxes[0]
+    for box, path in zip(boxes, paths):
+        if not isinstance(_fit_or_none([box], unit, limits, yaw), Fit):
+            return path, box
+    return f'the {len(paths)} models together', _group(boxes, 0)
+
+
+def _refusal(tried, where: str, what: str, boxes, unit: float, limits: TargetLimits, yaw: int | None,
+             fix: str) -> RadError:
+    """One line: what exceeds which limit in each yaw tried, what a target may span, and `fix`; for a
+    given yaw where another fits, that yaw."""
+    if yaw is not None:
+        other = _fit_or_none(boxes, unit, limits, None)
+        if isinstance(other, Fit):
+            return RadError(f'{where}: {what}; at --yaw {yaw}: {"; ".join(t for _, t in tried[yaw])}: '
+                            f'--yaw {other.yaw} fits, or leave --yaw out')
+        tried = other
+    texts = {y: ', '.join(t for _, t in p) for y, p in tried.items()}
+    if len(set(texts.values())) == 1:
+        why = next(iter(texts.values()))
+    else:
+        why = '; '.join(f'{"as in the file" if y == 0 else f"turned {y}"}: {t}' for y, t in texts.items())
+    return RadError(f'{where}: {what} of {unit:g} m, too large for the arm in any yaw ({why}); a target may '
+                    f'span {_dims(limits.cells(unit))} cells at x = {STRUCTURE_X:g} m ({_limits_text(limits)}): '
+                    f'{fix}')
+
+
 def _check_unit(unit: float) -> None:
     if not (isinstance(unit, (int, float)) and math.isfinite(unit) and 0.01 <= unit <= MAX_UNIT):
         raise RadError(f'--unit must be a cell edge in 0.01..{MAX_UNIT} m (the blocks\' cube edge, e.g. 0.05; '
                        f'the open hand takes cubes up to {MAX_UNIT} m), got {unit!r}')
 
 
-def _check_fits(extents: np.ndarray, pitch: float, unit: float, limits: TargetLimits, paths, size, scale) -> None:
-    """Refuse models beyond the limits, naming a --size and a --scale that fit."""
-    most = limits.cells(unit)
-    for ext, path in zip(extents, paths):
-        counts = cell_counts(ext, pitch)
-        if np.all(counts <= most):
-            continue
-        # Cells along axis a at scale S: ceil(ext_a * S / unit) <= most_a  <=>  S <= most_a * unit / ext_a.
-        s_fit = float(np.min(most * unit / np.maximum(extents.max(axis=0), 1e-12)))
-        longest = float(extents.max())
-        n_fit = int(np.min(np.floor(most * longest / np.maximum(extents.max(axis=0), 1e-12) + 1e-9)))
-        given = f'--size {size}' if size is not None else f'--scale {scale:g}'
-        raise RadError(f'{path}: at {given} the model is {_dims(counts)} cells of {unit} m; a target may span '
-                       f'{_dims(most)} ({_limits_text(limits)}): use --size {max(1, n_fit)} or less, '
-                       f'or --scale {_round_down(s_fit)} or less')
+def _check_fits(extents: np.ndarray, pitch: float, unit: float, limits: TargetLimits, paths, size, scale,
+                yaw: int | None) -> Fit:
+    """The fit of the models' boxes at this pitch (`fit_target`); refuse models that fit in no yaw
+    naming the largest unit, a --size and a --scale that fit."""
+    boxes = [tuple(int(v) for v in cell_counts(ext, pitch)) for ext in extents]
+    fit = _fit_or_none(boxes, unit, limits, yaw)
+    if isinstance(fit, Fit):
+        return fit
+    longest = float(extents.max())
+    n_now = max(max(b) for b in boxes)
+    n_fit = next((n for n in range(n_now, 0, -1)
+                  if isinstance(_fit_or_none([tuple(int(v) for v in cell_counts(ext, longest / n))
+                                              for ext in extents], unit, limits, yaw), Fit)), 1)
+    best = largest_unit(boxes, unit, limits, yaw)
+    given = f'--size {size}' if size is not None else f'--scale {scale:g}'
+    fixes = [f'--size {n_fit} or less']
+    if size is None:
+        # --scale S gives the cells of --size n where S = unit * n / longest (mesh units).
+        fixes.append(f'--scale {_round_down(unit * n_fit / max(longest, 1e-12))} or less')
+    if best:
+        fixes.append(f'--unit {best:.3f} or less' + (f' with --size {n_now}' if size is None else ' at this size'))
+    where, counts = _culprit(boxes, unit, limits, paths, yaw)
+    raise _refusal(fit, where, f'at {given} the model is {_dims(counts)} cells', boxes, unit, limits, yaw,
+                   'use ' + ', or '.join(fixes))
 
 
 def _check_total(models: Sequence[Model]) -> None:
@@ -640,8 +933,8 @@ def _dims(shape) -> str:
 
 
 def _limits_text(limits: TargetLimits) -> str:
-    return (f'{limits.max_width:g} x {limits.max_depth:g} x {limits.max_height:g} m wide, deep and high '
-            f'within the arm\'s reach')
+    return (f'{limits.max_width:g} x {limits.max_depth:g} m wide and deep within the arm\'s reach, as high as '
+            f'its reach allows a footprint that large')
 
 
 def _homogeneous(rotation: np.ndarray) -> np.ndarray:
