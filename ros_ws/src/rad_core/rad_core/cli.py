@@ -13,6 +13,7 @@
              [--effector hand|suction]
     rad limits RESULT.json [--robot panda|fr3] [--joint-prefix P]
     rad calibrate PAIRS.csv [--out FILE] [--max-rms M] [--mocap-frame NAME]
+    rad calibrate --hand-eye POSES.csv [--out FILE] [--max-rms M] [--mocap-frame NAME]
     rad eval --agent AGENT [--checkpoint FILE] --grid G [--robot] --scenes N --seed S --json FILE
              [--workers N [--dashboard] | --scheduler ADDR [--workers N]]
     rad ceiling SCENE.json [...] [--time-limit S] [--agent AGENT] [--support arm,hand] [--allocations-only]
@@ -268,13 +269,19 @@ def cmd_limits(args) -> int:
 
 
 def cmd_calibrate(args) -> int:
-    """Fit the motion-capture frame to the robot's base from point pairs (rad_core.cell.calibration); print
-    the transform and its residuals as one JSON object; --out writes the assembly node's parameters."""
+    """Fit the motion-capture frame to the robot's base from point pairs (rad_core.cell.calibration), or with
+    --hand-eye a fixed camera from flange and tag poses (rad_core.cell.hand_eye); print the transform and its
+    residuals as one JSON object; --out writes the assembly node's parameters."""
     from rad_core.cell.calibration import fit, parse_pairs_csv, read_pairs_csv  # numpy: this command only
     if not args.mocap_frame:
         raise RadError("--mocap-frame must name the motion-capture frame ('' means no calibration)")
     if args.out == '-':
         raise RadError('--out needs a file: stdout carries the JSON')
+    if (args.pairs is None) == (args.hand_eye is None):
+        raise RadError('give either PAIRS.csv (motion capture) or --hand-eye POSES.csv (a fixed camera), not '
+                       + ('both' if args.pairs is not None else 'neither'))
+    if args.hand_eye is not None:
+        return _calibrate_hand_eye(args)
     pairs = parse_pairs_csv(sys.stdin.read(), 'stdin') if args.pairs == '-' else read_pairs_csv(args.pairs)
     calibration = fit(pairs, args.max_rms)
     doc = {**calibration.to_dict(), 'max_rms_m': args.max_rms if args.max_rms != float('inf') else None,
@@ -283,6 +290,23 @@ def cmd_calibrate(args) -> int:
         header = (f'rad calibrate {args.pairs}: {len(pairs.base)} points, rms residual '
                   f'{calibration.rms_m * 1e3:.3f} mm, max {max(calibration.residuals_m) * 1e3:.3f} mm')
         _write_text(calibration.params_yaml(args.mocap_frame, header).rstrip('\n'), args.out)
+        doc['out'] = args.out
+    print(json.dumps(doc))
+    return 0
+
+
+def _calibrate_hand_eye(args) -> int:
+    """`rad calibrate --hand-eye`: the camera in the base frame, the tag on the flange, the residuals;
+    --out writes the camera as the frame the assembly node's poses arrive in (--mocap-frame names it)."""
+    from rad_core.cell.hand_eye import fit, parse_poses_csv, read_poses_csv  # scipy: this command only
+    poses = parse_poses_csv(sys.stdin.read(), 'stdin') if args.hand_eye == '-' else read_poses_csv(args.hand_eye)
+    hand_eye = fit(poses, args.max_rms)
+    doc = {**hand_eye.to_dict(), 'max_rms_m': args.max_rms if args.max_rms != float('inf') else None,
+           'mocap_frame': args.mocap_frame}
+    if args.out:
+        header = (f'rad calibrate --hand-eye {args.hand_eye}: {len(poses)} poses, rms residual '
+                  f'{hand_eye.rms_position_m * 1e3:.3f} mm, {hand_eye.rms_rotation_deg:.3f} deg')
+        _write_text(hand_eye.params_yaml(args.mocap_frame, header).rstrip('\n'), args.out)
         doc['out'] = args.out
     print(json.dumps(doc))
     return 0
@@ -663,14 +687,20 @@ def build_parser(command: str | None = 'train') -> argparse.ArgumentParser:
     p.add_argument('--robot', default='panda', choices=['panda', 'fr3'])
     p.add_argument('--joint-prefix', default='', help="arm joints <prefix>_joint1..7 ('' = the model's)")
     p.set_defaults(func=cmd_limits)
-    p = sub.add_parser('calibrate', help='fit the motion-capture frame to the robot base from point pairs')
-    p.add_argument('pairs', help='CSV with the header x_base,y_base,z_base,x_mocap,y_mocap,z_mocap (any order, '
-                                 'other columns ignored), - for stdin')
+    p = sub.add_parser('calibrate', help='fit the motion-capture frame (or, with --hand-eye, a fixed camera) to '
+                                         'the robot base')
+    p.add_argument('pairs', nargs='?', help='CSV with the header x_base,y_base,z_base,x_mocap,y_mocap,z_mocap '
+                                            '(any order, other columns ignored), - for stdin')
+    p.add_argument('--hand-eye', metavar='POSES.csv',
+                   help='fit a fixed camera from a tag on the flange instead: CSV with the header bf_x,bf_y,bf_z,'
+                        'bf_qx,bf_qy,bf_qz,bf_qw (the flange in the base) and ct_x,...,ct_qw (the tag in the '
+                        'camera), - for stdin')
     p.add_argument('--out', metavar='FILE', help="write the assembly node's parameters (ROS 2 YAML) here")
     p.add_argument('--max-rms', type=float, default=0.005, metavar='M',
-                   help='refuse a fit whose rms residual is over this, m (default: 0.005)')
+                   help='refuse a fit whose rms (position) residual is over this, m (default: 0.005)')
     p.add_argument('--mocap-frame', default='mocap', metavar='NAME',
-                   help="the motion-capture frame's name, written as mocap_frame (default: mocap)")
+                   help="the motion-capture frame's name (with --hand-eye: the camera frame's), written as "
+                        'mocap_frame (default: mocap)')
     p.set_defaults(func=cmd_calibrate)
     p = sub.add_parser('eval', help="the paper's metrics (R, d, e, f, f_g, f_p, coverage) of a sequencer over scenes")
     # A name, not argparse choices: the registry imports the solvers and networks, and building the parser

@@ -74,7 +74,8 @@ SUPPLY_STARTS = ('auto', 'table', 'feeder')
 COST_SCALE = 1000
 ORDERED_MAX_CELLS = 200
 """Targets of more cells skip the order model's cover (`_ordered_supply`): its model, every candidate
-pose at every step, takes minutes to build beyond that, whatever the time limit."""
+pose at every step, takes minutes to build beyond that, whatever the time limit. They are the large
+targets, whose CP-SAT search starts from the course-by-course cover."""
 
 
 def library(scene: Scene | None = None) -> dict[str, BlockType]:
@@ -283,12 +284,13 @@ def choose_blocks(targets: Sequence[TargetRegion], unit: float, types: Mapping[s
     counts = {n: n_target for n in types} if inventory is None else {n: int(inventory.get(n, 0)) for n in types}
     occupied = np.zeros(grid.num_cells, dtype=bool)
     model, w, _ = build_model(candidates, counts, 'stable', grid, occupied)
-    # The first cover, in well under a second at any size: CP-SAT starts from it (a hint) and improves it
-    # while time is left; where CP-SAT finds no answer in time (presolve of a large model can take it
-    # all), it is the answer.
+    # The first cover, in well under a second at any size: where CP-SAT finds no answer in time (presolve
+    # of a large model can take it all), it is the answer; on a large target CP-SAT also starts from it
+    # (a hint; on a small one a hint would only steer which of equal covers CP-SAT returns).
     first = course_cover(grid, candidates, counts)
-    for n in set(first):
-        model.add_hint(w[n], True)
+    if n_target > ORDERED_MAX_CELLS:
+        for n in set(first):
+            model.add_hint(w[n], True)
     # Lexicographic objective (module docstring): each level outweighs everything below it.
     unit_cost = [_cost(c.placement.type, params) for c in candidates]
     covered = [int(grid.is_target[list(c.cell_ids)].sum()) for c in candidates]
