@@ -284,11 +284,17 @@ def cmd_calibrate(args) -> int:
         return _calibrate_hand_eye(args)
     pairs = parse_pairs_csv(sys.stdin.read(), 'stdin') if args.pairs == '-' else read_pairs_csv(args.pairs)
     calibration = fit(pairs, args.max_rms)
+    return _print_calibration(args, calibration, f'rad calibrate {args.pairs}: {len(pairs.base)} points, rms '
+                              f'residual {calibration.rms_m * 1e3:.3f} mm, max '
+                              f'{max(calibration.residuals_m) * 1e3:.3f} mm')
+
+
+def _print_calibration(args, calibration, header: str) -> int:
+    """Print the fit as one JSON object; --out writes the assembly node's parameters (`header` their
+    first comment)."""
     doc = {**calibration.to_dict(), 'max_rms_m': args.max_rms if args.max_rms != float('inf') else None,
            'mocap_frame': args.mocap_frame}
     if args.out:
-        header = (f'rad calibrate {args.pairs}: {len(pairs.base)} points, rms residual '
-                  f'{calibration.rms_m * 1e3:.3f} mm, max {max(calibration.residuals_m) * 1e3:.3f} mm')
         _write_text(calibration.params_yaml(args.mocap_frame, header).rstrip('\n'), args.out)
         doc['out'] = args.out
     print(json.dumps(doc))
@@ -301,15 +307,8 @@ def _calibrate_hand_eye(args) -> int:
     from rad_core.cell.hand_eye import fit, parse_poses_csv, read_poses_csv  # scipy: this command only
     poses = parse_poses_csv(sys.stdin.read(), 'stdin') if args.hand_eye == '-' else read_poses_csv(args.hand_eye)
     hand_eye = fit(poses, args.max_rms)
-    doc = {**hand_eye.to_dict(), 'max_rms_m': args.max_rms if args.max_rms != float('inf') else None,
-           'mocap_frame': args.mocap_frame}
-    if args.out:
-        header = (f'rad calibrate --hand-eye {args.hand_eye}: {len(poses)} poses, rms residual '
-                  f'{hand_eye.rms_position_m * 1e3:.3f} mm, {hand_eye.rms_rotation_deg:.3f} deg')
-        _write_text(hand_eye.params_yaml(args.mocap_frame, header).rstrip('\n'), args.out)
-        doc['out'] = args.out
-    print(json.dumps(doc))
-    return 0
+    return _print_calibration(args, hand_eye, f'rad calibrate --hand-eye {args.hand_eye}: {len(poses)} poses, rms '
+                              f'residual {hand_eye.rms_position_m * 1e3:.3f} mm, {hand_eye.rms_rotation_deg:.3f} deg')
 
 
 def cmd_eval(args) -> int:

@@ -173,37 +173,44 @@ def _kabsch(source: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, np.ndar
 
 def parse_pairs_csv(text: str, source: str = 'pairs') -> PointPairs:
     """Pairs from CSV text (see the module docstring); RadError names the file and line."""
+    a, labels = read_columns(text, PAIR_COLUMNS, source)
+    return PointPairs(a[:, :3], a[:, 3:], labels)
+
+
+def read_columns(text: str, columns: Sequence[str], source: str) -> tuple[np.ndarray, tuple[str, ...]]:
+    """The named columns of CSV text as finite floats, one row per data line, and each row's 'line K':
+    a header naming at least `columns` in any order (others ignored), blank lines and lines starting
+    with '#' skipped; RadError naming the file and line of anything else."""
     lines = [(k, line) for k, line in enumerate(text.splitlines(), start=1)
              if line.strip() and not line.lstrip().startswith('#')]
     if not lines:
-        raise RadError(f'{source}: no header row; expected {",".join(PAIR_COLUMNS)}')
+        raise RadError(f'{source}: no header row; expected {",".join(columns)}')
     rows = list(csv.reader(io.StringIO('\n'.join(line for _, line in lines))))
     header = [h.strip() for h in rows[0]]
-    missing = [c for c in PAIR_COLUMNS if c not in header]
+    missing = [c for c in columns if c not in header]
     if missing:
         raise RadError(f'{source} line {lines[0][0]}: the header lacks {", ".join(missing)} '
-                       f'(expected {",".join(PAIR_COLUMNS)}; got {",".join(header)})')
-    twice = sorted({c for c in PAIR_COLUMNS if header.count(c) > 1})
+                       f'(expected {",".join(columns)}; got {",".join(header)})')
+    twice = sorted({c for c in columns if header.count(c) > 1})
     if twice:
         raise RadError(f'{source} line {lines[0][0]}: the header names {", ".join(twice)} more than once')
-    index = [header.index(c) for c in PAIR_COLUMNS]
+    index = [header.index(c) for c in columns]
     values, labels = [], []
     for (k, _), row in zip(lines[1:], rows[1:]):
         if len(row) != len(header):
             raise RadError(f'{source} line {k}: {len(row)} fields, the header has {len(header)}')
-        point = []
-        for c, i in zip(PAIR_COLUMNS, index):
+        out = []
+        for c, i in zip(columns, index):
             try:
                 v = float(row[i])
             except ValueError:
                 raise RadError(f'{source} line {k}: {c} is {row[i].strip()!r}, not a number') from None
             if not math.isfinite(v):
                 raise RadError(f'{source} line {k}: {c} is {row[i].strip()}, not a finite number')
-            point.append(v)
-        values.append(point)
+            out.append(v)
+        values.append(out)
         labels.append(f'line {k}')
-    a = np.array(values, dtype=float).reshape(-1, 6)
-    return PointPairs(a[:, :3], a[:, 3:], tuple(labels))
+    return np.array(values, dtype=float).reshape(-1, len(columns)), tuple(labels)
 
 
 def read_pairs_csv(path: str | Path) -> PointPairs:

@@ -39,15 +39,13 @@ other columns are ignored; blank lines and lines starting with '#' are skipped.
 
 from __future__ import annotations
 
-import csv
-import io
 import math
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from rad_core.cell.calibration import Calibration
+from rad_core.cell.calibration import Calibration, read_columns
 from rad_core.domain.errors import RadError
 from rad_core.domain.transforms import quaternion_from_matrix
 
@@ -277,37 +275,8 @@ def _refine(rb, bt, rc, ct, rx0, tx0, ry0, ty0):
 
 def parse_poses_csv(text: str, source: str = 'poses') -> HandEyePoses:
     """Poses from CSV text (see the module docstring); RadError names the file and line."""
-    lines = [(k, line) for k, line in enumerate(text.splitlines(), start=1)
-             if line.strip() and not line.lstrip().startswith('#')]
-    if not lines:
-        raise RadError(f'{source}: no header row; expected {",".join(POSE_COLUMNS)}')
-    rows = list(csv.reader(io.StringIO('\n'.join(line for _, line in lines))))
-    header = [h.strip() for h in rows[0]]
-    missing = [c for c in POSE_COLUMNS if c not in header]
-    if missing:
-        raise RadError(f'{source} line {lines[0][0]}: the header lacks {", ".join(missing)} '
-                       f'(expected {",".join(POSE_COLUMNS)}; got {",".join(header)})')
-    twice = sorted({c for c in POSE_COLUMNS if header.count(c) > 1})
-    if twice:
-        raise RadError(f'{source} line {lines[0][0]}: the header names {", ".join(twice)} more than once')
-    index = [header.index(c) for c in POSE_COLUMNS]
-    values, labels = [], []
-    for (k, _), row in zip(lines[1:], rows[1:]):
-        if len(row) != len(header):
-            raise RadError(f'{source} line {k}: {len(row)} fields, the header has {len(header)}')
-        pose = []
-        for c, i in zip(POSE_COLUMNS, index):
-            try:
-                v = float(row[i])
-            except ValueError:
-                raise RadError(f'{source} line {k}: {c} is {row[i].strip()!r}, not a number') from None
-            if not math.isfinite(v):
-                raise RadError(f'{source} line {k}: {c} is {row[i].strip()}, not a finite number')
-            pose.append(v)
-        values.append(pose)
-        labels.append(f'line {k}')
-    a = np.array(values, dtype=float).reshape(-1, 14)
-    return HandEyePoses(a[:, 0:3], a[:, 3:7], a[:, 7:10], a[:, 10:14], tuple(labels))
+    a, labels = read_columns(text, POSE_COLUMNS, source)
+    return HandEyePoses(a[:, 0:3], a[:, 3:7], a[:, 7:10], a[:, 10:14], labels)
 
 
 def read_poses_csv(path: str | Path) -> HandEyePoses:
