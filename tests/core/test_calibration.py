@@ -1,13 +1,12 @@
 """Calibration of the motion-capture frame: the fit, its refusals, the pairs CSV, `rad calibrate`,
 and the pair a live cell gives (forward kinematics, the rest check)."""
 
-import io
 import json
 import math
-import sys
 
 import numpy as np
 import pytest
+from in_process import rad
 import yaml
 from rad_core.cell.calibration import (
     PAIR_COLUMNS,
@@ -171,17 +170,6 @@ def test_append_pair_row_writes_a_file_the_reader_takes_and_refuses_another_head
 
 
 # ---- rad calibrate ------------------------------------------------------------------------
-
-def rad(capsys, monkeypatch, *args, stdin=None):
-    """`rad ARGS` in this process (a subprocess would spend seconds importing what the other commands need):
-    exit code, stdout, stderr."""
-    from rad_core.cli import main
-    if stdin is not None:
-        monkeypatch.setattr(sys, 'stdin', io.StringIO(stdin))
-    code = main(list(args))
-    out, err = capsys.readouterr()
-    return code, out, err
-
 
 def test_rad_calibrate_prints_the_transform_and_writes_the_parameters(tmp_path, capsys, monkeypatch):
     base, mocap, rotation, translation, q = synthetic(n=12, noise=0.0002, seed=4)

@@ -1,13 +1,12 @@
 """Hand-eye calibration of a fixed camera: the fit of X C_i = B_i Y, its refusals, the poses CSV and
 `rad calibrate --hand-eye`."""
 
-import io
 import json
 import math
-import sys
 
 import numpy as np
 import pytest
+from in_process import rad
 import yaml
 from rad_core.cell.hand_eye import POSE_COLUMNS, HandEyePoses, fit, parse_poses_csv, read_poses_csv
 from rad_core.domain.errors import RadError
@@ -209,16 +208,6 @@ def test_a_missing_file_is_refused(tmp_path):
 
 
 # ---- rad calibrate --hand-eye ------------------------------------------------------------
-
-def rad(capsys, monkeypatch, *args, stdin=None):
-    """`rad ARGS` in this process: exit code, stdout, stderr."""
-    from rad_core.cli import main
-    if stdin is not None:
-        monkeypatch.setattr(sys, 'stdin', io.StringIO(stdin))
-    code = main(list(args))
-    out, err = capsys.readouterr()
-    return code, out, err
-
 
 def test_rad_calibrate_hand_eye_prints_the_camera_and_writes_the_parameters(tmp_path, capsys, monkeypatch):
     poses, (rx, tx), (ry, ty) = lab_poses(4, sigma=0.0002, sigma_deg=0.05)

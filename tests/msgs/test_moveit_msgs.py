@@ -11,11 +11,8 @@ make it ignore the blocks rad publishes on /collision_object.
 Message types alone: no rclpy.init, no DDS.
 """
 
-import json
-import os
-
 import pytest
-from ament_index_python.packages import get_package_share_directory
+from interfaces import installed_type_hashes, rosidl_constants
 from moveit_msgs.msg import CollisionObject
 from object_recognition_msgs.msg import ObjectType
 
@@ -58,11 +55,6 @@ UPSTREAM_HASHES = {
 }
 
 
-def _constants(cls):
-    """The constants rosidl generated for cls (they live on its metaclass), name -> value."""
-    return {name: getattr(cls, name) for name in vars(type(cls)) if name.isupper() and not name.startswith('_')}
-
-
 @pytest.mark.parametrize('cls, fields', FIELDS, ids=[cls.__name__ for cls, _ in FIELDS])
 def test_fields_match_upstream_in_name_type_and_order(cls, fields):
     assert list(cls.get_fields_and_field_types().items()) == fields
@@ -70,7 +62,7 @@ def test_fields_match_upstream_in_name_type_and_order(cls, fields):
 
 @pytest.mark.parametrize('cls, constants', CONSTANTS, ids=[cls.__name__ for cls, _ in CONSTANTS])
 def test_constants_match_upstream(cls, constants):
-    assert _constants(cls) == constants
+    assert rosidl_constants(cls) == constants
 
 
 def test_upstream_declares_no_default_values():
@@ -82,8 +74,6 @@ def test_upstream_declares_no_default_values():
 
 @pytest.mark.parametrize('package, interface', sorted(UPSTREAM_HASHES), ids='/'.join)
 def test_type_hashes_match_upstream_jazzy(package, interface):
-    path = os.path.join(get_package_share_directory(package), interface + '.json')
-    with open(path) as f:
-        hashes = {h['type_name']: h['hash_string'] for h in json.load(f)['type_hashes']}
+    hashes = installed_type_hashes(package, interface)
     expected = UPSTREAM_HASHES[package, interface]
     assert {name: hashes.get(name) for name in expected} == expected

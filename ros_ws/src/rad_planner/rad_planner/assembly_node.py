@@ -128,57 +128,53 @@ DEADLINE_MARGIN = 0.05
 
 
 
-def _p(name, default, description, dynamic=False, range=None, any_type=False) -> Param:
-    return Param(name, default, description, dynamic, range, any_type)
-
-
 # Read for each request (dynamic: `ros2 param set` applies to the next one), or when the node configures
 # (read-only: set them in the parameter file or on the command line).
 PARAMS = [
-    _p('time_limit_s', 120.0, "a request's time limit when it gives none (s)", True, (0.1, 3600.0)),
-    _p('anytime_deadline_s', ANYTIME_DEADLINE_S, 'no improvement of a first plan starts after this (s), when a '
-       'request gives no time limit', True, (0.01, 600.0)),
-    _p('allocation_time_limit_s', 10.0, "CP-SAT's time limit per allocation (s)", True, (0.1, 600.0)),
-    _p('seed', 0, 'seed of the planner', True, (0, 2 ** 31 - 1)),
-    _p('task_file', '', "the task scene (JSON); '' = the latched scene topic"),
-    _p('service_timeout_s', 60.0, 'how long a call to GAMP or the allocation may take (s)', True, (0.1, 3600.0)),
-    _p('stale_after_s', 2.0, 'joint states and motion capture older than this are stale (s)', False, (0.01, 60.0)),
-    _p('settle_s', 0.5, 'wait after a placement before registering (s)', True, (0.0, 30.0)),
-    _p('position_tol', 0.005, 'a placed block further than this from its pose is a deviation (m)', True,
-       (0.0001, 0.1)),
-    _p('max_replans', 3, 'replans per execution', True, (0, 100)),
-    _p('step_timeout_factor', 3.0, "a motion may take this times its planned duration", True, (1.0, 100.0)),
-    _p('frame_id', 'world', "the robot's base frame"),
-    _p('sequencer_timeout_s', 20.0, 'how long /sequence may take (s)', True, (0.1, 600.0)),
-    _p('agent', 'default', 'the agent whose verification, re-allocation and support this node runs'),
-    _p('max_reallocations', 10, 're-allocations per plan when nothing can be built next', True, (0, 1000)),
-    _p('improve_time_s', IMPROVE_TIME_S, 'time for improving a first complete plan (s)', True, (0.0, 3600.0)),
-    _p('robot', 'panda', 'panda or fr3'),
-    _p('joint_prefix', '', "joint names' prefix ('' = the robot's)"),
-    _p('arm_controller', 'joint_trajectory_controller', "the arm controller's name (its follow_joint_trajectory)"),
-    _p('gripper_action', 'franka_gripper/gripper_action', "the hand's GripperCommand action"),
-    _p('gripper_result_is_width', False, "the gripper's result position is the width between the fingers "
-       '(franka_gripper), not per finger', True),
-    _p('path_tolerance', 0.05, 'path tolerance sent with each arm goal (rad)', True, (0.0, 1.0)),
-    _p('goal_tolerance', 0.01, 'goal tolerance sent with each arm goal (rad)', True, (0.0, 1.0)),
-    _p('goal_time_tolerance', 1.0, 'goal time tolerance sent with each arm goal (s)', True, (0.0, 60.0)),
-    _p('require_joint_states', True, 'false: plan from home when no joint states are heard', True),
-    _p('mocap_input', 'rad', "motion capture's message: rad, mocap4r2 or pose_stamped"),
-    _p('mocap_topic', 'rigid_bodies', 'the rigid bodies topic (rad, mocap4r2)'),
-    _p('pose_topic', 'mocap/{body}/pose', 'one PoseStamped per body, {body} replaced (pose_stamped)'),
-    _p('mocap_frame', '', "motion capture's frame ('' = frame_id)"),
-    _p('body_map_file', '', 'YAML mapping body names to blocks and pivots'),
-    _p('table_z', 0.0, "the table top's height in frame_id (m)"),
-    _p('lost_timeout_s', 2.0, 'how long a block that is not seen is waited for (s)', False, (0.0, 600.0)),
-    _p('mocap_noise', 0.0, "the tracker's position noise, standard deviation (m)", False, (0.0, 0.05)),
-    _p('mocap_yaw_noise_deg', 0.0, "the tracker's yaw noise, standard deviation (deg)", False, (0.0, 45.0)),
-    _p('feeder_service', 'feeder/present', "the feeder's PresentBlock service"),
-    _p('effector', 'hand', 'hand or suction'),
-    _p('vacuum_ns', 'franka_vacuum_gripper', "the vacuum gripper's namespace (effector suction)"),
-    _p('mocap_to_base_translation', [0.0, 0.0, 0.0], 'calibration: p_base = R p_mocap + t, t (m)', any_type=True),
-    _p('mocap_to_base_quaternion', [0.0, 0.0, 0.0, 1.0], 'calibration: R as a quaternion [x, y, z, w]',
-       any_type=True),
-    _p('ignore_bodies', [], 'motion-capture bodies to skip', any_type=True),
+    Param('time_limit_s', 120.0, "a request's time limit when it gives none (s)", True, (0.1, 3600.0)),
+    Param('anytime_deadline_s', ANYTIME_DEADLINE_S, 'no improvement of a first plan starts after this (s), when a '
+          'request gives no time limit', True, (0.01, 600.0)),
+    Param('allocation_time_limit_s', 10.0, "CP-SAT's time limit per allocation (s)", True, (0.1, 600.0)),
+    Param('seed', 0, 'seed of the planner', True, (0, 2 ** 31 - 1)),
+    Param('task_file', '', "the task scene (JSON); '' = the latched scene topic"),
+    Param('service_timeout_s', 60.0, 'how long a call to GAMP or the allocation may take (s)', True, (0.1, 3600.0)),
+    Param('stale_after_s', 2.0, 'joint states and motion capture older than this are stale (s)', False, (0.01, 60.0)),
+    Param('settle_s', 0.5, 'wait after a placement before registering (s)', True, (0.0, 30.0)),
+    Param('position_tol', 0.005, 'a placed block further than this from its pose is a deviation (m)', True,
+          (0.0001, 0.1)),
+    Param('max_replans', 3, 'replans per execution', True, (0, 100)),
+    Param('step_timeout_factor', 3.0, "a motion may take this times its planned duration", True, (1.0, 100.0)),
+    Param('frame_id', 'world', "the robot's base frame"),
+    Param('sequencer_timeout_s', 20.0, 'how long /sequence may take (s)', True, (0.1, 600.0)),
+    Param('agent', 'default', 'the agent whose verification, re-allocation and support this node runs'),
+    Param('max_reallocations', 10, 're-allocations per plan when nothing can be built next', True, (0, 1000)),
+    Param('improve_time_s', IMPROVE_TIME_S, 'time for improving a first complete plan (s)', True, (0.0, 3600.0)),
+    Param('robot', 'panda', 'panda or fr3'),
+    Param('joint_prefix', '', "joint names' prefix ('' = the robot's)"),
+    Param('arm_controller', 'joint_trajectory_controller', "the arm controller's name (its follow_joint_trajectory)"),
+    Param('gripper_action', 'franka_gripper/gripper_action', "the hand's GripperCommand action"),
+    Param('gripper_result_is_width', False, "the gripper's result position is the width between the fingers "
+          '(franka_gripper), not per finger', True),
+    Param('path_tolerance', 0.05, 'path tolerance sent with each arm goal (rad)', True, (0.0, 1.0)),
+    Param('goal_tolerance', 0.01, 'goal tolerance sent with each arm goal (rad)', True, (0.0, 1.0)),
+    Param('goal_time_tolerance', 1.0, 'goal time tolerance sent with each arm goal (s)', True, (0.0, 60.0)),
+    Param('require_joint_states', True, 'false: plan from home when no joint states are heard', True),
+    Param('mocap_input', 'rad', "motion capture's message: rad, mocap4r2 or pose_stamped"),
+    Param('mocap_topic', 'rigid_bodies', 'the rigid bodies topic (rad, mocap4r2)'),
+    Param('pose_topic', 'mocap/{body}/pose', 'one PoseStamped per body, {body} replaced (pose_stamped)'),
+    Param('mocap_frame', '', "motion capture's frame ('' = frame_id)"),
+    Param('body_map_file', '', 'YAML mapping body names to blocks and pivots'),
+    Param('table_z', 0.0, "the table top's height in frame_id (m)"),
+    Param('lost_timeout_s', 2.0, 'how long a block that is not seen is waited for (s)', False, (0.0, 600.0)),
+    Param('mocap_noise', 0.0, "the tracker's position noise, standard deviation (m)", False, (0.0, 0.05)),
+    Param('mocap_yaw_noise_deg', 0.0, "the tracker's yaw noise, standard deviation (deg)", False, (0.0, 45.0)),
+    Param('feeder_service', 'feeder/present', "the feeder's PresentBlock service"),
+    Param('effector', 'hand', 'hand or suction'),
+    Param('vacuum_ns', 'franka_vacuum_gripper', "the vacuum gripper's namespace (effector suction)"),
+    Param('mocap_to_base_translation', [0.0, 0.0, 0.0], 'calibration: p_base = R p_mocap + t, t (m)', any_type=True),
+    Param('mocap_to_base_quaternion', [0.0, 0.0, 0.0, 1.0], 'calibration: R as a quaternion [x, y, z, w]',
+          any_type=True),
+    Param('ignore_bodies', [], 'motion-capture bodies to skip', any_type=True),
 ]
 
 class AssemblyNode(ManagedNode):
@@ -287,6 +283,12 @@ class AssemblyNode(ManagedNode):
     def stop_requested(self, goal_handle) -> bool:
         """The goal was cancelled, or the node is being deactivated."""
         return goal_handle.is_cancel_requested or self.halting.is_set()
+
+    def ended_why(self, goal_handle, reason: str) -> str:
+        """A goal's result reason, saying so where deactivate stopped it (not a cancel)."""
+        if self.halting.is_set() and not goal_handle.is_cancel_requested:
+            return f'the assembly node was deactivated: {reason}'
+        return reason
 
     def health_checks(self) -> dict:
         """What /diagnostics reports each second: the robot's state, motion capture, the arm, and each
@@ -562,8 +564,9 @@ class AssemblyNode(ManagedNode):
     # ---- /plan_assembly ------------------------------------------------------------
     def plan_assembly_callback(self, request, response):
         t0 = time.perf_counter()
-        if not self.is_active:
-            response.success, response.reason = False, self.inactive_reason()
+        refused = self.refusal()
+        if refused:
+            response.success, response.reason = False, refused
             return response
         try:
             limit = self.time_limit(request.time_limit_s)
@@ -633,9 +636,8 @@ class AssemblyNode(ManagedNode):
             report(0, 0, '', 'done', result.reason)
             goal_handle.abort()
             return result
-        result.success, result.reason, result.replans = run.success, run.reason, run.replans
-        if self.halting.is_set() and not goal_handle.is_cancel_requested:
-            result.reason = f'the assembly node was deactivated: {run.reason}'
+        result.success, result.replans = run.success, run.replans
+        result.reason = self.ended_why(goal_handle, run.reason)
         result.steps_executed = len(run.steps)
         result.coverage = run.coverage
         result.result_json = json.dumps(run.document({'total': time.perf_counter() - t0}))

@@ -91,9 +91,7 @@ def serve_take_apart(node) -> ActionServer:
             goal_handle.abort()
             return result
         stats = run.drift_stats()
-        result.success, result.reason = run.success, run.reason
-        if node.halting.is_set() and not goal_handle.is_cancel_requested:
-            result.reason = f'the assembly node was deactivated: {run.reason}'
+        result.success, result.reason = run.success, node.ended_why(goal_handle, run.reason)
         result.steps_executed, result.replans = len(run.steps), run.run.replans
         result.lost = list(run.lost)
         result.drift_mean_m, result.drift_max_m = stats['mean_mm'] / 1e3, stats['max_mm'] / 1e3

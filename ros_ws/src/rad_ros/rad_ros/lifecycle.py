@@ -58,18 +58,16 @@ class ManagedNode(LifecycleNode):
 
     def drop_owned(self) -> None:
         """Destroy every endpoint `own` recorded, newest first (what cleanup does)."""
+        by_node = ((Publisher, self.destroy_publisher), (Subscription, self.destroy_subscription),
+                   (Service, self.destroy_service), (Timer, self.destroy_timer))
         while self._owned:
             entity = self._owned.pop()
-            if hasattr(entity, 'destroy') and not isinstance(entity, (Publisher, Subscription, Service, Timer)):
-                entity.destroy()      # rclpy.action's ActionServer and ActionClient
-            elif isinstance(entity, Publisher):
-                self.destroy_publisher(entity)
-            elif isinstance(entity, Subscription):
-                self.destroy_subscription(entity)
-            elif isinstance(entity, Service):
-                self.destroy_service(entity)
-            elif isinstance(entity, Timer):
-                self.destroy_timer(entity)
+            for kind, destroy in by_node:
+                if isinstance(entity, kind):
+                    destroy(entity)
+                    break
+            else:
+                entity.destroy()      # rclpy.action's ActionServer and ActionClient destroy themselves
 
     # ---- what a subclass does in each transition --------------------------------------
     def configure(self) -> None:

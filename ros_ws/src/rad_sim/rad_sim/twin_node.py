@@ -250,11 +250,20 @@ class TwinNode(ManagedNode):
         """Running goals end: the arm stops where it is, the hand where it is."""
         if self.arm_done is not None and not self.arm_done.done():
             self.twin.cancel()
-            self.arm_done.set_result({'error_code': FollowJointTrajectory.Result.INVALID_GOAL,
-                                      'error_string': 'the controller was deactivated: the arm stopped where it was'})
+        stopped = self.twin.cancel_gripper() if self.gripper_done is not None and not self.gripper_done.done() else None
+        self.end_goals('the controller was deactivated: the arm stopped where it was', stopped)
+
+    def end_goals(self, why: str, gripper: GripperResult | None = None) -> None:
+        """The arm and gripper goals still running end: the arm's aborted with `why`, the hand's with
+        `gripper` (default: where the fingers are)."""
+        if self.arm_done is not None and not self.arm_done.done():
+            self.arm_done.set_result({'error_code': FollowJointTrajectory.Result.INVALID_GOAL, 'error_string': why})
         if self.gripper_done is not None and not self.gripper_done.done():
-            stopped = self.twin.cancel_gripper()
-            self.gripper_done.set_result(stopped or GripperResult(float(self.world.joint_positions()[7:].mean())))
+            self.gripper_done.set_result(gripper or GripperResult(self.finger_position()))
+
+    def finger_position(self) -> float:
+        """Where the fingers are now, per finger (m)."""
+        return float(self.world.joint_positions()[7:].mean())
 
     def cleanup(self) -> None:
         self.wake_all()
@@ -272,12 +281,7 @@ class TwinNode(ManagedNode):
     def load(self, scene: Scene) -> None:
         self.workspace.check_scene(scene)
         self.twin.load_scene(scene)
-        # Goals running on the old world end: the robot was put back home.
-        if self.arm_done is not None and not self.arm_done.done():
-            self.arm_done.set_result({'error_code': FollowJointTrajectory.Result.INVALID_GOAL,
-                                      'error_string': 'the scene was reloaded while the arm moved'})
-        if self.gripper_done is not None and not self.gripper_done.done():
-            self.gripper_done.set_result(GripperResult(float(self.world.joint_positions()[7:].mean())))
+        self.end_goals('the scene was reloaded while the arm moved')   # the robot was put back home
         self.scene = scene
         for block in scene.blocks:
             if block.id not in self.pose_pubs:
@@ -409,7 +413,7 @@ class TwinNode(ManagedNode):
             self.twin.grip(float(command.position), float(command.max_effort))
         except RadError as e:
             self.get_logger().error(f'gripper goal refused: {e}')
-            result.position = float(self.world.joint_positions()[7:].mean())
+            result.position = self.finger_position()
             goal_handle.abort()
             return result
         self.twin.gripper_result = None
@@ -417,7 +421,7 @@ class TwinNode(ManagedNode):
         while not done.done():
             if goal_handle.is_cancel_requested:
                 stopped = self.twin.cancel_gripper()
-                result.position = stopped.position if stopped else float(self.world.joint_positions()[7:].mean())
+                result.position = stopped.position if stopped else self.finger_position()
                 goal_handle.canceled()
                 return result
             await _tick(self)

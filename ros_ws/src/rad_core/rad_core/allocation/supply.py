@@ -64,7 +64,7 @@ from rad_core.domain import shapes
 from rad_core.domain.blocks import BlockType
 from rad_core.domain.errors import RadError
 from rad_core.domain.grid import Grid
-from rad_core.domain.scene import MAX_BLOCKS, Block, Feeder, Scene, TargetRegion, station_position
+from rad_core.domain.scene import MAX_BLOCKS, Block, Feeder, Scene, TargetRegion, feeder_of
 from rad_core.domain.statics import order_statics
 from rad_core.domain.voxels import MAX_UNIT
 
@@ -287,10 +287,9 @@ def choose_blocks(targets: Sequence[TargetRegion], unit: float, types: Mapping[s
     # The first cover, in well under a second at any size: where CP-SAT finds no answer in time (presolve
     # of a large model can take it all), it is the answer; on a large target CP-SAT also starts from it
     # (a hint; on a small one a hint would only steer which of equal covers CP-SAT returns).
-    first = course_cover(grid, candidates, counts)
-    if n_target > ORDERED_MAX_CELLS:
-        for n in set(first):
-            model.add_hint(w[n], True)
+    first = course_cover(grid, candidates, counts) if n_target > ORDERED_MAX_CELLS else None
+    for n in set(first or ()):
+        model.add_hint(w[n], True)
     # Lexicographic objective (module docstring): each level outweighs everything below it.
     unit_cost = [_cost(c.placement.type, params) for c in candidates]
     covered = [int(grid.is_target[list(c.cell_ids)].sum()) for c in candidates]
@@ -306,6 +305,8 @@ def choose_blocks(targets: Sequence[TargetRegion], unit: float, types: Mapping[s
                                                          way_down=True):
         rounds += 1
         if status not in (cp_model.OPTIMAL, cp_model.FEASIBLE):
+            if best is None and first is None:
+                first = course_cover(grid, candidates, counts)
             if best is None and first:
                 # No answer in time: the course-by-course cover, judged by the same measure.
                 unplaced = _hand_unplaced(scene, candidates, first, params) if params.hand else []
@@ -497,8 +498,7 @@ def feeder_blocks(kinds: Sequence[str], types: Mapping[str, BlockType], targets:
         if lo[0] - reach < station[0] < hi[0] + reach and lo[1] - reach < station[1] < hi[1] + reach:
             raise RadError(f'the feeder\'s station {tuple(station)} lies within {reach:.2f} m of target region '
                            f'{t.name!r}: the blocks do not fit on the table and the feeder has no room')
-    blocks = [Block(f'b{n}', kind, station_position(types[kind], station, 0, unit), 0) for n, kind in enumerate(kinds)]
-    return blocks, Feeder(tuple(float(v) for v in station), tuple(b.id for b in blocks))
+    return feeder_of(kinds, types, station, unit)
 
 
 def supply(targets: Sequence[TargetRegion], unit: float, types: Mapping[str, BlockType],

@@ -214,11 +214,15 @@ def read_columns(text: str, columns: Sequence[str], source: str) -> tuple[np.nda
 
 
 def read_pairs_csv(path: str | Path) -> PointPairs:
+    return parse_pairs_csv(read_text(path), str(path))
+
+
+def read_text(path: str | Path) -> str:
+    """A file's text; RadError naming the file and why it cannot be read."""
     try:
-        text = Path(path).read_text()
+        return Path(path).read_text()
     except (OSError, UnicodeDecodeError) as e:
         raise RadError(f'cannot read {str(path)!r}: {getattr(e, "strerror", None) or e}') from None
-    return parse_pairs_csv(text, str(path))
 
 
 def append_pair_row(path: str | Path, p_base, p_mocap, extra: dict[str, float] | None = None) -> int:

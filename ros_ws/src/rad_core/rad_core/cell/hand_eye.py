@@ -45,7 +45,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rad_core.cell.calibration import Calibration, read_columns
+from rad_core.cell.calibration import Calibration, read_columns, read_text
 from rad_core.domain.errors import RadError
 from rad_core.domain.transforms import quaternion_from_matrix
 
@@ -280,8 +280,4 @@ def parse_poses_csv(text: str, source: str = 'poses') -> HandEyePoses:
 
 
 def read_poses_csv(path: str | Path) -> HandEyePoses:
-    try:
-        text = Path(path).read_text()
-    except (OSError, UnicodeDecodeError) as e:
-        raise RadError(f'cannot read {str(path)!r}: {getattr(e, "strerror", None) or e}') from None
-    return parse_poses_csv(text, str(path))
+    return parse_poses_csv(read_text(path), str(path))

@@ -25,7 +25,7 @@ import numpy as np
 
 from rad_core.domain.blocks import DEFAULT_LIBRARY, BlockType
 from rad_core.domain.errors import RadError
-from rad_core.domain.scene import FEEDER_ORDERS, MAX_CLEARANCE, Block, Feeder, Scene, TargetRegion, station_position
+from rad_core.domain.scene import FEEDER_ORDERS, MAX_CLEARANCE, Block, Scene, TargetRegion, feeder_of
 
 SUPPLIES = ('auto', 'table', 'feeder')
 
@@ -216,10 +216,8 @@ def generate_scene(config: GeneratorConfig = GeneratorConfig(), seed: int = 0) -
             blocks = None
     if blocks is None:
         # Every block in the feeder, presented at the station; the queue's order is the shuffled one.
-        blocks = [Block(f'b{n}', kind, station_position(DEFAULT_LIBRARY[kind], config.station, 0, u), 0)
-                  for n, kind in enumerate(kinds)]
-        feeder = Feeder(tuple(float(v) for v in config.station), tuple(b.id for b in blocks), 0,
-                        config.feeder_order, config.feeder_window if config.feeder_order == 'queue' else 1)
+        blocks, feeder = feeder_of(kinds, DEFAULT_LIBRARY, config.station, u, config.feeder_order,
+                                   config.feeder_window if config.feeder_order == 'queue' else 1)
     used = sorted({b.type for b in blocks})
     scene = Scene(u, {n: DEFAULT_LIBRARY[n] for n in used}, tuple(blocks), tuple(targets), float(config.clearance),
                   feeder=feeder)

@@ -33,7 +33,7 @@ from __future__ import annotations
 from functools import lru_cache
 
 from rad_core.domain.errors import RadError
-from rad_core.domain.scene import Block, Feeder, Scene, station_position
+from rad_core.domain.scene import Scene, feeder_of
 from rad_core.domain.shapes import (
     RegionSpec,
     ShapeSpec,
@@ -182,9 +182,7 @@ def large_scene(name: str) -> Scene:
 def feeder_scene(spec: ShapeSpec) -> Scene:
     """A shape drawn as the large ones are, with every block of its multiset in a feeder at `STATION`."""
     kinds = _multiset(spec)
-    blocks = [Block(f'b{n}', kind, station_position(spec.types[kind], STATION, 0, UNIT), 0)
-              for n, kind in enumerate(kinds)]
+    blocks, feeder = feeder_of(kinds, spec.types, STATION, UNIT)
     used = [n for n in spec.types if n in set(kinds)]
-    scene = Scene(UNIT, {n: spec.types[n] for n in used}, tuple(blocks), target_regions(spec, UNIT),
-                  feeder=Feeder(STATION, tuple(b.id for b in blocks)))
+    scene = Scene(UNIT, {n: spec.types[n] for n in used}, tuple(blocks), target_regions(spec, UNIT), feeder=feeder)
     return Scene.from_dict(scene.to_dict())

@@ -143,6 +143,14 @@ def station_position(btype: BlockType, station, yaw: int, unit: float) -> tuple[
             round(float(unit / 2 - lo[2] * unit), 6))
 
 
+def feeder_of(kinds, types: Mapping[str, BlockType], station, unit: float, order: str = 'request',
+              window: int = 1) -> tuple[list['Block'], Feeder]:
+    """Blocks of these kinds, ids b0, b1, ... in this order, each waiting in a feeder that presents it
+    at `station` (x, y) at yaw 0; and that feeder."""
+    blocks = [Block(f'b{n}', kind, station_position(types[kind], station, 0, unit), 0) for n, kind in enumerate(kinds)]
+    return blocks, Feeder(tuple(float(v) for v in station), tuple(b.id for b in blocks), 0, order, window)
+
+
 @dataclass(frozen=True)
 class TargetRegion:
     name: str
