@@ -6,6 +6,8 @@ and GAMP; only the faults the real parts will not produce on demand are injected
 that never finishes, a cancel).
 """
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from rad_core.allocation import solve
@@ -17,6 +19,7 @@ from rad_core.gamp.action import MotionPlanner
 from rad_core.sequencing import HeurPolicy
 from rad_core.sequencing.execution.execute import ExecuteConfig, execute_assembly
 from rad_core.sequencing.planning.plan import local_motion_planner, plan_assembly
+from rad_core.sim.faults import FaultConfig
 from rad_core.sim.twin import Tolerances, Twin, twin_world_config
 from rad_core.sim.world import World
 
@@ -275,3 +278,117 @@ def test_the_deviation_tolerance_follows_the_tracker_noise():
     for bad in (-0.001, float('nan')):
         with pytest.raises(RadError, match='mocap_noise'):
             ExecuteConfig(mocap_noise=bad).validate()
+
+
+# ---- the controllers' own failures, made to happen in the twin (sim.faults) -------------------------------
+
+class Cell(Run):
+    """Run, with the arm's answers as ActionPlant gives them (an abort raises TrajectoryAborted, a refusal
+    TrajectoryRejected), the joints as a 50 Hz joint state gives them (the reading before the last 40 ms
+    of motion, so a reading just after a stop is from before it), and one twin fault turned on for the
+    n-th arm trajectory or gripper command."""
+
+    def __init__(self, twin, motion, fault: str = '', nth: int = 0):
+        super().__init__(twin, motion)
+        self.fault, self.nth, self.history = fault, nth, []
+
+    def _with_fault(self, kind: str, count: int, call):
+        if self.fault.startswith(kind) and count == self.nth:
+            calm = self.twin.config
+            self.twin.config = replace(calm, faults=FaultConfig(**{self.fault: 1.0}))
+            try:
+                return call()
+            finally:
+                self.twin.config = calm
+        return call()
+
+    def move_arm(self, trajectory):
+        self.sent.append(trajectory)
+        report = self._with_fault('arm', len(self.sent), lambda: self.twin.execute(trajectory, callback=self.tick,
+                                                                                   callback_period=0.02))
+        if report.error_code:
+            raise TrajectoryAborted(report.error_code, report.error_string)
+
+    def move_gripper(self, command):
+        self.grips.append(command)
+        return self._with_fault('gripper', len(self.grips), lambda: self.twin.execute_gripper(command))
+
+    def tick(self, twin):
+        self.history = (self.history + [twin.world.joint_positions().copy()])[-3:]
+
+    def joints(self):
+        # The reading published 40 ms ago while the arm moved; the current one when it holds.
+        stale, self.history = (self.history[0] if len(self.history) == 3 else None), []
+        return stale if stale is not None else self.twin.world.joint_positions()
+
+    def __call__(self, config=ExecuteConfig(settle_s=0.2), **kw):
+        return super().__call__(config, joints=self.joints, **kw)
+
+
+def test_an_arm_the_controller_stops_mid_carry_backs_out_from_where_it_came_to_rest(twin, motion):
+    """The twin's controller stops the carry partway (arm_abort) while the arm moves fast; the last joint
+    state is 40 ms older than the stop. The back-out starts where the arm came to rest, so the twin (which
+    refuses any motion over the Panda's limits from where its controller holds) accepts it."""
+    cell = Cell(twin, motion, 'arm_abort', 2)
+    result = cell()
+    first = result.steps[0]
+    assert 'trajectory aborted' in first['failure'] and 'injected arm_abort' in first['failure'], first
+    assert 'put the block back' in first['failure']
+    assert result.faults[0]['recovered'] and twin.fault_counts['arm_abort'] == 1
+    assert result.success and result.coverage == 1.0, result.reason
+
+
+def test_a_trajectory_the_controller_refuses_is_backed_out_of_and_replanned(twin, motion):
+    cell = Cell(twin, motion, 'arm_reject', 2)      # the carry, refused with the block in the hand
+    result = cell()
+    first = result.steps[0]
+    assert 'trajectory refused' in first['failure'] and 'injected arm_reject' in first['failure'], first
+    actions = [g.action for g in cell.grips]
+    assert actions[actions.index('grasp') + 1] == 'release'       # put down where it was picked
+    # Back from where it stood (a hair off the planned pick) to the pick, released, then home.
+    assert np.allclose(cell.sent[3].points[-1].positions, HOME[:7], atol=1e-6)
+    assert result.faults[0]['recovered'] and result.success and result.coverage == 1.0, result.reason
+
+
+@pytest.mark.parametrize('fault', ['gripper_abort', 'gripper_reject'])
+def test_a_hand_that_does_not_open_stops_the_step_before_the_arm_descends(twin, motion, fault):
+    cell = Cell(twin, motion, fault, 2)               # close the empty hand, then open: the open fails
+    result = cell()
+    first = result.steps[0]
+    assert first['failure'].startswith('open failed: '), first
+    assert ('stopped at' in first['failure']) == (fault == 'gripper_abort'), first
+    assert ('refused' in first['failure']) == (fault == 'gripper_reject'), first
+    # Nothing moved in that step: the next arm trajectory sent belongs to the new plan.
+    assert len(cell.plans) == 2 and cell.plans[1][0].block(first['block']).position == \
+        pytest.approx(SCENE.block(first['block']).position, abs=1e-3)
+    assert result.faults[0]['recovered'] and result.success and result.coverage == 1.0, result.reason
+
+
+@pytest.mark.parametrize('fault', ['gripper_abort', 'gripper_reject'])
+def test_a_hand_that_does_not_let_go_retreats_only_once_clear_of_the_block(twin, motion, fault):
+    """A release that stops short (gripper_abort: the fingers stop partway, past the block's faces) lets
+    the arm retreat as planned; one the hand refuses (gripper_reject: the fingers still hold the block)
+    is asked again first. Either way the step reports it, and the loop re-registers and replans."""
+    cell = Cell(twin, motion, fault, 4)               # close, open, grasp, release: the release fails
+    result = cell()
+    first = result.steps[0]
+    assert first['failure'].startswith('release failed: '), first
+    said = 'the fingers cleared the block' if fault == 'gripper_abort' else 'asked again, the hand let go'
+    assert said in first['failure'], first
+    releases = [g.action for g in cell.grips[:6]].count('release')
+    assert releases == (1 if fault == 'gripper_abort' else 2)
+    retreat = cell.plans[0][2].steps[0].motion['trajectories'][2]
+    assert cell.sent[2].to_dict() == retreat                            # the planned retreat, as it was
+    assert result.faults[0]['recovered'] and result.success and result.coverage == 1.0, result.reason
+
+
+def test_a_hand_that_still_holds_a_placed_block_ends_the_run_for_a_person(twin, motion):
+    cell = Cell(twin, motion, 'gripper_reject', 4)
+
+    def move_gripper(command):                        # the release refused twice
+        cell.grips.append(command)
+        n = len(cell.grips)
+        return cell._with_fault('gripper', 4 if n in (4, 5) else 0, lambda: twin.execute_gripper(command))
+    result = cell(move_gripper=move_gripper)
+    assert not result.success and 'free the block by hand' in result.reason, result.reason
+    assert len(cell.sent) == 2                         # approach, carry: no retreat with the block held

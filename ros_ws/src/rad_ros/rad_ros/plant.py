@@ -8,9 +8,15 @@ path and goal tolerances and goal_time_tolerance), gripper commands as
 (``vacuum_ns`` given) its commands as franka_vacuum_gripper Vacuum and DropOff goals to
 ``<vacuum_ns>/vacuum`` and ``<vacuum_ns>/dropoff`` (franka_ros's action names; each result's success and
 error are checked, an aborted goal read as its result). The controller's
-answer decides: a rejected goal, or a result whose error_code is not SUCCESSFUL,
-raises RadError naming the code and the controller's error_string; `cancelled()`
-turning true while a goal runs cancels it (the controller stops the arm) and raises.
+answer decides, and every failure names the action and the controller's words: a
+rejected goal or an INVALID_* result raises `TrajectoryRejected` (the arm did not
+move), a tolerance violation, a goal the server cancelled or one that did not end
+in time (cancelled here) `TrajectoryAborted` (the arm stopped somewhere on the path);
+the execute loop backs out and replans from either. A gripper goal rejected,
+cancelled by its server or not answered in time raises `GripperFailed`; what an
+answered one did is judged by `rad_core.cell.motion.gripper_problem`. `cancelled()`
+turning true while a goal runs cancels it (the controller stops the arm) and raises
+RadError('cancelled'), which ends the run.
 
 The node given must be spun by an executor on another thread (the calls here block
 until the futures complete).
@@ -27,11 +33,18 @@ from action_msgs.msg import GoalStatus
 from control_msgs.action import FollowJointTrajectory, GripperCommand
 from control_msgs.msg import JointTolerance
 from franka_vacuum_gripper.action import DropOff, Vacuum
-from rad_core.cell.motion import VACUUM_ACTIONS, GripperResult
+from rad_core.cell.motion import VACUUM_ACTIONS, GripperFailed, GripperResult
 from rad_core.cell.motion import GripperCommand as GripperStep
 from rad_core.cell.panda import FINGER_OPEN
 from rad_core.cell.robot_model import RobotModel
-from rad_core.cell.trajectory import GOAL_TOLERANCE_VIOLATED, PATH_TOLERANCE_VIOLATED, Trajectory, TrajectoryAborted
+from rad_core.cell.trajectory import (
+    GOAL_TOLERANCE_VIOLATED,
+    INVALID_GOAL,
+    PATH_TOLERANCE_VIOLATED,
+    Trajectory,
+    TrajectoryAborted,
+    TrajectoryRejected,
+)
 from rad_core.domain.errors import RadError
 from rclpy.action import ActionClient as _ActionClient
 
@@ -105,13 +118,20 @@ class ActionPlant:
         goal.goal_tolerance = [JointTolerance(name=n, position=self.goal_tolerance) for n in names]
         goal.goal_time_tolerance = s_to_duration(self.goal_time_tolerance)
         wait = traj.duration * self.timeout_factor + self.goal_time_tolerance + 10.0
-        result = self._run(self.arm, self.arm_name, goal, wait, 'the arm controller')
+        try:
+            result = self._run(self.arm, self.arm_name, goal, wait, 'the arm controller')
+        except _Refused as e:
+            raise TrajectoryRejected(INVALID_GOAL, str(e)) from None     # it never started: the arm did not move
+        except _Dropped as e:
+            raise TrajectoryAborted(PATH_TOLERANCE_VIOLATED, str(e)) from None   # stopped somewhere on the path
         code = int(result.error_code)
         if code != FollowJointTrajectory.Result.SUCCESSFUL:
             why = (f'the arm controller ({self.arm_name}) failed the trajectory: '
                    f'{ERROR_NAMES.get(code, "error")} ({code}): {result.error_string or "no reason given"}')
             if code in (PATH_TOLERANCE_VIOLATED, GOAL_TOLERANCE_VIOLATED):
                 raise TrajectoryAborted(code, why)     # it moved and stopped: the arm is somewhere on the path
+            if code in ERROR_NAMES:
+                raise TrajectoryRejected(code, why)    # INVALID_GOAL, INVALID_JOINTS, OLD_HEADER_TIMESTAMP
             raise RadError(why)
 
     def move_gripper(self, command: GripperStep) -> GripperResult:
@@ -122,8 +142,11 @@ class ActionPlant:
         goal = GripperCommand.Goal()
         goal.command.position, goal.command.max_effort = float(command.position), float(command.max_effort)
         travel = 0.08 / 0.05      # the whole stroke at a slow hand's speed
-        result = self._run(self.gripper, self.gripper_name, goal, travel * self.timeout_factor + 10.0,
-                           'the gripper', accept_aborted=True)
+        try:
+            result = self._run(self.gripper, self.gripper_name, goal, travel * self.timeout_factor + 10.0,
+                               'the gripper', accept_aborted=True)
+        except (_Refused, _Dropped) as e:
+            raise GripperFailed(str(e)) from None
         position = float(result.position) / (2.0 if self.gripper_result_is_width else 1.0)
         return GripperResult(position, float(result.effort), bool(result.stalled), bool(result.reached_goal))
 
@@ -136,8 +159,11 @@ class ActionPlant:
             goal = Vacuum.Goal(vacuum=int(command.vacuum), timeout=int(command.timeout_ms))
         else:
             goal = DropOff.Goal(timeout=int(command.timeout_ms))
-        result = self._run(client, name, goal, command.timeout_ms / 1000.0 * self.timeout_factor + 10.0,
-                           'the vacuum gripper', accept_aborted=True)
+        try:
+            result = self._run(client, name, goal, command.timeout_ms / 1000.0 * self.timeout_factor + 10.0,
+                               'the vacuum gripper', accept_aborted=True)
+        except (_Refused, _Dropped) as e:
+            raise GripperFailed(str(e)) from None
         return GripperResult(FINGER_OPEN, reached_goal=bool(result.success), error=str(result.error))
 
     def _run(self, client, name, goal, timeout_s, what, accept_aborted=False):
@@ -147,7 +173,7 @@ class ActionPlant:
         if handle is None:
             raise RadError(f'{what} ({name}) did not answer the goal within {self.server_timeout_s:g} s')
         if not handle.accepted:
-            raise RadError(f'{what} ({name}) rejected the goal (its log says why)')
+            raise _Refused(f'{what} ({name}) rejected the goal (its log says why)')
         future = handle.get_result_async()
         deadline = time.monotonic() + timeout_s
         while not future.done():
@@ -157,15 +183,24 @@ class ActionPlant:
                 raise RadError('cancelled')
             if time.monotonic() > deadline:
                 _wait(handle.cancel_goal_async(), self.server_timeout_s)
-                raise RadError(f'{what} ({name}) did not finish within {timeout_s:.1f} s')
+                raise _Dropped(f'{what} ({name}) did not finish within {timeout_s:.1f} s; the goal was cancelled')
             time.sleep(0.01)
         wrapped = future.result()
         if wrapped.status == GoalStatus.STATUS_CANCELED:
-            raise RadError(f'{what} ({name}) cancelled the goal')
+            raise _Dropped(f'{what} ({name}) cancelled the goal')
         if wrapped.status != GoalStatus.STATUS_SUCCEEDED and not accept_aborted and \
                 int(getattr(wrapped.result, 'error_code', 0)) == 0:
-            raise RadError(f'{what} ({name}) aborted the goal without an error code')
+            raise _Dropped(f'{what} ({name}) aborted the goal without an error code')
         return wrapped.result
+
+
+class _Refused(RadError):
+    """The action server rejected the goal: nothing moved."""
+
+
+class _Dropped(RadError):
+    """The goal ended without a result to judge (cancelled by its server, aborted with no code, no answer
+    in time): it may have moved partway."""
 
 
 def _wait(future, timeout_s: float):

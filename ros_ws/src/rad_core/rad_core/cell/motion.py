@@ -147,6 +147,11 @@ class Motion:
         return motion
 
 
+class GripperFailed(RadError):
+    """A gripper goal that the hand's action refused, or ended without an answer to judge (cancelled by
+    its server, no result in time): the step stops there."""
+
+
 @dataclass(frozen=True)
 class GripperResult:
     """What a GripperCommand action answers."""
@@ -182,31 +187,93 @@ def grasp_problem(command: GripperCommand, result: GripperResult, tol: float = 0
     return ''
 
 
+def gripper_problem(command: GripperCommand, result: GripperResult, tol: float = 0.001) -> str:
+    """Why a gripper command did not leave the hand as the step needs it, or ''.
+
+    A grasp and the vacuum gripper's commands: `grasp_problem`. An opening move ('open' before a
+    grasp, 'release' after a placement) must have opened the fingers to within `tol` (per finger) of
+    the command: a hand that stopped short, however its goal ended, would descend onto a block with
+    its fingers in the way or carry the block off. 'close' (the empty hand) must have closed to within
+    3 mm of the command. An aborted or unreached goal whose fingers are where they were sent is taken:
+    the width is what the next motion needs (franka_gripper ends a move that stalls a hair short as
+    aborted)."""
+    if command.action == 'grasp' or command.action in VACUUM_ACTIONS:
+        return grasp_problem(command, result)
+    width, wanted = 2 * result.position * 1000, 2 * command.position * 1000
+    said = f' ({result.error})' if result.error else ('' if result.reached_goal else ' (the goal was not reached)')
+    if command.action in ('open', 'release') and result.position < command.position - tol:
+        what = 'open before the grasp' if command.action == 'open' else 'let go of the block'
+        return f'the hand did not {what}: it stopped at {width:.1f} mm of the {wanted:.1f} mm commanded{said}'
+    if command.action == 'close' and result.position > command.position + 0.003:
+        return f'the empty hand did not close: it stopped at {width:.1f} mm of the {wanted:.1f} mm commanded{said}'
+    return ''
+
+
 def run_motion(motion: Motion, move_arm, move_gripper, start=None) -> str:
     """Run a step's commands in order through a plant's two actions.
 
     move_arm(trajectory) runs an arm trajectory to its end and raises RadError when
     the controller refuses or aborts it (a fault to stop on); move_gripper(command)
-    returns the gripper's `GripperResult`. Returns '' when the step went through, or
-    why its grasp failed (a fault to re-register and replan on). After a failed grasp
-    the hand opens again and, given `start` (the arm's 7 joints when the step began),
-    the arm backs out along the approach it came down (the checked path, reversed)
-    to where the step began.
+    returns the gripper's `GripperResult` (GripperFailed when the hand refused or dropped the
+    goal). Returns '' when the step went through, or why a gripper command failed (a fault to
+    re-register and replan on: `gripper_problem`). After a failed grasp the hand opens again and,
+    given `start` (the arm's 7 joints when the step began), the arm backs out along the approach it
+    came down (the checked path, reversed) to where the step began. After a failed release the arm
+    retreats as planned once the fingers are clear of the block (`_let_go`), and the step reports the
+    failure. Any other failed gripper command stops the step where it is: the arm never descends with
+    its fingers closed.
     """
     done: list[Trajectory] = []
+    released = ''
     for command in motion.sequence():
         if isinstance(command, GripperCommand):
-            problem = grasp_problem(command, move_gripper(command))
+            try:
+                result = move_gripper(command)
+                problem = gripper_problem(command, result)
+            except GripperFailed as e:
+                result, problem = None, str(e)
+            if problem and command.action == 'release':
+                released = f'release failed: {_let_go(motion, command, result, problem, move_gripper)}'
+                continue        # the retreat: planned for the wider hand, it clears the narrower one too
+            if problem and command.action not in ('grasp', 'vacuum'):
+                return f'{command.action} failed: {problem}'
             if problem:
                 if command.action in VACUUM_ACTIONS:
-                    move_gripper(GripperCommand('drop_off', command.position, 0.0, command.before,
-                                                timeout_ms=command.timeout_ms))
+                    let_go = GripperCommand('drop_off', command.position, 0.0, command.before,
+                                            timeout_ms=command.timeout_ms)
                 else:
-                    move_gripper(GripperCommand('open', motion.opening, 0.0, command.before))
+                    let_go = GripperCommand('open', motion.opening, 0.0, command.before)
+                try:
+                    stuck = gripper_problem(let_go, move_gripper(let_go))
+                except GripperFailed as e:
+                    stuck = str(e)
                 if start is not None and len(done) == 1:
-                    move_arm(reversed_trajectory(done[0], start))
-                return f'grasp failed: {problem}'
+                    move_arm(reversed_trajectory(done[0], start))    # straight up the way it came down
+                return f'grasp failed: {problem}' + (f'; then {let_go.action} failed: {stuck}' if stuck else '')
         else:
             move_arm(command)
             done.append(command)
-    return ''
+    return released
+
+
+def _let_go(motion: Motion, release: GripperCommand, result: GripperResult | None, problem: str,
+            move_gripper) -> str:
+    """After a failed release: the problem, once the fingers are clear of the block (past its faces by
+    a millimetre each), asking once more where they are not. RadError when the hand still holds it:
+    the arm cannot leave a block it holds in the structure, and a person must free it."""
+    grasp = next((g for g in reversed(motion.gripper) if g.action == 'grasp' and g.before <= release.before), None)
+    faces = grasp.expected_position if grasp is not None and np.isfinite(grasp.expected_position) else None
+
+    def clear(r: GripperResult | None) -> bool:
+        return r is not None and faces is not None and r.position >= faces + 0.001
+    if clear(result):
+        return f'{problem}; the fingers cleared the block, and the arm retreated'
+    try:
+        again = move_gripper(release)
+        retry = gripper_problem(release, again)
+    except GripperFailed as e:
+        again, retry = None, str(e)
+    if not retry or clear(again):
+        return f'{problem}; asked again, the hand let go, and the arm retreated'
+    raise RadError(f'release failed: {problem}; asked again: {retry}: the hand still holds the block it placed, '
+                   'and the arm stays there: free the block by hand')

@@ -3,7 +3,8 @@
 A real cell's motion capture is noisy and drops bodies and frames; a real hand
 leaves a block a few millimetres from where it was meant to go, sometimes loses
 it during the carry, sometimes closes on nothing, and its fingers sometimes push
-a neighbour. `FaultConfig` says how often and how much; the twin
+a neighbour. Its controllers, too, now and then refuse a goal or end one early: an arm
+held back, a hand that stops short. `FaultConfig` says how often and how much; the twin
 (`rad_core.sim.twin`) injects them and records each as an event, so tests and
 benchmarks can count injected against recovered faults.
 
@@ -24,10 +25,12 @@ import yaml
 
 from rad_core.domain.errors import RadError
 
-KINDS = ('noise', 'drop_body', 'drop_frame', 'placement', 'slip', 'miss', 'nudge')
+KINDS = ('noise', 'drop_body', 'drop_frame', 'placement', 'slip', 'miss', 'nudge',
+         'arm_abort', 'arm_reject', 'gripper_abort', 'gripper_reject')
 """The fault kinds, each with its own random stream (index = stream number)."""
 
-_PROBABILITIES = ('drop_body', 'drop_frame', 'slip', 'miss', 'nudge')
+_PROBABILITIES = ('drop_body', 'drop_frame', 'slip', 'miss', 'nudge', 'arm_abort', 'arm_reject', 'gripper_abort',
+                  'gripper_reject')
 _MAGNITUDES = ('mocap_position_noise', 'mocap_yaw_noise_deg', 'placement_error', 'nudge_distance')
 
 
@@ -56,6 +59,16 @@ class FaultConfig:
     """Probability that the fingers push a neighbour of a block they release."""
     nudge_distance: float = 0.004
     """How far (m) a nudged neighbour is pushed."""
+    arm_abort: float = 0.0
+    """Probability that the arm controller stops a trajectory partway (PATH_TOLERANCE_VIOLATED), as it
+    does when something holds the arm back; the arm stops where it is, still moving when it is told."""
+    arm_reject: float = 0.0
+    """Probability that the arm controller refuses a trajectory (INVALID_GOAL): the arm does not move."""
+    gripper_abort: float = 0.0
+    """Probability that the hand stops short of an opening move (open, release): the goal ends aborted,
+    reached_goal false, the fingers where they stopped."""
+    gripper_reject: float = 0.0
+    """Probability that the gripper action refuses a command: the fingers do not move."""
 
     def __post_init__(self):
         if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:

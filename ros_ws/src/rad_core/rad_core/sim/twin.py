@@ -69,7 +69,7 @@ import numpy as np
 
 from rad_core.cell import panda
 from rad_core.cell.mocap import Registration, RegistrationConfig, RigidBodyPose, register_scene, register_world
-from rad_core.cell.motion import VACUUM_ACTIONS, GripperCommand, GripperResult, Motion, run_motion
+from rad_core.cell.motion import VACUUM_ACTIONS, GripperCommand, GripperFailed, GripperResult, Motion, run_motion
 from rad_core.cell.robot_model import RobotModel, robot_model
 from rad_core.cell.trajectory import (
     GOAL_TOLERANCE_VIOLATED,
@@ -234,6 +234,7 @@ class _Run:
         self.goal_time = tolerances.goal_time or config.goal_time
         self.t = 0.0
         self.max_error = 0.0
+        self.abort_at = math.inf       # an injected arm_abort: the controller stops the run at this time
         self.report = ExecutionReport(traj.joint_names, start_q, math.nan, 0.0, duration=traj.duration)
         self.wall_start = time.perf_counter()
 
@@ -461,9 +462,17 @@ class Twin:
         why = limit_violation(traj, start_q, self.model)
         if why:
             raise TrajectoryRejected(INVALID_GOAL, f'over the {self.model.name}\'s limits: {why}')
+        faults = self.config.faults
+        if faults.arm_reject > 0 and self._rng['arm_reject'].random() < faults.arm_reject:
+            self._fault('arm_reject')
+            raise TrajectoryRejected(INVALID_GOAL, 'the controller refused the trajectory (an injected arm_reject '
+                                     'fault): the arm did not move')
         if self._run is not None:
             self._finish(preempted=True)
         self._run = _Run(traj, start_q, tolerances, self.config)
+        if faults.arm_abort > 0 and self._rng['arm_abort'].random() < faults.arm_abort:
+            self._run.abort_at = float(self._rng['arm_abort'].uniform(0.2, 0.8)) * traj.duration
+            self._fault('arm_abort', at=round(self._run.abort_at, 4))
         self._events = []
         if self._slip is not None and self.attached is not None:
             # The carry after a grasp that will slip: it slips at that fraction of this trajectory.
@@ -486,9 +495,20 @@ class Twin:
                            f'[0, {panda.FINGER_OPEN}] m per finger')
         if not (math.isfinite(max_effort) and max_effort >= 0):
             raise RadError(f'gripper: max_effort must be finite and >= 0, got {max_effort}')
+        faults = self.config.faults
+        if faults.gripper_reject > 0 and self._rng['gripper_reject'].random() < faults.gripper_reject:
+            self._fault('gripper_reject')
+            raise GripperFailed('the gripper refused the command (an injected gripper_reject fault): the fingers '
+                                'did not move')
         now = float(self.world.joint_positions()[7:].mean())
         closing = position < now - 1e-4
         self._grip = _Grip(min(position, panda.FINGER_OPEN), max_effort, float(self._target[7:].mean()), closing)
+        if not closing and position > now + 1e-3 and faults.gripper_abort > 0 and \
+                self._rng['gripper_abort'].random() < faults.gripper_abort:
+            # The fingers stop partway (something in their way): the move ends short, reached_goal false.
+            grip = self._grip
+            grip.drive = now + float(self._rng['gripper_abort'].uniform(0.2, 0.7)) * (grip.goal - now)
+            self._fault('gripper_abort', stopped_at=round(grip.drive, 5))
         if closing:
             miss = self.config.faults.miss
             self._miss_next = miss > 0 and bool(self._rng['miss'].random() < miss)
@@ -750,6 +770,14 @@ class Twin:
         q_cmd, _ = run.command(run.t)
         err = float(np.abs(q - q_cmd).max())
         duration = run.spline.duration
+        if run.t >= run.abort_at:
+            j = int(np.abs(q - q_cmd).argmax())
+            run.report.error_code = PATH_TOLERANCE_VIOLATED
+            run.report.error_string = (f'path tolerance violated: the arm was held back (an injected arm_abort '
+                                       f'fault) at t = {run.t:.3f} s; {run.report.joint_names[j]} is {err:.4f} rad '
+                                       f'from the command')
+            run.report.final_error = err
+            return True
         if run.t < duration - 1e-9:
             run.max_error = max(run.max_error, err)
             if run.path_tol > 0 and err > run.path_tol:

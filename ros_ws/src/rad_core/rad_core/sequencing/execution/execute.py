@@ -6,11 +6,17 @@ FollowJointTrajectory and the hand's GripperCommand actions, joint states, motio
 capture) and tests pass an in-process `rad_core.sim.twin.Twin`.
 
 A step runs its arm trajectories and gripper commands in order
-(`rad_core.cell.motion.run_motion`). A trajectory the controller refuses or aborts ends
-the run with the controller's reason. A grasp that holds nothing (the width the
-hand reports after closing) ends the step like a deviation: the hand opens, the arm
-backs out along its approach to where the step began, the world is registered and,
-with `replan`, a new plan starts from it.
+(`rad_core.cell.motion.run_motion`). Every answer is checked and every failure stops
+the step with its cause, then the world is registered and, with `replan`, a new plan
+starts from it:
+- a trajectory the controller aborts (the arm held back) or refuses (it never moved):
+  the arm backs out from where it came to rest, along the path it came, to where the
+  step began; a block in the hand is put back where it was picked (`_run_step`);
+- a grasp that holds nothing (the width the hand reports after closing): the hand
+  opens and the arm backs out along its approach;
+- any other gripper command the hand refuses, drops, or ends short of its width (an
+  'open' before the descent, a 'release'): the arm stops where it is, so it never
+  descends with closed fingers nor carries a block it was to let go of.
 
 After each step the world is registered again and compared with what the plan
 expected (`result.deviation`). A step that left the world other than planned (a
@@ -64,10 +70,10 @@ import numpy as np
 
 from rad_core.allocation.result import AllocationResult
 from rad_core.cell.mocap import Registration
-from rad_core.cell.motion import VACUUM_ACTIONS, GripperCommand, GripperResult, Motion, run_motion
+from rad_core.cell.motion import VACUUM_ACTIONS, GripperCommand, GripperResult, Motion, gripper_problem, run_motion
 from rad_core.cell.panda import HOME
 from rad_core.cell.robot_model import PANDA, envelope
-from rad_core.cell.trajectory import Trajectory, TrajectoryAborted
+from rad_core.cell.trajectory import Trajectory, TrajectoryAborted, TrajectoryRejected
 from rad_core.domain.coverage import measured_coverage
 from rad_core.domain.errors import RadError
 from rad_core.domain.scene import Scene
@@ -217,6 +223,9 @@ def execute_assembly(scene: Scene, plan: Plan, move_arm: MoveArm, move_gripper: 
             if problem is None:
                 result.success, result.reason = assembly.success, assembly.reason
                 break
+            if _refused_again(result):
+                raise RadError(f'{problem} (the controller refused this step\'s motion twice in a row: a new plan '
+                               'would not change its mind)')
             if not config.replan or result.replans >= config.max_replans:
                 raise RadError(f'the world differs from the plan: {problem}')
             result.replans += 1
@@ -294,11 +303,23 @@ def _execute_step(plant: _Plant, result: ExecutionResult, step, step_start: np.n
                            f'to present it')
         plant.present(step.block)
     motion = Motion.from_dict(step.motion)
-    failed = _run_step(motion, plant.move_arm, plant.move_gripper, step_start, plant.joints, plant.config)
-    # A failed grasp, or a trajectory the controller aborted (something held the arm back), has
-    # opened the hand and backed the arm out to where the step began.
-    last_q = motion.final_joints() if not failed else np.concatenate(
-        [step_start[:7], [motion.opening] * 2])
+    try:
+        failed = _run_step(motion, plant.move_arm, plant.move_gripper, step_start, plant.joints, plant.config,
+                           plant.settle)
+    except RadError as e:
+        if str(e) != 'cancelled':
+            result.steps.append({**step.to_dict(), 'failure': str(e)})
+            result.faults.append({'step': len(result.steps) - 1, 'block': step.block, 'problem': str(e),
+                                  'recovered': False})
+        raise
+    # A failed grasp, or a trajectory the controller aborted or refused, has opened the hand and backed
+    # the arm out to where the step began; another failed gripper command left the arm where it was:
+    # the next plan starts from the joints as measured, where they are known.
+    last_q = motion.final_joints()
+    if failed:
+        measured = plant.joints() if plant.joints is not None else None
+        last_q = np.asarray(measured, dtype=float) if measured is not None else np.concatenate(
+            [step_start[:7], [motion.opening] * 2])
     plant.settle(plant.config.settle_s)
     plant.report(len(result.steps), n_steps, step.block, 'verifying', failed)
     expected = step.scene_after(current)
@@ -330,6 +351,13 @@ def _judge_coverage(result: ExecutionResult) -> None:
         result.reason = f'{result.reason}; lost blocks: {lost}'
 
 
+def _refused_again(result: ExecutionResult) -> bool:
+    """Whether the last two faults are refusals of the same block's motion by the arm controller."""
+    last = result.faults[-2:]
+    return len(last) == 2 and all(f['problem'].startswith('trajectory refused') for f in last) and \
+        last[0]['block'] == last[1]['block']
+
+
 def _starts_at(motion: dict | None, q: np.ndarray) -> bool:
     """Whether a motion's first arm trajectory starts where the arm is (q)."""
     trajectories = (motion or {}).get('trajectories') or []
@@ -342,16 +370,19 @@ def _starts_at(motion: dict | None, q: np.ndarray) -> bool:
 
 
 def _run_step(motion: Motion, move_arm: MoveArm, move_gripper: MoveGripper, step_start: np.ndarray,
-              joints, config: ExecuteConfig) -> str:
+              joints, config: ExecuteConfig, settle: Callable[[float], None] = time.sleep) -> str:
     """run_motion, and when the controller aborts a trajectory it had started (the arm or the held
-    block met something: PATH_TOLERANCE_VIOLATED), recover as a cell's operator would script it: back
-    the arm out along the path it came (the checked straight joint segments between the motion's
-    rest points, reversed) to where the step began. A block in the hand is carried back to where it
-    was picked and put down there (its spot is free: it came from there), then the arm goes on
-    backing out with the hand open; the loop then re-registers and replans. Needs `joints` (where
-    the arm stopped); without it, or with config.recover_aborts false, the abort ends the run. A
-    refused trajectory (TrajectoryRejected) never moved: it ends the run (a plan the controller
-    refuses is a bug to see, not a fault of the world)."""
+    block met something: PATH_TOLERANCE_VIOLATED) or refuses one (it never moved), recover as a cell's
+    operator would script it: back the arm out along the path it came (the checked straight joint
+    segments between the motion's rest points, reversed) to where the step began. A block in the hand
+    is carried back to where it was picked and put down there (its spot is free: it came from there),
+    then the arm goes on backing out with the hand open; the loop then re-registers and replans.
+
+    The back-out starts from the arm's measured state: after an abort the arm is still moving (the
+    controller brakes it to a hold), and the last joint state may be older than the stop, so the
+    joints are read until two readings `_REST_EVERY_S` apart agree (`_at_rest`), and the back-out
+    begins there, at rest, as Franka's controller needs a new motion to begin. Needs `joints`;
+    without it, or with config.recover_aborts false, the abort ends the run."""
     sent: list = []
     grips: list[GripperCommand] = []
 
@@ -365,25 +396,30 @@ def _run_step(motion: Motion, move_arm: MoveArm, move_gripper: MoveGripper, step
 
     try:
         return run_motion(motion, tracked_arm, tracked_gripper, start=step_start[:7])
-    except TrajectoryAborted as e:
+    except (TrajectoryAborted, TrajectoryRejected) as e:
         if joints is None or not config.recover_aborts:
             raise
         aborted = e
-    q_now = joints()
-    if q_now is None:
-        raise aborted
+    what = 'refused' if isinstance(aborted, TrajectoryRejected) else 'aborted'
     held = next((g for g in reversed(grips) if g.action in ('grasp', 'release', 'vacuum', 'drop_off')), None)
     held = held if held is not None and held.action in ('grasp', 'vacuum') else None
 
     def let_go(action: str, before: int) -> None:
-        """Open the hand ('open', 'release'), or with the vacuum gripper drop off (nothing to open)."""
+        """Open the hand ('open', 'release'), or with the vacuum gripper drop off (nothing to open); a
+        hand that does not open ends the recovery (RadError)."""
         vacuum = next((g for g in motion.gripper if g.action in VACUUM_ACTIONS), None)
         if vacuum is None:
-            move_gripper(GripperCommand(action, motion.opening, 0.0, before))
+            command = GripperCommand(action, motion.opening, 0.0, before)
         elif action == 'release' or held is not None:
-            move_gripper(GripperCommand('drop_off', vacuum.position, 0.0, before, timeout_ms=vacuum.timeout_ms))
+            command = GripperCommand('drop_off', vacuum.position, 0.0, before, timeout_ms=vacuum.timeout_ms)
+        else:
+            return
+        problem = gripper_problem(command, move_gripper(command))
+        if problem:
+            raise RadError(problem)
     try:
-        path = back_out_path(sent, np.asarray(q_now, dtype=float)[:7], np.asarray(step_start, dtype=float)[:7])
+        q_now = _at_rest(joints, settle)
+        path = back_out_path(sent, q_now, np.asarray(step_start, dtype=float)[:7])
         first = sent[0] if isinstance(sent[0], Trajectory) else Trajectory.from_dict(sent[0])
         names = first.joint_names
         if held is None:
@@ -399,8 +435,12 @@ def _run_step(motion: Motion, move_arm: MoveArm, move_gripper: MoveGripper, step
         wedged = False
         for k, leg in enumerate(legs):
             if len(leg) > 1:
+                back = retime(leg, envelope(PANDA), config.back_out_speed, joint_names=names)
                 try:
-                    move_arm(retime(leg, envelope(PANDA), config.back_out_speed, joint_names=names))
+                    try:
+                        move_arm(back)
+                    except TrajectoryRejected:
+                        move_arm(back)          # refused, so it never moved: ask once more
                 except TrajectoryAborted:
                     if k > 0 or held is None:
                         raise
@@ -408,7 +448,7 @@ def _run_step(motion: Motion, move_arm: MoveArm, move_gripper: MoveGripper, step
                     # where it is and back out empty from where the arm stopped.
                     let_go('open', held.before)
                     wedged = True
-                    q_here = np.asarray(joints(), dtype=float)[:7]
+                    q_here = _at_rest(joints, settle)
                     rest = back_out_path(sent, q_here, np.asarray(step_start, dtype=float)[:7])
                     if len(rest) > 1:
                         move_arm(retime(rest, envelope(PANDA), config.back_out_speed, joint_names=names))
@@ -419,7 +459,35 @@ def _run_step(motion: Motion, move_arm: MoveArm, move_gripper: MoveGripper, step
         raise RadError(f'{aborted}; backing out failed: {e}') from None
     where = '' if held is None else (', let go of the wedged block' if wedged
                                      else ', put the block back where it was picked')
-    return f'trajectory aborted: {aborted}; the arm backed out{where} and the hand opened'
+    return f'trajectory {what}: {aborted}; the arm backed out{where} and the hand opened'
+
+
+_REST_EVERY_S = 0.1
+"""Seconds between the joint readings `_at_rest` compares (a joint state published at 10 Hz or more
+gives a new reading each time)."""
+_REST_TOL = 2e-4
+"""Two readings this close on every joint count as the arm at rest (0.1 s apart: under 2 mrad/s)."""
+_REST_TIMEOUT_S = 3.0
+
+
+def _at_rest(joints, settle: Callable[[float], None]) -> np.ndarray:
+    """The arm's 7 joints once it is at rest: joints() read every `_REST_EVERY_S` until two readings in a
+    row agree within `_REST_TOL` on every joint; RadError when it is not still after `_REST_TIMEOUT_S`
+    (or joint states stop coming)."""
+    def read():
+        q = joints()
+        if q is None:
+            raise RadError("no joint state to back out from")
+        return np.asarray(q, dtype=float)[:7]
+    q = read()
+    for _ in range(int(round(_REST_TIMEOUT_S / _REST_EVERY_S))):
+        settle(_REST_EVERY_S)
+        q_next = read()
+        if np.abs(q_next - q).max() <= _REST_TOL:
+            return q_next
+        q = q_next
+    raise RadError(f'the arm did not come to rest within {_REST_TIMEOUT_S:g} s of the stop (its joints still '
+                   f'move by more than {_REST_TOL / _REST_EVERY_S * 1000:.0f} mrad/s)')
 
 
 def back_out_path(sent: list, q_now: np.ndarray, step_start: np.ndarray) -> list[np.ndarray]:
