@@ -94,7 +94,7 @@ def test_frame_check_names_both_frames_and_a_calibration_needs_a_frame():
     assert FRAMES.calibrated and FRAMES.expected_frame == 'optitrack'
     with pytest.raises(RadError, match="frame 'world', expected 'optitrack'"):
         FRAMES.check('world', '/rigid_bodies')
-    plain = MocapFrames('base', '')
+    plain = MocapFrames('base', '', in_base_frame=True)
     assert not plain.calibrated and plain.expected_frame == 'base'
     with pytest.raises(RadError, match="in frame 'mocap', expected 'base'"):
         plain.check('mocap', '/rigid_bodies')
@@ -102,7 +102,7 @@ def test_frame_check_names_both_frames_and_a_calibration_needs_a_frame():
         MocapFrames('world', '', CAL)
     with pytest.raises(RadError, match="equals frame_id 'world'"):
         MocapFrames('world', 'world', CAL)
-    assert not MocapFrames('world', 'world').calibrated
+    assert not MocapFrames('world', 'world', in_base_frame=True).calibrated
 
 
 # ---- the body map ----------------------------------------------------------------------
@@ -174,7 +174,7 @@ def test_unknown_bodies_are_skipped_and_reported_once_ignored_ones_silently():
     extra = [RigidBodyPose('tool', (0, 0, 1), (0, 0, 0, 1)), RigidBodyPose('wand', (0, 1, 1), (0, 0, 0, 1)),
              RigidBodyPose('Block_9', (0, 2, 1), (0, 0, 0, 1))]
     clock = Clock()
-    tracker = MocapTracker(MocapFrames('world'), clock=clock)
+    tracker = MocapTracker(MocapFrames('world', in_base_frame=True), clock=clock)
     tracker.frame('world', scene_to_bodies(TASK) + extra)
     warnings = []
     bodies = wait_for_bodies(tracker, resolved, sleep=clock.sleep, warn=warnings.append)
@@ -189,7 +189,7 @@ def test_unknown_bodies_are_skipped_and_reported_once_ignored_ones_silently():
 def test_a_body_lost_for_some_frames_is_waited_for_and_registers_when_seen_again():
     resolved = BodyMap().resolve(BLOCKS)
     clock = Clock()
-    tracker = MocapTracker(MocapFrames('world'), lost_timeout_s=1.0, clock=clock)
+    tracker = MocapTracker(MocapFrames('world', in_base_frame=True), lost_timeout_s=1.0, clock=clock)
     full = scene_to_bodies(TASK)
     tracker.frame('world', full)
     clock.t += 0.1
@@ -215,7 +215,7 @@ def test_a_body_lost_for_some_frames_is_waited_for_and_registers_when_seen_again
 def test_a_body_lost_beyond_the_timeout_fails_naming_its_block():
     resolved = BodyMap((BodyEntry('Block_3', 'c1'),)).resolve(BLOCKS)
     clock = Clock()
-    tracker = MocapTracker(MocapFrames('world'), lost_timeout_s=1.0, clock=clock)
+    tracker = MocapTracker(MocapFrames('world', in_base_frame=True), lost_timeout_s=1.0, clock=clock)
     full = [b if b.name != 'c1' else RigidBodyPose('Block_3', b.position, b.quaternion)
             for b in scene_to_bodies(TASK)]
     tracker.frame('world', full)
@@ -230,14 +230,14 @@ def test_a_body_lost_beyond_the_timeout_fails_naming_its_block():
 def test_never_seen_and_silent_motion_capture_fail_with_their_reason():
     resolved = BodyMap().resolve(BLOCKS)
     clock = Clock()
-    tracker = MocapTracker(MocapFrames('world'), lost_timeout_s=1.0, clock=clock)
+    tracker = MocapTracker(MocapFrames('world', in_base_frame=True), lost_timeout_s=1.0, clock=clock)
     tracker.frame('world', scene_to_bodies(TASK)[:2])
     clock.on_sleep = lambda t: tracker.frame('world', scene_to_bodies(TASK)[:2])
     with pytest.raises(RadError, match="motion capture has not seen block 'i0' yet"):
         wait_for_bodies(tracker, resolved, timeout_s=0.5, sleep=clock.sleep)
     with pytest.raises(RadError, match="lost block 'i0' never seen"):
         wait_for_bodies(tracker, resolved, sleep=clock.sleep)
-    silent = MocapTracker(MocapFrames('world'), lost_timeout_s=1.0, clock=clock)
+    silent = MocapTracker(MocapFrames('world', in_base_frame=True), lost_timeout_s=1.0, clock=clock)
     with pytest.raises(RadError, match='no motion capture since motion capture input started 1.0'):
         wait_for_bodies(silent, resolved, sleep=clock.sleep)
 
@@ -259,9 +259,9 @@ def test_a_frame_in_the_wrong_frame_is_refused_and_named_when_bodies_are_lost():
 def test_per_body_poses_are_seen_while_fresh():
     resolved = BodyMap().resolve(BLOCKS)
     clock = Clock()
-    tracker = MocapTracker(MocapFrames('world'), lost_timeout_s=2.0, fresh_s=0.2, clock=clock)
+    tracker = MocapTracker(MocapFrames('world', in_base_frame=True), lost_timeout_s=2.0, fresh_s=0.2, clock=clock)
     for b in scene_to_bodies(TASK):
-        tracker.pose('world', b, source=f'/natnet_ros/{b.name}/pose')
+        tracker.pose('world', b, source=f'/natnet_ros2/{b.name}/pose')
     assert not tracker.snapshot(resolved).not_seen
     clock.t += 0.1
     tracker.pose('world', scene_to_bodies(TASK)[0])

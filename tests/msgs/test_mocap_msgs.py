@@ -126,9 +126,9 @@ def test_driver_messages_convert_to_rigid_bodies_and_the_calibration_to_tf_stati
         ('Block_3', [1.0, 2.0, 3.0], [0.0, 0.0, 0.6, 0.8], True)
     pose = PoseStamped(pose=pose_msg((0.5, 0.0, 0.1), (0.0, 0.0, 0.0, 1.0)))
     assert body_from_pose_stamped('b1', pose).position == [0.5, 0.0, 0.1]
-    assert body_topic('/natnet_ros/{body}/pose', 'Block_3') == '/natnet_ros/Block_3/pose'
+    assert body_topic('/natnet_ros2/{body}/pose', 'Block_3') == '/natnet_ros2/Block_3/pose'
     with pytest.raises(RadError, match="must contain '{body}'"):
-        body_topic('/natnet_ros/pose', 'Block_3')
+        body_topic('/natnet_ros2/pose', 'Block_3')
     frames = MocapFrames('base', 'optitrack', FrameTransform((0.1, 0.2, 0.3), (0.0, 0.0, 0.6, 0.8)))
     (t,) = calibration_tf(frames, pose.header.stamp).transforms
     assert (t.header.frame_id, t.child_frame_id) == ('base', 'optitrack')

@@ -44,7 +44,8 @@ def start_graph(node_process, ros_node, tmp_path, scene: Scene = DEMO_SCENE, twi
              'gamp': node_process('rad_gamp', 'gamp_node', *ros_args(gamp or {})),
              'sequencer': node_process('rad_planner', 'sequencer_node', *ros_args(SEQUENCER)),
              'assembly': node_process('rad_planner', 'assembly_node',
-                                      *ros_args({'stale_after_s': 1.5, **(assembly or {})}))}
+                                      *ros_args({'stale_after_s': 1.5, 'mocap_in_base_frame': True,
+                                                 **(assembly or {})}))}
     client = wait_for_service(ros_node, PlanAssembly, 'plan_assembly', timeout=30.0)
     wait_for_service(ros_node, Sequence, 'sequence', timeout=60.0)   # the network loads in a few seconds
     actions = ActionClient(ros_node, ExecuteAssembly, 'execute_assembly')
@@ -371,7 +372,7 @@ def test_planners_run_against_a_different_plant(node_process, process, ros_node,
                      '-p', f'scene_file:={path}', '-p', 'speed:=8.0'], name='kinematic_plant')
     procs = [node_process('rad_planner', 'allocation_node'), node_process('rad_gamp', 'gamp_node'),
              node_process('rad_planner', 'sequencer_node', *ros_args(SEQUENCER)),
-             node_process('rad_planner', 'assembly_node')]
+             node_process('rad_planner', 'assembly_node', *ros_args({'mocap_in_base_frame': True}))]
     actions = ActionClient(ros_node, ExecuteAssembly, 'execute_assembly')
     assert actions.wait_for_server(timeout_sec=30.0)
     wait_for_service(ros_node, Sequence, 'sequence', timeout=60.0)
@@ -468,7 +469,10 @@ def test_plan_assembly_needs_fresh_and_complete_joint_states(node_process, ros_n
                   'allocation'):
         assert statuses[check][0] == 2, (check, statuses[check])       # ERROR
     assert 'no /joint_states received' in statuses['joint states'][1]
-    assert 'no sequencer (/sequence)' in statuses['sequencer'][1] and statuses['motion capture'][0] == 1   # WARN
+    assert 'no sequencer (/sequence)' in statuses['sequencer'][1]
+    # Motion capture left in a frame it cannot tell from the base frame, uncalibrated: refused, and said so.
+    assert statuses['motion capture'][0] == 2 and 'mocap_in_base_frame' in statuses['motion capture'][1], \
+        statuses['motion capture']
     r = plan_with(None)
     assert not r.success and 'no /joint_states received' in r.reason, r.reason
     r = plan_with(JOINT_NAMES[:7])                      # the arm only, as an arm controller's state broadcaster
@@ -479,6 +483,8 @@ def test_plan_assembly_needs_fresh_and_complete_joint_states(node_process, ros_n
     assert not r.success and 'stale' in r.reason and '10.' in r.reason and 'use_sim_time' in r.reason, r.reason
     r = plan_with(JOINT_NAMES, age=-10.0)                # a robot computer whose clock runs ahead
     assert not r.success and 'ahead of this node' in r.reason and 'chrony' in r.reason, r.reason
+    r = plan_with(JOINT_NAMES, age=-0.3)                 # a little ahead: within clock_skew_tolerance_s (0.5 s)
+    assert not r.success and 'joint_states' not in r.reason and 'allocate' in r.reason, r.reason
     # Fresh and complete (in any order): the request gets past the robot's state to /allocate (not running).
     r = plan_with(list(reversed(JOINT_NAMES)))
     assert not r.success and 'joint_states' not in r.reason and 'allocate' in r.reason, r.reason
@@ -653,4 +659,27 @@ def test_a_grasp_on_nothing_opens_the_hand_and_replans(node_process, ros_node, t
     assert 'nothing is held' in first['failure'], first['failure']
     assert result.success, result.reason
     assert result.replans >= 1
+    stop_graph(g)
+
+
+def test_the_controllers_refusals_and_early_ends_are_recovered_over_dds(node_process, ros_node, tmp_path):
+    """The twin's arm controller and hand now and then refuse a goal or end one early (sim.faults:
+    arm_abort, arm_reject, gripper_abort, gripper_reject), answered over the actions as a real cell's
+    are. Each stops its step with the cause; the arm backs out from where it came to rest (the twin
+    refuses anything over the limits from there) and the loop replans; the build completes and every
+    fault the twin injected is in the result, recovered."""
+    from rad_msgs.action import ExecuteAssembly
+    (tmp_path / 'faults.yaml').write_text('arm_abort: 0.1\narm_reject: 0.05\ngripper_abort: 0.15\n'
+                                          'gripper_reject: 0.05\n')
+    g = start_graph(node_process, ros_node, tmp_path, twin={'faults': str(tmp_path / 'faults.yaml'), 'faults_seed': 2},
+                    assembly={'max_replans': 12})
+    result = execute(g, ExecuteAssembly.Goal(scene_json=DEMO_SCENE.dumps(), replan=True), timeout=300.0)
+    doc_ = json.loads(result.result_json)
+    faults = doc_['execution']['faults']
+    assert faults, ('no fault was injected: choose another faults_seed', result.reason, len(doc_['steps']))
+    kinds = {f['problem'].split(':')[0] for f in faults}
+    assert len(kinds) >= 2, faults            # e.g. 'trajectory aborted', 'open failed', 'trajectory refused'
+    assert all(f['recovered'] for f in faults), faults
+    assert result.success and doc_['coverage'] == pytest.approx(1.0), (result.reason, faults)
+    assert g.procs['twin'].is_running()
     stop_graph(g)

@@ -2,9 +2,10 @@
 
 The test process plays two drivers: a mocap4r2 driver (mocap4r2_msgs/RigidBodies, in a motion-capture
 frame of its own, bodies named in the tracker's software with pivots off the anchor unit, plus a tool
-and an unknown wand) and natnet_ros2 (one geometry_msgs/PoseStamped per body on /natnet_ros/<body>/pose,
-in the base frame). Each of two assembly nodes listens to one and registers the task from it for
-/plan_assembly requests without a scene.
+and an unknown wand) and natnet_ros2 (one geometry_msgs/PoseStamped per body on /natnet_ros2/<body>/pose,
+in the base frame, said so with mocap_in_base_frame). Each of two assembly nodes listens to one and
+registers the task from it for /plan_assembly requests without a scene; a third, left with motion capture
+in a frame it cannot tell from the base frame and no calibration, refuses every registration naming both.
 """
 
 import re
@@ -62,20 +63,25 @@ def cell(node_process, process, ros_node, tmp_path):
     assembly = str(executable_path('rad_planner', 'assembly_node'))
     procs = {
         'mocap4r2': process([assembly, *ros_args(
-            {**common, 'mocap_input': 'mocap4r2', 'mocap_topic': 'm4r2/rigid_bodies', 'mocap_frame': 'optitrack',
+            {**common, 'frame_id': 'base', 'mocap_input': 'mocap4r2', 'mocap_topic': 'm4r2/rigid_bodies',
+             'mocap_frame': 'optitrack',
              'mocap_to_base_translation': '[0.3, -0.1, 0.72]',
              'mocap_to_base_quaternion': f'[0.0, 0.0, {CAL.quaternion[2]!r}, {CAL.quaternion[3]!r}]',
              'body_map_file': str(tmp_path / 'bodies.yaml')},
             {'assembly:__node': 'assembly_m4r2', 'plan_assembly': 'plan_m4r2', 'execute_assembly': 'execute_m4r2'})],
             name='assembly_m4r2'),
         'pose_stamped': process([assembly, *ros_args(
-            {**common, 'mocap_input': 'pose_stamped', 'pose_topic': '/natnet_ros/{body}/pose'},
+            {**common, 'mocap_driver': 'natnet_ros2', 'mocap_in_base_frame': True},
             {'assembly:__node': 'assembly_pose', 'plan_assembly': 'plan_pose', 'execute_assembly': 'execute_pose'})],
             name='assembly_pose'),
+        'plain': process([assembly, *ros_args(
+            {**common, 'mocap_driver': 'natnet_ros2'},
+            {'assembly:__node': 'assembly_plain', 'plan_assembly': 'plan_plain', 'execute_assembly': 'execute_plain'})],
+            name='assembly_plain'),
     }
     state = {'frame': 0, 'drop': set(), 'pose_frame': 'world'}
     m4r2_pub = ros_node.create_publisher(RigidBodies, 'm4r2/rigid_bodies', 10)
-    pose_pubs = {b.name: ros_node.create_publisher(PoseStamped, f'/natnet_ros/{b.name}/pose', 10)
+    pose_pubs = {b.name: ros_node.create_publisher(PoseStamped, f'/natnet_ros2/{b.name}/pose', 10)
                  for b in scene_to_bodies(TASK)}
 
     def publish():
@@ -86,7 +92,7 @@ def cell(node_process, process, ros_node, tmp_path):
             pose_pubs[body.name].publish(pose_stamped(body, stamp, state['pose_frame']))
     ros_node.create_timer(0.02, publish)
     clients = {mode: wait_for_service(ros_node, PlanAssembly, f'plan_{mode}', timeout=30.0)
-               for mode in ('m4r2', 'pose')}
+               for mode in ('m4r2', 'pose', 'plain')}
     wait_for_service(ros_node, Sequence, 'sequence', timeout=30.0)
 
     class Cell:
@@ -106,7 +112,7 @@ def test_drivers_messages_register_in_the_calibrated_frame_and_lost_or_misframed
     cell.node.create_subscription(TFMessage, '/tf_static', tf.append, LATCHED)
     assert spin_until(cell.node, lambda: tf, timeout=10.0), 'no calibration on /tf_static'
     (t,) = tf[0].transforms
-    assert (t.header.frame_id, t.child_frame_id) == ('world', 'optitrack')
+    assert (t.header.frame_id, t.child_frame_id) == ('base', 'optitrack')     # the base's child: one tree
     assert np.allclose([t.transform.translation.x, t.transform.translation.y, t.transform.translation.z],
                        CAL.translation)
     assert np.allclose([t.transform.rotation.z, t.transform.rotation.w], CAL.quaternion[2:])
@@ -137,3 +143,15 @@ def test_drivers_messages_register_in_the_calibrated_frame_and_lost_or_misframed
     r = cell.plan('pose')
     assert not r.success and "in frame 'optitrack', expected 'world'" in r.reason, r.reason
     assert all(p.is_running() for p in cell.procs.values())
+
+
+def test_motion_capture_it_cannot_tell_from_the_base_frame_is_refused_naming_both_frames(cell):
+    """natnet_ros2 reports in 'world', the node's frame_id is 'world', no calibration, nothing said: the node
+    comes up, says why at configure, and refuses each registration with both names and the fix."""
+    r = cell.plan('plain')
+    assert not r.success and "mocap_frame 'world' equals the robot base frame frame_id 'world'" in r.reason, r.reason
+    assert 'rad calibrate' in r.reason and 'mocap_in_base_frame: true' in r.reason, r.reason
+    cell.procs['plain'].wait_for_output('raw motion-capture coordinates would pass as base coordinates', timeout=5.0)
+    r = cell.plan('pose')                                   # the same driver, said to be in the base frame
+    assert r.success, r.reason
+    assert cell.procs['plain'].is_running()

@@ -169,11 +169,15 @@ def test_publishes_the_robot_description_and_each_blocks_frame_for_rviz(twin):
     from rclpy.qos import DurabilityPolicy, QoSProfile
     from std_msgs.msg import String
     from tf2_msgs.msg import TFMessage
-    described, tf = [], []
-    twin.node.create_subscription(String, 'robot_description', described.append,
-                                  QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
+    described, tf, static = [], [], []
+    latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    twin.node.create_subscription(String, 'robot_description', described.append, latched)
     twin.node.create_subscription(TFMessage, '/tf', tf.append, 10)
-    assert spin_until(twin.node, lambda: described and len(tf) >= 2, timeout=10.0)
+    twin.node.create_subscription(TFMessage, '/tf_static', static.append, latched)
+    assert spin_until(twin.node, lambda: described and len(tf) >= 2 and static, timeout=10.0)
+    # One tree: the robot's root link hangs from the base frame, as the blocks do.
+    (root,) = static[0].transforms
+    assert (root.header.frame_id, root.child_frame_id, root.transform.rotation.w) == ('world', 'panda_link0', 1.0)
     urdf = described[0].data
     joints = set(re.findall(r'<joint name="([^"]+)"', urdf))
     assert set(JOINT_NAMES) <= joints, joints            # the names joint_states carries

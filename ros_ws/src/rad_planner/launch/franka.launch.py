@@ -5,7 +5,9 @@ rad next to franka_ros2 (full ROS 2 Jazzy installs). use_twin:=false (the defaul
 node but the twin: franka_ros2 serves the arm's FollowJointTrajectory and the hand's
 GripperCommand actions and /joint_states. use_twin:=true adds the twin, which serves the same
 actions under the profile's names, for a dry run of the same profile in simulation (the
-assembly node is then told that gripper results are per finger, as the twin reports them).
+assembly node is then told that gripper results are per finger, as the twin reports them, and that
+motion capture is the twin's, in the base frame). Every node's frame_id is the profile's `base`,
+franka_description's root: the calibration base -> mocap frame and the blocks hang from that one tree.
 robot (panda or fr3; '' = the parameter file's) overrides `robot` of the twin, gamp and assembly.
 collision_objects:=true puts the blocks into MoveIt's planning scene (/collision_object), where
 franka's MoveIt launch runs move_group. The managed nodes (assembly, and the twin with use_twin)
@@ -40,6 +42,9 @@ def _nodes(context):
             overrides['robot'] = robot
         if name == 'assembly' and use_twin:
             overrides['gripper_result_is_width'] = False   # the twin reports per finger
+            # The twin's motion capture: rad_msgs/RigidBodies in the base frame itself, no calibration.
+            overrides.update(mocap_driver='rad', mocap_input='', mocap_topic='', pose_topic='', mocap_frame='',
+                             mocap_in_base_frame=True)
         if name in MANAGED:
             overrides['autostart'] = False
         if name == 'markers':

@@ -37,26 +37,35 @@ request with a reason naming it.
                          gripper, the sequencer, GAMP and the allocation answer (rad_ros.diagnostics)
   cli  <feeder_service>  rad_msgs/PresentBlock (default feeder/present, the twin's): before each pick of a
                          block from the scene's feeder, the feeder presents it at its station
-  sub  <mocap_topic>     rad_msgs/RigidBodies (mocap_input 'rad', the twin's) or mocap4r2_msgs/RigidBodies
-                         ('mocap4r2'); 'pose_stamped': one geometry_msgs/PoseStamped per body on
-                         <pose_topic> with {body} replaced (natnet_ros2, vrpn_mocap)
+  sub  motion capture    as mocap_driver publishes it (rad_ros.mocap_input.DRIVERS; mocap_input, mocap_topic,
+                         pose_topic and mocap_frame override its settings): rad_msgs/RigidBodies ('rad', the
+                         twin's), mocap4r2_msgs/RigidBodies ('mocap4r2_optitrack': /rigid_bodies, bodies
+                         named by Motive ID, frame 'map'), one geometry_msgs/PoseStamped per body
+                         ('natnet_ros2': /natnet_ros2/{body}/pose, 'vrpn_mocap': /vrpn_mocap/{body}/pose,
+                         frame 'world'), or fiducial tags' transforms camera -> tag on /tf ('fiducial_tags')
 
-Motion capture (rad_core.cell.mocap_input): poses arrive in mocap_frame ('' = frame_id) and are
-taken into frame_id by the calibration mocap_to_base_translation / _quaternion (p_base = R p +
-t); a message in another frame is refused, naming both. Bodies are named by block id unless
+Motion capture (rad_core.cell.mocap_input): poses arrive in mocap_frame ('' = the driver's frame; the
+twin's: frame_id) and are taken into frame_id by the calibration mocap_to_base_translation / _quaternion
+(p_base = R p + t; a camera's from `rad calibrate --hand-eye`); a message in another frame is refused,
+naming both. Motion capture whose frame cannot be told from frame_id (mocap_frame '' or equal to it) or
+that has no calibration is refused, naming both frames and the fix, unless mocap_in_base_frame says it
+reports in frame_id itself (the twin): the node logs it at configure, /diagnostics reports it and every
+registration fails with it, while plans from a request's scene go on. Bodies are named by block id unless
 body_map_file maps them ({bodies: {NAME: {block: ID, pivot: [x, y, z]}}, ignore: [NAME]}, the
-pivot's offset from the anchor unit's centre in the block frame); ignore_bodies lists more to
-skip; any other body is skipped and reported once. A block whose body is momentarily not seen
-(tracking_valid false, missing from a frame) is waited for, up to lost_timeout_s; one lost for
-longer fails the request naming it. table_z is the table top's height in frame_id.
+pivot's offset from the anchor unit's centre in the block frame; mocap4r2's numeric names as 1: or
+'1':); ignore_bodies lists more to skip; any other body is skipped and reported once. A block
+whose body is momentarily not seen (tracking_valid false, missing from a frame) is waited for, up to
+lost_timeout_s; one lost for longer fails the request naming it. table_z is the table top's height in frame_id.
 mocap_noise (m) and mocap_yaw_noise_deg (deg), the tracker's noise as a standard deviation,
 widen the registration tolerances and the deviation check to 5 and 6 sigma, so that noise
 alone is not taken for a fault.
 
 The robot's state comes from joint_states by name (the model's arm and finger joints,
-parameters robot and joint_prefix): a missing joint or a stamp older than stale_after_s
-fails the request with that reason (require_joint_states; false plans from home when
-no joint states are heard, and says so in the log).
+parameters robot and joint_prefix): a missing joint, a latest message that arrived longer than
+stale_after_s ago (this computer's monotonic clock), or a stamp off this node's clock by more than
+stale_after_s and clock_skew_tolerance_s allow fails the request with that reason, saying when the stamps
+look like another clock (simulated time, unsynchronised computers) and the fix (require_joint_states;
+false plans from home when no joint states are heard, and says so in the log).
 """
 
 from __future__ import annotations
@@ -98,7 +107,7 @@ from rad_ros.conversions import (
     scene_msg_is_empty,
 )
 from rad_ros.lifecycle import ManagedNode
-from rad_ros.mocap_input import MocapInput, calibration_tf
+from rad_ros.mocap_input import MocapInput, calibration_tf, resolve_driver
 from rad_ros.motion import motion_from_msgs, moved_aside_from_msgs
 from rad_ros.node_main import run_node
 from rad_ros.params import Param, declare
@@ -159,10 +168,16 @@ PARAMS = [
     Param('goal_tolerance', 0.01, 'goal tolerance sent with each arm goal (rad)', True, (0.0, 1.0)),
     Param('goal_time_tolerance', 1.0, 'goal time tolerance sent with each arm goal (s)', True, (0.0, 60.0)),
     Param('require_joint_states', True, 'false: plan from home when no joint states are heard', True),
-    Param('mocap_input', 'rad', "motion capture's message: rad, mocap4r2 or pose_stamped"),
-    Param('mocap_topic', 'rigid_bodies', 'the rigid bodies topic (rad, mocap4r2)'),
-    Param('pose_topic', 'mocap/{body}/pose', 'one PoseStamped per body, {body} replaced (pose_stamped)'),
-    Param('mocap_frame', '', "motion capture's frame ('' = frame_id)"),
+    Param('mocap_driver', 'rad', 'the motion-capture driver, which sets the input, topics and frame below: '
+          'rad (the twin), mocap4r2_optitrack, natnet_ros2, vrpn_mocap or fiducial_tags'),
+    Param('mocap_input', '', "motion capture's message: rad, mocap4r2, pose_stamped or tf ('' = the driver's)"),
+    Param('mocap_topic', '', "the rigid bodies topic (rad, mocap4r2) or the transforms' (tf) ('' = the driver's)"),
+    Param('pose_topic', '', "one PoseStamped per body, {body} replaced (pose_stamped) ('' = the driver's)"),
+    Param('mocap_frame', '', "the frame motion capture reports in ('' = the driver's; the twin's: frame_id)"),
+    Param('mocap_in_base_frame', False, 'motion capture reports in frame_id itself (the twin): no calibration; '
+          'false: a mocap_frame of its own and its calibration are needed'),
+    Param('clock_skew_tolerance_s', 0.5, "how far the robot computer's clock may be off this node's before "
+          "joint states' stamps are refused (s)", False, (0.0, 60.0)),
     Param('body_map_file', '', 'YAML mapping body names to blocks and pivots'),
     Param('table_z', 0.0, "the table top's height in frame_id (m)"),
     Param('lost_timeout_s', 2.0, 'how long a block that is not seen is waited for (s)', False, (0.0, 600.0)),
@@ -204,9 +219,15 @@ class AssemblyNode(ManagedNode):
         path = self.get_parameter('task_file').value
         if path:
             self.task = Scene.load(path)
-        self.frames = MocapFrames.from_params(self.param('frame_id'), self.param('mocap_frame'),
+        self.mocap_source = resolve_driver(str(self.param('mocap_driver')), str(self.param('mocap_input')),
+                                           str(self.param('mocap_topic')), str(self.param('pose_topic')),
+                                           str(self.param('mocap_frame')))
+        self.frames = MocapFrames.from_params(self.param('frame_id'), self.mocap_source.frame,
                                               self.param('mocap_to_base_translation'),
-                                              self.param('mocap_to_base_quaternion'))
+                                              self.param('mocap_to_base_quaternion'),
+                                              bool(self.param('mocap_in_base_frame')))
+        if self.frames.refusal:     # plans from a request's scene need no motion capture: the node comes up
+            self.get_logger().error(self.frames.refusal)
         ignore = self.param('ignore_bodies') or []
         if isinstance(ignore, str) or not all(isinstance(n, str) for n in ignore):
             raise RadError(f'ignore_bodies must be a list of body names, got {ignore!r}')
@@ -230,8 +251,7 @@ class AssemblyNode(ManagedNode):
         self.feeder_client = self.io.create_client(PresentBlock, str(self.param('feeder_service')))
         self.sequence_client = self.io.create_client(Sequence, 'sequence')
         self.io.create_subscription(JointState, 'joint_states', self.joint_states_callback, 10)
-        self.mocap = MocapInput(self.io, self.tracker, str(self.param('mocap_input')), str(self.param('mocap_topic')),
-                                str(self.param('pose_topic')))
+        self.mocap = MocapInput(self.io, self.tracker, self.mocap_source)
         if self.task is not None:
             self.watch_bodies(self.task)
         self.io.create_subscription(SceneMsg, 'scene', self.scene_callback, LATCHED)
@@ -320,6 +340,8 @@ class AssemblyNode(ManagedNode):
         return OK, 'fresh', {'joints': len(joints)}
 
     def mocap_health(self):
+        if self.frames.refusal:
+            return ERROR, self.frames.refusal, {}
         with self.tracker.lock:
             last, bodies = self.tracker.last_message, len(self.tracker.tracks)
         if last is None:
@@ -380,6 +402,8 @@ class AssemblyNode(ManagedNode):
         return resolved
 
     def fresh(self, entry, what: str):
+        """The message of `entry` (arrival time, message); RadError when none arrived or the latest arrived
+        longer than stale_after_s ago (by this computer's monotonic clock: the staleness check)."""
         stale = float(self.param('stale_after_s'))
         if entry is None:
             raise RadError(f'no {what} received: is the robot (or the twin) running?')
@@ -390,21 +414,17 @@ class AssemblyNode(ManagedNode):
 
     def current_joints(self) -> np.ndarray:
         """The model's 7 arm and 2 finger joints from joint_states, by name; RadError when a joint is
-        missing or the message is stale by its stamp."""
+        missing, the latest message arrived too long ago, or its stamp is off this node's clock by more
+        than stale_after_s and clock_skew_tolerance_s allow (saying when it looks like another clock)."""
         with self.lock:
-            msg = self.fresh(self.joints, '/joint_states')
-        stale = float(self.param('stale_after_s'))
+            entry = self.joints
+            msg = self.fresh(entry, '/joint_states')
         stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
-        age = self.get_clock().now().nanoseconds * 1e-9 - stamp
-        if stamp == 0.0:
-            raise RadError('/joint_states carries no stamp')
-        if age > stale or age < -stale:
-            clocks = ('the robot\'s computer and this one must keep the same time (chrony or PTP); a simulator '
-                      'that publishes /clock needs use_sim_time:=true on every node'
-                      + (' (this node uses simulated time)' if self.get_parameter('use_sim_time').value else ''))
-            raise RadError(f'/joint_states is stale: its stamp is {age:.1f} s old (limit {stale:g} s): {clocks}'
-                           if age > 0 else f'/joint_states is stamped {-age:.1f} s ahead of this node\'s clock '
-                           f'(limit {stale:g} s): {clocks}')
+        why = stamp_problem('/joint_states', stamp, self.get_clock().now().nanoseconds * 1e-9,
+                            float(self.param('stale_after_s')), float(self.param('clock_skew_tolerance_s')),
+                            bool(self.get_parameter('use_sim_time').value), time.monotonic() - entry[0])
+        if why:
+            raise RadError(why)
         # The vacuum gripper has no joints: its fingers' places in the joint vector stay open.
         suction = self.param('effector') == 'suction'
         names = self.model.arm_joint_names + (() if suction else self.model.finger_joint_names)
@@ -428,6 +448,8 @@ class AssemblyNode(ManagedNode):
         if self.task is None:
             raise RadError('no scene in the request and no task known: set the task_file parameter '
                            'or publish the task on /scene')
+        if self.frames.refusal:
+            raise RadError(self.frames.refusal)
         task = self.task
         resolved = self.watch_bodies(task)
         bodies = wait_for_bodies(self.tracker, resolved, warn=self.get_logger().warning,
@@ -646,6 +668,57 @@ class AssemblyNode(ManagedNode):
         else:
             (goal_handle.succeed if result.success else goal_handle.abort)()
         return result
+
+
+# Stamps before this (2001-09-09) are not wall-clock time: a simulator's /clock counts from its start.
+WALL_CLOCK_SINCE_S = 1e9
+# Stamps further than this from the node's clock come from another clock, not from a late message.
+OTHER_CLOCK_S = 60.0
+SYNC = ('synchronise the computers\' clocks (chrony against the robot PC or a common NTP server, PTP where '
+        'available: docs/real-cell.md)')
+
+
+def _span(seconds: float) -> str:
+    for unit, size in (('years', 365.25 * 86400), ('days', 86400), ('h', 3600), ('min', 60)):
+        if seconds >= 2 * size:
+            return f'{seconds / size:.1f} {unit}'
+    return f'{seconds:.1f} s'
+
+
+def stamp_problem(what: str, stamp: float, now: float, stale_s: float, skew_s: float, sim_time: bool,
+                  arrived_s: float = 0.0) -> str:
+    """Why a message stamped `stamp` cannot be taken at `now` (this node's clock, s), or '' when it can.
+
+    A stamp may lag the node's clock by up to stale_s + skew_s and lead it by up to skew_s (the robot
+    computer's clock a little off). Further off, the reason says whether the stamp looks like another clock
+    (simulated time, or minutes to years away: unsynchronised computers) and what fixes it."""
+    if stamp == 0.0:
+        return f'{what} carries no stamp (header.stamp is 0): its publisher must stamp it'
+    behind = now - stamp
+    if -skew_s <= behind <= stale_s + skew_s:
+        return ''
+    if stamp < WALL_CLOCK_SINCE_S <= now and not sim_time:
+        return (f'{what} is stale by this node\'s clock: it is stamped {stamp:.1f} s, which looks like simulated '
+                'time (a simulator\'s /clock) while this node runs on the wall clock: start every node with '
+                'use_sim_time:=true (graph --sim-time), or stamp with the wall clock')
+    if sim_time and stamp >= WALL_CLOCK_SINCE_S > now:
+        return (f'{what} is stamped with wall-clock time but this node uses simulated time (use_sim_time, now '
+                f'{now:.1f} s): set use_sim_time:=false where the robot publishes on its own clock, or run the '
+                'simulator that publishes /clock')
+    limit = f'stale_after_s {stale_s:g} + clock_skew_tolerance_s {skew_s:g}' if behind > 0 \
+        else f'clock_skew_tolerance_s {skew_s:g}'
+    if abs(behind) > OTHER_CLOCK_S:
+        side = 'behind' if behind > 0 else 'ahead of'
+        return (f'{what} is stamped {_span(abs(behind))} {side} this node\'s clock ({limit}) though it arrived '
+                f'{arrived_s:.2f} s ago: its publisher runs on another clock. ' + SYNC
+                + ('; this node uses simulated time: every node needs the same /clock' if sim_time
+                   else '; a simulator that publishes /clock needs use_sim_time:=true on every node'))
+    if behind > 0:
+        return (f'{what} is stale: its stamp is {behind:.1f} s old ({limit}) though it arrived {arrived_s:.2f} s '
+                'ago: the robot computer\'s clock is behind this one\'s, or its messages are delayed. ' + SYNC
+                + '; a simulator that publishes /clock needs use_sim_time:=true on every node')
+    return (f'{what} is stamped {-behind:.1f} s ahead of this node\'s clock ({limit}): the robot computer\'s '
+            'clock runs ahead. ' + SYNC)
 
 
 def _number(value, name: str) -> float:

@@ -11,11 +11,15 @@ dozen poses spread over the workspace (not on one line), then
 Endpoints (relative names):
   sub  joint_states    sensor_msgs/JointState: the arm joints by name (robot, joint_prefix)
   sub  <marker_topic>  geometry_msgs/PoseStamped: the marker body as natnet_ros2 or vrpn_mocap
-                       publish it (e.g. /natnet_ros/flange_marker/pose)
+                       publish it (e.g. /natnet_ros2/flange_marker/pose, /vrpn_mocap/flange_marker/pose)
   srv  ~/record        std_srvs/Trigger: append a pair; refused with the reason (no input, stale
                        input, the arm or the marker moving, a frame_id other than mocap_frame)
 
-Parameters: robot ('panda'), joint_prefix (''), marker_topic ('mocap/flange_marker/pose'),
+The robot comes from the cell's profile, as for every other node: start the recorder with the same
+parameter file (`--params-file franka.yaml`: its calibration_recorder section says robot: fr3) or
+give `-p robot:=fr3` (or panda). Left unset, the node stays up and every ~/record is refused saying so.
+
+Parameters: robot ('' = unset: refused), joint_prefix (''), marker_topic ('mocap/flange_marker/pose'),
 marker_offset ([x, y, z] m in the flange frame), csv_file ('calibration_pairs.csv'),
 mocap_frame ('' = take any frame_id), rest_window_s (0.5), joint_tol (0.001 rad),
 marker_tol (0.001 m), stale_after_s (0.5). Both inputs use sensor-data QoS, which also
@@ -44,7 +48,7 @@ KEEP_S = 5.0
 """s of input history kept (at least the rest window)."""
 
 # All read when the recorder starts: read-only.
-PARAMS = [Param('robot', 'panda', 'panda or fr3'),
+PARAMS = [Param('robot', '', "panda or fr3, as the cell's profile says ('' = unset: recording is refused)"),
           Param('joint_prefix', '', "joint names' prefix ('' = the robot's)"),
           Param('marker_topic', 'mocap/flange_marker/pose', "the flange marker's PoseStamped topic"),
           Param('marker_offset', [0.0, 0.0, 0.0], "the marker's offset from the flange, flange frame (m)",
@@ -61,7 +65,12 @@ class CalibrationRecorder(Node):
     def __init__(self):
         super().__init__('calibration_recorder')
         declare(self, PARAMS)
-        self.model = robot_model(str(self.param('robot')), str(self.param('joint_prefix')))
+        robot = str(self.param('robot'))
+        # No silent default: FR3 and Panda name their joints differently, and the profile says which this is.
+        self.model = robot_model(robot, str(self.param('joint_prefix'))) if robot else None
+        self.no_robot = ('' if robot else "the robot is not set: start the recorder with the cell's parameter file "
+                         '(--ros-args --params-file <your franka.yaml>, whose calibration_recorder section names it) '
+                         'or -p robot:=fr3 (or panda)')
         self.rest = RestConfig(float(self.param('rest_window_s')), float(self.param('joint_tol')),
                                float(self.param('marker_tol')), float(self.param('stale_after_s')))
         self.offset = np.asarray(self.param('marker_offset'), dtype=float)
@@ -77,8 +86,11 @@ class CalibrationRecorder(Node):
         topic = str(self.param('marker_topic'))
         self.create_subscription(PoseStamped, topic, self.marker_callback, qos_profile_sensor_data)
         self.create_service(Trigger, '~/record', self.record_callback)
-        self.get_logger().info(f'recording pairs into {self.param("csv_file")}: marker on {topic}, '
-                               f'offset {self.offset.tolist()} m from {self.model.prefix}_link8')
+        if self.model is None:
+            self.get_logger().error(self.no_robot)
+            return
+        self.get_logger().info(f'recording pairs into {self.param("csv_file")}: {self.model.name}, marker on '
+                               f'{topic}, offset {self.offset.tolist()} m from {self.model.prefix}_link8')
 
     def destroy_node(self):
         self.world.close()
@@ -95,6 +107,8 @@ class CalibrationRecorder(Node):
         self.input_problem[key] = ''
 
     def joint_states_callback(self, msg: JointState) -> None:
+        if self.model is None:
+            return
         by_name = dict(zip(msg.name, msg.position))
         missing = [n for n in self.model.arm_joint_names if n not in by_name]
         if missing:
@@ -115,6 +129,8 @@ class CalibrationRecorder(Node):
 
     def take_pair(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(arm q, marker in base, marker in mocap) over the rest window, or RadError."""
+        if self.model is None:
+            raise RadError(self.no_robot)
         now = time.monotonic()
         joints, markers = list(self.joints), list(self.markers)
         for key, samples in (('joint_states', joints), ('marker', markers)):

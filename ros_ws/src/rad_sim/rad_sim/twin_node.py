@@ -27,6 +27,9 @@ Endpoints (relative names, so namespaces and remaps work); <arm_controller> and
                                        URIs), for RViz (robot 'panda'; publish_robot_description)
   pub  /tf                             tf2_msgs/TFMessage: frame_id -> block/<id>, each block's true pose
                                        (its anchor unit's centre), at 10 Hz
+  pub  /tf_static                      tf2_msgs/TFMessage, latched: frame_id -> <prefix>_link0 (the robot's
+                                       root link; publish_base_tf), so the robot, the blocks and motion
+                                       capture make one tree from the base frame
   pub  ~/events                        std_msgs/String: accepted / rejected (with the reason) / done
   pub  /clock                          rosgraph_msgs/Clock: the simulated time from 0, each tick, where
                                        publish_clock is true; every stamp above is then simulated time,
@@ -40,7 +43,8 @@ Endpoints (relative names, so namespaces and remaps work); <arm_controller> and
                                        back); motion capture sees a feeder's blocks only when presented
 
 Motion capture is published as a motion-capture system would: in `mocap_frame`
-(stamped so; '' = frame_id, poses already in the robot base frame), the twin's
+(stamped so; '' = frame_id, poses already in the robot base frame: the assembly node is then told
+so with mocap_in_base_frame: true), the twin's
 base-frame poses taken through the inverse of the calibration p_base = R(q) p_mocap + t
 (`mocap_to_base_translation`, `mocap_to_base_quaternion` [x, y, z, w]).
 
@@ -113,6 +117,16 @@ def robot_description(effector: str, prefix: str = 'panda') -> str:
     return re.sub(r'filename="(/[^"]+)"', r'filename="file://\1"', text)
 
 
+def base_tf(frame_id: str, root_link: str, stamp) -> TFMessage:
+    """/tf_static's frame_id -> the robot's root link: the twin's robot stands at frame_id's origin, so the
+    robot's links (robot_state_publisher), the blocks and motion capture hang from one tree, as
+    franka_description's base -> <arm_id>_link0 does on the cell."""
+    t = TransformStamped(child_frame_id=root_link)
+    t.header.frame_id, t.header.stamp = frame_id, stamp
+    t.transform.rotation.w = 1.0
+    return TFMessage(transforms=[t])
+
+
 def block_tf(bodies, frame_id: str, stamp) -> TFMessage:
     """Each block's true pose as a transform frame_id -> block/<id> (anchor unit's centre)."""
     out = TFMessage()
@@ -137,6 +151,8 @@ PARAMS = [
     Param('publish_clock', False, 'publish /clock from the simulated time and stamp everything with it (run '
           'every node of the graph with use_sim_time:=true)'),
     Param('frame_id', 'world', "the robot's base frame"),
+    Param('publish_base_tf', True, "publish frame_id -> the robot's root link (<prefix>_link0) on /tf_static: one "
+          'TF tree for the robot, the blocks and motion capture'),
     Param('mocap_prefix', 'mocap', 'motion capture publishes <mocap_prefix>/<body>/pose'),
     Param('robot', 'panda', 'panda or fr3: joint names and limits'),
     Param('joint_prefix', '', "joint names' prefix ('' = the robot's)"),
@@ -202,6 +218,10 @@ class TwinNode(ManagedNode):
             self.description_pub = self.own(self.create_publisher(String, 'robot_description', LATCHED))
             self.description_pub.publish(String(data=robot_description(effector, self.twin.model.prefix)))
         self.tf_pub = self.own(self.create_publisher(TFMessage, '/tf', 10))
+        root = f'{self.twin.model.prefix}_link0'
+        if self.get_parameter('publish_base_tf').value and root != self.frame_id:
+            self.tf_static_pub = self.own(self.create_publisher(TFMessage, '/tf_static', LATCHED))
+            self.tf_static_pub.publish(base_tf(self.frame_id, root, self.get_clock().now().to_msg()))
         self.tf_every = max(1, round(rate / TF_RATE_HZ))
         self.bodies_pub = self.own(self.create_publisher(RigidBodies, 'rigid_bodies', qos_profile_sensor_data))
         self.scene_pub = self.own(self.create_publisher(SceneMsg, 'scene', LATCHED))

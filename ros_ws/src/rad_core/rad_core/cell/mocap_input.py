@@ -16,6 +16,8 @@ A cell's motion capture (natnet_ros2, vrpn_mocap, mocap4r2) differs from what
   calibration mocap -> base (p_base = R p_mocap + t, orientation q_base =
   q_cal * q_mocap); every message's frame_id is checked against the frame the
   cell says motion capture reports in, and a mismatch is refused naming both.
+  Motion capture whose frame cannot be told from the base frame, or that has no
+  calibration, is refused unless the cell says it reports in the base frame.
 - Dropouts. A marker set hidden behind the arm is reported with tracking_valid
   false or not at all. That block is "not seen" for the moment, not gone:
   `MocapTracker` keeps each body's last valid pose and when it was last seen,
@@ -23,7 +25,7 @@ A cell's motion capture (natnet_ros2, vrpn_mocap, mocap4r2) differs from what
   each block whose body stays lost longer than lost_timeout_s.
 
 Pure Python (no rclpy): rad_ros.mocap_input feeds the tracker from the three
-message formats, the assembly node calls `wait_for_bodies`.
+message formats (and fiducial tags on /tf), the assembly node calls `wait_for_bodies`.
 """
 
 from __future__ import annotations
@@ -69,6 +71,14 @@ def _vector(value, n: int, what: str) -> tuple[float, ...]:
 def _name(value, what: str) -> str:
     if not isinstance(value, str) or not value.strip():
         raise RadError(f'{what} must be a non-empty string, got {value!r}')
+    return value
+
+
+def _body_name(value):
+    """A body name as written in a body map: numbers as text (mocap4r2's OptiTrack driver names rigid
+    bodies by their Motive ID, '1', '2', ..., which YAML reads as integers)."""
+    if isinstance(value, int) and not isinstance(value, bool):
+        return str(value)
     return value
 
 
@@ -127,33 +137,72 @@ class FrameTransform:
 class MocapFrames:
     """Which frame motion capture reports in and how it maps to the robot base frame.
 
-    frame_id: the robot base frame (the assembly node's frame_id).
-    mocap_frame: the frame motion capture reports in; '' = it already reports in
-        frame_id (no calibration, identity).
+    frame_id: the robot base frame (the assembly node's frame_id; 'base' for franka_description).
+    mocap_frame: the frame motion capture reports in; '' = frame_id.
     transform: the calibration mocap_frame -> frame_id.
+    in_base_frame: the cell says motion capture already reports in the base frame (no calibration;
+        the twin's case). Without it, motion capture whose frame cannot be told from the base frame
+        (mocap_frame '' or equal to frame_id) or that has no calibration (the identity) is refused:
+        `refusal` says why, naming both frames and the fix, and `check` raises it for every message.
+        Drivers report in a frame of their own by default ('world' for natnet_ros2 and vrpn_mocap,
+        'map' for mocap4r2), so raw motion-capture coordinates must never pass as base coordinates.
     """
 
     frame_id: str = 'world'
     mocap_frame: str = ''
     transform: FrameTransform = field(default_factory=FrameTransform)
+    in_base_frame: bool = False
 
     def __post_init__(self):
         _name(self.frame_id, 'frame_id')
         if not isinstance(self.mocap_frame, str):
             raise RadError(f'mocap_frame must be a string, got {self.mocap_frame!r}')
-        if not self.calibrated and not self.transform.is_identity:
+        if not isinstance(self.in_base_frame, bool):
+            raise RadError(f'mocap_in_base_frame must be true or false, got {self.in_base_frame!r}')
+        if self.transform.is_identity:
+            return
+        if not self.distinct:
             said = "is ''" if not self.mocap_frame else f'equals frame_id {self.frame_id!r}'
             raise RadError(f'mocap_to_base_translation/quaternion give a calibration, but mocap_frame {said}: '
                            'set mocap_frame to the frame motion capture reports in')
+        if self.in_base_frame:
+            raise RadError(f'mocap_in_base_frame is true (motion capture reports in frame_id {self.frame_id!r}), '
+                           f'but mocap_to_base_translation/quaternion give a calibration from mocap_frame '
+                           f'{self.mocap_frame!r}: keep one of the two')
 
     @classmethod
-    def from_params(cls, frame_id, mocap_frame, translation, quaternion) -> MocapFrames:
-        return cls(frame_id, mocap_frame, FrameTransform(translation, quaternion))
+    def from_params(cls, frame_id, mocap_frame, translation, quaternion, in_base_frame=False) -> MocapFrames:
+        return cls(frame_id, mocap_frame, FrameTransform(translation, quaternion), in_base_frame)
+
+    @property
+    def distinct(self) -> bool:
+        """mocap_frame names a frame other than frame_id."""
+        return bool(self.mocap_frame) and self.mocap_frame != self.frame_id
+
+    @property
+    def refusal(self) -> str:
+        """Why motion capture cannot be taken in these frames ('' when it can)."""
+        if self.in_base_frame or not self.transform.is_identity:
+            return ''
+        fix = ('set mocap_frame to the frame your driver reports in (natnet_ros2: its global_frame, vrpn_mocap: its '
+               "frame_id, 'world' by default; mocap4r2: 'map'; a camera: its optical frame) and "
+               'mocap_to_base_translation / mocap_to_base_quaternion to the calibration `rad calibrate` prints '
+               '(`rad calibrate --hand-eye` for a camera), or set mocap_in_base_frame: true if motion capture '
+               f'really reports in the robot base frame {self.frame_id!r} (the twin does)')
+        if not self.distinct:
+            said = ("mocap_frame is '', which means" if not self.mocap_frame
+                    else f'mocap_frame {self.mocap_frame!r} equals')
+            return (f'motion capture refused: {said} the robot base frame frame_id {self.frame_id!r}, and no '
+                    'calibration is given, so raw motion-capture coordinates would pass as base coordinates: '
+                    + fix)
+        return (f'motion capture refused: mocap_frame {self.mocap_frame!r} is not the robot base frame frame_id '
+                f'{self.frame_id!r}, but no calibration from {self.mocap_frame!r} to {self.frame_id!r} is given '
+                '(mocap_to_base_translation/quaternion are the identity): ' + fix)
 
     @property
     def calibrated(self) -> bool:
-        """True when motion capture reports in a frame of its own (a calibration applies, /tf_static)."""
-        return bool(self.mocap_frame) and self.mocap_frame != self.frame_id
+        """True when motion capture reports in a frame of its own, under the base (/tf_static)."""
+        return self.distinct and not self.refusal
 
     @property
     def expected_frame(self) -> str:
@@ -161,6 +210,8 @@ class MocapFrames:
         return self.mocap_frame or self.frame_id
 
     def check(self, frame_id: str, source: str) -> None:
+        if self.refusal:
+            raise RadError(self.refusal)
         if frame_id != self.expected_frame:
             where = (f"mocap_frame is {self.mocap_frame!r}" if self.mocap_frame
                      else f"mocap_frame is '' so motion capture must report in frame_id {self.frame_id!r}")
@@ -255,12 +306,12 @@ class BodyMap:
             if not isinstance(spec, Mapping) or 'block' not in spec or set(spec) - {'block', 'pivot'}:
                 raise RadError(f'{where}: body {body!r} must be {{block: ID, pivot: [x, y, z]}} (pivot optional), '
                                f'got {spec!r}')
-            entries.append(BodyEntry(_name(body, f'{where}: a body name'), spec['block'],
+            entries.append(BodyEntry(_name(_body_name(body), f'{where}: a body name'), _body_name(spec['block']),
                                      spec.get('pivot', (0.0, 0.0, 0.0))))
         listed = doc.get('ignore') or []
         if isinstance(listed, str) or not isinstance(listed, (list, tuple)):
             raise RadError(f'{where}: "ignore" must be a list of body names, got {listed!r}')
-        return cls(tuple(entries), frozenset(listed) | frozenset(ignore))
+        return cls(tuple(entries), frozenset(_body_name(n) for n in listed) | frozenset(ignore))
 
     @classmethod
     def load(cls, path: str | Path, ignore: Iterable[str] = ()) -> BodyMap:

@@ -11,8 +11,10 @@ Positions: the planner (IK, GAMP) keeps every configuration inside
 `PLANNING_LOWER`/`PLANNING_UPPER`, the intersection of both robots' published
 ranges and the simulated URDF's, so one plan is valid on either robot (both share
 the Panda's kinematics). Velocity, acceleration and jerk come from the model the
-cell runs (parameter `robot`), times a speed scale. Not modelled: the FR3's
-position-dependent velocity limits (its table values are used as they stand).
+cell runs (parameter `robot`), times a speed scale. The FR3's velocity limits also
+depend on the joint's position (`RobotModel.velocity_bounds`, as libfranka
+computes them: a joint must be able to brake to rest before its range ends), so
+near the ends of a range it moves slower than its table value.
 
 Source: Franka's "robot and interface specifications" (libfranka), as gathered in
 the project's REAL_CELL.md.
@@ -38,6 +40,21 @@ class RobotModel:
     v_max: tuple[float, ...]
     a_max: tuple[float, ...]
     j_max: tuple[float, ...]
+    braking: tuple[tuple[float, float, float, float], ...] | None = None
+    """Position-dependent velocity limits (the FR3), per joint (offset, 2 x deceleration, lower end, upper
+    end): moving up, |v| <= sqrt(2 x deceleration x (upper end - q)) - offset, moving down the same from
+    the lower end, both within the table's v_max; None: the table's v_max everywhere."""
+
+    def velocity_bounds(self, q) -> tuple[np.ndarray, np.ndarray]:
+        """(lowest, highest) joint velocities allowed at positions q (..., 7), rad/s."""
+        q = np.asarray(q, dtype=float)
+        v = np.broadcast_to(np.asarray(self.v_max, dtype=float), q.shape)
+        if self.braking is None:
+            return -v, v
+        offset, decel2, low, high = (np.asarray(c, dtype=float) for c in zip(*self.braking))
+        up = np.minimum(v, np.maximum(0.0, np.sqrt(np.maximum(0.0, decel2 * (high - q))) - offset))
+        down = np.minimum(v, np.maximum(0.0, np.sqrt(np.maximum(0.0, decel2 * (q - low))) - offset))
+        return -down, up
 
     @property
     def arm_joint_names(self) -> tuple[str, ...]:
@@ -70,6 +87,11 @@ FR3 = RobotModel(
     v_max=(2.62, 2.62, 2.62, 2.62, 5.26, 4.18, 5.26),
     a_max=(10.0,) * 7,
     j_max=(5000.0,) * 7,
+    # libfranka's computeUpper/LowerLimitsJointVelocity (rate_limiting.h), Franka's "Limits for Franka
+    # Research 3": offset, 2 x deceleration, and the range ends they brake towards (slightly past q_min/q_max).
+    braking=((0.30, 12.0, -2.7501, 2.7501), (0.20, 5.17, -1.7918, 1.7918), (0.20, 7.0, -2.9065, 2.9065),
+             (0.30, 8.0, -3.0481, -0.1458), (0.35, 34.0, -2.8101, 2.8101), (0.35, 11.0, 0.54092, 4.5205),
+             (0.35, 34.0, -3.0196, 3.0196)),
 )
 
 MODELS = {m.name: m for m in (PANDA, FR3)}
@@ -82,11 +104,18 @@ def envelope(model: RobotModel) -> RobotModel:
     pick = {f: tuple(float(v) for v in (np.minimum if f != 'q_min' else np.maximum)(
         np.asarray(getattr(PANDA, f)), np.asarray(getattr(FR3, f)))) for f in ('q_min', 'q_max', 'v_max', 'a_max',
                                                                               'j_max')}
-    return replace(model, **pick)
+    return replace(model, **pick, braking=FR3.braking)
 
-PLANNING_LOWER = np.maximum(np.asarray(PANDA.q_min), np.asarray(FR3.q_min))
-PLANNING_UPPER = np.minimum(np.asarray(PANDA.q_max), np.asarray(FR3.q_max))
-"""The arm's position range every plan keeps to: valid on the Panda and on the FR3."""
+BRAKING_MARGIN = 0.02
+"""How far (rad) plans keep outside the FR3's braking zones (where its velocity limit toward the end
+of the range is zero: within offset^2 / (2 x deceleration) of the end)."""
+_offset, _decel2, _low, _high = (np.asarray(c, dtype=float) for c in zip(*FR3.braking))
+PLANNING_LOWER = np.maximum.reduce([np.asarray(PANDA.q_min), np.asarray(FR3.q_min),
+                                    _low + _offset ** 2 / _decel2 + BRAKING_MARGIN])
+PLANNING_UPPER = np.minimum.reduce([np.asarray(PANDA.q_max), np.asarray(FR3.q_max),
+                                    _high - _offset ** 2 / _decel2 - BRAKING_MARGIN])
+"""The arm's position range every plan keeps to: valid on the Panda and on the FR3, clear of the FR3's
+braking zones, so every waypoint can be reached at a speed the FR3 allows."""
 for _a in (PLANNING_LOWER, PLANNING_UPPER):
     _a.setflags(write=False)
 

@@ -114,13 +114,14 @@ def retime(waypoints: Sequence[np.ndarray], model: RobotModel, speed_scale: floa
         # The path parameter s runs 0 -> 1 along q = a + s d; each joint's limit bounds s's.
         inp = InputParameter(1)
         inp.current_position, inp.target_position = [0.0], [1.0]
-        inp.max_velocity = [float(np.min(v_max[moving] / np.abs(d[moving])))]
+        v_seg = v_max if model.braking is None else np.minimum(v_max, _braking_caps(a, d, model) * (1.0 - _MARGIN))
+        if not (v_seg[moving] > 0).all():
+            raise RadError(f'retime: between {a.round(4).tolist()} and {b.round(4).tolist()} a joint moves into '
+                           f'the {model.name}\'s braking zone at the end of its range, where it may not move')
+        inp.max_velocity = [float(np.min(v_seg[moving] / np.abs(d[moving])))]
         inp.max_acceleration = [float(np.min(a_max[moving] / np.abs(d[moving])))]
         inp.max_jerk = [float(np.min(j_max[moving] / np.abs(d[moving])))]
-        traj = RuckigTrajectory(1)
-        result = otg.calculate(inp, traj)
-        if result not in (Result.Working, Result.Finished):
-            raise RadError(f'retime: ruckig failed ({result}) between {a.round(4).tolist()} and {b.round(4).tolist()}')
+        traj = _segment(otg, inp, a, b)
         profile = traj.profiles[0][0]
         knots = np.cumsum(profile.t) + profile.brake.duration
         knots = [float(k) for k in knots if k > _MIN_PHASE]
@@ -135,6 +136,23 @@ def retime(waypoints: Sequence[np.ndarray], model: RobotModel, speed_scale: floa
     if len(points) == 1:
         raise RadError('retime: the arm does not move')
     return Trajectory(tuple(joint_names or model.arm_joint_names), points)
+
+
+def _segment(otg: Ruckig, inp: InputParameter, a: np.ndarray, b: np.ndarray) -> RuckigTrajectory:
+    traj = RuckigTrajectory(1)
+    result = otg.calculate(inp, traj)
+    if result not in (Result.Working, Result.Finished):
+        raise RadError(f'retime: ruckig failed ({result}) between {a.round(4).tolist()} and {b.round(4).tolist()}')
+    return traj
+
+
+def _braking_caps(a: np.ndarray, d: np.ndarray, model: RobotModel) -> np.ndarray:
+    """Per joint, the lowest velocity limit the model allows anywhere on the segment a -> a + d in the
+    direction the joint moves (the FR3's position-dependent limits, sampled every 1/64 of the way and at
+    both ends): a segment timed within these keeps to them everywhere."""
+    s_ = np.linspace(0.0, 1.0, 65)[:, None]
+    lower, upper = model.velocity_bounds(a + s_ * d)
+    return np.where(d >= 0, upper.min(axis=0), -lower.max(axis=0))
 
 
 def plan_motion(start: np.ndarray, waypoints: Sequence[np.ndarray], config: TimingConfig = TimingConfig(),
