@@ -152,7 +152,9 @@ def test_a_plant_that_never_finishes_is_a_timeout_reason(twin, motion):
                        'finish within 12.0 s')
     result = run(move_arm=never_finishes)
     assert not result.success and 'did not finish within' in result.reason
-    assert result.steps == [] and len(run.sent) == 1
+    # The step that timed out is in the result with the reason, and so is its fault: nothing is lost.
+    assert [s['failure'] for s in result.steps] == [result.reason] and len(run.sent) == 1
+    assert result.faults[-1]['problem'] == result.reason and not result.faults[-1]['recovered']
     assert result.final_scene is not None and result.coverage == 0.0
     assert run.phases[-1] == ('done', result.reason)
 

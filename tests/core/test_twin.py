@@ -563,7 +563,8 @@ def test_a_planned_step_runs_through_execute_motion(twin):
 
 def test_execute_motion_reports_a_refused_trajectory(twin):
     traj = move(HOME7, HOME7 + [0.6, 0.4, 0, 0.5, 0, 0, -0.8])
-    why = twin.execute_motion(Motion([scaled(traj, 0.3)], [GripperCommand('open', 0.035, 20.0, 0)]))
+    # 'open' to the full opening: the hand is open already (a narrower 'open' would be a grasp on air).
+    why = twin.execute_motion(Motion([scaled(traj, 0.3)], [GripperCommand('open', 0.04, 20.0, 0)]))
     assert why.startswith('trajectory refused (error code -1): over the panda\'s limits: panda_joint')
     assert np.abs(twin.world.joint_positions()[:7] - HOME7).max() < 1e-3
 

@@ -30,8 +30,11 @@ def test_panda_constants_come_from_the_urdf_and_franka():
     assert panda.URDF_LOWER[3] == pytest.approx(-3.1416) and panda.URDF_UPPER[5] == pytest.approx(3.8223)
     # Plans keep to Franka's published ranges, of the Panda and the FR3 both: joint 4 up to the Panda's
     # -0.0698 and the FR3's -0.1518, joint 6 from the FR3's 0.5445 to the Panda's 3.7525.
-    assert panda.UPPER[3] == pytest.approx(-0.1518) and panda.LOWER[5] == pytest.approx(0.5445)
-    assert panda.UPPER[5] == pytest.approx(3.7525) and panda.LOWER[0] == pytest.approx(-2.7437)
+    # Both then 0.02 rad clear of the FR3's braking zones (robot_model.BRAKING_MARGIN): joint 4's ends at
+    # -0.1458 - 0.3^2 / 8, joint 6's at 0.54092 + 0.35^2 / 11.
+    assert panda.UPPER[3] == pytest.approx(-0.1458 - 0.09 / 8 - 0.02)
+    assert panda.LOWER[5] == pytest.approx(0.54092 + 0.1225 / 11 + 0.02)
+    assert panda.UPPER[5] == pytest.approx(3.7525) and panda.LOWER[0] == pytest.approx(-2.7501 + 0.09 / 12 + 0.02)
     assert np.all(panda.LOWER >= panda.URDF_LOWER) and np.all(panda.UPPER <= panda.URDF_UPPER)
     assert panda.UPPER[7] == panda.UPPER[8] == 0.04
     assert panda.within_limits(panda.HOME)

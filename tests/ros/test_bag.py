@@ -11,7 +11,7 @@ from rad_core.domain.generator import GeneratorConfig, generate_scene
 from ros_harness import executable_path, ros_args, spin_until, wait_for_plant
 
 RUN_TOPICS = {'/scene', '/robot_description', '/plan_json', '/joint_states', '/rigid_bodies', '/tf'}
-LATCHED_TOPICS = {'/scene', '/robot_description', '/plan_json'}
+LATCHED_TOPICS = {'/scene', '/robot_description', '/plan_json', '/tf_static'}   # the twin's world -> panda_link0
 
 
 def test_the_schema_of_a_nested_type_is_its_msg_then_each_dependency_once_as_rosbag2_writes_it():
