@@ -566,6 +566,11 @@ class AssemblyNode(ManagedNode):
     def start_joints(self, requested):
         if len(requested):
             return list(requested)
+        # A request right after start-up may come before the joint_states subscription has matched the
+        # robot's publisher: wait up to stale_after_s for the first message before judging.
+        deadline = time.monotonic() + float(self.param('stale_after_s'))
+        while self.joints is None and time.monotonic() < deadline:
+            time.sleep(0.05)
         if not self.param('require_joint_states'):
             try:
                 return self.current_joints()
