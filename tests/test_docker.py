@@ -102,13 +102,6 @@ def test_a_pip_version_other_than_constraints_fails(repo, capsys):
     assert f'numpy==1.26.4: requirements/constraints.txt pins numpy=={numpy}' in out
 
 
-def test_a_pip_install_without_constraints_fails(repo, capsys):
-    edit(repo / 'docker' / 'Dockerfile', ' -c requirements/constraints.txt', '')
-    code, out = run(repo, capsys)
-    assert code == 1
-    assert 'pip install without -c requirements/constraints.txt' in out
-
-
 def test_host_networking_without_ipc_host_fails(repo, capsys):
     compose = repo / 'docker' / 'compose.yaml'
     text = compose.read_text()
@@ -118,27 +111,6 @@ def test_host_networking_without_ipc_host_fails(repo, capsys):
     assert code == 1
     assert 'mocap: network_mode host without ipc: host' in out
     assert len(failed(out)) == 1, out
-
-
-def test_an_unknown_executable_fails(repo, capsys):
-    edit(repo / 'docker' / 'compose.yaml', 'ros2 run rad_gamp gamp_node', 'ros2 run rad_gamp gamp_nod')
-    code, out = run(repo, capsys)
-    assert code == 1
-    assert 'gamp: rad_gamp has no executable gamp_nod' in out
-
-
-def test_a_missing_params_file_fails(repo, capsys):
-    edit(repo / 'docker' / 'compose.yaml', 'config/graph.yaml -p', 'config/graf.yaml -p')
-    code, out = run(repo, capsys)
-    assert code == 1
-    assert 'viz: params file /rad/ros_ws/install/rad_planner/share/rad_planner/config/graf.yaml' in out
-
-
-def test_a_missing_profile_fails(repo, capsys):
-    edit(repo / 'docker' / 'compose.yaml', 'profiles: [mocap]', 'profiles: [tracking]')
-    code, out = run(repo, capsys)
-    assert code == 1
-    assert 'no service in profile mocap' in out
 
 
 def test_loopback_dds_on_the_cell_fails(repo, capsys):
@@ -152,8 +124,25 @@ def test_loopback_dds_on_the_cell_fails(repo, capsys):
     assert 'cell-assembly: config/fastdds_loopback.xml is not a LAN profile' in out
 
 
-def test_a_fixed_domain_id_fails(repo, capsys):
-    edit(repo / 'docker' / 'compose.yaml', 'ROS_DOMAIN_ID: ${ROS_DOMAIN_ID:-42}', 'ROS_DOMAIN_ID: "42"', count=2)
+# One edit of one file, and the line the checker must print: (file, old, new, how many, expected).
+EDITS = {
+    'pip without constraints': ('docker/Dockerfile', ' -c requirements/constraints.txt', '', 1,
+                                'pip install without -c requirements/constraints.txt'),
+    'unknown executable': ('docker/compose.yaml', 'ros2 run rad_gamp gamp_node', 'ros2 run rad_gamp gamp_nod', 1,
+                           'gamp: rad_gamp has no executable gamp_nod'),
+    'missing params file': ('docker/compose.yaml', 'config/graph.yaml -p', 'config/graf.yaml -p', 1,
+                            'viz: params file /rad/ros_ws/install/rad_planner/share/rad_planner/config/graf.yaml'),
+    'missing profile': ('docker/compose.yaml', 'profiles: [mocap]', 'profiles: [tracking]', 1,
+                        'no service in profile mocap'),
+    'fixed domain id': ('docker/compose.yaml', 'ROS_DOMAIN_ID: ${ROS_DOMAIN_ID:-42}', 'ROS_DOMAIN_ID: "42"', 2,
+                        'cell-gamp: ROS_DOMAIN_ID is not taken from the environment'),
+}
+
+
+@pytest.mark.parametrize('fault', sorted(EDITS))
+def test_each_edit_fails_naming_it(repo, capsys, fault):
+    path, old, new, count, expected = EDITS[fault]
+    edit(repo / path, old, new, count)
     code, out = run(repo, capsys)
     assert code == 1
-    assert 'cell-gamp: ROS_DOMAIN_ID is not taken from the environment' in out
+    assert expected in out, out
