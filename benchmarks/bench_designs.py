@@ -30,21 +30,24 @@ def _box(g, lo, hi):
     g[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]] = True
 
 
+def _corners(g, xs, ys, size, height):
+    """Four posts (legs, wheels) of `size` (x, y) cells, from the ground to `height`, at each x in xs and y in ys."""
+    for x in xs:
+        for y in ys:
+            _box(g, (x, y, 0), (x + size[0], y + size[1], height))
+
+
 def designs() -> dict[str, np.ndarray]:
     """name -> occupancy [x, y, z], z up."""
     out = {}
     g = np.zeros((16, 12, 9), dtype=bool)                       # table: a top on four legs
     _box(g, (0, 0, 8), (16, 12, 9))
-    for x in (0, 14):
-        for y in (0, 10):
-            _box(g, (x, y, 0), (x + 2, y + 2, 8))
+    _corners(g, (0, 14), (0, 10), (2, 2), 8)
     out['table'] = g
     g = np.zeros((12, 12, 16), dtype=bool)                      # chair: seat, back, legs
     _box(g, (0, 0, 6), (12, 12, 8))
     _box(g, (0, 10, 8), (12, 12, 16))
-    for x in (0, 10):
-        for y in (0, 10):
-            _box(g, (x, y, 0), (x + 2, y + 2, 6))
+    _corners(g, (0, 10), (0, 10), (2, 2), 6)
     out['chair'] = g
     g = np.zeros((18, 10, 9), dtype=bool)                       # sofa: base, back, arms
     _box(g, (0, 0, 0), (18, 8, 4))
@@ -53,9 +56,7 @@ def designs() -> dict[str, np.ndarray]:
     _box(g, (16, 0, 4), (18, 8, 7))
     out['sofa'] = g
     g = np.zeros((18, 10, 8), dtype=bool)                       # car: wheels, body, cabin
-    for x in (2, 13):
-        for y in (0, 8):
-            _box(g, (x, y, 0), (x + 3, y + 2, 2))
+    _corners(g, (2, 13), (0, 8), (3, 2), 2)
     _box(g, (0, 0, 2), (18, 10, 5))
     _box(g, (5, 1, 5), (14, 9, 8))
     out['car'] = g

@@ -395,12 +395,12 @@ def _sampled(parsed: Trajectory, start, model: RobotModel, dt: float):
         both = np.vstack(values)
         out[label] = (np.abs(both) / limit, both)
     if model.braking is not None:
-        # The FR3's position-dependent velocity limits: each velocity against the bound where it is.
+        # The FR3's position-dependent velocity limits: each velocity against the bound where it is (within
+        # the table's v_max, so this ratio replaces the table's).
         both = np.vstack((v_fd, v_an))
         lower, upper = model.velocity_bounds(np.vstack((0.5 * (q[:-1] + q[1:]), q)))
         bound = np.where(both >= 0, upper, -lower)
-        ratio = np.where(np.abs(both) <= 1e-9, 0.0, np.abs(both) / np.maximum(bound, 1e-9))
-        out['velocity'] = (np.maximum(out['velocity'][0], ratio), both)
+        out['velocity'] = (np.where(np.abs(both) <= 1e-9, 0.0, np.abs(both) / np.maximum(bound, 1e-9)), both)
     return np.concatenate([ts, ts]), out
 
 

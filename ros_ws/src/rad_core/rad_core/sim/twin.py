@@ -361,7 +361,7 @@ class Twin:
             if bid in self.world.parked:
                 continue        # inside the feeder: no camera sees it
             name = names.get(bid, bid)
-            if not exact and f.drop_body > 0 and self._rng['drop_body'].random() < f.drop_body \
+            if not exact and self._happens('drop_body') \
                     and name in self._reported:
                 last = self._reported[name]
                 out.append(replace(last, tracking_valid=False))
@@ -381,8 +381,7 @@ class Twin:
 
     def drop_frame(self) -> bool:
         """Whether motion capture skips this frame (draw once per frame; counted when it does)."""
-        f = self.config.faults
-        dropped = f.drop_frame > 0 and bool(self._rng['drop_frame'].random() < f.drop_frame)
+        dropped = self._happens('drop_frame')
         self.fault_counts['drop_frame'] += dropped
         return dropped
 
@@ -462,15 +461,14 @@ class Twin:
         why = limit_violation(traj, start_q, self.model)
         if why:
             raise TrajectoryRejected(INVALID_GOAL, f'over the {self.model.name}\'s limits: {why}')
-        faults = self.config.faults
-        if faults.arm_reject > 0 and self._rng['arm_reject'].random() < faults.arm_reject:
+        if self._happens('arm_reject'):
             self._fault('arm_reject')
             raise TrajectoryRejected(INVALID_GOAL, 'the controller refused the trajectory (an injected arm_reject '
                                      'fault): the arm did not move')
         if self._run is not None:
             self._finish(preempted=True)
         self._run = _Run(traj, start_q, tolerances, self.config)
-        if faults.arm_abort > 0 and self._rng['arm_abort'].random() < faults.arm_abort:
+        if self._happens('arm_abort'):
             self._run.abort_at = float(self._rng['arm_abort'].uniform(0.2, 0.8)) * traj.duration
             self._fault('arm_abort', at=round(self._run.abort_at, 4))
         self._events = []
@@ -495,23 +493,20 @@ class Twin:
                            f'[0, {panda.FINGER_OPEN}] m per finger')
         if not (math.isfinite(max_effort) and max_effort >= 0):
             raise RadError(f'gripper: max_effort must be finite and >= 0, got {max_effort}')
-        faults = self.config.faults
-        if faults.gripper_reject > 0 and self._rng['gripper_reject'].random() < faults.gripper_reject:
+        if self._happens('gripper_reject'):
             self._fault('gripper_reject')
             raise GripperFailed('the gripper refused the command (an injected gripper_reject fault): the fingers '
                                 'did not move')
         now = float(self.world.joint_positions()[7:].mean())
         closing = position < now - 1e-4
         self._grip = _Grip(min(position, panda.FINGER_OPEN), max_effort, float(self._target[7:].mean()), closing)
-        if not closing and position > now + 1e-3 and faults.gripper_abort > 0 and \
-                self._rng['gripper_abort'].random() < faults.gripper_abort:
+        if not closing and position > now + 1e-3 and self._happens('gripper_abort'):
             # The fingers stop partway (something in their way): the move ends short, reached_goal false.
             grip = self._grip
             grip.drive = now + float(self._rng['gripper_abort'].uniform(0.2, 0.7)) * (grip.goal - now)
             self._fault('gripper_abort', stopped_at=round(grip.drive, 5))
         if closing:
-            miss = self.config.faults.miss
-            self._miss_next = miss > 0 and bool(self._rng['miss'].random() < miss)
+            self._miss_next = self._happens('miss')
         force = max_effort if closing and max_effort > 0 else self.config.finger_force
         self._forces[7:] = [force, force]
 
@@ -624,7 +619,7 @@ class Twin:
         if self.attached is not None:
             return self._vacuum_answer(True, '')
         block_id, why = self.seal()
-        if block_id and self.config.faults.miss > 0 and self._rng['miss'].random() < self.config.faults.miss:
+        if block_id and self._happens('miss'):
             self._fault('miss', block=block_id)
             block_id, why = '', 'the vacuum was not reached: the seal leaks'
         if not block_id:
@@ -921,8 +916,7 @@ class Twin:
         self._grip_width = width
         self._released = None
         self._events.append({'t': round(self._run_time(), 6), 'action': 'attach', 'block': block_id})
-        slip = self.config.faults.slip
-        if slip > 0 and self._rng['slip'].random() < slip:
+        if self._happens('slip'):
             # It will slip out during the carry: at this fraction of the next arm trajectory.
             self._slip = float(self._rng['slip'].uniform(0.1, 0.6))
 
@@ -937,6 +931,12 @@ class Twin:
         self._events.append({'t': round(self._run_time(), 6), 'action': 'detach', 'block': block_id})
 
     # ---- faults ------------------------------------------------------------------
+    def _happens(self, kind: str) -> bool:
+        """Whether a fault of `kind` (its FaultConfig probability) happens now: one draw from its own stream,
+        none while it is off, so turning one kind on does not shift when another happens."""
+        p = getattr(self.config.faults, kind)
+        return p > 0 and bool(self._rng[kind].random() < p)
+
     def _fault(self, kind: str, **fields) -> None:
         event = {'t': round(self._run_time(), 6), 'action': 'fault', 'fault': kind, **fields}
         self._events.append(event)
@@ -985,7 +985,7 @@ class Twin:
             offset = self._rng['placement'].normal(0.0, f.placement_error, 2)
             moved = self._shift(block_id, offset)
             self._fault('placement', block=block_id, offset=[round(float(v), 6) for v in offset * moved])
-        if f.nudge > 0 and self._rng['nudge'].random() < f.nudge:
+        if self._happens('nudge'):
             p = self._p
             body = w.blocks[block_id]
             near = sorted(bid for bid, other in w.blocks.items() if other != body

@@ -432,15 +432,17 @@ def _run_step(motion: Motion, move_arm: MoveArm, move_gripper: MoveGripper, step
                                 .points[-1].positions if before is not None else step_start[:7], dtype=float)
             cut = next((i for i, q in enumerate(path) if np.abs(q - picked).max() < 1e-6), len(path) - 1)
             legs = [path[:cut + 1], path[cut:]]
+        def back_out(waypoints) -> None:
+            back = retime(waypoints, envelope(PANDA), config.back_out_speed, joint_names=names)
+            try:
+                move_arm(back)
+            except TrajectoryRejected:
+                move_arm(back)          # refused, so it never moved: ask once more
         wedged = False
         for k, leg in enumerate(legs):
             if len(leg) > 1:
-                back = retime(leg, envelope(PANDA), config.back_out_speed, joint_names=names)
                 try:
-                    try:
-                        move_arm(back)
-                    except TrajectoryRejected:
-                        move_arm(back)          # refused, so it never moved: ask once more
+                    back_out(leg)
                 except TrajectoryAborted:
                     if k > 0 or held is None:
                         raise
@@ -451,7 +453,7 @@ def _run_step(motion: Motion, move_arm: MoveArm, move_gripper: MoveGripper, step
                     q_here = _at_rest(joints, settle)
                     rest = back_out_path(sent, q_here, np.asarray(step_start, dtype=float)[:7])
                     if len(rest) > 1:
-                        move_arm(retime(rest, envelope(PANDA), config.back_out_speed, joint_names=names))
+                        back_out(rest)
                     break
             if k == 0 and held is not None:
                 let_go('release', held.before)
