@@ -77,13 +77,60 @@ def cmd_scene_generate(args) -> int:
     return 0
 
 
+BRICK_SUFFIXES = ('.txt', '.ldr', '.mpd')
+
+
 def cmd_scene_check(args) -> int:
+    if Path(args.scene).suffix.lower() in BRICK_SUFFIXES:
+        return _check_design(args)
     scene = _read_scene(args.scene)
     counts = {k: v for k, v in scene.type_counts().items() if v}
     feeder = (f' ({len(scene.feeder.blocks)} in a {scene.feeder.order} feeder at {list(scene.feeder.station)})'
               if scene.feeder is not None else '')
+    studs = (f', {scene.studs.system} studs ({scene.course * 1000:.2f} mm courses, clutch {scene.studs.clutch:g} N)'
+             if scene.studs is not None else '')
     print(f'ok: {len(scene.blocks)} blocks {counts}{feeder}, {len(scene.targets)} target regions, '
-          f'{scene.num_target_cells} target cells, unit {scene.unit} m')
+          f'{scene.num_target_cells} target cells, unit {scene.unit} m{studs}')
+    if scene.studs is None:
+        return 0
+    from rad_core.domain.grid import Grid, blocks_on_grid  # numpy: this command only
+    from rad_core.domain.statics import first_failure  # ortools: this command only
+    grid = Grid(scene)
+    built = blocks_on_grid(scene, grid)
+    failure = first_failure(grid, list(built.values()), clutch=grid.clutch) if built else None
+    if failure is None:
+        print(f'stands: the {len(built)} blocks built in the target' if built else 'nothing built in the target yet')
+        return 0
+    ids = [scene.blocks[b].id for b in built]
+    step, verdict = failure
+    whys = verdict.why or ('',) * len(verdict.falling)
+    print(f'falls once block {ids[step]!r} is on: '
+          + '; '.join(f'{ids[n]} {why}'.strip() for n, why in zip(verdict.falling, whys)))
+    return 1
+
+
+def _check_design(args) -> int:
+    """`rad scene check` of a brick design: whether it stands with its clutch, and without."""
+    from rad_core.domain.brick_designs import read_design  # numpy: this command only
+    from rad_core.allocation.brick_scenes import design_verdict, lattice_of  # ortools: this command only
+    design = read_design(args.scene)
+    lattice = lattice_of(design, args.system, args.unit, args.clutch)
+    verdict, words = design_verdict(design, lattice)
+    print(f'{args.scene}: {len(design.bricks)} {lattice.system} bricks: {words}')
+    if verdict == 'stands':
+        alone, why = design_verdict(design, lattice, clutch=False)
+        print(f'without clutch it {why}' if alone == 'falls' else 'without clutch it stands too')
+    return 0 if verdict == 'stands' else 1
+
+
+def cmd_scene_from_bricks(args) -> int:
+    from rad_core.domain.brick_designs import read_design  # numpy: this command only
+    from rad_core.allocation.brick_scenes import scene_from_design  # ortools: this command only
+    scene, lines = scene_from_design(read_design(args.design), args.system, args.unit, args.clutch, args.yaw,
+                                     args.seed, args.supply)
+    _write_text(scene.dumps(), args.output)
+    for line in lines:
+        _say(args, line)
     return 0
 
 
@@ -554,6 +601,14 @@ def _add_solver_args(p: argparse.ArgumentParser) -> None:
     p.add_argument('--workers', type=int, default=1, help='CP-SAT workers (1 = deterministic)')
 
 
+def _add_brick_args(p) -> None:
+    p.add_argument('--system', choices=('lego', 'duplo'),
+                   help="the bricks' system where the file cannot say (the text format)")
+    p.add_argument('--unit', type=float, help='the stud pitch in the scene, m (default: the system\'s own, 8 or 16 mm; '
+                                              'courses keep the system\'s proportion)')
+    p.add_argument('--clutch', type=float, help='the pull one stud connection holds, N (default: the system\'s)')
+
+
 def _add_target_args(p: argparse.ArgumentParser) -> None:
     p.add_argument('--unit', type=float, default=0.05, help='cell edge (the cube edge), metres (default: 0.05)')
     p.add_argument('--up', choices=['x', 'y', 'z'], default='z', help="the model's axis that points up (default: z)")
@@ -614,9 +669,27 @@ def build_parser(command: str | None = 'train') -> argparse.ArgumentParser:
                    help='a queue feeder: how many of its first blocks the robot may take from (a tray)')
     p.add_argument('-o', '--output', help='output file (default: stdout)')
     p.set_defaults(func=cmd_scene_generate)
-    p = scene.add_parser('check', help='validate a scene file')
-    p.add_argument('scene', help="scene file, or - for stdin")
+    p = scene.add_parser('check', help='validate a scene file; of studded bricks, say whether what is built stands',
+                         description='A scene file: validate it, and where its blocks are studded bricks, say '
+                                     'whether the blocks built in its target stand with their clutch. A brick '
+                                     'design (.txt, .ldr, .mpd): whether it stands, which brick falls first and '
+                                     'why (exit 1 when it falls).')
+    p.add_argument('scene', help="scene file (- for stdin) or brick design")
+    _add_brick_args(p)
     p.set_defaults(func=cmd_scene_check)
+    p = scene.add_parser('from-bricks', help='a scene from a brick design, keeping its bricks',
+                         description='Read a brick model (text: one brick a line, "HxW (x,y,z)"; LDraw .ldr/.mpd '
+                                     'of common bricks and plates): its cells are the target, its bricks the blocks, '
+                                     'laid out on the table or in a feeder (docs/formats.md). A design that does not '
+                                     'stand even with clutch is refused, naming the brick that falls.')
+    p.add_argument('design', help='brick design file (.txt, .ldr, .mpd)')
+    _add_brick_args(p)
+    p.add_argument('--yaw', type=int, choices=(0, 90, 180, 270), help='turn the design (default: the yaw that fits)')
+    p.add_argument('--seed', type=int, default=0, help='seed of the layout on the table')
+    p.add_argument('--supply', choices=('auto', 'table', 'feeder'), default='auto',
+                   help='where the bricks start: the table, a feeder, or auto (the table where they fit)')
+    p.add_argument('-o', '--output', help='output scene file (default: stdout)')
+    p.set_defaults(func=cmd_scene_from_bricks)
     p = scene.add_parser('render', help='draw a scene (and an allocation) to a PNG')
     p.add_argument('scene')
     p.add_argument('-o', '--output', required=True)

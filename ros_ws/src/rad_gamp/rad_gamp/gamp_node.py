@@ -96,11 +96,11 @@ class GampNode(Node):
         if request.place_at_pose:
             block = scene.block(a.block_id)
             position, yaw = place_pose(request.place_pose)
-            units = position + scene.unit * scene.block_types[block.type].rotated(yaw)
+            units = position + scene.pitch * scene.block_types[block.type].rotated(yaw)
             Workspace().check_points(units, f'place_pose of block {a.block_id!r}: a unit')
-            if units[:, 2].min() < scene.unit / 4:
+            if units[:, 2].min() < scene.course / 4:
                 raise RadError(f'place_pose of block {a.block_id!r} puts it into the table (lowest unit centre '
-                               f'z = {units[:, 2].min():.3f} m, on the table it is {scene.unit / 2:.3f} m)')
+                               f'z = {units[:, 2].min():.3f} m, on the table it is {scene.course / 2:.3f} m)')
             start = self.planner.load(scene, request.start_positions)
             return plan_action(self.planner.world, a.block_id, position, yaw, start=start,
                                config=self.planner.config)

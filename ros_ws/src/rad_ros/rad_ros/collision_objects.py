@@ -65,11 +65,11 @@ def block_object(scene: Scene, block_id: str, frame_id: str, pose: tuple | None 
     position, quaternion = pose if pose is not None else (block.position, yaw_quaternion(block.yaw))
     offsets = scene.block_types[block.type].offsets
     half = scene.unit / 2
-    shift, halves = unit_boxes(offsets, half, half, scene.clearance * scene.unit / 2)
+    shift, halves = unit_boxes(offsets, half, scene.course / 2, scene.clearance * scene.unit / 2)
     obj = CollisionObject(id=object_id(block.id), operation=CollisionObject.ADD, pose=_pose(position, quaternion))
     obj.header.frame_id = frame_id
     for offset, d, h in zip(offsets, shift, halves):
-        centre = [scene.unit * float(o) + float(s) for o, s in zip(offset, d)]
+        centre = [float(pitch) * float(o) + float(s) for pitch, o, s in zip(scene.pitch, offset, d)]
         obj.primitives.append(SolidPrimitive(type=SolidPrimitive.BOX, dimensions=[float(2 * v) for v in h]))
         obj.primitive_poses.append(_pose(centre, (0.0, 0.0, 0.0, 1.0)))
     return obj

@@ -106,7 +106,7 @@ def block_unit_centres(scene: Scene, b: int) -> np.ndarray:
     """World centres of a block's units where it lies (its position is unit 0's centre)."""
     block = scene.blocks[b]
     offsets = scene.block_types[block.type].rotated(block.yaw)
-    return np.asarray(block.position, dtype=float) + np.asarray(offsets, dtype=float) * scene.unit
+    return np.asarray(block.position, dtype=float) + np.asarray(offsets, dtype=float) * scene.pitch
 
 
 def arm_filter(scene: Scene, grid: Grid, candidates: list[Candidate],
@@ -118,7 +118,7 @@ def arm_filter(scene: Scene, grid: Grid, candidates: list[Candidate],
     gamp = gamp or GampConfig()
     grasps = type_grasps(scene, gamp)
     # A tight grasp's target over the unit's centre; the cup's, on its top face.
-    lift = suction_styles(scene.unit, gamp)[0][1] if gamp.effector == 'suction' else grasp_lift(scene.unit)
+    lift = suction_styles(scene.course, gamp)[0][1] if gamp.effector == 'suction' else grasp_lift(scene.course)
     report = ArmFilter()
     for name, gs in grasps.items():
         if not gs:
@@ -218,13 +218,14 @@ class HandBlocked:
         if found is None:
             scene = self.scene
             if self.gamp.effector == 'suction':
-                styles = suction_styles(scene.unit, self.gamp)
+                styles = suction_styles(scene.course, self.gamp)
             elif span == 1:
-                styles = grasp_styles(grasp_width(scene.unit, scene.clearance), scene.unit, self.gamp)
+                styles = grasp_styles(grasp_width(scene.unit, scene.clearance), scene.course, self.gamp)
             else:
-                styles = wide_grasp_styles(span_width(span, scene.unit, scene.clearance), scene.unit, self.gamp)
+                styles = wide_grasp_styles(span_width(span, scene.unit, scene.clearance), scene.course, self.gamp)
+            course = None if scene.course == scene.unit else scene.course
             common = frozenset.intersection(*(blocking_offsets(scene.unit, scene.clearance, f, hand_yaw, lift, shift,
-                                                               self.gamp.effector) for f, lift in styles))
+                                                               self.gamp.effector, course) for f, lift in styles))
             found = self._offsets[key] = np.array(sorted(common), dtype=float).reshape(-1, 3)
         return found
 
@@ -242,7 +243,7 @@ class HandBlocked:
                 # grasp's, the hand 90 deg off that, or the half turn of it.
                 yaws = [(key[1] + g.yaw + 90 + half) % 360 for half in (0, 180)]
                 shift = grasp_shift(g, key[1])
-                found.append(tuple(self._on_grid(centre + self.offsets(y, g.span, shift) * grid.unit)
+                found.append(tuple(self._on_grid(centre + self.offsets(y, g.span, shift) * grid.pitch)
                                    for y in yaws))
             self._cells[key] = found
         return found

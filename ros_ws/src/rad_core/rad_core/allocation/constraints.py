@@ -44,11 +44,14 @@ def support_options(grid: Grid, ids: list[int], occupied, holders: dict) -> list
 
 def _support_sets(grid: Grid, ids: list[int], occupied):
     """(cell below each unit, the sufficient support sets of the pose's bottom units,
-    the bottom units already resting on the table or an occupied cell)."""
+    the bottom units already resting on the table or an occupied cell). Studded bricks (`grid.clutch`)
+    are held by any one stud: each bottom unit is a set (the statics of the whole say how far out)."""
     own = set(ids)
     below = [int(grid.below_idx[c]) for c in ids]
     bottom = [i for i, b in enumerate(below) if b not in own]
     trivial = {i for i in bottom if grid.on_table[ids[i]] or (below[i] >= 0 and occupied[below[i]])}
+    if grid.clutch is not None:
+        return below, tuple((i,) for i in bottom), trivial
     return below, _sufficient_supports(grid.ijk[ids].tobytes(), tuple(bottom)), trivial
 
 

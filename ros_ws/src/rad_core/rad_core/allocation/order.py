@@ -298,7 +298,7 @@ def solve_order(grid: Grid, occupied: np.ndarray, poses: list[tuple], items: lis
         return HandOrder()
     chosen = sorted((n for n in range(len(poses)) if solver.boolean_value(placed[n])),
                     key=lambda n: (solver.value(order[n]), n))
-    walk, waiting = order_statics(grid, [poses[n][0] for n in chosen], occupied)
+    walk, waiting = order_statics(grid, [poses[n][0] for n in chosen], occupied, clutch=grid.clutch)
     tipping = [poses[chosen[k]][0] for k in waiting]
     chosen = [chosen[k] for k in walk]          # the structure stands as a whole after each pose
     owner = {c: n for n in chosen for c in poses[n][0]}

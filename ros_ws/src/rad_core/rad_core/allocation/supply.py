@@ -460,7 +460,7 @@ def stands(grid: Grid, placements, targets: Sequence[TargetRegion]) -> bool:
         if order is None:
             return False
         ids = [[grid.index(names.index(t.name), c) for c in mine[n].cells] for n in order]
-        if order_statics(grid, ids)[1]:
+        if order_statics(grid, ids, clutch=grid.clutch)[1]:
             return False
     return True
 
@@ -468,7 +468,8 @@ def stands(grid: Grid, placements, targets: Sequence[TargetRegion]) -> bool:
 # ---- the table ------------------------------------------------------------------
 
 def lay_out_blocks(kinds: Sequence[str], types: Mapping[str, BlockType], targets: Sequence[TargetRegion],
-                   unit: float, seed: int = 0, config: shapes.LayoutConfig = shapes.LayoutConfig()) -> list[Block]:
+                   unit: float, seed: int = 0, config: shapes.LayoutConfig = shapes.LayoutConfig(),
+                   course: float | None = None) -> list[Block]:
     """The blocks on the table within reach, apart and clear of the targets (`shapes.lay_out`),
     largest first (they are the hardest to fit); tighter on each retry, as `shapes.build_scene`."""
     order = sorted(kinds, key=lambda k: (-types[k].size, k))
@@ -477,7 +478,7 @@ def lay_out_blocks(kinds: Sequence[str], types: Mapping[str, BlockType], targets
         last = attempt == shapes.LAYOUT_ATTEMPTS - 1
         try:
             return shapes.lay_out(order, types, targets, rng, unit,
-                                  replace(config, jitter=0.0 if last else config.jitter / 2 ** attempt))
+                                  replace(config, jitter=0.0 if last else config.jitter / 2 ** attempt), course)
         except RadError:
             if last:
                 break
@@ -488,7 +489,7 @@ def lay_out_blocks(kinds: Sequence[str], types: Mapping[str, BlockType], targets
 
 
 def feeder_blocks(kinds: Sequence[str], types: Mapping[str, BlockType], targets: Sequence[TargetRegion],
-                  unit: float, station: tuple[float, float]) -> tuple[list[Block], Feeder]:
+                  unit: float, station: tuple[float, float], course: float | None = None) -> tuple[list[Block], Feeder]:
     """Every block in a feeder presenting them at `station` (the plan asks for any), as the generator's
     and the large shapes' scenes have them; RadError where the station's footprint, 5 cm round the
     largest block, would overlap a target region."""
@@ -498,7 +499,7 @@ def feeder_blocks(kinds: Sequence[str], types: Mapping[str, BlockType], targets:
         if lo[0] - reach < station[0] < hi[0] + reach and lo[1] - reach < station[1] < hi[1] + reach:
             raise RadError(f'the feeder\'s station {tuple(station)} lies within {reach:.2f} m of target region '
                            f'{t.name!r}: the blocks do not fit on the table and the feeder has no room')
-    return feeder_of(kinds, types, station, unit)
+    return feeder_of(kinds, types, station, unit, course=course)
 
 
 def supply(targets: Sequence[TargetRegion], unit: float, types: Mapping[str, BlockType],

@@ -315,7 +315,7 @@ def _obstacle(block_id: str, body: RigidBodyPose, config: RegistrationConfig) ->
 def _blocked_cells(bodies: list[RigidBodyPose], types: list[str], scene: Scene) -> dict[str, tuple]:
     """The filled target cells the bodies' units overlap (by more than BLOCKED_OVERLAP in every axis)
     that no block of the scene occupies."""
-    u = scene.unit
+    u = scene.pitch
     taken = [scene.unit_positions(b) for b in scene.blocks]
     taken = np.vstack(taken) if taken else np.zeros((0, 3))
     out: dict[str, tuple] = {}
@@ -324,7 +324,7 @@ def _blocked_cells(bodies: list[RigidBodyPose], types: list[str], scene: Scene) 
         quat = np.asarray(body.quaternion, dtype=float)
         r = matrix_from_quaternion(quat / np.linalg.norm(quat))
         units = pos + (np.asarray(scene.block_types[type_name].offsets, dtype=float) * u) @ r.T
-        half = u / 2 * np.abs(r).sum(axis=1)          # half extents of a turned unit cube's bounding box
+        half = np.abs(r) @ (u / 2)                    # half extents of a turned unit cell's bounding box
         for t in scene.targets:
             for ijk in t.filled:
                 centre = t.cell_center(ijk, u)
@@ -350,11 +350,11 @@ def _over_regions(body: RigidBodyPose, template: Scene, block_type) -> bool:
     pos = np.asarray(body.position, dtype=float)
     quat = np.asarray(body.quaternion, dtype=float)
     r = matrix_from_quaternion(quat / np.linalg.norm(quat))
-    offsets = np.asarray(block_type.offsets, dtype=float) * template.unit
+    offsets = np.asarray(block_type.offsets, dtype=float) * template.pitch
     pts = pos + offsets @ r.T
     for t in template.targets:
-        lo, hi = t.bounds(template.unit)
-        inside = np.all((pts[:, :2] > lo[:2]) & (pts[:, :2] < hi[:2]), axis=1) & (pts[:, 2] < hi[2] + template.unit)
+        lo, hi = t.bounds(template.pitch)
+        inside = np.all((pts[:, :2] > lo[:2]) & (pts[:, :2] < hi[:2]), axis=1) & (pts[:, 2] < hi[2] + template.course)
         if inside.any():
             return True
     return False
@@ -393,13 +393,14 @@ def _snap(body: RigidBodyPose, template: Scene, block_type, config: Registration
         turn_error = ''
     snapped_yaw %= 360
 
-    height = (pos[2] - config.table_z - u / 2) / u
+    c = template.course
+    height = (pos[2] - config.table_z - c / 2) / c
     level = round(height)
     if abs(height - level) > config.position_tol:
-        raise _Unexpressible(f'rigid body {name!r}: height {pos[2]:.4f} m is {abs(height - level) * u * 1000:.1f} mm '
-                       f'off the unit lattice above the table (limit {config.position_tol * u * 1000:.1f} mm)')
+        raise _Unexpressible(f'rigid body {name!r}: height {pos[2]:.4f} m is {abs(height - level) * c * 1000:.1f} mm '
+                       f'off the unit lattice above the table (limit {config.position_tol * c * 1000:.1f} mm)')
     out = [_quantise(pos[0], config.resolution), _quantise(pos[1], config.resolution),
-           round(u / 2 + level * u, _DECIMALS)]
+           round(c / 2 + level * c, _DECIMALS)]
 
     region = _region_of(template, snapped_yaw, block_type, np.array(out))
     if turn_error:
@@ -439,10 +440,10 @@ def _quantise(x: float, step: float) -> float:
 
 def _region_of(scene: Scene, yaw: int, block_type, anchor: np.ndarray):
     """The target region holding most of the block's units (by unit centre), or None."""
-    pts = anchor + scene.unit * block_type.rotated(yaw)
+    pts = anchor + scene.pitch * block_type.rotated(yaw)
     best, best_count = None, 0
     for t in scene.targets:
-        lo, hi = t.bounds(scene.unit)
+        lo, hi = t.bounds(scene.pitch)
         count = int(np.all((pts > lo) & (pts < hi), axis=1).sum())
         if count > best_count:
             best, best_count = t, count

@@ -17,6 +17,11 @@ from rad_core.domain.scene import GRID_SNAP_TOL, Scene
 class Grid:
     def __init__(self, scene: Scene):
         self.unit = scene.unit
+        self.course = scene.course
+        self.pitch = scene.pitch
+        """The lattice's pitch along x, y, z (m): the unit, and along z the scene's course height."""
+        self.clutch = None if scene.studs is None else scene.studs.clutch_in_weights
+        """The pull a stud connection holds, in the weights of a cell (`domain.statics`); None: no studs."""
         self.regions = scene.targets
         sizes = [t.num_cells for t in scene.targets]
         self.offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
@@ -29,7 +34,7 @@ class Grid:
             cells = np.stack([i.ravel(), j.ravel(), k.ravel()], axis=1)
             region_of.append(np.full(len(cells), r))
             ijk.append(cells)
-            centres.append(np.asarray(t.origin) + self.unit * cells)
+            centres.append(np.asarray(t.origin) + self.pitch * cells)
             mask = np.zeros(len(cells), dtype=bool)
             for c in t.filled:
                 mask[self._flat(t.size, c)] = True
@@ -41,9 +46,9 @@ class Grid:
         # c of the paper's objective c^T g: +1 on target, -1 on non-target cells.
         self.weights = np.where(self.is_target, 1, -1).astype(np.int64)
         # Cells whose unit would rest on the table top (z = 0).
-        self.on_table = np.abs(self.centres[:, 2] - self.unit / 2) < GRID_SNAP_TOL * self.unit
+        self.on_table = np.abs(self.centres[:, 2] - self.course / 2) < GRID_SNAP_TOL * self.course
         # The grid cell directly under each cell, -1 where there is none.
-        down = np.array([0.0, 0.0, self.unit])
+        down = np.array([0.0, 0.0, self.course])
         self.below_idx = self.lookup(self.centres - down)
         # The grid cell directly over each cell, -1 where there is none.
         self.above_idx = self.lookup(self.centres + down)
@@ -100,7 +105,7 @@ class Grid:
         points = np.asarray(points, dtype=float).reshape(-1, 3)
         out = np.full(len(points), -1, dtype=np.int64)
         for r, t in enumerate(self.regions):
-            idx = (points - np.asarray(t.origin)) / self.unit
+            idx = (points - np.asarray(t.origin)) / self.pitch
             rounded = np.round(idx)
             size = np.asarray(t.size)
             hit = (np.all(np.abs(idx - rounded) <= GRID_SNAP_TOL, axis=1)

@@ -43,6 +43,16 @@ presented (`rad_core.sim.world.World.present`). ``feeder.order``: ``request`` (t
 asks for any block, as a feeder with a magazine per type) or ``queue`` (the feeder
 dictates: only the first ``feeder.window`` blocks of the list can be taken next, a tray of
 that many places refilled from the queue). A block placed leaves the feeder.
+
+A scene of studded bricks names its stud system in ``studs`` (optional, absent or
+``"none"``: blocks that only rest): ``{"system": "duplo"}`` or with its ``course`` (m,
+the lattice's z pitch: a brick's height without studs), ``clutch`` (N, the pull one
+stud connection holds) and ``mass`` (kg, of one lattice cell of a brick) given; a named
+system (`rad_core.domain.studs.SYSTEMS`) fills in what is left out, its course and mass in
+proportion to the unit (the stud pitch). The lattice is
+then ``unit`` along x and y and ``course`` along z (`Scene.pitch`): a block type's cells
+are studs by courses, and every position of the scene, a block's and a region's, lies on
+that lattice. Blocks sit on the table with their lowest cells' centres ``course / 2`` up.
 """
 
 from __future__ import annotations
@@ -58,6 +68,7 @@ import numpy as np
 from rad_core.domain import jsonfmt
 from rad_core.domain.blocks import BlockType
 from rad_core.domain.errors import SceneError
+from rad_core.domain.studs import SYSTEMS, Studs
 
 FORMAT = 'rad-scene/1'
 
@@ -69,8 +80,8 @@ MAX_GRID_CELLS = 4096
 MAX_TARGETS = 16
 MAX_BLOCKS = 256
 MAX_BLOCK_TYPES = 64
-MAX_TYPE_UNITS = 16
-MAX_TYPE_EXTENT = 8
+MAX_TYPE_UNITS = 48
+MAX_TYPE_EXTENT = 12
 UNIT_RANGE = (0.005, 1.0)
 MAX_COORD = 100.0
 # Fraction of a unit within which a block counts as sitting on a grid cell.
@@ -133,21 +144,24 @@ class Feeder:
         return doc
 
 
-def station_position(btype: BlockType, station, yaw: int, unit: float) -> tuple[float, float, float]:
+def station_position(btype: BlockType, station, yaw: int, unit: float,
+                     course: float | None = None) -> tuple[float, float, float]:
     """Anchor position of a block presented at a station: its footprint centred on `station`
-    (x, y), its lowest units on the table."""
+    (x, y), its lowest units on the table (`course`: the lattice's z pitch, the unit where None)."""
+    course = unit if course is None else course
     offs = btype.rotated(yaw)
     lo, hi = offs.min(axis=0), offs.max(axis=0)
     centre = (lo + hi) / 2
     return (round(float(station[0] - centre[0] * unit), 6), round(float(station[1] - centre[1] * unit), 6),
-            round(float(unit / 2 - lo[2] * unit), 6))
+            round(float(course / 2 - lo[2] * course), 6))
 
 
 def feeder_of(kinds, types: Mapping[str, BlockType], station, unit: float, order: str = 'request',
-              window: int = 1) -> tuple[list['Block'], Feeder]:
+              window: int = 1, course: float | None = None) -> tuple[list['Block'], Feeder]:
     """Blocks of these kinds, ids b0, b1, ... in this order, each waiting in a feeder that presents it
     at `station` (x, y) at yaw 0; and that feeder."""
-    blocks = [Block(f'b{n}', kind, station_position(types[kind], station, 0, unit), 0) for n, kind in enumerate(kinds)]
+    blocks = [Block(f'b{n}', kind, station_position(types[kind], station, 0, unit, course), 0)
+              for n, kind in enumerate(kinds)]
     return blocks, Feeder(tuple(float(v) for v in station), tuple(b.id for b in blocks), 0, order, window)
 
 
@@ -165,13 +179,14 @@ class TargetRegion:
     def contains_index(self, ijk) -> bool:
         return all(0 <= int(ijk[a]) < self.size[a] for a in range(3))
 
-    def cell_center(self, ijk, unit: float) -> np.ndarray:
-        return np.asarray(self.origin) + unit * np.asarray(ijk, dtype=float)
+    def cell_center(self, ijk, pitch) -> np.ndarray:
+        """pitch: the scene's lattice pitch, `Scene.pitch` (a number where the cells are cubes)."""
+        return np.asarray(self.origin) + pitch * np.asarray(ijk, dtype=float)
 
-    def bounds(self, unit: float) -> tuple[np.ndarray, np.ndarray]:
-        """Axis-aligned box covered by the region's cells (lower, upper corner)."""
-        lo = np.asarray(self.origin) - unit / 2
-        return lo, lo + unit * np.asarray(self.size, dtype=float)
+    def bounds(self, pitch) -> tuple[np.ndarray, np.ndarray]:
+        """Axis-aligned box covered by the region's cells (lower, upper corner); pitch as `cell_center`."""
+        lo = np.asarray(self.origin) - np.asarray(pitch) / 2
+        return lo, lo + pitch * np.asarray(self.size, dtype=float)
 
     def to_dict(self) -> dict:
         return {'name': self.name, 'origin': list(self.origin), 'size': list(self.size),
@@ -193,6 +208,8 @@ class Scene:
     """Blocks set aside by registration, where they lie (module docstring)."""
     feeder: Feeder | None = None
     """Blocks that arrive at a pick station instead of lying on the table (module docstring)."""
+    studs: Studs | None = None
+    """The blocks' stud system, None for blocks that only rest (module docstring)."""
     _by_id: dict = field(default=None, repr=False, compare=False)
 
     def __post_init__(self):
@@ -211,10 +228,21 @@ class Scene:
                 return t
         raise SceneError('target', f'unknown target region {name!r}')
 
+    @property
+    def course(self) -> float:
+        """The lattice's z pitch (m): the stud system's course height, else the unit."""
+        return self.studs.course if self.studs is not None else self.unit
+
+    @property
+    def pitch(self) -> np.ndarray:
+        """The lattice's pitch along x, y, z (m): cell [i, j, k] lies pitch * [i, j, k] from a
+        region's origin."""
+        return np.array([self.unit, self.unit, self.course])
+
     def unit_positions(self, block: Block) -> np.ndarray:
-        """World centres of the block's unit cubes, shape (n, 3)."""
+        """World centres of the block's unit cells, shape (n, 3)."""
         offsets = self.block_types[block.type].rotated(block.yaw)
-        return np.asarray(block.position) + self.unit * offsets
+        return np.asarray(block.position) + self.pitch * offsets
 
     def offset(self, block_id: str) -> np.ndarray:
         """The block's measured x/y offset from its scene pose as a 3-vector (m; zeros when none)."""
@@ -256,6 +284,8 @@ class Scene:
         if self.clearance:
             # Only when set: flush scenes keep the exact documents they always had.
             doc['clearance'] = self.clearance
+        if self.studs is not None:
+            doc['studs'] = self.studs.to_dict()
         doc.update({
             'block_types': {n: [list(o) for o in t.offsets] for n, t in self.block_types.items()},
             'blocks': [b.to_dict() for b in self.blocks],
@@ -358,6 +388,31 @@ def _clearance(v: Any) -> float:
     return float(v)
 
 
+def _parse_studs(doc: Any, unit: float) -> Studs | None:
+    """``studs``: 'none', a system's name, or {system, course?, clutch?}; a named system fills in its
+    course height (its brick's, in proportion to the unit) and clutch."""
+    if doc == 'none':
+        return None
+    if isinstance(doc, str):
+        doc = {'system': doc}
+    _expect(isinstance(doc, dict), 'studs', f"expected 'none', a system name ({', '.join(SYSTEMS)}) or "
+                                            f"{{system, course, clutch}}, got {_show(doc)}")
+    _check_keys(doc, 'studs', {'system'}, {'course', 'clutch', 'mass'})
+    name = _name(doc['system'], 'studs.system')
+    known = SYSTEMS.get(name)
+    for key in ('course', 'clutch', 'mass'):
+        _expect(known is not None or key in doc, 'studs',
+                f"system {name!r} is not one rad knows ({', '.join(SYSTEMS)}): give its {key}")
+    course = _number(doc['course'], 'studs.course') if 'course' in doc else unit * known.course_ratio()
+    _expect(0.2 * unit <= course <= 3.0 * unit, 'studs.course',
+            f'{course} m is outside 0.2..3 units ({0.2 * unit:g}..{3 * unit:g} m): the course height of the lattice')
+    clutch = _number(doc['clutch'], 'studs.clutch') if 'clutch' in doc else known.clutch
+    _expect(0 < clutch <= 100, 'studs.clutch', f'{clutch} N is outside 0 < clutch <= 100 N per stud connection')
+    mass = _number(doc['mass'], 'studs.mass') if 'mass' in doc else round(known.cell_mass(unit, course), 9)
+    _expect(1e-5 <= mass <= 1.0, 'studs.mass', f'{mass} kg is outside 0.00001..1 kg (one lattice cell of a brick)')
+    return Studs(name, round(course, 9), clutch, mass)
+
+
 def _parse_block_types(doc: Any) -> dict[str, BlockType]:
     _expect(isinstance(doc, dict), 'block_types', 'expected an object mapping type names to cell lists')
     _expect(0 < len(doc) <= MAX_BLOCK_TYPES, 'block_types', f'needs 1 to {MAX_BLOCK_TYPES} types, got {len(doc)}')
@@ -385,7 +440,8 @@ def _yaw(yaw: Any, where: str) -> int:
     return int(yaw) % 360
 
 
-def _parse_block(doc: Any, i: int, types: Mapping[str, BlockType], feeder: dict | None, unit: float) -> Block:
+def _parse_block(doc: Any, i: int, types: Mapping[str, BlockType], feeder: dict | None, unit: float,
+                 course: float) -> Block:
     """A block; one in the feeder (`feeder`: its station, yaw and ids) gets its pose at the station."""
     where = f'blocks[{i}]'
     _expect(isinstance(doc, dict), where, 'expected an object')
@@ -399,7 +455,7 @@ def _parse_block(doc: Any, i: int, types: Mapping[str, BlockType], feeder: dict 
     yaw = feeder['yaw']
     _expect(_yaw(doc.get('yaw', yaw), f'{where}.yaw') == yaw, f'{where}.yaw',
             f'block {bid!r} is in the feeder, which presents it at yaw {yaw}, not {doc.get("yaw")}')
-    pos = station_position(types[btype], feeder['station'], yaw, unit)
+    pos = station_position(types[btype], feeder['station'], yaw, unit, course)
     if 'position' in doc:
         given = _vec3(doc['position'], f'{where}.position', _number)
         _expect(max(abs(a - b) for a, b in zip(given, pos)) <= 1e-4, f'{where}.position',
@@ -456,18 +512,20 @@ def _parse_target(doc: Any, i: int) -> TargetRegion:
 def _parse_scene(doc: Any) -> Scene:
     _expect(isinstance(doc, dict), '', 'a scene must be a JSON object')
     _check_keys(doc, '', {'format', 'unit', 'block_types', 'blocks', 'targets'},
-                {'clearance', 'measured_offsets', 'obstacles', 'feeder'})
+                {'clearance', 'measured_offsets', 'obstacles', 'feeder', 'studs'})
     _expect(doc['format'] == FORMAT, 'format', f'expected {FORMAT!r}, got {_show(doc["format"])}')
     unit = _number(doc['unit'], 'unit')
     _expect(UNIT_RANGE[0] <= unit <= UNIT_RANGE[1], 'unit', f'{unit} m is outside {UNIT_RANGE[0]}..{UNIT_RANGE[1]} m')
     clearance = _clearance(doc.get('clearance', 0.0))
+    studs = _parse_studs(doc.get('studs', 'none'), unit)
+    course = unit if studs is None else studs.course
     types = _parse_block_types(doc['block_types'])
 
     blocks_doc = doc['blocks']
     _expect(isinstance(blocks_doc, list), 'blocks', 'expected a list')
     _expect(len(blocks_doc) <= MAX_BLOCKS, 'blocks', f'{len(blocks_doc)} blocks exceed the limit of {MAX_BLOCKS}')
     feeder = _parse_feeder(doc['feeder']) if 'feeder' in doc else None
-    blocks = tuple(_parse_block(b, i, types, feeder, unit) for i, b in enumerate(blocks_doc))
+    blocks = tuple(_parse_block(b, i, types, feeder, unit, course) for i, b in enumerate(blocks_doc))
     seen = {}
     for i, b in enumerate(blocks):
         _expect(b.id not in seen, f'blocks[{i}].id', f'duplicate id {b.id!r} (also blocks[{seen.get(b.id)}])')
@@ -492,7 +550,7 @@ def _parse_scene(doc: Any) -> Scene:
     if feeder is not None:
         _expect(not any(b in offsets for b in feeder.blocks), 'measured_offsets',
                 'a block in the feeder has no measured offset (it is not on the table)')
-    scene = Scene(unit, types, blocks, targets, clearance, offsets, obstacles, feeder)
+    scene = Scene(unit, types, blocks, targets, clearance, offsets, obstacles, feeder, studs)
     _check_geometry(scene)
     return scene
 
@@ -543,7 +601,7 @@ def _parse_offsets(doc: Any, ids: Mapping[str, int], unit: float) -> dict[str, t
 def _check_geometry(scene: Scene) -> None:
     """Regions must not overlap; blocks must not overlap, sink into the table,
     or sit in a region off its grid."""
-    u = scene.unit
+    u, course = scene.pitch, scene.course
     boxes = [t.bounds(u) for t in scene.targets]
     for a in range(len(boxes)):
         for b in range(a + 1, len(boxes)):
@@ -565,9 +623,9 @@ def _check_geometry(scene: Scene) -> None:
             fed.append((i, pts))
             continue
         low = pts[:, 2].min()
-        _expect(low >= u / 2 - 0.25 * u, f'blocks[{i}].position',
+        _expect(low >= course / 2 - 0.25 * course, f'blocks[{i}].position',
                 f'block {block.id!r} reaches below the table top (lowest unit centre z={low:.4f} m, '
-                f'needs >= {u / 2:.4f})')
+                f'needs >= {course / 2:.4f})')
         _check_block_vs_regions(scene, i, pts)
         centres.append(pts)
         owner.extend([i] * len(pts))
@@ -598,7 +656,7 @@ def _check_block_vs_regions(scene: Scene, i: int, pts: np.ndarray) -> None:
     Units may be spread over adjacent regions; a block half in a region and half
     out, or inside one but off its grid, is rejected.
     """
-    u = scene.unit
+    u = scene.pitch
     where, name = f'blocks[{i}].position', scene.blocks[i].id
     in_some = np.zeros(len(pts), dtype=bool)
     for t in scene.targets:

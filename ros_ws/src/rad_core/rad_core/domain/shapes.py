@@ -304,8 +304,10 @@ class LayoutConfig:
 
 
 def lay_out(kinds: Sequence[str], types: Mapping[str, BlockType], targets: Sequence[TargetRegion],
-            rng: np.random.Generator, unit: float = UNIT, config: LayoutConfig = LayoutConfig()) -> list[Block]:
-    """Blocks lying on the table in random order and yaw, at random places in reach.
+            rng: np.random.Generator, unit: float = UNIT, config: LayoutConfig = LayoutConfig(),
+            course: float | None = None) -> list[Block]:
+    """Blocks lying on the table in random order and yaw, at random places in reach (`course`: the
+    lattice's z pitch, the unit where None).
 
     The generator's rows run out to 0.75 m, beyond a top-down grasp's reach once
     a dozen blocks (some of them 0.2 m bars) need rows; here every block takes
@@ -314,6 +316,7 @@ def lay_out(kinds: Sequence[str], types: Mapping[str, BlockType], targets: Seque
     left. The seed so changes the order, yaws and places without leaving reach.
     """
     grid, boxes = _lattice(config), _region_boxes(targets, unit, config)
+    course = unit if course is None else course
     taken = np.zeros((0, 2))
     blocks = []
     for n, kind in enumerate(kinds):
@@ -335,7 +338,7 @@ def lay_out(kinds: Sequence[str], types: Mapping[str, BlockType], targets: Seque
         offs, pts, pool, _ = options[yaw]
         score = np.linalg.norm(pts.mean(axis=1), axis=-1) + rng.uniform(0, config.jitter, len(grid))
         cand = int(np.argmin(np.where(pool, score, np.inf)))
-        z = unit / 2 - int(offs[:, 2].min()) * unit        # lowest unit rests on the table
+        z = course / 2 - int(offs[:, 2].min()) * course        # lowest unit rests on the table
         pos = (grid[cand][0], grid[cand][1], z)
         blocks.append(Block(f'b{n}', kind, tuple(round(float(v), 6) for v in pos), yaw))
         taken = np.concatenate([taken, grid[cand] + unit * offs[:, :2]])
@@ -403,7 +406,7 @@ def move_aside_spot(scene: Scene, block_id: str, config: LayoutConfig = LayoutCo
         return None
     distance = np.linalg.norm(grid - np.asarray(block.position[:2]), axis=-1)
     cand = int(np.argmin(np.where(ok, distance, np.inf)))
-    z = unit / 2 - int(offs[:, 2].min()) * unit
+    z = scene.course / 2 - int(offs[:, 2].min()) * scene.course
     return (round(float(grid[cand][0]), 6), round(float(grid[cand][1]), 6), round(z, 6)), yaw
 
 

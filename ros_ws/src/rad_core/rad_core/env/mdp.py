@@ -24,6 +24,7 @@ from rad_core.domain.coverage import state_coverage
 from rad_core.domain.errors import RadError
 from rad_core.domain.grid import Grid, blocks_on_grid
 from rad_core.domain.scene import Scene
+from rad_core.domain.statics import structure_statics
 from rad_core.sim.physics import PhysicsStability
 
 
@@ -91,7 +92,8 @@ class StabilityCheck(Protocol):
     placed: world unit centres of every block already in the structure;
     new: world unit centres of the block being placed. Returns (stable, reason).
     A scene with a clearance (`rad_core.domain.scene`) passes it as the keyword
-    ``clearance`` (a fraction of the unit); flush scenes call with three arguments.
+    ``clearance`` (a fraction of the unit), one of studded bricks whose courses are not a unit
+    high the keyword ``course`` (m); flush scenes of cubes call with three arguments.
     """
 
     def __call__(self, unit: float, placed: list[np.ndarray], new: np.ndarray) -> tuple[bool, str]: ...
@@ -228,7 +230,7 @@ class AssemblyEnv:
         if key not in self._cells_of:
             offsets = self.types[b].rotated(yaw)
             rel = offsets - offsets[action.unit]
-            cells = self.grid.cells_at(self.grid.centres[action.cell] + self.scene.unit * rel)
+            cells = self.grid.cells_at(self.grid.centres[action.cell] + self.scene.pitch * rel)
             if cells is not None:
                 cells.flags.writeable = False
             self._cells_of[key] = cells
@@ -282,14 +284,31 @@ class AssemblyEnv:
             return ok, '' if ok else 'a unit would rest on nothing (support rule)'
         if not support.any_support(self.grid, occ, cells):
             return False, 'the block would rest on nothing and fall'
+        if self.grid.clutch is not None:
+            return self._stands_with_clutch(b, cells)
         key = (frozenset(tuple(sorted(int(c) for c in cs)) for cs, _ in self.state.placed.values()),
                tuple(int(c) for c in cells))
         if key not in self._stability_cache:
             centres = self.grid.centres
             placed = [centres[cs] for cs, _ in self.state.placed.values()]
             extra = {'clearance': self.scene.clearance} if self.scene.clearance else {}
+            if self.scene.course != self.scene.unit:
+                extra['course'] = self.scene.course
             self._stability_cache[key] = self.stability(self.scene.unit, placed, centres[cells], **extra)
         return self._stability_cache[key]
+
+    def _stands_with_clutch(self, b: int, cells: np.ndarray) -> tuple[bool, str]:
+        """Studded bricks: whether the structure with the new brick stands, forces through contacts and
+        studs within their clutch (`domain.statics`), as the twin's joints hold it."""
+        placed = list(self.state.placed.items())
+        pieces = [np.asarray(cs) for _, (cs, _) in placed] + [np.asarray(cells)]
+        verdict = structure_statics(self.grid, pieces, clutch=self.grid.clutch)
+        if verdict:
+            return True, ''
+        ids = [self.scene.blocks[k].id for k, _ in placed] + [self.scene.blocks[b].id]
+        whys = verdict.why or ('does not stand',) * len(verdict.falling)
+        return False, 'the structure would fall: ' + '; '.join(f'block {ids[n]} {w}'
+                                                               for n, w in zip(verdict.falling, whys))
 
     def fail(self, outcome: Outcome, reason: str, cells: np.ndarray | None = None) -> StepResult:
         """End the episode on an invalid action decided outside the bookkeeping

@@ -310,6 +310,7 @@ class RobotAssemblyEnv:
             twin.execute_motion(plan.motion)     # what went wrong shows in the world, judged after
         else:
             self.world.set_block_pose(block_id, position, yaw_quaternion(yaw))
+            self.world.studs.join(self.world, block_id)   # teleported: pressed home onto the studs under it
             self.world.set_joint_positions(plan.final_joints())
             twin.sync()
             rest = self.config.at_rest

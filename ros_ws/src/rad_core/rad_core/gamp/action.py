@@ -62,7 +62,7 @@ def target_pose(scene: Scene, action: SceneAction) -> tuple[np.ndarray, int]:
     if action.rotation not in (0, 1, 2, 3):
         raise RadError(f'rotation {action.rotation} is not one of 0, 1, 2, 3')
     scene.block(action.block_id)
-    return placement_pose(scene, action.block_id, action.unit, region.cell_center(action.cell, scene.unit),
+    return placement_pose(scene, action.block_id, action.unit, region.cell_center(action.cell, scene.pitch),
                           action.rotation)
 
 
@@ -77,7 +77,7 @@ def seat_shift(scene: Scene, block_id: str, position, yaw: int, limit: float = 0
     intrudes), so offsets do not pile up along a row; squeezed from both sides, the middle (the
     collision checks then say whether the play absorbs it). A corner neighbour that still overlaps is
     cleared along the axis that costs less. At most `limit` unit in each axis."""
-    u = scene.unit
+    u = scene.pitch
     block = scene.block(block_id)
     ours = np.asarray(position, dtype=float) + u * scene.block_types[block.type].rotated(yaw)
     lo, hi = np.full(2, -np.inf), np.full(2, np.inf)
@@ -111,7 +111,7 @@ def seat_shift(scene: Scene, block_id: str, position, yaw: int, limit: float = 0
                 if lo[a] <= o[a] <= hi[a]:
                     shift[a] = o[a]
                     break
-    shift = np.clip(shift, -limit * u, limit * u)
+    shift = np.clip(shift, -limit * scene.unit, limit * scene.unit)
     return np.array([round(float(shift[0]), 6), round(float(shift[1]), 6), 0.0])
 
 
@@ -232,7 +232,7 @@ def table_neighbours(scene: Scene, block_id: str, reach: float = 0.08) -> list[s
     block, nearest first: the ones whose moving away could free its grasps."""
     unit, types = scene.unit, scene.block_types
     ours = footprint(scene.block(block_id), types, unit)
-    boxes = [t.bounds(unit) for t in scene.targets]
+    boxes = [t.bounds(scene.pitch) for t in scene.targets]
     found = []
     for other in scene.blocks:
         if other.id == block_id or scene.in_feeder(other.id):

@@ -167,7 +167,7 @@ def world_key(world: World, exclude, attached: Attachment | None, config: Collis
     p, cid = world.pybullet, world.client
     held = attached.block_id if attached is not None else None
     scene = world.scene
-    shapes = ((scene.unit, scene.clearance, tuple(b.type for b in scene.blocks),
+    shapes = ((scene.unit, scene.course, scene.clearance, tuple(b.type for b in scene.blocks),
                tuple(o.type for o in scene.obstacles)) if scene is not None else None)
     blocks = tuple((bid, body, None if bid == held else p.getBasePositionAndOrientation(body, physicsClientId=cid))
                    for bid, body in world.blocks.items())

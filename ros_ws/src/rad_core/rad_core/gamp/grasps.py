@@ -65,9 +65,10 @@ GRASP_BELOW_TOP = 0.013
 centre: the fingertips' pads then cover the unit's side from 2.4 mm under its top down to 21 mm."""
 
 
-def grasp_lift(unit: float) -> float:
-    """How far (m) a tight grasp's target sits above the held unit's centre, for a unit of this size."""
-    return max(0.0, unit / 2 - GRASP_BELOW_TOP)
+def grasp_lift(height: float) -> float:
+    """How far (m) a tight grasp's target sits above the held unit's centre, for a unit this high (the
+    unit, or a stud system's course height)."""
+    return max(0.0, height / 2 - GRASP_BELOW_TOP)
 
 
 @dataclass(frozen=True)

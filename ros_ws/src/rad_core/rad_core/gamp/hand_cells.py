@@ -47,14 +47,16 @@ _RIGID = ('panda_link7', 'panda_link8', 'panda_hand', 'panda_leftfinger', 'panda
 
 @lru_cache(maxsize=64)
 def blocking_offsets(unit: float, clearance: float, finger_open: float, hand_yaw_deg: int,
-                     lift: float = 0.0, shift: tuple[float, float] = (0.0, 0.0), effector: str = 'hand') -> frozenset:
+                     lift: float = 0.0, shift: tuple[float, float] = (0.0, 0.0), effector: str = 'hand',
+                     course: float | None = None) -> frozenset:
     """The integer cell offsets (di, dj, dk) from a held unit whose built cube the hand, its fingers
     open `finger_open` each, or panda_link7 enters by more than `DEPTH`, the hand pointing down at
     `hand_yaw_deg` (a multiple of 90) with its grasp target `lift` (m) over the held unit's centre.
     shift: where the grasp target sits beside that unit's centre, in units along world x and y (a
     wide grasp's target is the middle of its row: `grasps.grasp_centre`; offsets then count from
     the row's first unit). effector: the hand, or the vacuum gripper (`cell.panda.EFFECTORS`: its
-    housing and cup, no fingers)."""
+    housing and cup, no fingers). course: the lattice's z pitch (m) where it is not the unit (a stud
+    system's course height)."""
     import pybullet as p  # pybullet: importing it prints a banner on stdout
 
     if hand_yaw_deg % 90:
@@ -81,7 +83,8 @@ def blocking_offsets(unit: float, clearance: float, finger_open: float, hand_yaw
         # A block's unit box as `physics.block_shape` makes it, its sides set back by the scene's
         # clearance, without its overlap: the smallest it can be.
         side = unit / 2 - PhysicsConfig().side_gap * unit - clearance * unit / 2
-        box = p.createCollisionShape(p.GEOM_BOX, halfExtents=[side, side, unit / 2], physicsClientId=cid)
+        pitch = np.array([unit, unit, unit if course is None else course])
+        box = p.createCollisionShape(p.GEOM_BOX, halfExtents=[side, side, pitch[2] / 2], physicsClientId=cid)
         turned = list(quaternion_from_matrix(turn))
         cube = p.createMultiBody(0.0, box, -1, at.tolist(), turned, physicsClientId=cid)
         links = [index[name] for name in _RIGID]
@@ -92,7 +95,7 @@ def blocking_offsets(unit: float, clearance: float, finger_open: float, hand_yaw
                 for dk in range(-1, rk + 1):
                     if (di, dj, dk) == (0, 0, 0):
                         continue
-                    centre = at + turn @ (np.array([di, dj, dk], dtype=float) * unit)
+                    centre = at + turn @ (np.array([di, dj, dk], dtype=float) * pitch)
                     p.resetBasePositionAndOrientation(cube, centre.tolist(), turned, physicsClientId=cid)
                     if any(pt[8] < -DEPTH for link in links
                            for pt in p.getClosestPoints(cube, robot, 0.0, linkIndexB=link, physicsClientId=cid)):

@@ -120,6 +120,10 @@ class GampConfig:
     the vacuum gripper: its cup comes down on the top face of a unit (`grasps.suction_grasps`),
     `suction_hover` over it, the vacuum holds the block, and a drop-off lets it go at the placement;
     nothing goes down beside the block."""
+    press_depth: float = 0.003
+    """Studded bricks (a scene's ``studs``): after setting a brick down, the hand pushes it this far (m)
+    further down, onto the studs under it, and comes back up before letting go: the press that joins it
+    (the twin's `TwinConfig.press_force`); the arm's stiffness turns the depth into the force."""
     suction_hover: float = 0.005
     """The cup's lip stops this far (m) over the top face it takes: clear of the collision margin; the
     cup's bellows close the gap when the vacuum comes on (the twin seals within its own tolerance)."""
@@ -130,6 +134,8 @@ class GampConfig:
 
     def validate(self) -> None:
         panda.check_effector(self.effector)
+        if not 0 <= self.press_depth <= 0.01:
+            raise RadError(f'press_depth must be 0..0.01 m (0: no press), got {self.press_depth!r}')
         if not self.cartesian_step > 0:
             raise RadError(f'cartesian_step must be a positive length (m), got {self.cartesian_step!r}')
         if not (self.near_step >= 0 and self.near_margin >= 0):
@@ -198,7 +204,7 @@ def placement_pose(scene: Scene, block_id: str, unit: int, cell_centre, rotation
     if not 0 <= unit < btype.size:
         raise RadError(f'unit {unit} is not a unit of block {block_id!r}')
     yaw = int(round(((block.yaw if current_yaw is None else current_yaw) + 90 * rotation) / 90.0)) * 90 % 360
-    offset = btype.rotated(yaw)[unit] * scene.unit
+    offset = btype.rotated(yaw)[unit] * scene.pitch
     return np.asarray(cell_centre, dtype=float) - offset, yaw
 
 
@@ -206,7 +212,7 @@ def allocated_pose(scene: Scene, placement) -> tuple[np.ndarray, int]:
     """Anchor position and yaw (deg) of an allocation `Placement`: its cells list the
     units in type order, so the first cell is the anchor's."""
     region = scene.target(placement.target)
-    return region.cell_center(placement.cells[0], scene.unit), int(placement.yaw)
+    return region.cell_center(placement.cells[0], scene.pitch), int(placement.yaw)
 
 
 class _Clock:
@@ -261,8 +267,8 @@ def plan_action(world: World, block_id: str, position, yaw_deg: float, start=Non
         world.present(block_id)     # a block in the feeder is picked where the feeder presents it
         start = world.joint_positions() if start is None else _full(start)
         block_pos, block_quat = world.block_pose(block_id)
-        job = _Job(world, block_id, btype, unit, scene.clearance, position, float(yaw_deg), start, block_pos,
-                   block_quat, _tops(world, exclude=block_id), world_key(world, (), None, config.collision),
+        job = _Job(world, block_id, btype, unit, scene.course, scene.clearance, position, float(yaw_deg), start,
+                   block_pos, block_quat, _tops(world, exclude=block_id), world_key(world, (), None, config.collision),
                    config, clock, rng)
         for grasp in grasps:
             done, pick_reason, place_reason = _try_grasp(job, grasp)
@@ -291,6 +297,7 @@ class _Job:
     block_id: str
     btype: BlockType
     unit: float
+    course: float
     clearance: float
     position: np.ndarray
     yaw_deg: float
@@ -321,18 +328,18 @@ def _try_grasp(job: _Job, grasp: Grasp) -> tuple[tuple | None, str, str]:
         # The finger coordinate stands for the vacuum (the vacuum gripper has no fingers, and its URDF's
         # finger links no shape): open = off, closed = on, so that plan_motion places its commands.
         width, closed_f = float('nan'), 0.0
-        styles = suction_styles(unit, config)
+        styles = suction_styles(job.course, config)
     elif grasp.span == 1:
         width = grasp_width(unit, job.clearance)
-        styles = grasp_styles(width, unit, config)
+        styles = grasp_styles(width, job.course, config)
     else:
         width = span_width(grasp.span, unit, job.clearance)
-        styles = wide_grasp_styles(width, unit, config)
+        styles = wide_grasp_styles(width, job.course, config)
     if config.effector != 'suction':
         closed_f = max(0.0, width / 2 - config.grip_squeeze)
     rot, final_rot = job.rot, job.final_rot
     turn = math.radians(job.yaw_deg) - job.block_yaw
-    centre = grasp_centre(btype, grasp) * unit
+    centre = grasp_centre(btype, grasp) * np.array([unit, unit, job.course])
     closing = job.block_yaw + math.radians(grasp.yaw)
     pick_reason = place_reason = ''
     for hand_yaw in hand_yaw_options(job.block_pos + rot @ centre, closing):
@@ -341,7 +348,7 @@ def _try_grasp(job: _Job, grasp: Grasp) -> tuple[tuple | None, str, str]:
             offset = centre + (0.0, 0.0, lift)
             grasp_point = job.block_pos + rot @ offset
             # From the grasp point down to the held block's bottom.
-            hang = (offset[2] - min(o[2] for o in btype.offsets) * unit) + unit / 2
+            hang = (offset[2] - min(o[2] for o in btype.offsets) * job.course) + job.course / 2
             transit_z = job.tops + hang + config.transit_clearance
             rise_pick = max(config.approach_height, transit_z - grasp_point[2])
             near = hang + config.near_margin
@@ -387,35 +394,37 @@ _PICK_MEMO: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 _PICK_MEMO_MAX = 2048
 
 
-def grasp_styles(width: float, unit: float, config: GampConfig = GampConfig()) -> tuple[tuple[float, float], ...]:
-    """How the planner takes a unit `width` wide (of a block of `unit` cells), in the order it tries:
+def grasp_styles(width: float, height: float, config: GampConfig = GampConfig()) -> tuple[tuple[float, float], ...]:
+    """How the planner takes a unit `width` wide (of a block of cells `height` high), in the order it tries:
     (each finger's travel when open (m), the grasp target's height over the unit's centre (m)).
     First the fingers `finger_clearance` off its faces at its centre; then the tight grasp,
     `tight_finger_clearance` off its faces near its top (`grasps.grasp_lift`)."""
     out = [(min(panda.FINGER_OPEN, width / 2 + config.finger_clearance), 0.0)]
     if 0 < config.tight_finger_clearance < config.finger_clearance:
-        out.append((min(panda.FINGER_OPEN, width / 2 + config.tight_finger_clearance), grasp_lift(unit)))
+        out.append((min(panda.FINGER_OPEN, width / 2 + config.tight_finger_clearance), grasp_lift(height)))
     return tuple(out)
 
 
-def wide_grasp_styles(width: float, unit: float, config: GampConfig = GampConfig()) -> tuple[tuple[float, float], ...]:
-    """How the planner takes a wide grasp across `width` (m) of a block of `unit` cells, in the order it
-    tries: (each finger's travel when open (m), the grasp target's height over the held units' centre (m)),
-    always at the tight grasp's height (`grasps.grasp_lift`): first the fingers `finger_clearance` off the
-    row's outer faces, then `tight_finger_clearance` off them (never wider than the hand opens)."""
-    out = [(min(panda.FINGER_OPEN, width / 2 + config.finger_clearance), grasp_lift(unit))]
+def wide_grasp_styles(width: float, height: float,
+                      config: GampConfig = GampConfig()) -> tuple[tuple[float, float], ...]:
+    """How the planner takes a wide grasp across `width` (m) of a block of cells `height` high, in the
+    order it tries: (each finger's travel when open (m), the grasp target's height over the held units'
+    centre (m)), always at the tight grasp's height (`grasps.grasp_lift`): first the fingers
+    `finger_clearance` off the row's outer faces, then `tight_finger_clearance` off them (never wider
+    than the hand opens)."""
+    out = [(min(panda.FINGER_OPEN, width / 2 + config.finger_clearance), grasp_lift(height))]
     if 0 < config.tight_finger_clearance < config.finger_clearance:
-        tight = (min(panda.FINGER_OPEN, width / 2 + config.tight_finger_clearance), grasp_lift(unit))
+        tight = (min(panda.FINGER_OPEN, width / 2 + config.tight_finger_clearance), grasp_lift(height))
         if tight != out[0]:
             out.append(tight)
     return tuple(out)
 
 
-def suction_styles(unit: float, config: GampConfig = GampConfig()) -> tuple[tuple[float, float], ...]:
+def suction_styles(height: float, config: GampConfig = GampConfig()) -> tuple[tuple[float, float], ...]:
     """How the planner takes a unit with the vacuum gripper, as `grasp_styles` gives it for the hand: the
     finger coordinate at open (it stands for the vacuum off: the gripper has no fingers) and the cup's
     lip `suction_hover` over the unit's top face."""
-    return ((panda.FINGER_OPEN, unit / 2 + config.suction_hover),)
+    return ((panda.FINGER_OPEN, height / 2 + config.suction_hover),)
 
 
 def _remembered_pick(bodies, world, block_id, grasp_point, hand_yaw, start, open_f, closed_f, rise, config,
@@ -482,7 +491,12 @@ def _plan_place(world, block_id, pick, place_point, position, yaw_deg, hand_yaw,
     _probe(after, q_open, 'opening the fingers')
     retreat = [_with_fingers(q, open_f) for q in column]
     _check_column(after, q_open, retreat, config, 'on the retreat', 'on the retreat')
-    return {'waypoints': _down_and_up(column, q_place, q_open, retreat)}
+    if world.scene.studs is None or config.press_depth <= 0:
+        return {'waypoints': _down_and_up(column, q_place, q_open, retreat)}
+    # The press: into the studs under the brick on purpose, so no collision probe; back up to q_place.
+    press_point = np.asarray(place_point) - [0.0, 0.0, config.press_depth]
+    q_press = _ik(world, press_point, hand_yaw, [q_place], closed_f, config, clock, rng, 'IK for the press')
+    return {'waypoints': column[::-1] + [q_place, q_press, q_place, q_open] + retreat}
 
 
 def _ik(world, point, hand_yaw, seeds, fingers, config, clock, rng, where) -> np.ndarray:

@@ -137,17 +137,21 @@ class PhysicsConfig:
             raise RadError('physics config: side_gap and overlap are meant to be hairs (< 0.25, < 0.05 unit)')
 
 
-def polycube_inertia(offsets: np.ndarray, edge: float, cube_mass: float) -> tuple[np.ndarray, np.ndarray]:
-    """Centre of mass and inertia tensor about it of cubes at integer offsets (edge in m)."""
+def polycube_inertia(offsets: np.ndarray, edge, cube_mass: float) -> tuple[np.ndarray, np.ndarray]:
+    """Centre of mass and inertia tensor about it of cubes at integer offsets (edge in m; or the
+    lattice's x, y, z pitch, `Scene.pitch`, for boxes of a stud system's courses)."""
     pts = np.asarray(offsets, dtype=float) * edge
     com = pts.mean(axis=0)
     d = pts - com
-    own = cube_mass * edge ** 2 / 6.0                     # a solid cube about its own centre
-    tensor = np.eye(3) * (own * len(d) + cube_mass * (d ** 2).sum()) - cube_mass * d.T @ d
-    return com, tensor
+    if np.ndim(edge) == 0:
+        own = cube_mass * edge ** 2 / 6.0                 # a solid cube about its own centre
+        return com, np.eye(3) * (own * len(d) + cube_mass * (d ** 2).sum()) - cube_mass * d.T @ d
+    sq = np.asarray(edge, dtype=float) ** 2               # a solid box about its own centre
+    own = cube_mass / 12.0 * np.array([sq[1] + sq[2], sq[0] + sq[2], sq[0] + sq[1]])
+    return com, np.diag(own * len(d)) + np.eye(3) * cube_mass * (d ** 2).sum() - cube_mass * d.T @ d
 
 
-def principal_frame(offsets: np.ndarray, edge: float, cube_mass: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def principal_frame(offsets: np.ndarray, edge, cube_mass: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Centre of mass, principal moments and principal axes (columns, right-handed) of a polycube."""
     com, tensor = polycube_inertia(offsets, edge, cube_mass)
     moments, axes = np.linalg.eigh(tensor)
@@ -217,10 +221,11 @@ class BlockShape:
     axes: list[float]         # principal axes in the block's axes, as a quaternion (x, y, z, w)
 
 
-def block_shape(p, client: int, offsets: np.ndarray, edge: float, config: PhysicsConfig,
+def block_shape(p, client: int, offsets: np.ndarray, edge, config: PhysicsConfig,
                 frame: str = 'principal', visual_half: float | None = None,
                 clearance: float = 0.0) -> BlockShape:
-    """Shapes and mass properties of a block of cubes at integer `offsets` with this edge (m).
+    """Shapes and mass properties of a block of cubes at integer `offsets` with this edge (m; or
+    boxes of the lattice's x, y, z pitch, `Scene.pitch`, where courses are not a unit high).
 
     Collision boxes are a hair narrower (``config.side_gap``) and taller (``config.overlap``)
     than a cube, the mass is ``config.cube_mass`` per cube, the inertia the exact polycube's (see
@@ -239,9 +244,11 @@ def block_shape(p, client: int, offsets: np.ndarray, edge: float, config: Physic
     com, moments, axes = principal_frame(offsets, edge, config.cube_mass)
     if not (math.isfinite(clearance) and 0 <= clearance < 0.5):
         raise RadError(f'block_shape: clearance must be in [0, 0.5) of the edge, got {clearance!r}')
-    side, height = edge / 2 - config.side_gap * edge, edge / 2 + config.overlap * edge
+    pitch = edge
+    edge, course = (float(edge), float(edge)) if np.ndim(edge) == 0 else (float(edge[0]), float(edge[2]))
+    side, height = edge / 2 - config.side_gap * edge, course / 2 + config.overlap * edge
     shift, half = unit_boxes(offsets, side, height, clearance * edge / 2)
-    centres = offsets * edge + shift
+    centres = offsets * pitch + shift
     boxes = {'halfExtents': half.tolist()}
     if frame == 'principal':
         # Boxes in the principal frame, turned back so they are axis-aligned in the world.
@@ -254,9 +261,9 @@ def block_shape(p, client: int, offsets: np.ndarray, edge: float, config: Physic
     if visual_half is not None:
         if frame != 'anchor':
             raise RadError("block_shape: visual boxes are made in the 'anchor' frame only")
-        vshift, vhalf = unit_boxes(offsets, visual_half, visual_half, clearance * edge / 2)
+        vshift, vhalf = unit_boxes(offsets, visual_half, visual_half * course / edge, clearance * edge / 2)
         visual = p.createVisualShapeArray([p.GEOM_BOX] * n, halfExtents=vhalf.tolist(),
-                                          visualFramePositions=(offsets * edge + vshift).tolist(),
+                                          visualFramePositions=(offsets * pitch + vshift).tolist(),
                                           physicsClientId=client)
     return BlockShape(frame, collision, visual, config.cube_mass * n, moments.tolist(), com,
                       quaternion_from_matrix(axes))
@@ -318,7 +325,8 @@ class PhysicsStability(ClientOwner):
 
     # ---- the check -------------------------------------------------------
     def __call__(self, unit: float, placed: list[np.ndarray], new: np.ndarray,
-                 clearance: float = 0.0) -> tuple[bool, str]:
+                 clearance: float = 0.0, course: float | None = None) -> tuple[bool, str]:
+        """course: the lattice's z pitch (m) where it is not the unit (a stud system's, `Scene.course`)."""
         if not (math.isfinite(unit) and unit > 0):
             raise RadError(f'unit must be a positive length, got {unit!r}')
         if not (math.isfinite(clearance) and 0 <= clearance < 0.5):
@@ -330,28 +338,28 @@ class PhysicsStability(ClientOwner):
         if self.client < 0:
             self._connect()
         cubes = [b * (self.config.sim_unit / unit) for b in blocks]
+        pitch = self.config.sim_unit if course is None else self.config.sim_unit * np.array([1.0, 1.0, course / unit])
         try:
             for c in cubes:
-                self._bodies.append(self._add_body(c, clearance))
+                self._bodies.append(self._add_body(c, clearance, pitch))
             return self._simulate(cubes, unit)
         finally:
             for body in self._bodies:
                 self._p.removeBody(body, physicsClientId=self.client)
             self._bodies.clear()
 
-    def _shape(self, offsets: np.ndarray, clearance: float) -> BlockShape:
-        key = (tuple(map(tuple, offsets.tolist())), clearance)
+    def _shape(self, offsets: np.ndarray, clearance: float, pitch) -> BlockShape:
+        key = (tuple(map(tuple, offsets.tolist())), clearance, tuple(np.atleast_1d(pitch).tolist()))
         shape = self._shapes.get(key)
         if shape is None:
-            shape = block_shape(self._p, self.client, offsets, self.config.sim_unit, self.config,
-                                clearance=clearance)
+            shape = block_shape(self._p, self.client, offsets, pitch, self.config, clearance=clearance)
             self._shapes[key] = shape
         return shape
 
-    def _add_body(self, cubes: np.ndarray, clearance: float) -> int:
-        """A block whose unit cubes have these world centres (simulation scale)."""
+    def _add_body(self, cubes: np.ndarray, clearance: float, pitch) -> int:
+        """A block whose unit cells have these world centres (simulation scale, the lattice's `pitch`)."""
         cfg = self.config
-        shape = self._shape(np.round((cubes - cubes[0]) / cfg.sim_unit).astype(np.int64), clearance)
+        shape = self._shape(np.round((cubes - cubes[0]) / pitch).astype(np.int64), clearance, pitch)
         return add_block_body(self._p, self.client, shape, (cubes[0] + shape.com).tolist(), shape.axes, cfg,
                               maximal_coordinates=True, damping=0.0)
 

@@ -168,6 +168,10 @@ class TwinConfig:
     """Opening = finger target this far (m) above the width the block was grasped at."""
     attach_max_force: float = 500.0
     """Strength (N) of the attachment constraint; far above any load a block puts on it."""
+    press_travel: float = 5e-4
+    """A studded brick is pressed home when the hand holding it goes on down this far (m) after the brick
+    touched what is under it (the studs' engagement: a real arm's stiffness turns it into force): let go
+    then, it is joined to the bricks under it (`sim.clutch`); set down and let go, it only rests."""
     faults: FaultConfig = field(default_factory=FaultConfig)
     """The faults of a real cell to inject (none by default)."""
 
@@ -178,7 +182,7 @@ class TwinConfig:
         values = list(self.arm_forces) + [self.finger_force, self.position_gain, self.velocity_gain,
                                           self.limit_tol, self.goal_time, self.goal_tol, self.close_margin,
                                           self.release_margin, self.attach_max_force, self.gripper_speed,
-                                          self.grasp_epsilon, self.path_tol]
+                                          self.grasp_epsilon, self.path_tol, self.press_travel]
         if len(self.arm_forces) != 7 or not all(isinstance(v, (int, float)) and math.isfinite(v) and v >= 0
                                                  for v in values):
             raise RadError('twin config: expected 7 arm forces and finite, non-negative settings')
@@ -292,6 +296,8 @@ class Twin:
         self._ghosts: dict[int, str] = {}      # block bodies the fingers pass through (slip, miss) until clear
         self._miss_next = False                # the grasp under way will miss
         self._released: tuple[str, float] | None = None   # block just let go, width it was held at
+        self._pressed: str | None = None        # the held brick, once pressed home onto studs
+        self._touched_at: dict[str, float] = {}  # held brick -> the hand's height when it first touched below
         self._apply()
 
     # ---- state -----------------------------------------------------------
@@ -653,7 +659,7 @@ class Twin:
             for x, y, z in btype.offsets:
                 if (x, y, z + 1) in cells:
                     continue
-                top = np.asarray(position) + rot @ (np.array([x, y, z + 0.5]) * scene.unit)
+                top = np.asarray(position) + rot @ (np.array([x, y, z + 0.5]) * scene.pitch)
                 local = rot.T @ (lip - top)
                 gap, off = float(local[2]), float(max(abs(local[0]), abs(local[1])))
                 if not (-0.002 <= gap <= SEAL_GAP) or off > half:
@@ -742,6 +748,8 @@ class Twin:
             self._apply()
             self.world.step()
             self.time += self.dt
+            if self.attached is not None and self.world.scene.studs is not None:
+                self._press_check()
             if self._slip_at is not None and self.time >= self._slip_at:
                 self._slip_out()
             self._grasp_update()
@@ -929,6 +937,33 @@ class Twin:
         if c in self._constraint_ids():   # gone already when its block was removed with a scene
             self._p.removeConstraint(c, physicsClientId=self.world.client)
         self._events.append({'t': round(self._run_time(), 6), 'action': 'detach', 'block': block_id})
+        if self._pressed == block_id and block_id in self.world.blocks:
+            joined = self.world.studs.join(self.world, block_id)
+            self._events.append({'t': round(self._run_time(), 6), 'action': 'join', 'block': block_id,
+                                 'to': joined})
+        self._pressed = None
+        self._touched_at.pop(block_id, None)
+
+    def _press_check(self) -> None:
+        """Whether the held brick has been pushed onto the blocks under it `press_travel` past where it
+        first touched them (the hand's travel while in contact): then it is pressed home onto their
+        studs, and joined when let go (`sim.clutch`)."""
+        p, w = self._p, self.world
+        block_id = self.attached[0]
+        body = w.blocks.get(block_id)
+        if body is None or self._pressed == block_id:
+            return
+        others = set(w.blocks.values()) - {body}
+        if not any(c[2] in others and c[7][2] > 0.9       # the normal on B points up at the held brick
+                   for c in p.getContactPoints(bodyA=body, physicsClientId=w.client)):
+            return
+        hand_z = float(p.getLinkState(w.robot, w.ee_link, computeForwardKinematics=True,
+                                      physicsClientId=w.client)[4][2])
+        touched = self._touched_at.setdefault(block_id, hand_z)
+        if touched - hand_z >= self.config.press_travel:
+            self._pressed = block_id
+            self._events.append({'t': round(self._run_time(), 6), 'action': 'pressed', 'block': block_id,
+                                 'travel': round(touched - hand_z, 5)})
 
     # ---- faults ------------------------------------------------------------------
     def _happens(self, kind: str) -> bool:

@@ -36,5 +36,5 @@ class Workspace:
         for block in scene.blocks:
             self.check_points(scene.unit_positions(block), f'block {block.id!r}')
         for t in scene.targets:
-            corners = [t.cell_center((0, 0, 0), scene.unit), t.cell_center(np.asarray(t.size) - 1, scene.unit)]
+            corners = [t.cell_center((0, 0, 0), scene.pitch), t.cell_center(np.asarray(t.size) - 1, scene.pitch)]
             self.check_points(np.array(corners), f'target region {t.name!r}')

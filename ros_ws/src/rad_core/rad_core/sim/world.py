@@ -41,7 +41,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -50,9 +50,13 @@ from rad_core.cell.panda import JOINT_NAMES
 from rad_core.domain.colours import TABLE, type_colour
 from rad_core.domain.errors import RadError
 from rad_core.domain.scene import Scene
-from rad_core.domain.transforms import yaw_quaternion
+from rad_core.domain.transforms import matrix_from_quaternion, yaw_quaternion
+from rad_core.sim.clutch import StudJoints
 from rad_core.sim.physics import (BlockShape, ClientOwner, PhysicsConfig, add_block_body, block_shape,
                                   direct_client)
+
+STUD_CHECK_STEPS = 4
+"""Every how many simulation steps stretched studs are looked for (`sim.clutch.StudJoints.check`)."""
 
 PARK_Z = -20.0
 """Where parked feeder blocks wait (m below the table top), one metre apart along x."""
@@ -97,6 +101,8 @@ class World(ClientOwner):
         self._mass: dict[int, tuple[float, tuple]] = {}     # body -> (mass, principal inertia)
         self.parked: set[str] = set()           # feeder blocks not presented (static, out of the way)
         self.presented: str | None = None       # the feeder block put at the station last
+        self.studs = StudJoints()               # studded bricks pressed home (`sim.clutch`)
+        self._steps = 0
         self.table = -1
         self._table_box = (tuple(config.table_centre), tuple(config.table_half_extents))
         self._make_table(*self._table_box)
@@ -143,7 +149,7 @@ class World(ClientOwner):
     def _fit_table(self, scene: Scene) -> None:
         """Grow the table when a scene reaches past its edge (rare: the default is 2.4 m)."""
         pts = [scene.unit_positions(b) for b in scene.blocks]
-        pts += [np.vstack(t.bounds(scene.unit)) for t in scene.targets]
+        pts += [np.vstack(t.bounds(scene.pitch)) for t in scene.targets]
         pts = np.vstack(pts + [np.zeros((1, 3))])
         (cx, cy), half = self._table_box
         lo, hi = np.array([cx - half[0], cy - half[1]]), np.array([cx + half[0], cy + half[1]])
@@ -165,12 +171,16 @@ class World(ClientOwner):
         p.setCollisionFilterPair(self.robot, self.table, self.link_index['panda_link1'], -1, 0,
                                  physicsClientId=cid)
 
-    def _shape(self, type_name: str, offsets: np.ndarray, unit: float,
-               clearance: float = 0.0) -> tuple[BlockShape, list[float]]:
-        key = (type_name, tuple(map(tuple, offsets.tolist())), unit, clearance)
+    def _shape(self, type_name: str, offsets: np.ndarray, pitch, clearance: float = 0.0,
+               mass: float | None = None) -> tuple[BlockShape, list[float]]:
+        """pitch: the unit, or the lattice's x, y, z pitch (`Scene.pitch`) where courses are not a unit high;
+        mass: of one cell (kg) where not the physics config's cube (a stud system's bricks)."""
+        key = (type_name, tuple(map(tuple, offsets.tolist())), tuple(np.atleast_1d(pitch).tolist()), clearance, mass)
         shape = self._shapes.get(key)
         if shape is None:
-            shape = (block_shape(self._p, self.client, offsets, unit, self.config.physics, frame='anchor',
+            unit = float(np.atleast_1d(pitch)[0])
+            physics = self.config.physics if mass is None else replace(self.config.physics, cube_mass=mass)
+            shape = (block_shape(self._p, self.client, offsets, pitch, physics, frame='anchor',
                                  visual_half=unit / 2 * 0.98, clearance=clearance),
                      [*type_colour(type_name), 1.0])
             self._shapes[key] = shape
@@ -187,6 +197,7 @@ class World(ClientOwner):
             p.removeBody(body, physicsClientId=cid)
         self.blocks.clear()
         self.obstacles.clear()
+        self.studs.clear()
         self._inertial.clear()
         self._mass.clear()
         self.parked.clear()
@@ -194,7 +205,8 @@ class World(ClientOwner):
         self._fit_table(scene)
         def add(type_name: str, position, quaternion, rgba=None) -> int:
             offsets = np.asarray(scene.block_types[type_name].offsets, dtype=float)
-            shape, colour = self._shape(type_name, offsets, scene.unit, scene.clearance)
+            shape, colour = self._shape(type_name, offsets, scene.unit if scene.studs is None else scene.pitch,
+                                        scene.clearance, None if scene.studs is None else scene.studs.mass)
             body = add_block_body(p, cid, shape, list(position), list(quaternion), self.config.physics)
             p.changeVisualShape(body, -1, rgbaColor=rgba or colour, physicsClientId=cid)
             self._inertial[body] = (shape.com.tolist(), shape.axes)
@@ -315,6 +327,12 @@ class World(ClientOwner):
         p.resetBasePositionAndOrientation(body, pos, orn, physicsClientId=cid)
         p.resetBaseVelocity(body, [0, 0, 0], [0, 0, 0], physicsClientId=cid)
 
+    def unit_centres(self, block_id: str) -> np.ndarray:
+        """World centres (n, 3) of a block's units where it is now."""
+        position, quaternion = self.block_pose(block_id)
+        offsets = np.asarray(self.scene.block_types[self.scene.block(block_id).type].offsets, dtype=float)
+        return position + (offsets * self.scene.pitch) @ matrix_from_quaternion(quaternion).T
+
     def set_block_velocities_zero(self) -> None:
         for body in self.blocks.values():
             self._p.resetBaseVelocity(body, [0, 0, 0], [0, 0, 0], physicsClientId=self.client)
@@ -358,8 +376,12 @@ class World(ClientOwner):
 
     # ---- simulation ------------------------------------------------------
     def step(self, n: int = 1) -> None:
+        """Simulate n steps; studs pulled off let go (`sim.clutch`, checked every few steps)."""
         for _ in range(int(n)):
             self._p.stepSimulation(physicsClientId=self.client)
+            self._steps += 1
+            if self.studs.studs and self._steps % STUD_CHECK_STEPS == 0:
+                self.studs.check(self)
 
     def _snapshot(self) -> tuple:
         p, cid = self._p, self.client
@@ -369,11 +391,11 @@ class World(ClientOwner):
                          p.getBaseVelocity(body, physicsClientId=cid)) for body in self.blocks.values()}
         constraints = {p.getConstraintUniqueId(i, physicsClientId=cid)
                        for i in range(p.getNumConstraints(physicsClientId=cid))}
-        return joints, bodies, constraints, frozenset(self.parked), self.presented
+        return joints, bodies, constraints, frozenset(self.parked), self.presented, self.studs.state()
 
     def _restore(self, snap: tuple) -> None:
         p, cid = self._p, self.client
-        joints, bodies, constraints, parked, self.presented = snap
+        joints, bodies, constraints, parked, self.presented, studs = snap
         if parked != self.parked:
             for block_id in self.parked - parked:
                 self.unpark(block_id)
@@ -391,6 +413,7 @@ class World(ClientOwner):
             p.removeConstraint(c, physicsClientId=cid)
         if constraints - now:
             raise RadError('a constraint was removed inside World.preserved(); it cannot be restored')
+        self.studs.restore(self, studs)
 
     def save(self) -> 'WorldState':
         """Everything that decides how this world goes on: joints, block poses and

@@ -174,20 +174,25 @@ def _placements(allocation) -> list:
     return list(placements)
 
 
-def block_cubes(centres: np.ndarray, unit: float, clearance: float) -> tuple[np.ndarray, np.ndarray]:
+def block_cubes(centres: np.ndarray, unit: float, clearance: float,
+                course: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(box centres (n, 3), half extents (n, 3)) drawn for one block's unit cubes at these
     world centres: cubes of edge BLOCK_SIZE, their outer side faces set back by
-    half the clearance (a fraction of the unit)."""
+    half the clearance (a fraction of the unit); `course` high where it is not the unit."""
     centres = np.asarray(centres, dtype=float).reshape(-1, 3)
-    offsets = np.round((centres - centres[0]) / unit).astype(np.int64)
+    course = unit if course is None else course
+    offsets = np.round((centres - centres[0]) / np.array([unit, unit, course])).astype(np.int64)
     half = unit * BLOCK_SIZE / 2
-    shift, halves = unit_boxes(offsets, half, half, clearance * unit / 2)
+    shift, halves = unit_boxes(offsets, half, course * BLOCK_SIZE / 2, clearance * unit / 2)
     return centres + shift, halves
 
 
 def _scene_boxes(scene: Scene, placements: list, occupancy) -> list[tuple[np.ndarray, float | tuple, tuple]]:
     """(centre, half edge or half extents (x, y, z), rgb) of every box to draw."""
-    u = scene.unit
+    u = scene.unit if scene.course == scene.unit else scene.pitch
+
+    def half(size: float):
+        return u * size / 2 if np.ndim(u) == 0 else tuple((u * size / 2).tolist())
     boxes = []
     on_grid: dict[int, np.ndarray] = {}
     if occupancy is not None:
@@ -205,18 +210,19 @@ def _scene_boxes(scene: Scene, placements: list, occupancy) -> list[tuple[np.nda
             centres = scene.unit_positions(block)
         colour = type_colour(block.type)
         if scene.clearance:
-            boxes.extend((c, tuple(h.tolist()), colour) for c, h in zip(*block_cubes(centres, u, scene.clearance)))
+            boxes.extend((c, tuple(h.tolist()), colour)
+                         for c, h in zip(*block_cubes(centres, scene.unit, scene.clearance, scene.course)))
         else:
-            boxes.extend((c, u * BLOCK_SIZE / 2, colour) for c in centres)
+            boxes.extend((c, half(BLOCK_SIZE), colour) for c in centres)
     for p in placements:
         region = scene.target(p.target)
         colour = tuple(0.65 * v + 0.35 for v in type_colour(p.type))   # paler: planned, not built
-        boxes.extend((region.cell_center(c, u), u * PLAN_SIZE / 2, colour) for c in p.cells)
+        boxes.extend((region.cell_center(c, u), half(PLAN_SIZE), colour) for c in p.cells)
     for region in scene.targets:
         filled = set(region.filled)
         for ijk in np.ndindex(*region.size):
             size, colour = (TARGET_SIZE, PINK) if ijk in filled else (OTHER_CELL_SIZE, GREEN)
-            boxes.append((region.cell_center(ijk, u), u * size / 2, colour))
+            boxes.append((region.cell_center(ijk, u), half(size), colour))
     return boxes
 
 

@@ -91,11 +91,11 @@ def block_shape(scene: Scene, type_name: str) -> BoxSet:
     scene's clearance the block's outer side faces are set back by half of it.
     """
     offsets = np.asarray(scene.block_types[type_name].offsets, dtype=float)
-    boxes = BoxSet.of(scene.unit * offsets, scene.unit * BLOCK_SIZE / 2, rgba8(type_colour(type_name)))
+    boxes = BoxSet.of(scene.pitch * offsets, scene.pitch * BLOCK_SIZE / 2, rgba8(type_colour(type_name)))
     if not scene.clearance:
         return boxes
     half = scene.unit * BLOCK_SIZE / 2
-    shift, halves = unit_boxes(offsets, half, half, scene.clearance * scene.unit / 2)
+    shift, halves = unit_boxes(offsets, half, scene.course * BLOCK_SIZE / 2, scene.clearance * scene.unit / 2)
     return BoxSet(boxes.centers + shift, halves, boxes.colors)
 
 
@@ -142,7 +142,7 @@ def cell_points(scene: Scene) -> dict[str, tuple[np.ndarray, np.ndarray]]:
         filled = set(region.filled)
         target, other = [], []
         for ijk in np.ndindex(*region.size):
-            (target if ijk in filled else other).append(region.cell_center(ijk, scene.unit))
+            (target if ijk in filled else other).append(region.cell_center(ijk, scene.pitch))
         out[region.name] = (np.asarray(target, dtype=float).reshape(-1, 3),
                             np.asarray(other, dtype=float).reshape(-1, 3))
     return out
@@ -150,7 +150,7 @@ def cell_points(scene: Scene) -> dict[str, tuple[np.ndarray, np.ndarray]]:
 
 def cell_boxes(scene: Scene) -> dict[str, tuple[BoxSet, BoxSet]]:
     """Per region: (pink target cell markers, smaller green markers on the other cells)."""
-    u = scene.unit
+    u = scene.pitch
     return {name: (BoxSet.of(t, u * TARGET_SIZE / 2, rgba8(PINK, 0.8)),
                    BoxSet.of(o, u * OTHER_CELL_SIZE / 2, rgba8(GREEN, 0.6)))
             for name, (t, o) in cell_points(scene).items()}
@@ -166,8 +166,8 @@ def placement_boxes(scene: Scene, placement, size: float = PLAN_SIZE, alpha: flo
         raise RadError(f'placement of a {placement.type} names target region {placement.target!r}, '
                        f'which the scene does not have') from None
     colour = type_colour(placement.type) if placement.type in scene.block_types else UNKNOWN_COLOUR
-    centers = [region.cell_center(c, scene.unit) for c in placement.cells]
-    return BoxSet.of(centers, scene.unit * size / 2, rgba8(colour, alpha))
+    centers = [region.cell_center(c, scene.pitch) for c in placement.cells]
+    return BoxSet.of(centers, scene.pitch * size / 2, rgba8(colour, alpha))
 
 
 def table_box(scene: Scene | None = None) -> BoxSet:

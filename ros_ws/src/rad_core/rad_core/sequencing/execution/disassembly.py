@@ -99,7 +99,7 @@ class TableConfig:
 def _in_regions(scene: Scene, points: np.ndarray, margin: float = 0.0) -> bool:
     """Whether any of the points lies over a target region's footprint (grown by margin)."""
     for t in scene.targets:
-        lo, hi = t.bounds(scene.unit)
+        lo, hi = t.bounds(scene.pitch)
         if np.any(np.all((points[:, :2] > lo[:2] - margin) & (points[:, :2] < hi[:2] + margin), axis=1)):
             return True
     return False
@@ -107,18 +107,18 @@ def _in_regions(scene: Scene, points: np.ndarray, margin: float = 0.0) -> bool:
 
 def to_take_apart(scene: Scene) -> list[str]:
     """Blocks still to take apart: those in a target region, or standing on another block."""
-    u = scene.unit
+    c = scene.course
     out = []
     for b in scene.blocks:
         pts = scene.unit_positions(b)
-        if _in_regions(scene, pts) or pts[:, 2].min() > u / 2 + 0.25 * u:
+        if _in_regions(scene, pts) or pts[:, 2].min() > c / 2 + 0.25 * c:
             out.append(b.id)
     return out
 
 
 def resting_on(scene: Scene) -> dict[str, set[str]]:
     """Block id -> ids of the blocks resting directly on it (a unit one level up, over one of its units)."""
-    u = scene.unit
+    u, c = scene.unit, scene.course
     units = {b.id: scene.unit_positions(b) for b in scene.blocks}
     out: dict[str, set[str]] = {b.id: set() for b in scene.blocks}
     for below, pb in units.items():
@@ -126,7 +126,7 @@ def resting_on(scene: Scene) -> dict[str, set[str]]:
             if above == below:
                 continue
             d = pa[:, None, :] - pb[None, :, :]
-            on = (np.abs(d[..., 2] - u) < 0.25 * u) & np.all(np.abs(d[..., :2]) < 0.99 * u, axis=-1)
+            on = (np.abs(d[..., 2] - c) < 0.25 * c) & np.all(np.abs(d[..., :2]) < 0.99 * u, axis=-1)
             if on.any():
                 out[below].add(above)
     return out
@@ -149,13 +149,13 @@ def removal_order(scene: Scene, pending, build_order=()) -> list[str]:
 
 def _units_at(scene: Scene, block_id: str, position, yaw: int) -> np.ndarray:
     btype = scene.block_types[scene.block(block_id).type]
-    return np.asarray(position, dtype=float) + scene.unit * btype.rotated(yaw)
+    return np.asarray(position, dtype=float) + scene.pitch * btype.rotated(yaw)
 
 
 def _on_table(scene: Scene, block_id: str, xy, yaw: int) -> np.ndarray:
     """The anchor position that puts the block down on the table at anchor x, y and yaw."""
     low = scene.block_types[scene.block(block_id).type].rotated(yaw)[:, 2].min()
-    return np.array([xy[0], xy[1], scene.unit / 2 - low * scene.unit])
+    return np.array([xy[0], xy[1], scene.course / 2 - low * scene.course])
 
 
 def _room(scene: Scene, pts: np.ndarray, others: list[np.ndarray], gap: float) -> bool:
@@ -163,7 +163,7 @@ def _room(scene: Scene, pts: np.ndarray, others: list[np.ndarray], gap: float) -
     reach = scene.unit + gap - 1e-9
     for o in others:
         d = np.abs(pts[:, None, :] - o[None, :, :])
-        if np.any(np.all(d[..., :2] < reach, axis=-1) & (d[..., 2] < scene.unit)):
+        if np.any(np.all(d[..., :2] < reach, axis=-1) & (d[..., 2] < scene.course)):
             return False
     return True
 

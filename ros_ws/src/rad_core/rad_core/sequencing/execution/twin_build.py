@@ -48,6 +48,7 @@ def build_teleported(scene: Scene, steps, settle_s: float = 0.5, effector: str =
                 world.set_block_pose(d['block'], d['position'], yaw_quaternion(d['yaw']))
             world.present(step.block)       # from the feeder, if the scene has one and it is there
             world.set_block_pose(step.block, step.position, yaw_quaternion(step.yaw))
+            world.studs.join(world, step.block)     # teleported: pressed home onto the studs under it
             if step.motion:
                 # The arm where the step's motion leaves it (retreated above the block), as after a real
                 # step: left at home, a tall structure would grow into the hand.

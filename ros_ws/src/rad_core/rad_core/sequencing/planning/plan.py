@@ -441,7 +441,7 @@ def pits_last(env: AssemblyEnv, guide, ranked: list) -> list:
         close = np.min(np.linalg.norm(xy[None, :, :] - pts[:, None, :2], axis=2), axis=0) <= PIT_REACH * u + 1e-9
         near = np.zeros(len(open_cells), dtype=bool)
         near[owner[close]] = True
-        deep = (pts[:, 2].max() - tops) >= PIT_LAYERS * u - 1e-9
+        deep = (pts[:, 2].max() - tops) >= PIT_LAYERS * env.scene.course - 1e-9
         mine = np.zeros(len(open_cells), dtype=bool)      # open poses the action itself fills part of
         mine[owner[np.isin(flat_open, cells)]] = True
         (later if np.any(near & deep & ~mine) else keep).append(action)

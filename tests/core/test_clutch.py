@@ -1,0 +1,118 @@
+"""Studded bricks that lock: a Duplo 2 x 4 cantilevered two studs off a 2 x 2, which stands by its
+clutch alone, in the planner's statics, the physics world's stud joints and the twin's press."""
+
+import numpy as np
+import pytest
+from rad_core.allocation.brick_scenes import built_blocks, lattice_of, scene_from_design, target_of
+from rad_core.domain.brick_designs import parse_text
+from rad_core.domain.scene import Scene
+from rad_core.domain.transforms import yaw_quaternion
+
+CANTILEVER = '4x2 (0,0,0)\n4x2 (3,0,1)\n'
+"""A 2 x 4 on the table along x and another on it, one stud column over its end and three out: its
+centre of mass a stud beyond the edge. Its two studs must hold about twice its weight: Duplo bricks
+scaled to a 3 cm pitch weigh 11.5 g a cell, so about 1 N each (1.06 N with the statics' margin)."""
+
+CLUTCH = 2.0
+"""N per stud: Duplo's (`domain.studs.SYSTEMS`)."""
+
+
+def cantilever_scene(clutch: float | None = None, built: bool = True) -> Scene:
+    """The cantilever's scene: the 2 x 2 already built (or on the table), the 2 x 4 on the table."""
+    design = parse_text(CANTILEVER, 'cantilever.txt')
+    scene, _ = scene_from_design(design, 'duplo', 0.03, CLUTCH)
+    doc = scene.to_dict()
+    if clutch is not None:
+        doc['studs']['clutch'] = clutch       # weaker bricks than the design was checked with
+    if not built:
+        return Scene.from_dict(doc)
+    lattice = lattice_of(design, 'duplo', 0.03, CLUTCH)
+    _, region, _ = target_of(design, lattice)
+    _, placed = built_blocks(design.normalised(), lattice, region)
+    base = doc['blocks'][0]                   # both are 2 x 4s: the first is the base
+    base['position'], base['yaw'] = list(placed[0].position), placed[0].yaw
+    return Scene.from_dict(doc)
+
+
+def top_pose(scene: Scene):
+    design = parse_text(CANTILEVER, 'cantilever.txt')
+    lattice = lattice_of(design, 'duplo', 0.03, CLUTCH)
+    _, region, _ = target_of(design, lattice)
+    _, placed = built_blocks(design.normalised(), lattice, region)
+    top = scene.blocks[1]
+    return top.id, np.asarray(placed[1].position), placed[1].yaw
+
+
+def test_the_cantilever_stands_by_clutch_alone():
+    from rad_core.allocation.brick_scenes import design_verdict
+    design = parse_text(CANTILEVER, 'cantilever.txt')
+    assert design_verdict(design, lattice_of(design, 'duplo', 0.03, CLUTCH))[0] == 'stands'
+    verdict, why = design_verdict(design, lattice_of(design, 'duplo', 0.03, CLUTCH), clutch=False)
+    assert verdict == 'falls' and 'tips over the edge' in why
+    verdict, why = design_verdict(design, lattice_of(design, 'duplo', 0.03, 0.5))
+    assert verdict == 'falls' and 'cantilever.txt:2' in why
+    assert 'pulls off its studs' in why and 'must hold 2.11 N over 2 studs, the clutch gives 1.00 N' in why
+
+
+def _settled(world, block_id: str, seconds: float = 1.0) -> float:
+    """How far (m) the block moved while the world ran `seconds`."""
+    before, _ = world.block_pose(block_id)
+    world.step(int(seconds / world.config.physics.time_step))
+    after, _ = world.block_pose(block_id)
+    return float(np.linalg.norm(after - before))
+
+
+@pytest.mark.parametrize('joined,clutch,stays', [(True, None, True), (False, None, False), (True, 0.5, False)])
+def test_stud_joints_hold_the_cantilever_up_to_their_clutch(joined, clutch, stays):
+    from rad_core.sim.world import World
+    scene = cantilever_scene(clutch)
+    top, position, yaw = top_pose(scene)
+    with World(scene) as world:
+        world.set_block_pose(top, position, yaw_quaternion(yaw))
+        if joined:
+            assert world.studs.join(world, top) == [scene.blocks[0].id]
+            assert len(world.studs.studs) == 2            # one stud column of two studs over the 2 x 2
+        moved = _settled(world, top)
+        assert (moved < 0.001) == stays, moved
+        assert bool(world.studs.broken) == (joined and not stays)
+
+
+def test_joints_made_inside_a_snapshot_are_gone_after_it():
+    from rad_core.sim.world import World
+    scene = cantilever_scene()
+    top, position, yaw = top_pose(scene)
+    with World(scene) as world:
+        with world.preserved():
+            world.set_block_pose(top, position, yaw_quaternion(yaw))
+            world.studs.join(world, top)
+            assert world.studs.studs
+        assert not world.studs.studs
+        assert world.pybullet.getNumConstraints(physicsClientId=world.client) == 0
+
+
+@pytest.mark.parametrize('press_depth,joined', [(0.003, True), (0.0, False)])
+def test_the_twin_joins_a_brick_only_when_the_arm_presses_it_home(press_depth, joined):
+    from rad_core.gamp.action import MotionPlanner, SceneAction
+    from rad_core.gamp.planner import GampConfig
+    from rad_core.sim.twin import Twin, twin_world_config
+    from rad_core.sim.world import World, WorldConfig
+
+    scene = cantilever_scene()
+    top, position, yaw = top_pose(scene)
+    planner = MotionPlanner(GampConfig(press_depth=press_depth))
+    try:
+        region = scene.targets[0]
+        cell = tuple(int(v) for v in np.round((position - np.asarray(region.origin)) / scene.pitch))
+        block = scene.block(top)
+        result, planned, _ = planner(scene, SceneAction(top, 0, region.name, cell, ((yaw - block.yaw) // 90) % 4))
+    finally:
+        planner.close()
+    assert result.success, result.reason
+    assert planned == pytest.approx(position)
+    with World(scene, twin_world_config(WorldConfig())) as world:
+        twin = Twin(world)
+        assert twin.execute_motion(result.motion) == ''
+        twin.settle(1.0)
+        assert bool(world.studs.studs) == joined
+        now, _ = world.block_pose(top)
+        assert (float(np.linalg.norm(now - position)) < 0.002) == joined
