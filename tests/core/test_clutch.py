@@ -116,3 +116,47 @@ def test_the_twin_joins_a_brick_only_when_the_arm_presses_it_home(press_depth, j
         assert bool(world.studs.studs) == joined
         now, _ = world.block_pose(top)
         assert (float(np.linalg.norm(now - position)) < 0.002) == joined
+
+
+def _env_after(text: str, built: int, clutch: float | None = None):
+    """The MDP of a design's scene with its first `built` bricks placed where the design has them,
+    and the design's next brick as an action (block, cells)."""
+    from rad_core.env.mdp import AssemblyEnv, EnvConfig
+    design = parse_text(text, 'design.txt')
+    scene, _ = scene_from_design(design, 'duplo', 0.03)
+    doc = scene.to_dict()
+    if clutch is not None:
+        doc['studs']['clutch'] = clutch
+    scene = Scene.from_dict(doc)
+    lattice = lattice_of(design, 'duplo', 0.03)
+    _, region, _ = target_of(design, lattice)
+    _, placed = built_blocks(design.normalised(), lattice, region)
+    env = AssemblyEnv(scene, EnvConfig(stability='physics'))
+    free = {b.type: [] for b in scene.blocks}
+    for n, b in enumerate(scene.blocks):
+        free[b.type].append(n)
+    for k, want in enumerate(placed[:built + 1]):
+        b = free[want.type].pop(0)
+        cells = env.grid.cells_at(scene.pitch * scene.block_types[want.type].rotated(want.yaw) + want.position)
+        if k == built:
+            return env, b, cells
+        env.state.placed[b] = (cells, want.yaw)
+        env.state.occupancy[cells] = b
+
+
+@pytest.mark.parametrize('clutch,stands', [(None, True), (0.5, False)])
+def test_the_mdp_lets_a_brick_reach_out_as_far_as_its_clutch_holds(clutch, stands):
+    env, b, cells = _env_after(CANTILEVER, 1, clutch)
+    ok, why = env._stable(b, cells)
+    assert ok == stands
+    assert stands or ('pulls off its studs' in why and 'the clutch gives 1.00 N' in why)
+
+
+def test_a_press_that_would_break_what_is_built_is_refused():
+    # The letter T: the crossbar on its stem; a 2 x 4 pressed onto one arm would lever it off the stem.
+    text = '2x2 (3,0,0)\n8x2 (0,0,1)\n4x2 (4,0,2)\n'
+    env, b, cells = _env_after(text, 2)
+    ok, why = env._stable(b, cells)
+    assert not ok and why.startswith('pressing it home would break what is built')
+    env, b, cells = _env_after(text, 1)           # the crossbar itself, pressed over the stem: fine
+    assert env._stable(b, cells) == (True, '')

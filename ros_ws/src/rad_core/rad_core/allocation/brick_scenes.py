@@ -15,7 +15,6 @@ order or in any order the statics walk finds, is refused naming the brick that f
 from __future__ import annotations
 
 import math
-import re
 from dataclasses import dataclass, replace
 import numpy as np
 
@@ -150,16 +149,22 @@ def design_verdict(design: BrickDesign, lattice: BrickLattice, clutch: bool = Tr
     grid = Grid(scene)
     pieces = [grid.cells_at(scene.unit_positions(b)) for b in blocks]
     limit = lattice.studs.clutch_in_weights if clutch else None
+    weight = lattice.mass * GRAVITY
     failure = first_failure(grid, pieces, clutch=limit)
     if failure is None:
-        return 'stands', f'stands: every one of its {len(pieces)} bricks, placed in the file\'s order'
-    step, verdict = failure
-    fall = _falls(design, step, verdict, lattice.mass * GRAVITY)
-    _, waiting = order_statics(grid, pieces, clutch=limit)
-    if not waiting:
-        return 'stands', (f'stands once built, but not in the file\'s order: placing {fall}; '
-                          f'rad builds it in another order')
-    return 'falls', f'falls: no order keeps every step standing; in the file\'s order, placing {fall}'
+        words = f'stands: every one of its {len(pieces)} bricks, placed in the file\'s order'
+    else:
+        fall = _falls(design, failure[0], failure[1], weight)
+        if order_statics(grid, pieces, clutch=limit, press=False)[1]:
+            return 'falls', f'falls: no order keeps every step standing; in the file\'s order, placing {fall}'
+        words = f'stands once built, but not in the file\'s order: placing {fall}; rad builds it in another order'
+    if limit is not None:
+        _, waiting = order_statics(grid, pieces, clutch=limit)
+        if waiting:
+            words += (f'; but no order presses every brick home without breaking what is built ('
+                      f'{len(waiting)} left over, the {design.bricks[waiting[0]].describe()} first): rad builds '
+                      f'what it can')
+    return 'stands', words
 
 
 def _falls(design: BrickDesign, step: int, verdict: Statics, weight: float) -> str:
@@ -170,13 +175,7 @@ def _falls(design: BrickDesign, step: int, verdict: Statics, weight: float) -> s
         return f'the {b.describe()}' + (f' (line {b.line})' if b.line else '')
     placed = design.bricks[step]
     where = f'{placed.source}:{placed.line}: ' if placed.line else ''
-    parts = []
-    for n, why in zip(verdict.falling, verdict.why or ('',) * len(verdict.falling)):
-        why = re.sub(r'piece (\d+)', lambda m: name(int(m.group(1))), why)
-        why = re.sub(r"must hold ([\d.]+) times a cell's weight over (\d+) studs, the clutch gives ([\d.]+)",
-                     lambda m: f'must hold {float(m.group(1)) * weight:.2f} N over {m.group(2)} studs, the '
-                               f'clutch gives {float(m.group(3)) * weight:.2f} N', why)
-        parts.append(('it' if n == step else name(n)) + (f' {why}' if why else ' falls'))
+    parts = [('it' if n == step else name(n)) + f' {why}' for n, why in verdict.told(name, weight)]
     return f'{where}the {placed.describe()}: ' + '; '.join(parts or ['it does not stand'])
 
 

@@ -37,6 +37,7 @@ adds forces that may go unused), so the program runs only where something overha
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from typing import Sequence
 
@@ -70,6 +71,19 @@ class Statics:
     def __bool__(self) -> bool:
         return self.stands
 
+    def told(self, name, weight: float | None = None) -> list[tuple[int, str]]:
+        """(falling piece, why) with the pieces named by `name(index)` and, given the `weight` (N) of a
+        cell, forces in newtons rather than cell weights."""
+        out = []
+        for n, why in zip(self.falling, self.why or ('does not stand',) * len(self.falling)):
+            why = re.sub(r'piece (\d+)', lambda m: name(int(m.group(1))), why)
+            if weight is not None:
+                why = re.sub(r"must hold ([\d.]+) times a cell's weight over (\d+) studs, the clutch gives ([\d.]+)",
+                             lambda m: f'must hold {float(m.group(1)) * weight:.2f} N over {m.group(2)} studs, '
+                                       f'the clutch gives {float(m.group(3)) * weight:.2f} N', why)
+            out.append((n, why))
+        return out
+
 
 def _under(grid: Grid, owner: np.ndarray, cells: np.ndarray) -> np.ndarray:
     """Per unit: what is below it: -1 the table (or ground), a piece index, -2 nothing."""
@@ -95,8 +109,11 @@ def overhangs(grid: Grid, pieces: Sequence[Sequence[int]], ground=None) -> list[
 
 
 def structure_statics(grid: Grid, pieces: Sequence[Sequence[int]], ground=None, margin: float = MARGIN,
-                      clutch: float | None = None, table_clutch: bool = False, explain: bool = True) -> Statics:
+                      clutch: float | None = None, table_clutch: bool = False, explain: bool = True,
+                      loads: Sequence[tuple[float, float, float] | None] | None = None) -> Statics:
     """Whether the pieces (grid cell ids each) stand together on the table (module docstring).
+    loads: per piece, None or a push down on it besides its weight (the press that seats a brick on
+    its studs): (how hard, in cell weights; where, x and y in cells as grid.centres[:, :2] / unit).
     ground: a mask of grid cells built before, taken as fixed as the table (None: none).
     clutch: the pull one stud connection holds, in cell weights (None: no studs, nothing pulls).
     table_clutch: whether the table's studs hold too. explain: say why each falling piece falls
@@ -105,7 +122,7 @@ def structure_statics(grid: Grid, pieces: Sequence[Sequence[int]], ground=None, 
     owner = _owner(grid, pieces, ground)
     if not any((_under(grid, owner, cells) == -2).any() for cells in pieces):
         return Statics(True)
-    program = _Program(grid, pieces, owner, margin, clutch, table_clutch)
+    program = _Program(grid, pieces, owner, margin, clutch, table_clutch, loads)
     solved = program.solve()
     if solved is None:
         return Statics(False, tuple(range(len(pieces))),
@@ -141,7 +158,8 @@ class _Program:
     balance equations with slack, the slack minimised (module docstring)."""
 
     def __init__(self, grid: Grid, pieces: Sequence[np.ndarray], owner: np.ndarray, margin: float,
-                 clutch: float | None, table_clutch: bool):
+                 clutch: float | None, table_clutch: bool,
+                 loads: Sequence[tuple[float, float, float] | None] | None = None):
         from ortools.linear_solver import pywraplp
         self.lp = pywraplp
         self.solver = solver = pywraplp.Solver.CreateSolver('GLOP')
@@ -149,8 +167,14 @@ class _Program:
         self.scale = max(1.0, float(sum(len(p) for p in pieces)))
         xy = grid.centres[:, :2] / grid.unit
         self.com = [xy[p].mean(axis=0) for p in pieces]
-        self.rows = [[solver.Constraint(float(len(cells)), float(len(cells))),
-                      solver.Constraint(0.0, 0.0), solver.Constraint(0.0, 0.0)] for cells in pieces]
+        self.rows = []
+        for n, cells in enumerate(pieces):
+            push, x, y = (loads[n] if loads is not None and loads[n] is not None else (0.0, *self.com[n]))
+            # A push down at (x, y) off the centre of mass: the forces from below balance its moment too.
+            turn_x, turn_y = push * (y - self.com[n][1]), push * (x - self.com[n][0])
+            down = float(len(cells)) + push
+            self.rows.append([solver.Constraint(down, down), solver.Constraint(turn_x, turn_x),
+                              solver.Constraint(turn_y, turn_y)])
         patches, studs = _contacts(grid, owner, pieces, margin, table_clutch)
         for (n, m), corners in patches.items():
             # Forces anywhere on a contact patch are forces at the corners of its convex hull.
@@ -268,17 +292,33 @@ def first_failure(grid: Grid, pieces: Sequence[Sequence[int]], ground=None, clut
     stand: (the index of the piece just placed, the verdict on the structure then, which names the
     pieces that fall and why); None when it stands after every step. Only steps whose load reaches
     an overhang are solved (`order_statics`)."""
-    walk = _Walk(grid, ground, margin, clutch, table_clutch, explain=True)
+    walk = _Walk(grid, ground, margin, clutch, table_clutch, explain=True, press=False)
     for n, cells in enumerate(pieces):
         if not walk.add(np.asarray(cells, dtype=int).ravel())[0]:
             return n, walk.verdict
     return None
 
 
+def press_load(grid: Grid, owner: np.ndarray, cells, clutch: float) -> tuple[float, float, float] | None:
+    """The press that seats a studded piece on the pieces under it (`structure_statics`' loads): the
+    clutch per stud it goes onto (seating a stud takes the pull it then holds), pushed down over those
+    studs, where the hand presses (GAMP takes the grasp nearest them first). owner: per grid cell, a
+    piece (>= 0), the ground (-1) or nothing (-2). None where it goes onto no stud (the table)."""
+    cells = np.asarray(cells, dtype=int).ravel()
+    below = grid.below_idx[cells]
+    on = (below >= 0) & ~np.isin(below, cells) & (owner[np.maximum(below, 0)] >= -1) & ~grid.on_table[cells]
+    if not on.any():
+        return None
+    x, y = (grid.centres[cells[on], :2] / grid.unit).mean(axis=0)
+    return float(on.sum()) * float(clutch), float(x), float(y)
+
+
 def order_statics(grid: Grid, pieces: Sequence[Sequence[int]], ground=None, margin: float = MARGIN,
-                  clutch: float | None = None, table_clutch: bool = False) -> tuple[list[int], list[int]]:
+                  clutch: float | None = None, table_clutch: bool = False,
+                  press: bool = True) -> tuple[list[int], list[int]]:
     """(the order the pieces are placed in, the pieces that wait to the end), indices into `pieces`,
-    of a walk that keeps the structure standing (clutch, table_clutch: `structure_statics`).
+    of a walk that keeps the structure standing (clutch, table_clutch: `structure_statics`); with
+    clutch, also under the press that seats each piece (`press_load`; `press` False: not).
 
     The pieces go on `ground` (cells built before, as fixed as the table) in the order given; one
     that would leave a structure that does not stand waits, and is tried again once a piece placed
@@ -288,7 +328,7 @@ def order_statics(grid: Grid, pieces: Sequence[Sequence[int]], ground=None, marg
     A piece every unit of which rests on something, on pieces that each rest so all the way down,
     leaves a standing structure standing (its weight goes straight down, column by column), so
     the program is solved only for pieces whose load reaches an overhang."""
-    walk_ = _Walk(grid, ground, margin, clutch, table_clutch)
+    walk_ = _Walk(grid, ground, margin, clutch, table_clutch, press=press)
     walk, waiting = [], []
     pieces = [np.asarray(p, dtype=int).ravel() for p in pieces]
     for n, cells in enumerate(pieces):
@@ -315,9 +355,10 @@ class _Walk:
     `verdict`: the last verdict asked for (Statics(True) until one is)."""
 
     def __init__(self, grid: Grid, ground, margin: float, clutch: float | None = None,
-                 table_clutch: bool = False, explain: bool = False):
+                 table_clutch: bool = False, explain: bool = False, press: bool = True):
         self.grid, self.ground, self.margin = grid, ground, margin
         self.clutch, self.table_clutch, self.explain = clutch, table_clutch, explain
+        self.press = press and clutch is not None
         self.owner = _owner(grid, [], ground)
         self.placed: list[np.ndarray] = []
         self.verdict = Statics(True)
@@ -352,6 +393,13 @@ class _Walk:
                                              self.clutch, self.table_clutch, self.explain)
             if not self.verdict:
                 return False, heavy
+            load = press_load(self.grid, self.owner, cells, self.clutch) if self.press else None
+            if load is not None:
+                self.verdict = structure_statics(self.grid, self.placed + [cells], self.ground, self.margin,
+                                                 self.clutch, self.table_clutch, self.explain,
+                                                 [None] * len(self.placed) + [load])
+                if not self.verdict:
+                    return False, heavy
         self.placed.append(cells)
         self.owner[cells] = n
         return True, heavy

@@ -24,7 +24,8 @@ from rad_core.domain.coverage import state_coverage
 from rad_core.domain.errors import RadError
 from rad_core.domain.grid import Grid, blocks_on_grid
 from rad_core.domain.scene import Scene
-from rad_core.domain.statics import structure_statics
+from rad_core.domain.statics import press_load, structure_statics
+from rad_core.domain.studs import GRAVITY
 from rad_core.sim.physics import PhysicsStability
 
 
@@ -303,12 +304,20 @@ class AssemblyEnv:
         placed = list(self.state.placed.items())
         pieces = [np.asarray(cs) for _, (cs, _) in placed] + [np.asarray(cells)]
         verdict = structure_statics(self.grid, pieces, clutch=self.grid.clutch)
+        what = 'the structure would fall'
         if verdict:
-            return True, ''
+            # Seating it takes a press (`statics.press_load`): what is built must bear that too.
+            load = press_load(self.grid, np.where(self.state.occupancy >= 0, 0, -2), cells, self.grid.clutch)
+            if load is None:
+                return True, ''
+            loads = [None] * (len(pieces) - 1) + [load]
+            verdict = structure_statics(self.grid, pieces, clutch=self.grid.clutch, loads=loads)
+            if verdict:
+                return True, ''
+            what = 'pressing it home would break what is built'
         ids = [self.scene.blocks[k].id for k, _ in placed] + [self.scene.blocks[b].id]
-        whys = verdict.why or ('does not stand',) * len(verdict.falling)
-        return False, 'the structure would fall: ' + '; '.join(f'block {ids[n]} {w}'
-                                                               for n, w in zip(verdict.falling, whys))
+        told = verdict.told(lambda n: f'block {ids[n]}', self.scene.studs.mass * GRAVITY)
+        return False, f'{what}: ' + '; '.join(f'block {ids[n]} {why}' for n, why in told)
 
     def fail(self, outcome: Outcome, reason: str, cells: np.ndarray | None = None) -> StepResult:
         """End the episode on an invalid action decided outside the bookkeeping

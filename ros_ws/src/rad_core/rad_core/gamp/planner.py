@@ -254,6 +254,8 @@ def plan_action(world: World, block_id: str, position, yaw_deg: float, start=Non
     clock = _Clock()
     rng = np.random.default_rng(config.seed)
     grasps = scene_grasps(btype, unit, scene.clearance, config.wide_grasps, config.effector)
+    if scene.studs is not None and config.press_depth > 0:
+        grasps = _over_the_studs(world, block_id, btype, position, float(yaw_deg), grasps)
     result = GampResult(False)
     if world.effector != config.effector:
         raise RadError(f'the planning world carries the {world.effector}, the config plans for the {config.effector}')
@@ -287,6 +289,30 @@ def plan_action(world: World, block_id: str, position, yaw_deg: float, start=Non
     reason = (f'placement: {n_ok} of {len(grasps)} grasps feasible, none places the block: '
               + '; '.join(place_failures))
     return _finish(result, 'placement', reason, clock, t0)
+
+
+def _over_the_studs(world: World, block_id: str, btype: BlockType, position, yaw_deg: float,
+                    grasps: tuple[Grasp, ...]) -> tuple[Grasp, ...]:
+    """A studded brick's grasps, those whose target is nearest the studs it goes onto first (stable):
+    the press pushes through the grasp, so over the studs it seats rather than out on what they hold
+    (the statics of the press, `env.mdp`, assume so)."""
+    scene = world.scene
+    turn = yaw_matrix(yaw_deg)
+    units = np.asarray(position) + (np.asarray(btype.offsets, dtype=float) * scene.pitch) @ turn.T
+    under = units - [0.0, 0.0, scene.course]
+    below = [world.unit_centres(b) for b in world.blocks if b != block_id and b not in world.parked]
+    if not below:
+        return grasps
+    theirs = np.concatenate(below)
+    on = np.array([np.any(np.all(np.abs(theirs - u) < 0.25 * scene.pitch, axis=1)) for u in under])
+    if not on.any():
+        return grasps
+    studs = units[on, :2].mean(axis=0)
+
+    def distance(g: Grasp) -> float:
+        at = np.asarray(position) + (grasp_centre(btype, g) * scene.pitch) @ turn.T
+        return round(float(np.hypot(*(at[:2] - studs))), 6)
+    return tuple(sorted(grasps, key=distance))
 
 
 @dataclass

@@ -101,7 +101,11 @@ def standing_fallbacks(env: AssemblyEnv, below: list) -> list:
     """Of the actions an agent values below stopping (`FALLBACKS`), in their order, those whose
     block would stand on its supports alone, its centre of mass FIRM_MARGIN units inside their
     footprint (`support.rests_on_its_own`); none while the structure is only balanced somewhere
-    (`firm`). So a fallback never leaves the structure less firm than it found it."""
+    (`firm`). So a fallback never leaves the structure less firm than it found it. Studded bricks
+    pressed home are locked, firm whatever their balance: there, those the MDP finds standing with
+    their clutch (`AssemblyEnv.evaluate`)."""
+    if below and env.grid.clutch is not None:
+        return [action for action in below if env.evaluate(action)[0] is None]
     if not below or not firm(env):
         return []
     out = []
