@@ -65,12 +65,13 @@ def run_set(set_name: str, designs: list, unit: float, effector: str, agent, exe
     for row, got in zip(rows, result['scenes']):
         row.update(coverage=got['coverage'], outcome=got['outcome'], steps=got['steps'],
                    failed=got['outcome'].startswith('invalid'), reason=got['reason'] or got['stop_reason'],
-                   lost=got.get('lost', {}))
+                   lost=got.get('lost', {}), plan_s=got.get('plan_s'))
     whole = sum(r['coverage'] >= 1.0 - 1e-9 for r in rows)
+    plan = sorted(r['plan_s'] for r in rows)
     clutch = [r for r in rows if r['needs_clutch']]
     line = [effector, set_name, str(len(rows)), str(len(clutch)), f"{result['coverage']:.3f}",
             f'{whole}/{len(rows)}', f"{sum(r['coverage'] >= 1 - 1e-9 for r in clutch)}/{len(clutch)}",
-            f"{result['f']:g}", f'{seconds / max(1, len(rows)):.1f}']
+            f"{result['f']:g}", f'{plan[len(plan) // 2]:.1f} / {plan[-1]:.1f}', f'{seconds / max(1, len(rows)):.1f}']
     print(' | '.join(line), flush=True)
     return rows, line
 
@@ -98,10 +99,11 @@ def main() -> int:
             f'that stand with Duplo\'s clutch ({fell} drawn tasks fell and were passed over, as `rad scene '
             'from-bricks` refuses them); designs: the files in scenes/bricks/. needing clutch: designs that '
             'fall without it. coverage: what the twin finds built, mean over designs; whole: designs built to '
-            'the last cell; f: episodes that ended on a failed action; s/design: planning and building, mean.')
+            'the last cell; f: episodes that ended on a failed action; planning s: the plans of a design (its '
+            're-plans included), median and max over designs; s/design: planning and building, mean.')
     page = write_page('bricks', 'Studded bricks pressed home by the robot',
                       ['effector', 'set', 'designs', 'needing clutch', 'coverage', 'whole',
-                       'needing clutch whole', 'f', 's/design'],
+                       'needing clutch whole', 'f', 'planning s (median / max)', 's/design'],
                       table, note, rows=rows, results=args.results)
     print(f'wrote {page}')
     return 0

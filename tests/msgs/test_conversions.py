@@ -87,3 +87,20 @@ def test_a_feeder_travels_in_the_scene_message(order):
     msg.feeder[0].blocks = ['nope']
     with pytest.raises(RadError, match="feeder.blocks: unknown block id 'nope'"):
         scene_from_msg(msg)
+
+
+def test_a_stud_system_travels_in_the_scene_message():
+    from pathlib import Path
+
+    from rad_core.allocation.brick_scenes import scene_from_design
+    from rad_core.domain.brick_designs import read_design
+    design = read_design(Path(__file__).resolve().parents[2] / 'scenes' / 'bricks' / 'duplo_bridge_tower.ldr')
+    s, _ = scene_from_design(design, unit=0.03)
+    msg = scene_to_msg(s)
+    assert len(msg.studs) == 1 and msg.studs[0].system == 'duplo' and msg.studs[0].course == pytest.approx(0.036)
+    back = scene_from_msg(msg)
+    assert back.studs == s.studs and back.to_dict() == s.to_dict()
+    assert list(scene_to_msg(scene()).studs) == []
+    msg.studs[0].clutch = -1.0
+    with pytest.raises(RadError, match='studs.clutch'):
+        scene_from_msg(msg)

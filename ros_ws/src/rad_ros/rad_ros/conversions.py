@@ -4,7 +4,8 @@ A scene message is turned into the rad-scene/1 document and parsed by the same
 validator the CLI uses, so a bad message gets the same field-naming errors.
 
 A scene's ``clearance`` (rad_core.domain.scene) travels in rad_msgs/Scene's ``clearance``
-field (0 = flush, as in a scene document without the key).
+field (0 = flush, as in a scene document without the key), its ``studs`` in ``studs`` (at most
+one rad_msgs/Studs; none: blocks that only rest).
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from rad_core.domain.scene import FORMAT, Scene
 from rad_msgs.msg import Block, BlockType, Cell, Placement, TargetRegion
 from rad_msgs.msg import Feeder as FeederMsg
 from rad_msgs.msg import Scene as SceneMsg
+from rad_msgs.msg import Studs as StudsMsg
 
 MAX_SCENE_JSON_BYTES = 10 * 1024 * 1024
 
@@ -44,6 +46,9 @@ def scene_to_msg(scene: Scene, frame_id: str = 'world') -> SceneMsg:
         f = scene.feeder
         msg.feeder = [FeederMsg(station_x=float(f.station[0]), station_y=float(f.station[1]), yaw_deg=int(f.yaw),
                                 order=f.order, window=int(f.window), blocks=list(f.blocks))]
+    if scene.studs is not None:
+        s = scene.studs
+        msg.studs = [StudsMsg(system=s.system, course=float(s.course), clutch=float(s.clutch), mass=float(s.mass))]
     return msg
 
 
@@ -61,6 +66,8 @@ def scene_msg_to_dict(msg: SceneMsg) -> dict:
         **{'feeder': {'station': [f.station_x, f.station_y], 'yaw': f.yaw_deg, 'order': f.order,
                       **({'window': int(f.window)} if f.order == 'queue' else {}), 'blocks': list(f.blocks)}
            for f in msg.feeder[:1]},
+        **{'studs': {'system': s.system, 'course': s.course, 'clutch': s.clutch, 'mass': s.mass}
+           for s in msg.studs[:1]},
     }
 
 

@@ -20,7 +20,9 @@ from dataclasses import dataclass
 import numpy as np
 
 BREAK_STRETCH = 0.001
-"""How far (m) a stud's joint may stretch before it counts as pulled off."""
+"""How far (m) a stud's joint may stretch, the upper brick lifted off its seat or slid along it,
+before it counts as pulled off. Pushed further onto its seat (a press, a load) it holds: contacts
+bear that."""
 
 SEATED = 0.15
 """How far (a fraction of the unit, and of the course height) a brick may sit off the lattice above
@@ -62,22 +64,24 @@ class StudJoints:
         p, cid = world.pybullet, world.client
         mine = world.unit_centres(block_id)
         pitch = scene.pitch
-        found: dict[str, list[np.ndarray]] = {}
+        found: dict[str, list[tuple[int, int]]] = {}
         for other in world.blocks:
             if other == block_id or other in world.parked:
                 continue
             theirs = world.unit_centres(other)
             gap = (mine[:, None, :] - pitch * (0, 0, 1)) - theirs[None, :, :]
             seated = np.all(np.abs(gap) < SEATED * pitch, axis=-1)
-            for i, j in zip(*np.nonzero(seated)):
-                found.setdefault(other, []).append((mine[i] + theirs[j]) / 2)
+            found.update({other: list(zip(*np.nonzero(seated)))} if seated.any() else {})
         upper = world.blocks[block_id]
-        for other, points in found.items():
+        half = np.array([0.0, 0.0, scene.course / 2])
+        for other, pairs in found.items():
             lower = world.blocks[other]
-            for point in points:
-                pivot = [float(point[0]), float(point[1]), float(point[2])]
-                in_upper = _local(p, cid, upper, pivot)
-                in_lower = _local(p, cid, lower, pivot)
+            for i, j in pairs:
+                # Each stud where the lattice puts it in both bricks (the middle of the face they share),
+                # not where they happen to be: the joint pulls a brick still pressed in, or a hair off,
+                # to its seat.
+                in_upper = world.in_inertial_frame(block_id, _offset(world, block_id, i) - half)
+                in_lower = world.in_inertial_frame(other, _offset(world, other, j) + half)
                 c = p.createConstraint(lower, -1, upper, -1, p.JOINT_POINT2POINT, [0, 0, 0],
                                        parentFramePosition=in_lower, childFramePosition=in_upper,
                                        physicsClientId=cid)
@@ -97,9 +101,9 @@ class StudJoints:
         for stud in self.studs.values():
             if stud.broken:
                 continue
-            a = _world(p, cid, world.blocks[stud.upper], stud.in_upper)
-            b = _world(p, cid, world.blocks[stud.lower], stud.in_lower)
-            if np.linalg.norm(a - b) > BREAK_STRETCH:
+            d = _world(p, cid, world.blocks[stud.upper], stud.in_upper) - _world(p, cid, world.blocks[stud.lower],
+                                                                                  stud.in_lower)
+            if d[2] > BREAK_STRETCH or np.hypot(d[0], d[1]) > BREAK_STRETCH:
                 stud.broken = True
                 p.changeConstraint(stud.constraint, maxForce=0.0, physicsClientId=cid)
                 out.append((stud.upper, stud.lower))
@@ -132,11 +136,10 @@ class StudJoints:
                 p.changeConstraint(c, maxForce=limit, physicsClientId=cid)
 
 
-def _local(p, cid: int, body: int, point) -> list[float]:
-    pos, orn = p.getBasePositionAndOrientation(body, physicsClientId=cid)
-    inv_pos, inv_orn = p.invertTransform(pos, orn)
-    local, _ = p.multiplyTransforms(inv_pos, inv_orn, point, [0, 0, 0, 1])
-    return list(local)
+def _offset(world, block_id: str, unit: int) -> np.ndarray:
+    """The centre of a block's unit in its own frame (its yaw turns the frame, not the offsets)."""
+    scene = world.scene
+    return np.asarray(scene.block_types[scene.block(block_id).type].offsets[unit], dtype=float) * scene.pitch
 
 
 def _world(p, cid: int, body: int, local) -> np.ndarray:

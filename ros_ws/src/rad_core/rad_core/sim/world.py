@@ -327,6 +327,14 @@ class World(ClientOwner):
         p.resetBasePositionAndOrientation(body, pos, orn, physicsClientId=cid)
         p.resetBaseVelocity(body, [0, 0, 0], [0, 0, 0], physicsClientId=cid)
 
+    def in_inertial_frame(self, block_id: str, point) -> list[float]:
+        """A point given in the block's own frame (its anchor unit's centre, its yaw) in the frame Bullet
+        keeps the body in (its inertial frame): where constraints on the body are fixed."""
+        p = self._p
+        ipos, iorn = p.invertTransform(*self._inertial[self._body(block_id)])
+        local, _ = p.multiplyTransforms(ipos, iorn, [float(v) for v in point], [0, 0, 0, 1])
+        return list(local)
+
     def unit_centres(self, block_id: str) -> np.ndarray:
         """World centres (n, 3) of a block's units where it is now."""
         position, quaternion = self.block_pose(block_id)

@@ -358,13 +358,13 @@ def build_layers(scene: Scene, heap: bool = False) -> BuildLayers:
             continue
         colour = type_colour(block.type)
         tint = tuple(0.35 * c + 0.65 * t for c, t in zip(colour, OFF_TARGET))
-        for i, (centre, half) in enumerate(zip(*block_cubes(centres, u, scene.clearance))):
+        for i, (centre, half) in enumerate(zip(*block_cubes(centres, u, scene.clearance, scene.course))):
             if cells is not None and not grid.is_target[cells[i]]:
                 solid.append((centre, tuple(half.tolist()), tint))
                 solid.extend(_outline(centre, half, OFF_TARGET_EDGE, thickness))
             else:
                 solid.append((centre, tuple(half.tolist()), colour))
-    ghosts, half = [], u * BLOCK_SIZE / 2
+    ghosts, half = [], (u * BLOCK_SIZE / 2 if scene.course == u else tuple(scene.pitch * BLOCK_SIZE / 2))
     for centre in grid.centres[grid.is_target & ~filled]:
         ghosts.append((centre, half, PINK))
         solid.extend(_outline(centre, half, GHOST_EDGE, thickness))
