@@ -57,6 +57,8 @@ FIGURES = [
      ('g = 5, clearance 0.2: a-bar / f',), '30'),
     ('Without the robot, g = 5: the mixed network, stable allocation (Table I; the paper 0.85)', 'table1',
      {'allocation': 'stable', 'agent': '**MILP-DQN-mixed**'}, ('g = 5',), '200 unseen'),
+    ('`default`, Duplo-style tasks of 2-12 studded bricks, the hand pressing each home: coverage / whole / f',
+     'bricks', {'effector': 'hand', 'set': 'duplo tasks'}, ('coverage', 'whole', 'f'), '22'),
 ]
 
 
