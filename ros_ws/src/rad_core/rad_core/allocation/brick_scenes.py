@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
+
 import numpy as np
 
 from rad_core.allocation.supply import feeder_blocks, lay_out_blocks
