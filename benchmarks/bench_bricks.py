@@ -25,7 +25,7 @@ from common import RESULTS, write_page
 from rad_core.allocation.brick_scenes import design_verdict, lattice_of, scene_from_design
 from rad_core.domain.brick_designs import read_design
 from rad_core.domain.brick_tasks import duplo_task
-from rad_core.experiment.evaluation import evaluate, get_agent
+from rad_core.experiment.evaluation import get_agent, robot_planner, scene_episode, summarize
 
 DESIGNS = Path(__file__).resolve().parents[1] / 'scenes' / 'bricks'
 
@@ -50,6 +50,37 @@ def files() -> list:
     return [read_design(p) for p in sorted(DESIGNS.iterdir()) if p.suffix in ('.txt', '.ldr', '.mpd')]
 
 
+class _Timed:
+    """The agent's planner, timing its plans (a build's re-plans included); the rest passes through."""
+
+    def __init__(self, planner):
+        self.planner, self.seconds = planner, 0.0
+
+    def __call__(self, *args):
+        t0 = time.perf_counter()
+        try:
+            return self.planner(*args)
+        finally:
+            self.seconds += time.perf_counter() - t0
+
+    def __getattr__(self, name):
+        return getattr(self.planner, name)
+
+
+def _evaluate(agent, scenes: list, execution: str, effector: str) -> dict:
+    """`evaluate`'s rows and metrics (robot in the loop, scene i seeded i), each row with plan_s."""
+    planner = _Timed(robot_planner(agent, effector=effector))
+    rows = []
+    try:
+        for i, (name, scene) in enumerate(scenes):
+            planner.seconds = 0.0
+            row = {'name': name, **scene_episode(agent, scene, True, i, execution, planner=planner)}
+            rows.append({**row, 'plan_s': planner.seconds})
+    finally:
+        planner.close()
+    return summarize(rows, agent.name)
+
+
 def run_set(set_name: str, designs: list, unit: float, effector: str, agent, execution: str) -> tuple[list, list]:
     rows, scenes = [], []
     for design in designs:
@@ -60,12 +91,12 @@ def run_set(set_name: str, designs: list, unit: float, effector: str, agent, exe
         rows.append({'effector': effector, 'set': set_name, 'name': design.name, 'bricks': len(design.bricks),
                      'system': lattice.system, 'cells': len(design.cells()), 'needs_clutch': alone == 'falls'})
     t0 = time.perf_counter()
-    result = evaluate(agent, scenes, True, 0, execution=execution, effector=effector)
+    result = _evaluate(agent, scenes, execution, effector)
     seconds = time.perf_counter() - t0
     for row, got in zip(rows, result['scenes']):
         row.update(coverage=got['coverage'], outcome=got['outcome'], steps=got['steps'],
                    failed=got['outcome'].startswith('invalid'), reason=got['reason'] or got['stop_reason'],
-                   lost=got.get('lost', {}), plan_s=got.get('plan_s'))
+                   lost=got.get('lost', {}), plan_s=got['plan_s'])
     whole = sum(r['coverage'] >= 1.0 - 1e-9 for r in rows)
     plan = sorted(r['plan_s'] for r in rows)
     clutch = [r for r in rows if r['needs_clutch']]

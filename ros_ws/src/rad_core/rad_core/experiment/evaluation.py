@@ -205,7 +205,6 @@ def robot_episode(planner, scene: Scene, seed: int, execution: str = 'teleport')
     expected; reason: why an invalid action failed; stop_reason: why the plan stopped short."""
     if execution == 'teleport':
         plan = planner(scene, None, seed)
-        plans = [plan]
         registered = build_teleported(scene, plan.steps, effector=planner.effector)
         coverage, lost, steps, replans = measured_coverage(registered.scene), registered.set_aside, len(plan.steps), 0
     elif execution == 'simulate':
@@ -226,8 +225,7 @@ def robot_episode(planner, scene: Scene, seed: int, execution: str = 'teleport')
     row = {'return': episode.ret, 'outcome': (episode.outcome or Outcome.TERMINATED).value, 'coverage': coverage,
            'steps': steps, 'coverage_opt': _optimum(scene, plan.allocation),
            'predicted_coverage': plan.predicted_coverage, 'reason': episode.reason if invalid else '',
-           'stop_reason': plan.reason, 'lost': dict(lost),
-           'plan_s': sum(p.timings.get('total', 0.0) for p in plans)}
+           'stop_reason': plan.reason, 'lost': dict(lost)}
     if execution == 'simulate':
         row['replans'] = replans
     if planner.spec.realloc:
