@@ -89,10 +89,6 @@ class StudJoints:
                 self.studs[c] = Stud(c, block_id, other, in_upper, in_lower)
         return sorted(found)
 
-    def joined_above(self, block_id: str) -> set[str]:
-        """Blocks joined on top of this one (unbroken studs)."""
-        return {s.upper for s in self.studs.values() if s.lower == block_id and not s.broken}
-
     def check(self, world) -> list[tuple[str, str]]:
         """Break the studs stretched more than `BREAK_STRETCH`; the (upper, lower) connections that
         lost a stud now."""
@@ -109,14 +105,6 @@ class StudJoints:
                 out.append((stud.upper, stud.lower))
         self.broken.extend(out)
         return out
-
-    def release(self, world, block_id: str) -> None:
-        """Let go of every stud of a brick, above and below it (it is lifted off, or removed)."""
-        p, cid = world.pybullet, world.client
-        for c, stud in list(self.studs.items()):
-            if block_id in (stud.upper, stud.lower):
-                p.removeConstraint(c, physicsClientId=cid)
-                del self.studs[c]
 
     def state(self) -> dict:
         return {c: (s.broken,) for c, s in self.studs.items()}
