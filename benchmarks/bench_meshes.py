@@ -26,8 +26,8 @@ import numpy as np
 from common import RESULTS, write_page
 
 TITLE = 'Meshes from outside: solid targets'
-HEADERS = ['meshes', 'count', 'targets', 'share', 'contains', 'bodies', 'flood fill', 'surface', 'median s',
-           'longest s']
+METHODS = ('contains', 'bodies', 'flood fill', 'surface', 'closed gaps')    # `voxels.MeshReport.method`
+HEADERS = ['meshes', 'count', 'targets', 'share', *METHODS, 'median s', 'longest s']
 
 
 def corpus(n_random: int) -> list[tuple[str, Path]]:
@@ -61,7 +61,7 @@ def measure(name: str, path: Path, unit: float, size: int) -> dict:
 
 def summary(label: str, rows: list[dict]) -> list:
     solid = sum(r['solid'] for r in rows)
-    methods = [sum(r['method'] == m for r in rows) for m in ('contains', 'bodies', 'flood fill', 'surface')]
+    methods = [sum(r['method'] == m for r in rows) for m in METHODS]
     seconds = [r['seconds'] for r in rows]
     return [label, len(rows), solid, f'{solid / max(1, len(rows)):.2f}', *methods,
             f'{np.median(seconds):.2f}', f'{max(seconds):.2f}']
@@ -93,7 +93,10 @@ def main(argv=None) -> int:
             f'{args.size}, --unit {args.unit:g}, z up (the code of the command, `voxels.mesh_models`). Methods: '
             f'contains = one closed shell, cell centres inside; bodies = several closed shells, united; flood fill '
             f'= anything else, holes capped and the outside flood-filled on a finer grid; surface = closed '
-            f'walls thinner than a cell, the cells their surface passes through. No target ('
+            f'walls thinner than a cell (shells that share edges or touch, cracks narrower than a sub-cell '
+            f'included), the cells their surface passes through; closed gaps = anything else left open (gaps '
+            f'between parts, open edges that form no loop), its gaps up to about two cells wide closed on the '
+            f'flood fill\'s grid by thickening the surface and thinning the solid back. No target ('
             f'{len(failed)}): ' + '; '.join(f'{r["mesh"]} ({_reason(r["error"])})' for r in failed)
             + '. The thinnest targets (filled share of their box): '
             + ', '.join(f'{r["mesh"]} {r["fill"]:.2f}' for r in thin) + '.')

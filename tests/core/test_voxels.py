@@ -336,6 +336,78 @@ def test_a_sheet_and_a_tilted_plane_are_refused_with_the_reason(tmp_path):
     assert surface.report.method == 'surface' and surface.cells.shape == (4, 4, 1) and surface.cells.all()
 
 
+def panel_box(n: int, gap: float) -> trimesh.Trimesh:
+    """The six faces of a box n cells a side (UNIT) as separate sheets, each pushed out by `gap` cells: a CAD
+    export whose panels do not meet. Every panel's rim is a loop (capped onto the panel itself), so only
+    the gaps at the box's edges let the outside in."""
+    box = voxels.cells_to_mesh(np.ones((n, n, n), dtype=bool))
+    panels = []
+    for axis in range(3):
+        for side in (0, n):
+            panel = box.triangles[np.all(np.isclose(box.triangles[:, :, axis], side), axis=1)].copy()
+            panel[:, :, axis] += gap if side else -gap
+            panels.append(panel)
+    corners = np.concatenate(panels).reshape(-1, 3) * UNIT
+    return trimesh.Trimesh(corners, np.arange(len(corners)).reshape(-1, 3))
+
+
+def test_a_box_of_panels_that_do_not_meet_has_its_gaps_closed(tmp_path):
+    # Gaps of 0.6 cells (3.7 sub-cells at size 4) at every edge: the flood fill's outside leaks in.
+    path = save(panel_box(4, 0.6), tmp_path / 'panels.stl')
+    got = model(path, size=4)
+    assert got.report.method == 'closed gaps' and got.cells.shape == (4, 4, 4) and got.cells.all()
+    closed = [r for r in got.report.repairs if r.startswith('closed gaps up to about ')]
+    width, cells = re.match(r'closed gaps up to about ([0-9.]+) mesh units wide \(([0-9.]+) cells\)',
+                            closed[0]).groups()
+    pitch = 5.2 * UNIT / 4                                                  # the panels span 5.2 cells
+    assert 0.6 * UNIT < float(width) <= pitch and float(cells) == pytest.approx(float(width) / pitch, abs=0.01)
+    assert 'closed gaps' in got.report.summary()
+    hollow = model(path, size=4, hollow=True)
+    assert hollow.report.method == 'closed gaps' and hollow.cells.sum() == 56 and not hollow.cells[1:3, 1:3, 1:3].any()
+    # Gaps of 2.4 cells at size 8: wider than the closing's two cells, the panels are left apart.
+    with pytest.raises(RadError, match=r'encloses no volume .* even with its gaps up to about [0-9.]+ units wide'):
+        voxels.mesh_models([('m', save(panel_box(4, 3.0), tmp_path / 'apart.stl'))], 0.03, size=8)
+
+
+def test_an_open_sheet_is_refused_even_with_its_gaps_closed(tmp_path):
+    # A gently waved sheet, as it is and tilted (its sub-cells a staircase whose corners a closing fills): thickened
+    # and thinned again it is still a sheet, at any size.
+    x, y = np.meshgrid(np.linspace(0, 1, 33), np.linspace(0, 1, 33), indexing='ij')
+    idx = np.arange(33 * 33).reshape(33, 33)
+    quads = np.stack([idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]], axis=-1).reshape(-1, 4)
+    points = np.stack([x.ravel(), y.ravel(), 0.01 * np.sin(2 * np.pi * x.ravel())], axis=1)
+    for about_y, about_x in ((0, 0), (30, 15)):
+        sheet = trimesh.Trimesh(points, np.concatenate([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]]))
+        sheet.apply_transform(trimesh.transformations.rotation_matrix(math.radians(about_y), [0, 1, 0]))
+        sheet.apply_transform(trimesh.transformations.rotation_matrix(math.radians(about_x), [1, 0, 0]))
+        path = save(sheet, tmp_path / f'sheet_{about_y}.ply')
+        for size in (4, 6, 8):
+            with pytest.raises(RadError, match=r'encloses no volume .* even with its gaps up to about .* closed '
+                                               r'\(a gap wider than that, or a single sheet\): give --hollow'):
+                voxels.mesh_models([('m', path)], 0.03, size=size)
+            [surface] = voxels.mesh_models([('m', path)], 0.03, size=size, hollow=True)
+            assert surface.report.method == 'surface' and surface.cells.any()
+
+
+def test_thin_parts_that_share_edges_or_have_hairline_cracks_give_their_surface(tmp_path):
+    # An L bracket of two plates 0.3 cells thick that share an edge (on four triangles, so not watertight):
+    # no cell centre is inside either, and the flood fill finds nothing between their walls.
+    bracket = boxes([(0, 0, 0), (4, 1, 0.3)], [(0, 0, 0.3), (0.3, 1, 3)])
+    got = model(save(bracket, tmp_path / 'bracket.ply'), scale=1.0)
+    assert got.report.method == 'surface' and got.report.open_edges == 0
+    assert cells_of(got.cells) == {(0, 0, 0), (1, 0, 0), (2, 0, 0), (3, 0, 0), (0, 0, 1), (0, 0, 2)}
+    # A thin ring (as in the test above) with a T-junction: an edge split on one side only, a crack of no width.
+    ring = trimesh.creation.annulus(r_min=2.4, r_max=2.5, height=1.0, sections=64)
+    a, b, c = ring.faces[0]
+    vertices = np.vstack([ring.vertices, (ring.vertices[a] + ring.vertices[b]) / 2])
+    m = len(ring.vertices)
+    cracked = trimesh.Trimesh(vertices, np.vstack([[[a, m, c], [m, b, c]], ring.faces[1:]]), process=False)
+    got = model(save(cracked, tmp_path / 'cracked.ply'), size=5)
+    assert got.report.method == 'surface' and got.report.open_after == 0 and 'capped 1 hole' in got.report.repairs
+    ring_cells = got.cells.any(axis=2)
+    assert ring_cells[0, 2] and ring_cells[4, 2] and not ring_cells[2, 2]
+
+
 def test_the_report_says_what_was_done_in_one_line(tmp_path):
     box = trimesh.creation.box(extents=(0.15, 0.1, 0.1))
     box.update_faces(box.face_normals[:, 2] < 0.5)      # no top
@@ -367,6 +439,23 @@ def test_pybullet_lego_brick_gives_its_walls(tmp_path):
     assert layers.max() == 24 * 24 and layers[:10].max() < 0.25 * 24 * 24   # a closed top on walls and a tube
     assert not grid[6, 6, 3]                                                # inside the hollow
     assert model(_pybullet('lego/lego.obj'), size=6, up='y').cells.any()
+
+
+def test_pybullet_meshes_of_thin_parts_and_gaps_give_targets(tmp_path):
+    # A rail frame of bars thinner than a cell, closed shells that touch: the cells its surface passes through.
+    def at_size_8(name):
+        return voxels.mesh_models([('m', str(_pybullet(name)))], 0.03, size=8)[0]
+
+    rail = at_size_8('husky/meshes/user_rail.stl')
+    assert rail.report.method == 'surface' and rail.cells.shape == (8, 7, 1)
+    assert not rail.cells[2:6, 2:5].any()                              # a frame, not a plate
+    # A shelf pod whose fabric bins have cracks that no loop of open edges bounds: closed, the bins are solid.
+    pod = at_size_8('kiva_shelf/meshes/pod_lowres.stl')
+    assert pod.report.method == 'closed gaps' and pod.report.open_after > 0
+    assert pod.cells.sum() >= 0.9 * pod.cells.size and pod.cells.shape[1] >= 5
+    # A height field is a single sheet: still refused.
+    with pytest.raises(RadError, match='encloses no volume .* closed'):
+        at_size_8('terrain.obj')
 
 
 # ---- fit: yaw, place, height, refusal -------------------------------------------------

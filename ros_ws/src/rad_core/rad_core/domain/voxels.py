@@ -23,8 +23,21 @@ which says what it found and did in a `MeshReport`):
   counting half ('flood fill'). A gap narrower than a sub-cell closes by itself; the half rule
   keeps the solid from growing a cell layer fatter than the model, so a box exactly N cells long
   still gives N cells. Enclosed cavities are filled.
+Where the flood fill finds nothing solid:
+- a surface that encloses sub-cells but no cell, or that is closed (every edge on two triangles or
+  more once its holes are capped, and every hole narrower than a sub-cell, a crack: closed shells, also
+  ones that share edges or touch) is walls thinner than a cell (a tray, a frame of bars): the cells its
+  surface passes through stand for them, one cell thick ('surface');
+- anything else has gaps (cracks between parts, panels that do not meet, open edges that form no
+  loop): they are closed on the flood fill's grid ('closed gaps'). The surface's sub-cells are
+  thickened by r sub-cells along every axis, the outside of that is flood-filled and thickened back by
+  r, so that the solid grows no fatter than the model, and a cell is solid by the flood fill's rule.
+  r starts at the least value from 1 at which the thickened surface encloses something and a cell is
+  solid, and grows while one more sub-cell adds cells (gaps of several widths), up to `sub`: gaps up
+  to about two cells wide close. The report says how wide. A single sheet (a height field) thickened
+  encloses nothing at any r: it is refused.
 `hollow` keeps the solid's shell (cells with a face towards the outside); where nothing is
-enclosed it takes the cells the surface passes through ('surface').
+enclosed even with the gaps closed it takes the cells the surface passes through ('surface').
 
 Scale: `size` N makes the longest side of all the models together N cells (several
 models keep their proportions); `scale` S says how many metres one mesh unit is (1 for a
@@ -155,8 +168,8 @@ class MeshReport:
 
     bodies: connected pieces of surface; open_edges: edges with one triangle on them as read
     (vertices repeated along texture seams count); open_after: those left after the repairs and
-    the caps; repairs: what was changed, in words; method: 'contains', 'bodies', 'flood fill' or
-    'surface' (the module docstring says which mesh gets which); cells: the filled cells.
+    the caps; repairs: what was changed, in words; method: 'contains', 'bodies', 'flood fill', 'surface'
+    or 'closed gaps' (the module docstring says which mesh gets which); cells: the filled cells.
     """
 
     bodies: int
@@ -169,7 +182,7 @@ class MeshReport:
     def summary(self) -> str:
         """One line: the cells and how, the mesh as read, the repairs."""
         shells = f'{self.bodies} bod{"y" if self.bodies == 1 else "ies"}'
-        if self.open_edges == 0:
+        if self.open_edges == 0 and self.open_after == 0:
             state = f'{shells}, no open edge'
         elif self.open_after == self.open_edges:
             state = f'{shells}, {self.open_edges} open edges'
@@ -347,9 +360,10 @@ def solid_cells(mesh, pitch: float, hollow: bool = False, where: str = 'mesh') -
     """The mesh's cells of edge `pitch` (mesh units), the bounding box centred in theirs, and the report.
 
     Solid by the mesh's kind (module docstring): 'contains' for one closed shell, 'bodies' for
-    several, 'flood fill' for anything else. Hollow: the solid's shell, or where the surface
-    encloses nothing, the cells it passes through. RadError (naming `where`) when a solid is asked
-    and the surface encloses nothing.
+    several, 'flood fill' for anything else; where that finds nothing solid, 'surface' for walls
+    thinner than a cell, 'closed gaps' for a surface with gaps up to about two cells wide. Hollow: the
+    solid's shell, or where the surface encloses nothing even with its gaps closed, the cells it passes
+    through. RadError (naming `where`) when a solid is asked and the surface encloses nothing.
     """
     lo, hi = mesh.bounds
     counts = cell_counts(hi - lo, pitch)
@@ -363,10 +377,8 @@ def solid_cells(mesh, pitch: float, hollow: bool = False, where: str = 'mesh') -
             grid = shell(grid)
         return grid, MeshReport(bodies, n_open, open_after, tuple(repairs), method, int(grid.sum()))
 
-    closed = False              # closed shells thinner than a cell have no cell centre inside: their surface's below
     if mesh.is_watertight:
         shells = mesh.split(only_watertight=False) if bodies > 1 else [mesh]
-        closed = len(shells) == 1 or all(s.is_watertight for s in shells)
         if len(shells) == 1:
             inside = _contains(mesh, cell_centres(corner, counts, pitch)).reshape(tuple(counts))
             if inside.any():
@@ -376,24 +388,34 @@ def solid_cells(mesh, pitch: float, hollow: bool = False, where: str = 'mesh') -
             if inside.any():
                 return done(inside, 'bodies', 0)
     triangles = mesh.triangles
-    caps, holes, open_after = _hole_caps(mesh)
+    caps, holes, open_after, widest = _hole_caps(mesh)
+    sub = _sub_cells(counts)
+    # Every edge on two triangles or more, once cracks narrower than a sub-cell are capped: closed shells, also
+    # ones that share edges or touch. Closed shells thinner than a cell have no cell centre inside: their
+    # surface's below.
+    closed = not open_after and widest < pitch / sub
     if holes:
         repairs.append(f'capped {holes} hole{"s" if holes > 1 else ""}')
         triangles = np.concatenate([triangles, caps])
-    sub = _sub_cells(counts)
-    solid, surface, enclosed = _flood_fill(triangles, corner, counts, pitch, sub)
+    solid, surface, enclosed, fine = _flood_fill(triangles, corner, counts, pitch, sub)
     if enclosed and solid.any():
         return done(solid, 'flood fill', open_after)
-    thin = (enclosed or closed) and surface.any()
-    if thin and not hollow:
-        # Walls thinner than a cell (a tray, a channel): no cell centre is inside them, so the cells
-        # the surface passes through stand for them, one cell thick.
-        repairs.append('thinner than a cell: the cells its surface passes through')
-    if thin or hollow:
+    if (enclosed or closed) and surface.any():
+        if not hollow:
+            # Walls thinner than a cell (a tray, a channel): no cell centre is inside them, so the cells
+            # the surface passes through stand for them, one cell thick.
+            repairs.append('thinner than a cell: the cells its surface passes through')
         return done(surface, 'surface', open_after)
-    raise RadError(f'{where}: the surface encloses no volume at {pitch:.4g} mesh units per cell (a gap wider than '
-                   f'{pitch / sub:.3g} units, or a single sheet): give --hollow to take its surface only, or '
-                   f'close it in a mesh editor')
+    closed_solid, r = _close_gaps(fine, counts, sub)
+    if closed_solid is not None:
+        repairs.append(f'closed gaps up to about {_gap(r, pitch, sub):.3g} mesh units wide '
+                       f'({_gap(r, pitch, sub) / pitch:.2g} cells)')
+        return done(closed_solid, 'closed gaps', open_after)
+    if hollow:
+        return done(surface, 'surface', open_after)
+    raise RadError(f'{where}: the surface encloses no volume at {pitch:.4g} mesh units per cell, even with its '
+                   f'gaps up to about {_gap(sub, pitch, sub):.3g} units wide closed (a gap wider than that, or a '
+                   f'single sheet): give --hollow to take its surface only, or close it in a mesh editor')
 
 
 def _repaired(mesh):
@@ -459,17 +481,19 @@ def _inside_shells(shells, corner: np.ndarray, counts: np.ndarray, pitch: float)
     return solid.reshape(tuple(counts))
 
 
-def _hole_caps(mesh) -> tuple[np.ndarray, int, int]:
+def _hole_caps(mesh) -> tuple[np.ndarray, int, int, float]:
     """Triangles that close the mesh's holes, a fan from the centroid of every loop of open edges;
-    the number of loops; and the open edges that no loop closes."""
+    the number of loops; the open edges that no loop closes; and the widest hole's width (mesh units):
+    four times its cap's area over its perimeter (a square's side, a circle's diameter, twice a slit's
+    width)."""
     import networkx as nx  # trimesh's own dependency: only a mesh import pays for its import
     from trimesh import grouping  # trimesh: only a mesh import pays for its import
     boundary = mesh.edges_sorted[grouping.group_rows(mesh.edges_sorted, require_count=1)]
     if len(boundary) == 0:
-        return np.zeros((0, 3, 3)), 0, 0
+        return np.zeros((0, 3, 3)), 0, 0, 0.0
     loops = nx.cycle_basis(nx.from_edgelist(boundary.tolist()))
     if not loops:
-        return np.zeros((0, 3, 3)), 0, len(boundary)
+        return np.zeros((0, 3, 3)), 0, len(boundary), 0.0
     sizes = np.array([len(loop) for loop in loops])
     ring = np.concatenate([np.asarray(loop, dtype=np.int64) for loop in loops])
     starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
@@ -481,7 +505,11 @@ def _hole_caps(mesh) -> tuple[np.ndarray, int, int]:
     n = len(mesh.vertices)
     closed = np.sort(np.stack([ring, ring[following]], axis=1), axis=1)
     still_open = ~np.isin(boundary[:, 0] * n + boundary[:, 1], closed[:, 0] * n + closed[:, 1])
-    return caps, len(loops), int(still_open.sum())
+    area = np.add.reduceat(np.linalg.norm(np.cross(caps[:, 1] - caps[:, 0], caps[:, 2] - caps[:, 0]), axis=1) / 2,
+                           starts)
+    perimeter = np.add.reduceat(np.linalg.norm(points[following] - points, axis=1), starts)
+    width = 4 * area / np.maximum(perimeter, 1e-300)
+    return caps, len(loops), int(still_open.sum()), float(width.max())
 
 
 def _sub_cells(counts: np.ndarray) -> int:
@@ -491,9 +519,10 @@ def _sub_cells(counts: np.ndarray) -> int:
 
 
 def _flood_fill(triangles: np.ndarray, corner: np.ndarray, counts: np.ndarray, pitch: float,
-                sub: int) -> tuple[np.ndarray, np.ndarray, bool]:
+                sub: int) -> tuple[np.ndarray, np.ndarray, bool, np.ndarray]:
     """The solid cells by a flood fill of the outside (module docstring), the cells the surface passes
-    through, and whether the surface encloses anything (a sub-cell neither outside nor on it)."""
+    through, whether the surface encloses anything (a sub-cell neither outside nor on it), and the
+    sub-cells the surface touches (the cells' sub-cells with two empty ones round them)."""
     from scipy import ndimage  # scipy: only a mesh import pays for its import
     step = pitch / sub
     shape = tuple(int(c) * sub + 4 for c in counts)          # two empty sub-cells round the cells
@@ -503,12 +532,60 @@ def _flood_fill(triangles: np.ndarray, corner: np.ndarray, counts: np.ndarray, p
     inner = (slice(2, -2),) * 3
     on = surface[inner]
     enclosed = ~outside[inner] & ~on
-    blocks = tuple(v for c in counts for v in (int(c), sub))
+    return _cell_rule(enclosed, on, counts, sub), _blocks(on, counts, sub).any(axis=(1, 3, 5)), \
+        bool(enclosed.any()), surface
+
+
+def _blocks(fine: np.ndarray, counts: np.ndarray, sub: int) -> np.ndarray:
+    """The cells' sub-cells [i, a, j, b, k, c]: sub-cell (a, b, c) of cell (i, j, k)."""
+    return fine.reshape(tuple(v for c in counts for v in (int(c), sub)))
+
+
+def _cell_rule(enclosed: np.ndarray, on: np.ndarray, counts: np.ndarray, sub: int) -> np.ndarray:
+    """The solid cells: more than half of a cell not outside, a sub-cell the surface touches counting half
+    (module docstring); at the cell's centre first, its 2 x 2 x 2 sub-cells, then all of it on a tie."""
     middle = slice(sub // 2 - 1, sub // 2 + 1)                # the 2 x 2 x 2 sub-cells round a cell's centre
-    weight = (enclosed.astype(np.float32) + 0.5 * on).reshape(blocks)
+    weight = _blocks(enclosed.astype(np.float32) + 0.5 * on, counts, sub)
     centre = weight[:, middle, :, middle, :, middle].sum(axis=(1, 3, 5))
-    solid = (centre > 4) | ((centre == 4) & (weight.sum(axis=(1, 3, 5)) >= 0.5 * sub ** 3))
-    return solid, on.reshape(blocks).any(axis=(1, 3, 5)), bool(enclosed.any())
+    return (centre > 4) | ((centre == 4) & (weight.sum(axis=(1, 3, 5)) >= 0.5 * sub ** 3))
+
+
+def _close_gaps(surface: np.ndarray, counts: np.ndarray, sub: int) -> tuple[np.ndarray | None, int]:
+    """The solid cells of a surface that encloses nothing, its gaps closed (module docstring), and by how
+    many sub-cells r it was thickened: for r = 1 .. sub, the surface (`_flood_fill`'s sub-cells) thickened
+    by r sub-cells along every axis, the outside of that flood-filled from the border and thickened back by
+    r, so that the solid is no fatter than the model; the solid by `_cell_rule`. From the least r at which
+    the thickened surface encloses a sub-cell and a cell is solid, r grows while one more sub-cell adds
+    cells (several gaps of different widths all closed, no wider one), up to r = sub. (None, 0) where no r
+    encloses a solid cell: a single sheet thickened encloses nothing."""
+    from scipy import ndimage  # scipy: only a mesh import pays for its import
+    margin = sub + 1                                         # the thickest surface stays clear of the border
+    grid = np.pad(surface, margin)
+    inner = (slice(margin + 2, -margin - 2),) * 3            # the cells' sub-cells
+    on = grid[inner]
+    # Sub-cells from the surface, the most along any one axis: within r = within a cube of 2r + 1 round it.
+    near = ndimage.distance_transform_cdt(~grid, metric='chessboard')
+    found = None
+    for r in range(1, sub + 1):
+        labels, _ = ndimage.label(near > r)                  # faces shared: six neighbours
+        outside = labels == labels[0, 0, 0]
+        if found is None and not (near > r)[~outside].any():
+            continue                                         # the thickened surface encloses nothing
+        outside = ndimage.distance_transform_cdt(~outside, metric='chessboard') <= r
+        solid = _cell_rule(~outside[inner] & ~on, on, counts, sub)
+        if found is not None and np.array_equal(solid, found):
+            return found, r - 1
+        if solid.any():
+            found = solid
+    return found, sub if found is not None else 0
+
+
+def _gap(r: int, pitch: float, sub: int) -> float:
+    """About the widest gap (mesh units) that the surface's sub-cells close when thickened by r of pitch / sub:
+    2r + 2 sub-cells. Each side's sub-cells cover that side and start at most half a sub-cell past it
+    (`_rasterize`), so a gap g sub-cells wide leaves more than g - 3 and fewer than g sub-cells between them;
+    thickened by r each side, every gap up to 2r + 1 sub-cells wide closes, none wider than 2r + 3."""
+    return (2 * r + 2) * pitch / sub
 
 
 def _rasterize(triangles: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
