@@ -160,3 +160,22 @@ def test_a_press_that_would_break_what_is_built_is_refused():
     assert not ok and why.startswith('pressing it home would break what is built')
     env, b, cells = _env_after(text, 1)           # the crossbar itself, pressed over the stem: fine
     assert env._stable(b, cells) == (True, '')
+
+
+@pytest.mark.parametrize('push,stays_joined', [(0.002, True), (0.006, False)])
+def test_a_brick_pushed_along_the_one_under_it_keeps_its_studs_until_it_leaves_their_sockets(push, stays_joined):
+    """Studs hold sideways by their shape: a joined brick pushed 2 mm along its base comes back to its
+    seat with its studs; pushed 6 mm (a fifth of the 3 cm unit) it has left them."""
+    from rad_core.sim.world import World
+    scene = cantilever_scene()
+    top, position, yaw = top_pose(scene)
+    with World(scene) as world:
+        world.set_block_pose(top, position, yaw_quaternion(yaw))
+        world.studs.join(world, top)
+        world.step(10)
+        world.set_block_pose(top, position + (push, 0.0, 0.0), yaw_quaternion(yaw))
+        world.step(int(0.5 / world.config.physics.time_step))
+        assert bool(world.studs.broken) == (not stays_joined)
+        if stays_joined:
+            after, _ = world.block_pose(top)
+            assert np.linalg.norm(after - position) < 0.001

@@ -222,3 +222,28 @@ def test_mdp_uses_physics_by_default():
     # I2 (yaw 90) turned to lie along x on top of the cube, its second unit over nothing.
     r = env.step(Action(2, 0, env.grid.index(0, (0, 0, 1)), 3))
     assert r.outcome == Outcome.INVALID_UNSTABLE and r.reason.startswith('new block')
+
+
+def test_a_block_of_more_units_than_a_pybullet_compound_holds_collides_on_every_unit():
+    """PyBullet keeps 16 children of a compound shape and drops the rest without a word: a LEGO 2 x 6
+    brick, 36 units of a plate's height, must still be solid at every one of them."""
+    import pybullet as p
+    from rad_core.sim.physics import MAX_COMPOUND_BOXES, PhysicsConfig, add_block_body, block_shape
+    offsets = np.array([[x, y, z] for x in range(6) for y in range(2) for z in range(3)])
+    pitch = np.array([0.03, 0.03, 0.012])
+    client = p.connect(p.DIRECT)
+    try:
+        config = PhysicsConfig()
+        shape = block_shape(p, client, offsets, pitch, config, frame='anchor')
+        assert len(p.getCollisionShapeData(add_block_body(p, client, shape, (0, 0, 0), (0, 0, 0, 1), config), -1,
+                                           physicsClientId=client)) <= MAX_COMPOUND_BOXES
+        body = add_block_body(p, client, shape, (0, 0, 0), (0, 0, 0, 1), config)
+        ball = p.createCollisionShape(p.GEOM_SPHERE, radius=0.001, physicsClientId=client)
+        probe = p.createMultiBody(0, ball, basePosition=(5, 5, 5), physicsClientId=client)
+        for unit in offsets * pitch:       # a grain of sand at every unit's centre touches the brick
+            p.resetBasePositionAndOrientation(probe, unit, (0, 0, 0, 1), physicsClientId=client)
+            assert p.getClosestPoints(body, probe, 0.0, physicsClientId=client), f'no collision at unit {unit}'
+        p.resetBasePositionAndOrientation(probe, (0.2, 0.0, 0.0), (0, 0, 0, 1), physicsClientId=client)
+        assert not p.getClosestPoints(body, probe, 0.0, physicsClientId=client)
+    finally:
+        p.disconnect(client)

@@ -238,3 +238,37 @@ def test_supply_finds_a_cover_of_the_solid_box_the_hand_places_whole_where_rows_
                               params=SupplyParams(time_limit_s=10.0))
     assert report.covered == 16
     assert (report.hand_covered == 16) == whole, report    # at 4 cm: 80 mm rows, wider than the hand takes
+
+
+def test_a_plate_thinner_than_the_fingertips_reach_is_held_above_its_tight_grasp():
+    """A LEGO 2 x 4 plate at a 3 cm pitch is 12 mm thick, less than the 8 mm the pads reach under the
+    grasp target plus the plate's half: held at its centre, the fingertips would hit the table. The
+    planner raises the grasp so they stay `TIP_FLOOR` over what it rests on, and it is placed."""
+    import numpy as np
+    from rad_core.allocation.brick_scenes import built_blocks, lattice_of, scene_from_design, target_of
+    from rad_core.domain.brick_designs import parse_ldraw
+    from rad_core.gamp.action import MotionPlanner, SceneAction
+    from rad_core.gamp.grasps import TIP_FLOOR, tip_floor_lift
+
+    assert tip_floor_lift(0.006) == pytest.approx(TIP_FLOOR - 0.006)
+    assert tip_floor_lift(0.030) == 0.0
+    ldraw = '1 4 0 -24 0 1 0 0 0 1 0 0 0 1 3001.dat\n1 4 0 -32 0 1 0 0 0 1 0 0 0 1 3020.dat\n'
+    design = parse_ldraw(ldraw, 'plate.ldr')
+    scene, _ = scene_from_design(design, 'lego', 0.03)
+    lattice = lattice_of(design, 'lego', 0.03)
+    _, region, _ = target_of(design, lattice)
+    _, placed = built_blocks(design.normalised(), lattice, region)
+    doc = scene.to_dict()
+    brick = next(b for b in doc['blocks'] if b['type'] == placed[0].type)
+    brick['position'], brick['yaw'] = list(placed[0].position), placed[0].yaw
+    scene = type(scene).from_dict(doc)
+    plate = next(b for b in scene.blocks if b.type == placed[1].type)
+    cell = tuple(int(v) for v in np.round((np.asarray(placed[1].position) - region.origin) / scene.pitch))
+    planner = MotionPlanner()
+    try:
+        result, planned, _ = planner(scene, SceneAction(plate.id, 0, region.name, cell,
+                                                        ((placed[1].yaw - plate.yaw) // 90) % 4))
+    finally:
+        planner.close()
+    assert result.success, result.reason
+    assert planned == pytest.approx(placed[1].position)

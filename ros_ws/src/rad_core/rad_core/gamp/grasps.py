@@ -65,6 +65,21 @@ GRASP_BELOW_TOP = 0.013
 centre: the fingertips' pads then cover the unit's side from 2.4 mm under its top down to 21 mm."""
 
 
+TIP_BELOW = 0.008
+"""How far (m) the fingertips' pads reach under the grasp target (`cell.panda.FINGER_BOXES`' rubber tip)."""
+
+TIP_FLOOR = TIP_BELOW + 0.002
+"""The least height (m) of the grasp target over the held block's bottom: the pads stay 2 mm above what
+the block rests on. A block thinner than that (a plate of a stud system) is held higher than its tight
+grasp, the pads on its upper part (`tip_floor_lift`)."""
+
+
+def tip_floor_lift(hang: float) -> float:
+    """How far (m) to raise a grasp whose target hangs `hang` above the held block's bottom, so that the
+    fingertips stay `TIP_FLOOR` over what the block rests on (0 where they already do)."""
+    return max(0.0, TIP_FLOOR - hang)
+
+
 def grasp_lift(height: float) -> float:
     """How far (m) a tight grasp's target sits above the held unit's centre, for a unit this high (the
     unit, or a stud system's course height)."""

@@ -53,6 +53,7 @@ from rad_core.gamp.grasps import (
     Grasp,
     grasp_centre,
     grasp_lift,
+    tip_floor_lift,
     grasp_width,
     no_grasp_reason_for,
     scene_grasps,
@@ -372,9 +373,12 @@ def _try_grasp(job: _Job, grasp: Grasp) -> tuple[tuple | None, str, str]:
         pick, why = None, []
         for open_f, lift in styles:
             offset = centre + (0.0, 0.0, lift)
-            grasp_point = job.block_pos + rot @ offset
-            # From the grasp point down to the held block's bottom.
+            # From the grasp point down to the held block's bottom; a plate is held above its tight grasp.
             hang = (offset[2] - min(o[2] for o in btype.offsets) * job.course) + job.course / 2
+            if config.effector != 'suction':
+                raise_by = tip_floor_lift(hang)
+                offset, hang = offset + (0.0, 0.0, raise_by), hang + raise_by
+            grasp_point = job.block_pos + rot @ offset
             transit_z = job.tops + hang + config.transit_clearance
             rise_pick = max(config.approach_height, transit_z - grasp_point[2])
             near = hang + config.near_margin

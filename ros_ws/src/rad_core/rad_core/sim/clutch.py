@@ -7,6 +7,10 @@ at the scene's clutch (N, ``studs.clutch``). Contacts stay Bullet's own, so a br
 an edge of what holds it lifts the studs on the far side, which pull it back up to their clutch;
 a stud pulled harder stretches, and once it has stretched `BREAK_STRETCH` it is broken for good
 (its force set to 0, as a stud that popped off stays off until the brick is pressed again).
+Across the stud a joint gives way only after `BREAK_SLIDE`: a stud in its socket is held sideways by
+its shape, not by the clutch, so a brick pushed along the one under it comes back to its seat
+(its joints pull it there) where a millimetre's slide broke its studs before, and a cantilever
+held by one column of studs fell with it.
 
 Only bricks pressed home are joined (`join`): the twin's press, or a teleported placement, which
 stands for one. A brick set down unpressed only rests. Joints are part of a world's snapshot:
@@ -23,6 +27,10 @@ BREAK_STRETCH = 0.001
 """How far (m) a stud's joint may stretch, the upper brick lifted off its seat or slid along it,
 before it counts as pulled off. Pushed further onto its seat (a press, a load) it holds: contacts
 bear that."""
+
+BREAK_SLIDE = 0.1
+"""How far (a fraction of the unit) a stud's joint may be slid along the brick under it before it
+counts as pushed off its stud: a brick that slides that far has left its socket."""
 
 SEATED = 0.15
 """How far (a fraction of the unit, and of the course height) a brick may sit off the lattice above
@@ -90,16 +98,17 @@ class StudJoints:
         return sorted(found)
 
     def check(self, world) -> list[tuple[str, str]]:
-        """Break the studs stretched more than `BREAK_STRETCH`; the (upper, lower) connections that
-        lost a stud now."""
+        """Break the studs lifted more than `BREAK_STRETCH` off their seat or slid more than `BREAK_SLIDE`
+        along it; the (upper, lower) connections that lost a stud now."""
         p, cid = world.pybullet, world.client
+        slide = BREAK_SLIDE * world.scene.unit
         out = []
         for stud in self.studs.values():
             if stud.broken:
                 continue
             d = _world(p, cid, world.blocks[stud.upper], stud.in_upper) - _world(p, cid, world.blocks[stud.lower],
                                                                                   stud.in_lower)
-            if d[2] > BREAK_STRETCH or np.hypot(d[0], d[1]) > BREAK_STRETCH:
+            if d[2] > BREAK_STRETCH or np.hypot(d[0], d[1]) > slide:
                 stud.broken = True
                 p.changeConstraint(stud.constraint, maxForce=0.0, physicsClientId=cid)
                 out.append((stud.upper, stud.lower))

@@ -213,7 +213,7 @@ class BlockShape:
     """
 
     frame: str
-    collision: int            # compound of one box per unit cube, in the body frame
+    collision: int            # compound of one box per unit cube (merged beyond 16), in the body frame
     visual: int               # compound of visual boxes in the body frame, or -1
     mass: float
     inertia: list[float]      # principal moments, kg m^2
@@ -248,25 +248,70 @@ def block_shape(p, client: int, offsets: np.ndarray, edge, config: PhysicsConfig
     edge, course = (float(edge), float(edge)) if np.ndim(edge) == 0 else (float(edge[0]), float(edge[2]))
     side, height = edge / 2 - config.side_gap * edge, course / 2 + config.overlap * edge
     shift, half = unit_boxes(offsets, side, height, clearance * edge / 2)
-    centres = offsets * pitch + shift
+    centres, half = compound_boxes(offsets * pitch + shift, half)
+    m = len(centres)
     boxes = {'halfExtents': half.tolist()}
     if frame == 'principal':
         # Boxes in the principal frame, turned back so they are axis-aligned in the world.
         boxes.update(collisionFramePositions=((centres - com) @ axes).tolist(),
-                     collisionFrameOrientations=[quaternion_from_matrix(axes.T)] * n)
+                     collisionFrameOrientations=[quaternion_from_matrix(axes.T)] * m)
     else:
         boxes.update(collisionFramePositions=centres.tolist())
-    collision = p.createCollisionShapeArray([p.GEOM_BOX] * n, **boxes, physicsClientId=client)
+    collision = p.createCollisionShapeArray([p.GEOM_BOX] * m, **boxes, physicsClientId=client)
     visual = -1
     if visual_half is not None:
         if frame != 'anchor':
             raise RadError("block_shape: visual boxes are made in the 'anchor' frame only")
         vshift, vhalf = unit_boxes(offsets, visual_half, visual_half * course / edge, clearance * edge / 2)
-        visual = p.createVisualShapeArray([p.GEOM_BOX] * n, halfExtents=vhalf.tolist(),
-                                          visualFramePositions=(offsets * pitch + vshift).tolist(),
-                                          physicsClientId=client)
+        vcentres, vhalf = compound_boxes(offsets * pitch + vshift, vhalf)
+        visual = p.createVisualShapeArray([p.GEOM_BOX] * len(vcentres), halfExtents=vhalf.tolist(),
+                                          visualFramePositions=vcentres.tolist(), physicsClientId=client)
     return BlockShape(frame, collision, visual, config.cube_mass * n, moments.tolist(), com,
                       quaternion_from_matrix(axes))
+
+
+MAX_COMPOUND_BOXES = 16
+"""The most children a PyBullet compound shape keeps: createCollisionShapeArray and
+createVisualShapeArray silently drop the rest (pybullet 3.2.x, `MAX_COMPOUND_COLLISION_SHAPES`)."""
+
+
+def compound_boxes(centres: np.ndarray, half: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The boxes (centres, half extents (n, 3)) as at most `MAX_COMPOUND_BOXES` boxes that fill the same
+    space: where there are more (a brick of many units: a LEGO 2x4 brick is 24), boxes that share their
+    extent along two axes and meet or nearly meet (within the gap a unit's box leaves to the next) along
+    the third are merged, until no two are left to merge; at most 16 boxes, unchanged. RadError where a
+    block still needs more (a shape too ragged for one PyBullet body)."""
+    centres, half = np.asarray(centres, dtype=float), np.asarray(half, dtype=float)
+    if len(centres) <= MAX_COMPOUND_BOXES:
+        return centres, half
+    boxes = [(tuple(a), tuple(b)) for a, b in zip((centres - half).tolist(), (centres + half).tolist())]
+    gap = 0.2 * float(np.min(half))          # unit boxes stand apart by a hair (side_gap), never by this much
+    while True:
+        count = len(boxes)
+        for axis in range(3):
+            rows: dict = {}
+            for box in boxes:       # boxes that share their extent along the other two axes, in a row
+                key = tuple(round(v, 9) for k in range(3) if k != axis for v in (box[0][k], box[1][k]))
+                rows.setdefault(key, []).append(box)
+            boxes = []
+            for row in rows.values():
+                row.sort(key=lambda b: b[0][axis])
+                run_lo, run_hi = list(row[0][0]), list(row[0][1])
+                for b_lo, b_hi in row[1:]:
+                    if b_lo[axis] - run_hi[axis] <= gap:
+                        run_hi[axis] = max(run_hi[axis], b_hi[axis])
+                    else:
+                        boxes.append((tuple(run_lo), tuple(run_hi)))
+                        run_lo, run_hi = list(b_lo), list(b_hi)
+                boxes.append((tuple(run_lo), tuple(run_hi)))
+        if len(boxes) == count:
+            break
+    lo, hi = [np.array(b[0]) for b in boxes], [np.array(b[1]) for b in boxes]
+    if len(lo) > MAX_COMPOUND_BOXES:
+        raise RadError(f'a block of {len(centres)} units needs {len(lo)} boxes, more than the '
+                       f'{MAX_COMPOUND_BOXES} a PyBullet body holds: split it into blocks of simpler shapes')
+    lo, hi = np.array(lo), np.array(hi)
+    return (lo + hi) / 2, (hi - lo) / 2
 
 
 def add_block_body(p, client: int, shape: BlockShape, position, orientation, config: PhysicsConfig,
