@@ -179,3 +179,61 @@ def test_a_brick_pushed_along_the_one_under_it_keeps_its_studs_until_it_leaves_t
         if stays_joined:
             after, _ = world.block_pose(top)
             assert np.linalg.norm(after - position) < 0.001
+
+
+@pytest.mark.parametrize('raise_by,unseated', [(0.0, False), (1.0, True), (0.0, None)])
+def test_motion_capture_sees_a_brick_standing_on_its_studs_as_not_pressed_home(raise_by, unseated):
+    """A Duplo brick a stud's height (8.4 mm at a 3 cm pitch) above its seat registers on its seat, marked
+    not pressed home; on its seat, or on the table (None: which has no studs), it is not marked."""
+    from rad_core.cell.mocap import RegistrationConfig, RigidBodyPose, register_world
+    scene = cantilever_scene()
+    top, position, yaw = top_pose(scene)
+    stud = scene.stud_height
+    assert stud == pytest.approx(0.03 * 4.5 / 16)
+    base = scene.blocks[0]
+    where = np.asarray(position) if unseated is not None else np.array([0.3, -0.3, scene.course / 2])
+    bodies = [RigidBodyPose(base.id, tuple(base.position), tuple(yaw_quaternion(base.yaw))),
+              RigidBodyPose(top, tuple(where + (0, 0, raise_by * stud)), tuple(yaw_quaternion(yaw)))]
+    config = RegistrationConfig(body_map={b.id: (b.id, b.type) for b in scene.blocks})
+    reg = register_world(bodies, scene, config)
+    assert not reg.set_aside
+    assert (top in reg.unseated) == bool(unseated)
+    assert reg.scene.block(top).position[2] == pytest.approx(where[2])
+    if unseated:
+        assert reg.unseated[top] == pytest.approx(stud, abs=1e-4)
+
+
+def _tower_build(**faults):
+    """A Duplo tower of three 2 x 4s built by the robot in the twin with these faults."""
+    from rad_core.experiment.evaluation import get_agent, robot_planner
+    from rad_core.sequencing.execution.twin_build import build_simulated
+    from rad_core.sim.faults import FaultConfig
+    from rad_core.sim.twin import TwinConfig
+    design = parse_text('4x2 (0,0,0)\n4x2 (0,0,1)\n4x2 (0,0,2)\n', 'tower.txt')
+    scene, _ = scene_from_design(design, 'duplo', 0.03)
+    planner = robot_planner(get_agent('default'))
+    try:
+        return build_simulated(scene, lambda now, start: planner(now, start, 0), planner.motion,
+                               twin_config=TwinConfig(faults=FaultConfig(**faults)))
+    finally:
+        planner.close()
+
+
+@pytest.mark.slow
+def test_a_brick_not_pressed_home_is_seen_and_pressed_again():
+    built = _tower_build(seed=1, unpressed=0.5)
+    assert built.injected == {'unpressed': 1}
+    result = built.result
+    assert result.success and result.coverage == 1.0 and not result.unseated
+    fault, = result.faults
+    assert 'is not pressed home: motion capture sees it 8.4 mm above its seat' in fault['problem']
+    assert fault['recovered']
+    assert len(result.steps) == 4           # three bricks, one of them taken again and pressed
+
+
+@pytest.mark.slow
+def test_a_brick_left_unpressed_fails_the_run_naming_it():
+    built = _tower_build(seed=0, unpressed=0.5)        # the top brick three times in a row
+    result = built.result
+    assert not result.success and result.reason.startswith('not pressed home: ')
+    assert all(not f['recovered'] for f in result.faults)

@@ -193,6 +193,9 @@ class Registration:
     """The set-aside blocks that lie over a target region (below its top)."""
     blocked: dict[str, tuple[tuple[int, int, int], ...]] = field(default_factory=dict)
     """Region name -> the target cells set-aside blocks occupy (and no registered block does)."""
+    unseated: dict[str, float] = field(default_factory=dict)
+    """Block id -> how far (m) above its seat it stands: studded bricks seen a stud's height up, standing
+    on the studs under them, not pressed home (registered at their seat)."""
 
     def plannable(self) -> Scene:
         """The registered scene without the blocked cells among its targets' filled cells (a region left
@@ -239,6 +242,7 @@ def _register(bodies: list[RigidBodyPose], template: Scene, config: Registration
     blocks, names = [], []
     offsets: dict[str, list[float]] = {}
     set_aside: dict[str, str] = {}
+    unseated: dict[str, float] = {}
     in_regions: set[str] = set()
     for body in bodies:
         name = body.name
@@ -259,7 +263,8 @@ def _register(bodies: list[RigidBodyPose], template: Scene, config: Registration
                 block_id, np.asarray(body.position, dtype=float) - [0.0, 0.0, config.table_z]):
             continue        # presented by the feeder and not taken: still the feeder's (kept below)
         try:
-            position, yaw, offset = _snap(body, template, template.block_types[block_type], config, lenient)
+            position, yaw, offset, raised = _snap(body, template, template.block_types[block_type], config,
+                                                  lenient)
         except _Unexpressible as e:
             if not lenient:
                 raise
@@ -269,6 +274,8 @@ def _register(bodies: list[RigidBodyPose], template: Scene, config: Registration
             continue
         blocks.append({'id': block_id, 'type': block_type, 'position': position, 'yaw': yaw})
         names.append(name)
+        if raised:
+            unseated[block_id] = raised
         if offset is not None and (len(offset) == 3 or max(abs(v) for v in offset) >= config.offset_floor):
             offsets[block_id] = offset
     by_block = {entry[0]: body for body in bodies for entry in [config.body_map.get(body.name)] if entry}
@@ -301,7 +308,8 @@ def _register(bodies: list[RigidBodyPose], template: Scene, config: Registration
             continue
         blocked = _blocked_cells([by_block[b] for b in set_aside], [config.body_map[by_block[b].name][1]
                                                                     for b in set_aside], scene)
-        return Registration(scene, set_aside, frozenset(in_regions), blocked)
+        return Registration(scene, set_aside, frozenset(in_regions), blocked,
+                            {b: h for b, h in unseated.items() if b not in set_aside})
 
 
 def _obstacle(block_id: str, body: RigidBodyPose, config: RegistrationConfig) -> dict:
@@ -361,10 +369,12 @@ def _over_regions(body: RigidBodyPose, template: Scene, block_type) -> bool:
 
 
 def _snap(body: RigidBodyPose, template: Scene, block_type, config: RegistrationConfig,
-          lenient: bool = False) -> tuple[list[float], int, list[float] | None]:
-    """The block's anchor position and yaw as a scene can express them, and its measured offset from
+          lenient: bool = False) -> tuple[list[float], int, list[float] | None, float]:
+    """The block's anchor position and yaw as a scene can express them, its measured offset from
     there: x/y (m) for a block snapped onto a target region's grid; [0, 0, turn (deg)] for one lying
-    on the table turned off the lattice (lenient only; strict registration refuses it); else None."""
+    on the table turned off the lattice (lenient only; strict registration refuses it); else None;
+    and how far (m) above its seat it stands: in a studded scene, a brick whose height fits a level
+    plus a stud's height better than a level stands on the studs under it, not pressed home (0 else)."""
     name, u = body.name, template.unit
     pos = np.asarray(body.position, dtype=float).reshape(-1)
     quat = np.asarray(body.quaternion, dtype=float).reshape(-1)
@@ -396,6 +406,13 @@ def _snap(body: RigidBodyPose, template: Scene, block_type, config: Registration
     c = template.course
     height = (pos[2] - config.table_z - c / 2) / c
     level = round(height)
+    raised = 0.0
+    if template.stud_height:
+        on_studs = height - template.stud_height / c
+        if round(on_studs) >= 1 and abs(on_studs - round(on_studs)) < abs(height - level):
+            # Higher than a seat by about a stud (the table has none): on the studs of the brick under it.
+            raised = round((height - round(on_studs)) * c, 4)
+            height, level = on_studs, round(on_studs)
     if abs(height - level) > config.position_tol:
         raise _Unexpressible(f'rigid body {name!r}: height {pos[2]:.4f} m is {abs(height - level) * c * 1000:.1f} mm '
                        f'off the unit lattice above the table (limit {config.position_tol * c * 1000:.1f} mm)')
@@ -409,7 +426,7 @@ def _snap(body: RigidBodyPose, template: Scene, block_type, config: Registration
         # where it really lies and put down straight. Anywhere else it cannot be expressed.
         if region is not None or level != 0 or _over_regions(body, template, block_type):
             raise _Unexpressible(turn_error)
-        return out, snapped_yaw, [0.0, 0.0, round(turned, 3)]
+        return out, snapped_yaw, [0.0, 0.0, round(turned, 3)], raised
     if region is not None:
         origin = np.asarray(region.origin)
         idx = (np.array(out[:2]) - origin[:2]) / u
@@ -422,8 +439,8 @@ def _snap(body: RigidBodyPose, template: Scene, block_type, config: Registration
         measured = out[:2]
         for a in range(2):
             out[a] = round(float(origin[a] + u * np.round(idx[a])), _DECIMALS)
-        return out, snapped_yaw, [round(measured[a] - out[a], _DECIMALS) for a in range(2)]
-    return out, snapped_yaw, None
+        return out, snapped_yaw, [round(measured[a] - out[a], _DECIMALS) for a in range(2)], raised
+    return out, snapped_yaw, None, raised
 
 
 def grid_tolerance(config: RegistrationConfig, scene: Scene) -> float:

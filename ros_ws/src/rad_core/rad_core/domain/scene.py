@@ -68,7 +68,7 @@ import numpy as np
 from rad_core.domain import jsonfmt
 from rad_core.domain.blocks import BlockType
 from rad_core.domain.errors import SceneError
-from rad_core.domain.studs import SYSTEMS, Studs
+from rad_core.domain.studs import SYSTEMS, Studs, stud_height
 
 FORMAT = 'rad-scene/1'
 
@@ -232,6 +232,12 @@ class Scene:
     def course(self) -> float:
         """The lattice's z pitch (m): the stud system's course height, else the unit."""
         return self.studs.course if self.studs is not None else self.unit
+
+    @property
+    def stud_height(self) -> float:
+        """How high (m) the studs stand (0 without studs): a brick not pressed home stands this much
+        above its seat (`domain.studs.stud_height`)."""
+        return stud_height(self.studs.system, self.unit) if self.studs is not None else 0.0
 
     @property
     def pitch(self) -> np.ndarray:

@@ -34,6 +34,8 @@ class StudSystem:
     """The pull one stud connection holds (N), a nominal value for new bricks."""
     brick_mass: float
     """The mass (kg) of a brick per stud (a 2 x 4's over 8), at the system's own size."""
+    stud: float = 0.0017
+    """A stud's height (m): how much higher a brick stands on the studs under it before it is pressed home."""
 
     def cell_mass(self, unit: float, course: float) -> float:
         """The mass (kg) of one lattice cell `unit` square and `course` high, of this system's bricks."""
@@ -45,15 +47,23 @@ class StudSystem:
 
 
 SYSTEMS: dict[str, StudSystem] = {
-    'lego': StudSystem('lego', 0.008, 0.0096, 0.0032, 1.0, 0.00232 / 8),
-    'duplo': StudSystem('duplo', 0.016, 0.0192, None, 2.0, 0.014 / 8),
+    'lego': StudSystem('lego', 0.008, 0.0096, 0.0032, 1.0, 0.00232 / 8, 0.0017),
+    'duplo': StudSystem('duplo', 0.016, 0.0192, None, 2.0, 0.014 / 8, 0.0045),
 }
 """The systems rad knows by name. Clutch (the force model: `rad_core.domain.statics`): published LEGO
 figures run from 0.7 N a friction point (BrickSim) and 0.98 N a point, three or four points a stud
 (StableLego, Liu et al. 2024), to about 3 N a stud (Funes and Pollack's 12.7 N mm a joint); 1 N is
 the cautious value for worn bricks. For Duplo no measurement was found: 2 N is an estimate. A scene
 gives its own bricks' value (``studs.clutch``, ``--clutch``). Masses: a LEGO 2 x 4 brick (3001) weighs
-2.32 g; a Duplo 2 x 4 about 14 g (an estimate: its walls are not twice LEGO's)."""
+2.32 g; a Duplo 2 x 4 about 14 g (an estimate: its walls are not twice LEGO's). Stud heights: LEGO's
+1.7 mm; Duplo's 4.5 mm is an estimate. A system rad does not know has LEGO's proportions."""
+
+
+def stud_height(system: str, unit: float) -> float:
+    """How high (m) a stud of `system` stands at a stud pitch of `unit` (m): the system's own proportion,
+    LEGO's for a system rad does not know."""
+    known = SYSTEMS.get(system, SYSTEMS['lego'])
+    return known.stud / known.pitch * unit
 
 GRAVITY = 9.81
 """m/s^2, as the physics world's (`sim.physics.PhysicsConfig.gravity`)."""

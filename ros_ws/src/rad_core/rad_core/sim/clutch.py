@@ -66,20 +66,10 @@ class StudJoints:
         """Join a brick to the bricks its bottom units sit on within `SEATED`, one joint per stud;
         the ids it was joined to (none in a scene without studs)."""
         scene = world.scene
-        if scene is None or scene.studs is None or any(
-                s.upper == block_id and not s.broken for s in self.studs.values()):
+        if scene is None or scene.studs is None or self.joined(block_id):
             return []
         p, cid = world.pybullet, world.client
-        mine = world.unit_centres(block_id)
-        pitch = scene.pitch
-        found: dict[str, list[tuple[int, int]]] = {}
-        for other in world.blocks:
-            if other == block_id or other in world.parked:
-                continue
-            theirs = world.unit_centres(other)
-            gap = (mine[:, None, :] - pitch * (0, 0, 1)) - theirs[None, :, :]
-            seated = np.all(np.abs(gap) < SEATED * pitch, axis=-1)
-            found.update({other: list(zip(*np.nonzero(seated)))} if seated.any() else {})
+        found = _seated_on(world, block_id)
         upper = world.blocks[block_id]
         half = np.array([0.0, 0.0, scene.course / 2])
         for other, pairs in found.items():
@@ -96,6 +86,29 @@ class StudJoints:
                 p.changeConstraint(c, maxForce=float(scene.studs.clutch), physicsClientId=cid)
                 self.studs[c] = Stud(c, block_id, other, in_upper, in_lower)
         return sorted(found)
+
+    def joined(self, block_id: str) -> bool:
+        """Whether the brick holds onto the studs under it (a stud of it, not broken)."""
+        return any(s.upper == block_id and not s.broken for s in self.studs.values())
+
+    def unpressed(self, world, block_id: str) -> bool:
+        """Whether the brick stands on the studs of a brick under it, within `SEATED` of its seat, without
+        being joined to them: set down or knocked loose, never pressed home."""
+        scene = world.scene
+        return (scene is not None and scene.studs is not None and not self.joined(block_id)
+                and bool(_seated_on(world, block_id)))
+
+    def let_go(self, world, block_id: str) -> list[str]:
+        """Break every stud that holds the brick onto the bricks under it (a knock); the lower ids."""
+        p, cid = world.pybullet, world.client
+        out = []
+        for stud in self.studs.values():
+            if stud.upper == block_id and not stud.broken:
+                stud.broken = True
+                p.changeConstraint(stud.constraint, maxForce=0.0, physicsClientId=cid)
+                out.append(stud.lower)
+        self.broken.extend((block_id, lower) for lower in out)
+        return sorted(set(out))
 
     def check(self, world) -> list[tuple[str, str]]:
         """Break the studs lifted more than `BREAK_STRETCH` off their seat or slid more than `BREAK_SLIDE`
@@ -131,6 +144,23 @@ class StudJoints:
                 stud.broken = broken
                 limit = 0.0 if broken else float(world.scene.studs.clutch)
                 p.changeConstraint(c, maxForce=limit, physicsClientId=cid)
+
+
+def _seated_on(world, block_id: str) -> dict[str, list[tuple[int, int]]]:
+    """The bricks the brick's units sit on within `SEATED` of the lattice: other id -> [(unit of this
+    brick, unit of the other)]."""
+    mine = world.unit_centres(block_id)
+    pitch = world.scene.pitch
+    found: dict[str, list[tuple[int, int]]] = {}
+    for other in world.blocks:
+        if other == block_id or other in world.parked:
+            continue
+        theirs = world.unit_centres(other)
+        gap = (mine[:, None, :] - pitch * (0, 0, 1)) - theirs[None, :, :]
+        seated = np.all(np.abs(gap) < SEATED * pitch, axis=-1)
+        if seated.any():
+            found[other] = list(zip(*np.nonzero(seated)))
+    return found
 
 
 def _offset(world, block_id: str, unit: int) -> np.ndarray:

@@ -3,7 +3,8 @@
 A real cell's motion capture is noisy and drops bodies and frames; a real hand
 leaves a block a few millimetres from where it was meant to go, sometimes loses
 it during the carry, sometimes closes on nothing, and its fingers sometimes push
-a neighbour. Its controllers, too, now and then refuse a goal or end one early: an arm
+a neighbour. A studded brick is sometimes not pressed home, or a brick is knocked off
+its studs. Its controllers, too, now and then refuse a goal or end one early: an arm
 held back, a hand that stops short. `FaultConfig` says how often and how much; the twin
 (`rad_core.sim.twin`) injects them and records each as an event, so tests and
 benchmarks can count injected against recovered faults.
@@ -26,12 +27,12 @@ import yaml
 from rad_core.domain.errors import RadError
 
 KINDS = ('noise', 'drop_body', 'drop_frame', 'placement', 'slip', 'miss', 'nudge',
-         'arm_abort', 'arm_reject', 'gripper_abort', 'gripper_reject')
+         'arm_abort', 'arm_reject', 'gripper_abort', 'gripper_reject', 'unpressed', 'knock')
 """The fault kinds, each with its own random stream (index = stream number)."""
 
 _PROBABILITIES = ('drop_body', 'drop_frame', 'slip', 'miss', 'nudge', 'arm_abort', 'arm_reject', 'gripper_abort',
-                  'gripper_reject')
-_MAGNITUDES = ('mocap_position_noise', 'mocap_yaw_noise_deg', 'placement_error', 'nudge_distance')
+                  'gripper_reject', 'unpressed', 'knock')
+_MAGNITUDES = ('mocap_position_noise', 'mocap_yaw_noise_deg', 'placement_error', 'nudge_distance', 'knock_speed')
 
 
 @dataclass(frozen=True)
@@ -69,6 +70,15 @@ class FaultConfig:
     reached_goal false, the fingers where they stopped."""
     gripper_reject: float = 0.0
     """Probability that the gripper action refuses a command: the fingers do not move."""
+    unpressed: float = 0.0
+    """Probability that a studded brick the arm pressed is not pressed home (a stud caught on the edge of
+    its socket): it is let go standing on the studs under it, not joined to them, and motion capture
+    sees it a stud's height above its seat."""
+    knock: float = 0.0
+    """Probability that letting go of a brick knocks a brick of the structure off its studs: that brick's
+    studs let go and it is pushed sideways at `knock_speed`."""
+    knock_speed: float = 1.0
+    """How fast (m/s) a knocked brick is pushed off."""
 
     def __post_init__(self):
         if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:

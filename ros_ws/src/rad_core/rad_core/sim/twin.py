@@ -54,7 +54,12 @@ for the twin's life, and in the running trajectory's report with the grasp event
 - miss: at the moment of grasping the fingers pass through the block, so the
   hand closes on nothing (no attachment; the gripper reports the closed width);
 - nudge: when a block is released, a block touching or next to it is pushed
-  away from it by `nudge_distance` (as far as its own neighbours allow).
+  away from it by `nudge_distance` (as far as its own neighbours allow);
+- unpressed: a studded brick the arm pressed home is let go without joining it to the
+  studs under it; like every brick resting on studs unjoined, `bodies` reports it a
+  stud's height above where it rests (the twin's bricks have no studs);
+- knock: when a brick is released, a joined brick of the structure lets go of its studs
+  and is pushed sideways at `knock_speed`.
 A block the fingers pass through (slip, miss) collides with them again once it is
 clear of them.
 """
@@ -363,9 +368,15 @@ class Twin:
         names = names or {}
         f = self.config.faults
         out = []
+        studs = self.world.studs if self.world.scene is not None and self.world.scene.studs is not None else None
+        held = self.attached[0] if self.attached is not None else None
         for bid, (pos, q) in self.block_poses().items():
             if bid in self.world.parked:
                 continue        # inside the feeder: no camera sees it
+            if studs is not None and bid != held and studs.unpressed(self.world, bid):
+                # The twin's bricks have no studs: one not pressed home rests at its seat in the physics,
+                # where a real one stands on the studs under it, a stud's height higher.
+                pos = pos + (0.0, 0.0, self.world.scene.stud_height)
             name = names.get(bid, bid)
             if not exact and self._happens('drop_body') \
                     and name in self._reported:
@@ -938,11 +949,31 @@ class Twin:
             self._p.removeConstraint(c, physicsClientId=self.world.client)
         self._events.append({'t': round(self._run_time(), 6), 'action': 'detach', 'block': block_id})
         if self._pressed == block_id and block_id in self.world.blocks:
-            joined = self.world.studs.join(self.world, block_id)
-            self._events.append({'t': round(self._run_time(), 6), 'action': 'join', 'block': block_id,
-                                 'to': joined})
+            if self._happens('unpressed'):
+                self._fault('unpressed', block=block_id)
+            else:
+                joined = self.world.studs.join(self.world, block_id)
+                self._events.append({'t': round(self._run_time(), 6), 'action': 'join', 'block': block_id,
+                                     'to': joined})
         self._pressed = None
         self._touched_at.pop(block_id, None)
+        if self.world.studs.studs and self._happens('knock'):
+            self._knock()
+
+    def _knock(self) -> None:
+        """A brick of the structure knocked off its studs (`FaultConfig.knock`): one joined brick, drawn
+        at random, lets go of the bricks under it and is pushed sideways."""
+        w, rng = self.world, self._rng['knock']
+        joined = sorted({s.upper for s in w.studs.studs.values() if not s.broken})
+        if not joined:
+            return
+        block_id = joined[int(rng.integers(len(joined)))]
+        w.studs.let_go(w, block_id)
+        angle = float(rng.uniform(0.0, 2 * math.pi))
+        speed = self.config.faults.knock_speed
+        self._p.resetBaseVelocity(w.blocks[block_id], [speed * math.cos(angle), speed * math.sin(angle), 0.0],
+                                  [0.0, 0.0, 0.0], physicsClientId=w.client)
+        self._fault('knock', block=block_id)
 
     def _press_check(self) -> None:
         """Whether the held brick has been pushed onto the blocks under it `press_travel` past where it

@@ -103,6 +103,9 @@ class ExecuteConfig:
     hand, back out along the path it came, re-register and replan (False: the abort ends the run)."""
     back_out_speed: float = 0.3
     """Fraction of the Franka limits (velocity, acceleration, jerk) the back-out moves at."""
+    press_retries: int = 2
+    """A studded brick seen standing on its studs after its step (not pressed home) is taken again where it
+    stands and pressed onto its cell, at most this many times, before the step counts as deviated."""
 
     @property
     def deviation_tol(self) -> float:
@@ -120,6 +123,8 @@ class ExecuteConfig:
             raise RadError(f'back_out_speed must be in (0, 1], got {self.back_out_speed}')
         if self.max_replans < 0:
             raise RadError(f'max_replans must be >= 0, got {self.max_replans}')
+        if self.press_retries < 0:
+            raise RadError(f'press_retries must be >= 0, got {self.press_retries}')
 
 
 @dataclass
@@ -141,6 +146,9 @@ class ExecutionResult:
     """Region name -> target cells the lost blocks occupy (left out of the plans)."""
     planned_coverage: float | None = None
     """The coverage the first plan set out to build (its steps applied to the scene)."""
+    unseated: dict[str, float] = field(default_factory=dict)
+    """Studded bricks the last registration saw standing on their studs, not pressed home (block id ->
+    how far above its seat, m)."""
 
     @property
     def coverage(self) -> float:
@@ -218,6 +226,16 @@ def execute_assembly(scene: Scene, plan: Plan, move_arm: MoveArm, move_gripper: 
                         break
                 problem, current, last_q = _execute_step(plant, result, step, step_start, current,
                                                          len(assembly.steps))
+                for _ in range(config.press_retries if plan_motion is not None else 0):
+                    if problem != _not_pressed(step.block, result.unseated.get(step.block, 0.0)):
+                        break
+                    problem, current, last_q = _press_again(plant, result, step, current, last_q, plan_motion,
+                                                            len(assembly.steps))
+                    if problem is None:          # pressed home this time
+                        for fault in result.faults:
+                            if fault['block'] == step.block and fault['problem'].startswith(
+                                    f'block {step.block} is not pressed home'):
+                                fault['recovered'] = True
                 if problem is not None:
                     break
             if problem is None:
@@ -261,6 +279,7 @@ def _measure(register: Register, result: ExecutionResult) -> Scene:
     got = register()
     reg = got if isinstance(got, Registration) else Registration(got)
     result.final_scene, result.lost_blocks = reg.scene, dict(reg.set_aside)
+    result.unseated = dict(reg.unseated)
     result.blocked_cells = {name: [list(c) for c in cells] for name, cells in reg.blocked.items()}
     return reg.plannable()
 
@@ -268,7 +287,7 @@ def _measure(register: Register, result: ExecutionResult) -> Scene:
 def _note_plan(result: ExecutionResult, assembly: AssemblyPlan, current: Scene) -> None:
     """Record a new plan: a fault before it recovered, the first plan's allocation and the coverage it
     sets out to build, every plan's re-allocations."""
-    if result.faults and result.replans:
+    if result.faults and result.replans and not _still_unpressed(result, result.faults[-1]):
         result.faults[-1]['recovered'] = True     # a new plan from the measured world
     if result.allocation is None:
         result.allocation = assembly.allocation
@@ -331,15 +350,48 @@ def _execute_step(plant: _Plant, result: ExecutionResult, step, step_start: np.n
                               'problem': str(e), 'recovered': False})
         raise
     problem = failed or deviation(expected, current, plant.config.deviation_tol, result.lost_blocks)
+    if problem is None and step.block in result.unseated:
+        problem = _not_pressed(step.block, result.unseated[step.block])
     if problem is not None:
         result.faults.append({'step': len(result.steps) - 1, 'block': step.block, 'problem': problem,
                               'recovered': False})
     return problem, current, last_q
 
 
+def _not_pressed(block: str, raised: float) -> str:
+    return (f'block {block} is not pressed home: motion capture sees it {raised * 1000:.1f} mm above its seat, '
+            f'standing on the studs under it')
+
+
+def _press_again(plant: _Plant, result: ExecutionResult, step, current: Scene, start: np.ndarray,
+                 plan_motion: PlanMotion, n_steps: int) -> tuple[str | None, Scene, np.ndarray]:
+    """A brick left standing on its studs: take it again where it stands and set it down on its cell
+    with a press (its own step's action, its motion planned from the world as measured), as
+    `_execute_step` runs a step. (the problem or None, the measured world, where the arm is)."""
+    fresh = plan_motion(current, SceneAction(step.block, step.unit, step.target, tuple(step.cell), step.rotation),
+                        start)
+    if not fresh.success:
+        problem = f'block {step.block}: cannot be taken again to press it home ({fresh.reason})'
+        result.faults.append({'step': len(result.steps) - 1, 'block': step.block, 'problem': problem,
+                              'recovered': False})
+        return problem, current, start
+    again = replace(step, motion=fresh.motion, grasp=tuple(fresh.grasp), moved_aside=[])
+    return _execute_step(plant, result, again, start, current, n_steps)
+
+
+def _still_unpressed(result: ExecutionResult, fault: dict) -> bool:
+    """Whether the fault is a brick not pressed home that still is (a new plan takes it as built)."""
+    block = fault['block']
+    return block in result.unseated and fault['problem'].startswith(f'block {block} is not pressed home')
+
+
 def _judge_coverage(result: ExecutionResult) -> None:
     """Judge the run by what the last registration sees: below what the first plan set out to build
-    is no success, and the reason names the lost blocks."""
+    is no success, and the reason names the lost blocks; so is a brick left standing on its studs."""
+    if result.success and result.unseated:
+        result.success = False
+        result.reason = 'not pressed home: ' + ', '.join(
+            f'{b} ({h * 1000:.1f} mm above its seat)' for b, h in sorted(result.unseated.items()))
     lost = '; '.join(f'{b} ({why})' for b, why in sorted(result.lost_blocks.items()))
     if result.success and result.planned_coverage is not None and result.coverage < result.planned_coverage - 1e-9:
         result.success = False
