@@ -409,10 +409,11 @@ def _snap(body: RigidBodyPose, template: Scene, block_type, config: Registration
     raised = 0.0
     if template.stud_height:
         on_studs = height - template.stud_height / c
-        if round(on_studs) >= 1 and abs(on_studs - round(on_studs)) < abs(height - level):
+        seat = round(on_studs)
+        if seat >= 1 and abs(on_studs - seat) < abs(height - level):
             # Higher than a seat by about a stud (the table has none): on the studs of the brick under it.
-            raised = round((height - round(on_studs)) * c, 4)
-            height, level = on_studs, round(on_studs)
+            raised = round((height - seat) * c, 4)
+            height, level = on_studs, seat
     if abs(height - level) > config.position_tol:
         raise _Unexpressible(f'rigid body {name!r}: height {pos[2]:.4f} m is {abs(height - level) * c * 1000:.1f} mm '
                        f'off the unit lattice above the table (limit {config.position_tol * c * 1000:.1f} mm)')

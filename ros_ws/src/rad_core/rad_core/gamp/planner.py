@@ -53,11 +53,11 @@ from rad_core.gamp.grasps import (
     Grasp,
     grasp_centre,
     grasp_lift,
-    tip_floor_lift,
     grasp_width,
     no_grasp_reason_for,
     scene_grasps,
     span_width,
+    tip_floor_lift,
 )
 from rad_core.gamp.ik import IkConfig, hand_yaw_options, solve_top_down
 from rad_core.gamp.trajectory import TimingConfig, plan_motion

@@ -104,8 +104,7 @@ class StudJoints:
         out = []
         for stud in self.studs.values():
             if stud.upper == block_id and not stud.broken:
-                stud.broken = True
-                p.changeConstraint(stud.constraint, maxForce=0.0, physicsClientId=cid)
+                _give_way(p, cid, stud)
                 out.append(stud.lower)
         self.broken.extend((block_id, lower) for lower in out)
         return sorted(set(out))
@@ -122,8 +121,7 @@ class StudJoints:
             d = _world(p, cid, world.blocks[stud.upper], stud.in_upper) - _world(p, cid, world.blocks[stud.lower],
                                                                                   stud.in_lower)
             if d[2] > BREAK_STRETCH or np.hypot(d[0], d[1]) > slide:
-                stud.broken = True
-                p.changeConstraint(stud.constraint, maxForce=0.0, physicsClientId=cid)
+                _give_way(p, cid, stud)
                 out.append((stud.upper, stud.lower))
         self.broken.extend(out)
         return out
@@ -144,6 +142,12 @@ class StudJoints:
                 stud.broken = broken
                 limit = 0.0 if broken else float(world.scene.studs.clutch)
                 p.changeConstraint(c, maxForce=limit, physicsClientId=cid)
+
+
+def _give_way(p, cid: int, stud: Stud) -> None:
+    """The stud lets go for good: broken, its joint's force 0."""
+    stud.broken = True
+    p.changeConstraint(stud.constraint, maxForce=0.0, physicsClientId=cid)
 
 
 def _seated_on(world, block_id: str) -> dict[str, list[tuple[int, int]]]:

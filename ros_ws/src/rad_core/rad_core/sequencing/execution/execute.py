@@ -227,14 +227,13 @@ def execute_assembly(scene: Scene, plan: Plan, move_arm: MoveArm, move_gripper: 
                 problem, current, last_q = _execute_step(plant, result, step, step_start, current,
                                                          len(assembly.steps))
                 for _ in range(config.press_retries if plan_motion is not None else 0):
-                    if problem != _not_pressed(step.block, result.unseated.get(step.block, 0.0)):
+                    if not _is_not_pressed(problem, step.block):
                         break
                     problem, current, last_q = _press_again(plant, result, step, current, last_q, plan_motion,
                                                             len(assembly.steps))
                     if problem is None:          # pressed home this time
                         for fault in result.faults:
-                            if fault['block'] == step.block and fault['problem'].startswith(
-                                    f'block {step.block} is not pressed home'):
+                            if _is_not_pressed(fault['problem'], step.block):
                                 fault['recovered'] = True
                 if problem is not None:
                     break
@@ -363,6 +362,11 @@ def _not_pressed(block: str, raised: float) -> str:
             f'standing on the studs under it')
 
 
+def _is_not_pressed(problem: str | None, block: str) -> bool:
+    """Whether a step's problem is `_not_pressed` of this block."""
+    return problem is not None and problem.startswith(f'block {block} is not pressed home:')
+
+
 def _press_again(plant: _Plant, result: ExecutionResult, step, current: Scene, start: np.ndarray,
                  plan_motion: PlanMotion, n_steps: int) -> tuple[str | None, Scene, np.ndarray]:
     """A brick left standing on its studs: take it again where it stands and set it down on its cell
@@ -381,8 +385,7 @@ def _press_again(plant: _Plant, result: ExecutionResult, step, current: Scene, s
 
 def _still_unpressed(result: ExecutionResult, fault: dict) -> bool:
     """Whether the fault is a brick not pressed home that still is (a new plan takes it as built)."""
-    block = fault['block']
-    return block in result.unseated and fault['problem'].startswith(f'block {block} is not pressed home')
+    return fault['block'] in result.unseated and _is_not_pressed(fault['problem'], fault['block'])
 
 
 def _judge_coverage(result: ExecutionResult) -> None:
