@@ -135,3 +135,26 @@ def test_every_candidate_maps_to_the_graph(method):
     space = milp if method == 'milp' else action_space(method, env)
     o = Observer(env)(env, space(env))
     assert o.num_actions == len(space(env)) > 0
+
+
+def test_a_small_graph_is_scored_on_one_thread_and_the_process_setting_is_kept(monkeypatch):
+    import rad_core.learning.policy as policy_module
+    from rad_core.learning.policy import QPolicy
+    torch.manual_seed(0)
+    net = QNetwork(NetConfig(dim=32, heads=4, ff=64, readout=32)).eval()
+    seen = []
+    forward = net.forward
+    monkeypatch.setattr(net, 'forward', lambda batch: (seen.append(torch.get_num_threads()), forward(batch))[1])
+    env, space = env_with_actions()
+    actions = space(env)
+    before = torch.get_num_threads()
+    torch.set_num_threads(2)
+    try:
+        scores = QPolicy(net).scores(env, actions)
+        assert seen == [1] and torch.get_num_threads() == 2
+        # A graph at or above the threshold keeps the process's threads.
+        monkeypatch.setattr(policy_module, 'ONE_THREAD_BELOW', 1)
+        again = QPolicy(net).scores(env, actions)
+        assert seen == [1, 2] and np.allclose(scores, again, atol=1e-5)
+    finally:
+        torch.set_num_threads(before)

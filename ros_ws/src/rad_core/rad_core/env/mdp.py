@@ -286,7 +286,11 @@ class AssemblyEnv:
         if not support.any_support(self.grid, occ, cells):
             return False, 'the block would rest on nothing and fall'
         if self.grid.clutch is not None:
-            return self._stands_with_clutch(b, cells)
+            key = ('clutch', frozenset((k, tuple(int(c) for c in cs)) for k, (cs, _) in self.state.placed.items()),
+                   b, tuple(int(c) for c in cells))
+            if key not in self._stability_cache:
+                self._stability_cache[key] = self._stands_with_clutch(b, cells)
+            return self._stability_cache[key]
         key = (frozenset(tuple(sorted(int(c) for c in cs)) for cs, _ in self.state.placed.values()),
                tuple(int(c) for c in cells))
         if key not in self._stability_cache:

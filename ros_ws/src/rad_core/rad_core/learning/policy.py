@@ -4,10 +4,16 @@ scores(env, actions, rng) returns Q(s, a) for every candidate and Q(s, stop)
 last, so `ranked_actions` keeps exactly the actions the network values above
 terminating. The greedy choice needs no randomness; rng is accepted for the
 common interface (a search adds its own exploration).
+
+Graphs below `ONE_THREAD_BELOW` nodes are scored on one thread. A forward of a
+few hundred nodes takes about 10 ms on one core; torch's default of a thread per
+core makes it 20-30 times slower whenever another process holds a core (the twin,
+a node beside it, a solver), as the threads wait on each other.
 """
 
 from __future__ import annotations
 
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -17,6 +23,24 @@ from rad_core.env.mdp import Action, AssemblyEnv
 from rad_core.learning import checkpoint as ckpt
 from rad_core.learning.graph import Observer
 from rad_core.learning.network import NetConfig, QNetwork, collate
+
+
+ONE_THREAD_BELOW = 1024
+"""Node count from which a forward uses torch's own thread count."""
+
+
+@contextmanager
+def _threads_for(nodes: int):
+    """One torch thread for a graph below ONE_THREAD_BELOW nodes, the process's setting otherwise."""
+    before = torch.get_num_threads()
+    if nodes >= ONE_THREAD_BELOW or before == 1:
+        yield
+        return
+    torch.set_num_threads(1)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(before)
 
 
 class QPolicy:
@@ -57,5 +81,6 @@ class QPolicy:
     @torch.no_grad()
     def scores(self, env: AssemblyEnv, actions: list[Action], rng: np.random.Generator | None = None) -> np.ndarray:
         obs = self.observer(env)(env, actions)
-        qa, qs = self.net(collate([obs], self.device))
+        with _threads_for(obs.num_nodes):
+            qa, qs = self.net(collate([obs], self.device))
         return np.concatenate([qa.cpu().numpy(), qs.cpu().numpy()]).astype(float)
