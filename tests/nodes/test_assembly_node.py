@@ -207,14 +207,14 @@ def _bad_requests():
     unreachable = doc(targets=[{'name': 'far', 'origin': [0.0, 0.95, U / 2], 'size': [2, 1, 1],
                                 'filled': [[0, 0, 0], [1, 0, 0]]}])
     many = doc(blocks=[{'id': f'b{n}', 'type': 'cube', 'position': [0.2 + 0.06 * (n % 20), -0.3 - 0.06 * (n // 20),
-                                                                      U / 2], 'yaw': 0} for n in range(300)])
+                                                                      U / 2], 'yaw': 0} for n in range(1100)])
     nan = json.dumps(doc()).replace('-0.2,', 'NaN,', 1)
     return {
         'malformed scene': ({'scene_json': '{"format": "rad-scene/1", '}, 'not valid JSON'),
         'empty target': ({'scene_json': json.dumps(doc()).replace(
             '"filled": [[0, 0, 0], [1, 0, 0], [2, 0, 0], [0, 0, 1]]', '"filled": []')}, 'is empty'),
         'unreachable target region': ({'scene_json': json.dumps(unreachable)}, 'unreachable'),
-        'more blocks than the table holds': ({'scene_json': json.dumps(many)}, 'exceed the limit of 256'),
+        'more blocks than the table holds': ({'scene_json': json.dumps(many)}, 'exceed the limit of 1024'),
         'a time limit too short to plan': ({'scene_json': SMALL.dumps(), 'time_limit_s': 1e-9}, 'time limit'),
         'negative time limit': ({'scene_json': SMALL.dumps(), 'time_limit_s': -1.0}, 'time_limit_s must be'),
         'NaN pose': ({'scene_json': nan}, 'must be finite'),
