@@ -3,7 +3,7 @@
 scenes/bricks/; Duplo-style tasks), judged by the statics (`domain.statics.structure_statics`, with
 the bricks' clutch) and by the physics twin (`sim.world.World` with its stud joints, `sim.clutch`).
 
-    python benchmarks/bench_statics_twin.py [--quick] [--prefixes 5] [--seconds 1.0] [--recheck 4]
+    python benchmarks/bench_statics_twin.py [--quick] [--designs a,b] [--prefixes 5] [--seconds 1.0] [--recheck 4]
                                             [--results docs/results]
 
 A design's bricks are put in a bottom-up order: by course, then the order the statics walk
@@ -680,15 +680,20 @@ def main(argv=None) -> int:
     p.add_argument('--recheck', type=int, default=4, help='judge disagreements again in a twin whose time step is '
                                                           'this many times shorter (default 4; 0: not)')
     p.add_argument('--results', type=Path, help='where the page goes (default docs/results; quick: out/)')
+    p.add_argument('--designs', help='only these designs (names, comma-separated; a subset while iterating: '
+                                     'writes under out/ unless --results is given)')
     args = p.parse_args(argv)
+    only = set(args.designs.split(',')) if args.designs else None
     prefixes = args.prefixes or (4 if args.quick else 5)
-    results = args.results or (RESULTS.parents[1] / 'out' / 'statics_twin_quick' if args.quick else RESULTS)
+    results = args.results or (RESULTS.parents[1] / 'out' / 'statics_twin_quick' if args.quick or only else RESULTS)
     t0 = time.perf_counter()
     rows, set_order = [], []
     fine = Twin(fine_config(args.recheck)) if args.recheck > 1 else None
     try:
         with Twin() as twin:
             for set_name, design, system, unit in design_sets(args.quick):
+                if only is not None and design.name not in only:
+                    continue
                 if set_name not in set_order:
                     set_order.append(set_name)
                 got = run_design(set_name, design, system, unit, twin, prefixes, args.seconds, fine)
@@ -702,6 +707,9 @@ def main(argv=None) -> int:
         if fine is not None:
             fine.close()
     wall_s = time.perf_counter() - t0
+    from rad_core.sim.twin import twin_world_config
+    from rad_core.sim.world import WorldConfig
+    world_config = twin_world_config(WorldConfig())
     lines = table(rows, set_order)
     bad = [r for r in rows if not r['agree']]
     again = [r for r in bad if r['fine_stands'] is not None]
@@ -711,7 +719,9 @@ def main(argv=None) -> int:
         f"Every structure judged twice: by the statics (`domain.statics.structure_statics`, the bricks' "
         f"clutch as stud pulls, corner forces `statics.MARGIN` in from the edges) and by the physics twin "
         f"(a `sim.world.World` as the twin builds it, `sim.twin.twin_world_config`: a 1/240 s step, "
-        f"100 solver iterations, 0.01 of a stud of play a side; holding just the structure's bricks at their "
+        f"simulated in a studded scene as {world_config.stud_substeps} steps of "
+        f"{world_config.stud_solver_iterations} solver iterations (`WorldConfig.stud_substeps`), "
+        f"0.01 of a stud of play a side; holding just the structure's bricks at their "
         f"lattice poses, each joined to the bricks under it as a pressed placement is, `world.studs.join`: one "
         f"joint a stud, its pull capped at the clutch, let go past 1 mm; the arm turned away; then "
         f"{args.seconds:g} s simulated). In the twin a brick has fallen when a unit centre moved more than "

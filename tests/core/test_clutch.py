@@ -237,3 +237,28 @@ def test_a_brick_left_unpressed_fails_the_run_naming_it():
     result = built.result
     assert not result.success and result.reason.startswith('not pressed home: ')
     assert all(not f['recovered'] for f in result.faults)
+
+
+def test_a_studded_scene_is_stepped_in_shorter_steps_and_a_plain_one_as_before():
+    from rad_core.domain.errors import RadError
+    from rad_core.sim.world import World, WorldConfig
+    studded = cantilever_scene()
+    doc = studded.to_dict()
+    doc.pop('studs')
+    plain = Scene.from_dict(doc)
+    with World(plain) as world:
+        p, cid, cfg = world.pybullet, world.client, world.config
+
+        def bullet():
+            got = p.getPhysicsEngineParameters(physicsClientId=cid)
+            return got['fixedTimeStep'], got['numSolverIterations']
+
+        before = bullet()
+        assert world.substeps == 1 and before == (cfg.physics.time_step, cfg.physics.solver_iterations)
+        world.load_scene(studded)
+        assert world.substeps == cfg.stud_substeps > 1
+        assert bullet() == pytest.approx((cfg.physics.time_step / cfg.stud_substeps, cfg.stud_solver_iterations))
+        world.load_scene(plain)
+        assert world.substeps == 1 and bullet() == before
+    with pytest.raises(RadError, match='stud_substeps'):
+        WorldConfig(stud_substeps=0)

@@ -75,9 +75,31 @@ class WorldConfig:
     """x, y of the table's centre (m); grown by `load_scene` if a scene reaches past it."""
     effector: str = 'hand'
     """What the arm carries on its flange (`cell.panda.EFFECTORS`): Franka's hand, or the vacuum gripper."""
+    stud_substeps: int = 4
+    """In a scene of studded bricks (``scene.studs``), every step of ``physics.time_step`` is simulated
+    as this many Bullet steps, each that much shorter (`World.step`); 1: as other scenes. See
+    `stud_solver_iterations`."""
+    stud_solver_iterations: int = 50
+    """...each with this many solver iterations (other scenes: ``physics.solver_iterations``).
+
+    Why (measured, benchmarks/bench_statics_twin.py): studded bricks are small and light (a LEGO
+    cell at a 16 mm pitch weighs 2.3 g) and stand in tall thin stacks; Bullet's iterative solver
+    leaves their contacts (and the stud joints, which it does not warm-start) too soft at 1/240 s,
+    so a stack a real one would hold rocks over: the stem of a T, 16 2 x 4 bricks in one column,
+    falls within 0.4 s even without studs, and 21 of 193 structures the statics stand fell. A shorter
+    step stiffens contacts and joints far more than more iterations do at the same cost (200
+    iterations at 1/240 s: 5 of those 21 stand; 2 steps of 100: 13), and 4 steps of 50 iterations
+    cost about 2.2 times one step of 100 (the solver is most of a step). The step is made shorter
+    rather than Bullet's ``numSubSteps`` set: with sub-steps Bullet caps a motor's force as an impulse
+    over the whole step, which would make the arm's and the fingers' force limits 4 times their
+    value (user constraints, the stud joints and the grasp, are capped per sub-step either way)."""
 
     def __post_init__(self):
         panda.check_effector(self.effector)
+        if not (isinstance(self.stud_substeps, int) and self.stud_substeps >= 1
+                and isinstance(self.stud_solver_iterations, int) and self.stud_solver_iterations >= 1):
+            raise RadError(f'world config stud_substeps, stud_solver_iterations: expected integers >= 1, got '
+                           f'{self.stud_substeps!r}, {self.stud_solver_iterations!r}')
         if not all(math.isfinite(v) and v > 0 for v in self.table_half_extents):
             raise RadError(f'world config table_half_extents: expected positive sizes, got {self.table_half_extents!r}')
 
@@ -103,6 +125,8 @@ class World(ClientOwner):
         self.presented: str | None = None       # the feeder block put at the station last
         self.studs = StudJoints()               # studded bricks pressed home (`sim.clutch`)
         self._steps = 0
+        self.substeps = 1                       # Bullet steps per step: `WorldConfig.stud_substeps` while studded
+        self._iterations = config.physics.solver_iterations     # the solver's now (`_solver_for`)
         self.table = -1
         self._table_box = (tuple(config.table_centre), tuple(config.table_half_extents))
         self._make_table(*self._table_box)
@@ -203,6 +227,7 @@ class World(ClientOwner):
         self.parked.clear()
         self.presented = None
         self._fit_table(scene)
+        self._solver_for(scene)
         def add(type_name: str, position, quaternion, rgba=None) -> int:
             offsets = np.asarray(scene.block_types[type_name].offsets, dtype=float)
             shape, colour = self._shape(type_name, offsets, scene.unit if scene.studs is None else scene.pitch,
@@ -226,6 +251,22 @@ class World(ClientOwner):
             self._park(block_id)
         self.set_block_velocities_zero()
         self.set_joint_positions(panda.HOME)
+
+    def _solver_for(self, scene: Scene) -> None:
+        """The time step and solver iterations of a scene: studded bricks get `WorldConfig.stud_substeps`
+        shorter steps with `WorldConfig.stud_solver_iterations`; other scenes the physics config's, as
+        `direct_client` set them (untouched unless a studded scene changed them). Before any joint is
+        made: Bullet turns a constraint's force cap into an impulse over the step current then (a motor's
+        too, which `load_scene`'s HOME and the twin's every command set again)."""
+        cfg = self.config
+        substeps = cfg.stud_substeps if scene.studs is not None else 1
+        iterations = cfg.stud_solver_iterations if scene.studs is not None else cfg.physics.solver_iterations
+        if (substeps, iterations) == (self.substeps, self._iterations):
+            return
+        p, cid = self._p, self.client
+        p.setTimeStep(cfg.physics.time_step / substeps, physicsClientId=cid)
+        p.setPhysicsEngineParameter(numSolverIterations=int(iterations), physicsClientId=cid)
+        self.substeps, self._iterations = substeps, iterations
 
     # ---- the feeder --------------------------------------------------------
     def _static(self, block_id: str) -> None:
@@ -384,9 +425,12 @@ class World(ClientOwner):
 
     # ---- simulation ------------------------------------------------------
     def step(self, n: int = 1) -> None:
-        """Simulate n steps; studs pulled off let go (`sim.clutch`, checked every few steps)."""
+        """Simulate n steps of ``physics.time_step`` (each `substeps` Bullet steps: several in a studded
+        scene, `WorldConfig.stud_substeps`); studs pulled off let go (`sim.clutch`, checked every few steps)."""
+        p, cid, substeps = self._p, self.client, self.substeps
         for _ in range(int(n)):
-            self._p.stepSimulation(physicsClientId=self.client)
+            for _ in range(substeps):
+                p.stepSimulation(physicsClientId=cid)
             self._steps += 1
             if self.studs.studs and self._steps % STUD_CHECK_STEPS == 0:
                 self.studs.check(self)
