@@ -13,10 +13,7 @@ from rad_core.domain.scene import Scene
 from rad_core.domain.transforms import yaw_quaternion
 from rad_core.env.mdp import Action, AssemblyEnv
 from rad_core.gamp import plan_action
-from rad_core.gamp.action import blocks_named
-from rad_core.gamp.planner import GampConfig
 from rad_core.gamp.hand_cells import blocking_offsets
-from rad_core.sequencing.planning.plan import plan_assembly
 from rad_core.sequencing.planning.reallocation import placed_scene
 from rad_core.sim.world import World
 
@@ -73,41 +70,6 @@ def test_a_pose_hemmed_in_on_both_closing_axes_is_blocked_and_the_planner_refuse
         assert hand(corner, occupied)
         refused = plan_action(world, 'c0', ORIGIN, 0)
         assert not refused.success and refused.failure == 'placement' and 'at the placement' in refused.reason
-
-
-class _CornerLast:
-    """A policy that fills the corner cell (0, 0, 0) last, when its neighbours hem it in."""
-    name = 'corner-last'
-
-    def scores(self, env, actions, rng):
-        corner = env.grid.index(0, (0, 0, 0))
-        return np.array([-1.0 if corner in env.resulting_cells(a)[0] else 1.0 for a in actions] + [-2.0])
-
-
-def test_a_plan_that_knows_the_hand_refuses_a_hemmed_in_pose_without_asking_gamp_as_gamp_would(motion):
-    scene = corner_scene()
-    asked = []
-
-    def counted(scene_now, action, start, move_aside=False):
-        asked.append(action.cell)
-        return motion(scene_now, action, start, move_aside=move_aside)
-
-    def plan(gamp):
-        asked.clear()
-        made = plan_assembly(scene, solve, counted, _CornerLast(), seed=1, gamp=gamp)
-        return made, list(asked)
-
-    blind, gamp_asked = plan(None)
-    told, told_asked = plan(GampConfig())
-    # Both plans build the two neighbours and no more: GAMP refuses the corner at the placement.
-    assert [s.cells for s in told.steps] == [s.cells for s in blind.steps] and len(told.steps) == 2
-    assert not blind.success and not told.success
-    assert 'at the placement' in blind.reason
-    # The plan that knows the hand never asks GAMP about the corner, and names the blocks in the way
-    # as GAMP does (a repair learns its precedences from them).
-    assert (0, 0, 0) in [tuple(c) for c in gamp_asked] and (0, 0, 0) not in [tuple(c) for c in told_asked]
-    assert 'every grasp, at both hand yaws' in told.reason
-    assert blocks_named(told.reason) == {s.block for s in told.steps}
 
 
 def test_the_arm_bound_drops_where_built_cells_hem_a_free_cell_in_and_the_plain_bound_does_not():

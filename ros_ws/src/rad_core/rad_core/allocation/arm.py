@@ -257,17 +257,6 @@ class HandBlocked:
         grasps = self.cells(type_name, yaw, cell_ids)
         return bool(grasps) and all(occupied[a].any() and occupied[b].any() for a, b in grasps)
 
-    def in_the_way(self, type_name: str, yaw: int, cell_ids, occupied: np.ndarray) -> list[int] | None:
-        """Where the pose is `blocked`: one built cell in the way of each grasp at each hand yaw (the
-        first, in grid order; repeats dropped); None where some grasp has a way free."""
-        if not self.blocked(type_name, yaw, cell_ids, occupied):
-            return None
-        found: dict[int, None] = {}
-        for ways in self.cells(type_name, yaw, cell_ids):
-            for cells in ways:
-                found.setdefault(int(cells[occupied[cells]].min()), None)
-        return list(found)
-
     def __call__(self, cand: Candidate, occupied: np.ndarray) -> bool:
         """`blocked` for an allocation candidate."""
         return self.blocked(cand.placement.type, cand.placement.yaw, cand.cell_ids, occupied)

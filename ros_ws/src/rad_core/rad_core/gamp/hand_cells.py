@@ -21,8 +21,7 @@ which this test leaves to the planner.
 
 Used through `allocation.arm.HandBlocked`: a pose all of whose grasps, at either hand yaw, have a
 built cell at a blocking offset can never be placed once those cells are built, and cells are never
-unbuilt. The robot ceiling's bound and the hand's order models count on it, and a plan refuses such
-an action without asking GAMP (`planning.plan.plan_assembly`'s gamp).
+unbuilt. The robot ceiling's bound and the hand's order models count on it.
 """
 
 from __future__ import annotations

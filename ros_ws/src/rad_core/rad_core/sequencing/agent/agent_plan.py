@@ -153,7 +153,7 @@ def effector_solvers(effector: str) -> Solvers | None:
         return None
     gamp = GampConfig(effector=effector)
     return Solvers(partial(course_line, gamp=gamp), partial(hand_order, gamp=gamp), partial(ordered_cover, gamp=gamp),
-                   robot_ceiling, gamp)
+                   robot_ceiling)
 
 
 class AgentPlanner:

@@ -44,7 +44,6 @@ from rad_core.allocation.order import Precedence, hand_order, ordered_cover
 from rad_core.allocation.placements import Placement
 from rad_core.allocation.result import AllocationResult
 from rad_core.domain.scene import Scene
-from rad_core.gamp.planner import GampConfig
 from rad_core.env.mdp import AssemblyEnv
 from rad_core.sequencing.bounds.robot_ceiling import robot_ceiling
 from rad_core.sequencing.decide.agents import AgentSpec
@@ -83,8 +82,6 @@ class Solvers:
     hand_order: Callable = hand_order
     ordered_cover: Callable = ordered_cover
     robot_ceiling: Callable = robot_ceiling
-    gamp: GampConfig = field(default_factory=GampConfig)
-    """The motion planner's settings the searches and the plans count on (its effector, its grasps)."""
 
 
 @dataclass
@@ -129,7 +126,7 @@ class Planning:
                              time_limit_s=until - time.perf_counter(),
                              reallocate=self.reallocate if self.spec.realloc else None,
                              reallocation=self.reallocation, verify=self.spec.verify, precedences=precedences,
-                             pace=self.pace, gamp=self.solvers.gamp)
+                             pace=self.pace)
         self.plans.append(made)
         return made
 

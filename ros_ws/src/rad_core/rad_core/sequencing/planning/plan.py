@@ -33,7 +33,6 @@ from typing import Any, Callable
 
 import numpy as np
 
-from rad_core.allocation.arm import HandBlocked
 from rad_core.allocation.order import Precedence
 from rad_core.allocation.result import AllocationResult
 from rad_core.cell.motion import Motion
@@ -177,8 +176,7 @@ def moved(scene: Scene, block_id: str, position, yaw: int) -> Scene:
 
 def plan_assembly(scene: Scene, allocate: Allocate, plan_motion: PlanMotion, sequencer: Policy | Rank,
                   seed: int = 0, start=None, time_limit_s: float = 60.0, reallocate=None,
-                  reallocation=None, verify: bool = True, precedences=(), pace: dict | None = None,
-                  gamp=None) -> AssemblyPlan:
+                  reallocation=None, verify: bool = True, precedences=(), pace: dict | None = None) -> AssemblyPlan:
     """sequencer: a Policy (in-process scores of the MDP state) or a Rank callable.
     A Rank callable's RadError (say, the sequencer node is down) propagates.
     reallocate: (scene state, no-goods, time limit) -> AllocationResult, to re-allocate on
@@ -191,10 +189,7 @@ def plan_assembly(scene: Scene, allocate: Allocate, plan_motion: PlanMotion, seq
     it (as long as such calls took on average), nor a re-allocation once it has passed; the plan so
     far comes back, its `reason` saying the limit ended it (the allocation is the caller's to bound:
     `allocate` is called first, as it is). pace: {'rank': [seconds, count], 'motion': [...]} of the
-    calls made so far, updated here (plans of one agent's planning share it; default: this plan's).
-    gamp: the motion planner's settings (`GampConfig`), where the caller knows them: an action whose
-    every grasp has a built block in the effector's way (`allocation.arm.HandBlocked`, cells the
-    planner always refuses) is refused as GAMP would, without asking it (None: GAMP is asked)."""
+    calls made so far, updated here (plans of one agent's planning share it; default: this plan's)."""
     t0 = time.perf_counter()
     timings = {'allocation': 0.0, 'sequencing': 0.0, 'motion': 0.0}
     allocation = allocate(scene)
@@ -217,8 +212,7 @@ def plan_assembly(scene: Scene, allocate: Allocate, plan_motion: PlanMotion, seq
             plan.reason = (f'time limit of {time_limit_s:g} s reached: the allocation placed no block '
                            f'within it ({allocation.status})')
         return _done(plan, t0)
-    run = _Planning(plan, env, plan_motion, sequencer, start, verify, precedences, t0 + time_limit_s, pace,
-                    None if gamp is None else HandBlocked(scene, env.grid, gamp))
+    run = _Planning(plan, env, plan_motion, sequencer, start, verify, precedences, t0 + time_limit_s, pace)
     reallocator = None
     if reallocate is not None:
         reallocator = Reallocator(run.allowed, run.pose_check, reallocation or ReallocationConfig(),
@@ -255,10 +249,8 @@ class _Planning:
     and the arm joints), the plan so far, and the sequencer's and GAMP's answers in this state."""
 
     def __init__(self, plan: AssemblyPlan, env: AssemblyEnv, plan_motion: PlanMotion, sequencer, start,
-                 verify: bool, precedences, deadline: float, pace: dict | None = None,
-                 hand: HandBlocked | None = None):
+                 verify: bool, precedences, deadline: float, pace: dict | None = None):
         self.plan, self.env, self.timings = plan, env, plan.timings
-        self.hand = hand      # the effector's cell model: what GAMP refuses for certain
         self.allowed = AllocationActions(env, plan.allocation.placements)   # its guide changes on re-allocation
         self.world = {'scene': plan.scene, 'q': start}
         self.sequencer, self.verify, self.precedences, self.deadline = sequencer, verify, precedences, deadline
@@ -335,30 +327,12 @@ class _Planning:
         return self.memo[key]
 
     def check_motion(self, env: AssemblyEnv, scene_now: Scene, action, q) -> MotionPlan:
-        """`_checked_motion`, noting the placed blocks a refusal names (`conflicts_of`); an action
-        the effector's cell model refuses (`hand_refusal`) is not asked of GAMP."""
-        motion = _checked_motion(env, scene_now, action, self.planned_motion, q, self.timings, self.hand_refusal)
+        """`_checked_motion`, noting the placed blocks a refusal names (`conflicts_of`)."""
+        motion = _checked_motion(env, scene_now, action, self.planned_motion, q, self.timings)
         if not motion.success and motion.failure != 'stability':
             for p in conflicts_of(env, action, motion.reason):
                 self.seen.setdefault(p, None)
         return motion
-
-    def hand_refusal(self, env: AssemblyEnv, action) -> MotionPlan | None:
-        """GAMP's placement refusal, where every grasp of the action, at both hand yaws, has a built
-        block where the effector goes (`HandBlocked`): naming those blocks, as GAMP names what it hits.
-        None where some way is free (GAMP then decides) or the plan has no cell model."""
-        if self.hand is None:
-            return None
-        cells, yaw = env.resulting_cells(action)
-        if cells is None:
-            return None
-        occupancy = env.state.occupancy
-        built = self.hand.in_the_way(env.scene.blocks[action.block].type, yaw, cells, occupancy >= 0)
-        if built is None:
-            return None
-        names = ', '.join(f'hits block {env.scene.blocks[b].id}' for b in dict.fromkeys(occupancy[built]))
-        return MotionPlan(False, 'placement', f'placement: every grasp, at both hand yaws, has a built block '
-                                              f'where the {self.hand.gamp.effector} goes ({names})')
 
     def pose_check(self, action) -> MotionPlan:
         """What the plan's own steps are held to (`_checked_motion`), for a re-allocation's checks: a
@@ -511,17 +485,12 @@ def precedences_last(env: AssemblyEnv, ranked: list, precedences) -> list:
     return keep + later
 
 
-def _checked_motion(env: AssemblyEnv, scene: Scene, action, plan_motion: PlanMotion, q, timings,
-                    refusal=None) -> MotionPlan:
+def _checked_motion(env: AssemblyEnv, scene: Scene, action, plan_motion: PlanMotion, q, timings) -> MotionPlan:
     """An action checked as a plan's step is: the stability check first (no motion for a block
-    that falls), then refusal(env, action) where given (a MotionPlan GAMP would answer, or None),
-    then GAMP's motion (its time added to timings['motion'])."""
+    that falls), then GAMP's motion (its time added to timings['motion'])."""
     outcome, why, _, _ = env.evaluate(action)
     if outcome is not None:
         return MotionPlan(False, 'stability', why)
-    refused = refusal(env, action) if refusal is not None else None
-    if refused is not None:
-        return refused
     ts = time.perf_counter()
     motion = plan_motion(scene, scene_action(env, action), q)
     timings['motion'] += time.perf_counter() - ts
