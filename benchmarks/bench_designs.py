@@ -8,66 +8,21 @@ unit, 300-1,000 cells) and one 2,100-cell solid, each through the code of `rad s
 asked, --supply auto): the yaw and place chosen, the seconds to a scene (this process's wall clock, one
 design at a time, nothing else running), the cells covered, the blocks and where they start. The
 designs are this file's own, not a public corpus: they measure size, not variety (bench_meshes has the
-corpus). Writes <results>/designs.md and designs.rows.jsonl.
+corpus). Writes <results>/designs.md and designs.rows.jsonl. `designs` and `design_scene` (one design to a
+scene) are also what `bench_large.py --designs` plans and builds.
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
-import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
-from common import RESULTS, write_page
+from common import RESULTS, design_scene, designs, write_page
 
 TITLE = 'Large voxel designs: time to a scene'
 HEADERS = ['design', 'cells', 'blocks', 'covered', 'share', 'stands', 'hand places', 'start', 'fit', 'seconds']
-
-
-def _box(g, lo, hi):
-    g[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]] = True
-
-
-def _corners(g, xs, ys, size, height):
-    """Four posts (legs, wheels) of `size` (x, y) cells, from the ground to `height`, at each x in xs and y in ys."""
-    for x in xs:
-        for y in ys:
-            _box(g, (x, y, 0), (x + size[0], y + size[1], height))
-
-
-def designs() -> dict[str, np.ndarray]:
-    """name -> occupancy [x, y, z], z up."""
-    out = {}
-    g = np.zeros((16, 12, 9), dtype=bool)                       # table: a top on four legs
-    _box(g, (0, 0, 8), (16, 12, 9))
-    _corners(g, (0, 14), (0, 10), (2, 2), 8)
-    out['table'] = g
-    g = np.zeros((12, 12, 16), dtype=bool)                      # chair: seat, back, legs
-    _box(g, (0, 0, 6), (12, 12, 8))
-    _box(g, (0, 10, 8), (12, 12, 16))
-    _corners(g, (0, 10), (0, 10), (2, 2), 6)
-    out['chair'] = g
-    g = np.zeros((18, 10, 9), dtype=bool)                       # sofa: base, back, arms
-    _box(g, (0, 0, 0), (18, 8, 4))
-    _box(g, (0, 8, 0), (18, 10, 9))
-    _box(g, (0, 0, 4), (2, 8, 7))
-    _box(g, (16, 0, 4), (18, 8, 7))
-    out['sofa'] = g
-    g = np.zeros((18, 10, 8), dtype=bool)                       # car: wheels, body, cabin
-    _corners(g, (2, 13), (0, 8), (3, 2), 2)
-    _box(g, (0, 0, 2), (18, 10, 5))
-    _box(g, (5, 1, 5), (14, 9, 8))
-    out['car'] = g
-    g = np.zeros((20, 8, 10), dtype=bool)                       # train: engine with a chimney, two wagons
-    for x0, x1 in ((0, 7), (8, 13), (14, 20)):
-        _box(g, (x0, 0, 0), (x1, 8, 5))
-    _box(g, (0, 1, 5), (4, 7, 8))
-    _box(g, (5, 3, 5), (7, 5, 10))
-    out['train'] = g
-    out['solid 20 x 15 x 7'] = np.ones((20, 15, 7), dtype=bool)
-    return out
 
 
 def main(argv=None) -> int:
@@ -77,40 +32,30 @@ def main(argv=None) -> int:
     parser.add_argument('--only', nargs='*', help='design names')
     parser.add_argument('--results', type=Path, default=RESULTS)
     args = parser.parse_args(argv)
-    from rad_core.allocation.supply import SupplyParams, supply
-    from rad_core.domain.blocks import DEFAULT_LIBRARY
     from rad_core.domain.errors import RadError
-    from rad_core.domain.voxels import place_regions, placement, voxel_models
     rows, table = [], []
-    with tempfile.TemporaryDirectory() as tmp:
-        for name, grid in designs().items():
-            if args.only and name not in args.only:
-                continue
-            path = Path(tmp) / f'{name.split()[0]}.npy'
-            np.save(path, grid)
-            t0 = time.perf_counter()
-            row = {'design': name, 'cells': int(grid.sum())}
-            try:
-                models = voxel_models([(name.split()[0], str(path))], args.unit)
-                chosen = placement(models, args.unit)
-                fit = f'x {chosen.x:g} m, yaw {chosen.yaw}'
-                scene, report = supply(place_regions(models, args.unit), args.unit, dict(DEFAULT_LIBRARY),
-                                       params=SupplyParams(time_limit_s=args.time_limit))
-                row.update(blocks=len(scene.blocks), covered=report.covered, share=report.coverage,
-                           stands=report.stands, hand=report.hand_covered, status=report.status,
-                           start='feeder' if scene.feeder is not None else 'table', fit=fit)
-            except RadError as e:
-                row.update(error=str(e))
-            row['seconds'] = time.perf_counter() - t0
-            rows.append(row)
-            if 'error' in row:
-                line = [name, row['cells'], '-', '-', '-', '-', '-', '-', row['error'][:60], f'{row["seconds"]:.1f}']
-            else:
-                line = [name, row['cells'], row['blocks'], row['covered'], f'{row["share"]:.2f}',
-                        'yes' if row['stands'] else 'no', row['hand'], row['start'], row['fit'],
-                        f'{row["seconds"]:.1f}']
-            table.append(line)
-            print(' | '.join(str(v) for v in line), flush=True)
+    for name, grid in designs().items():
+        if args.only and name not in args.only:
+            continue
+        t0 = time.perf_counter()
+        row = {'design': name, 'cells': int(grid.sum())}
+        try:
+            scene, report, fit = design_scene(name, grid, args.unit, args.time_limit)
+            row.update(blocks=len(scene.blocks), covered=report.covered, share=report.coverage,
+                       stands=report.stands, hand=report.hand_covered, status=report.status,
+                       start='feeder' if scene.feeder is not None else 'table', fit=fit)
+        except RadError as e:
+            row.update(error=str(e))
+        row['seconds'] = time.perf_counter() - t0
+        rows.append(row)
+        if 'error' in row:
+            line = [name, row['cells'], '-', '-', '-', '-', '-', '-', row['error'][:60], f'{row["seconds"]:.1f}']
+        else:
+            line = [name, row['cells'], row['blocks'], row['covered'], f'{row["share"]:.2f}',
+                    'yes' if row['stands'] else 'no', row['hand'], row['start'], row['fit'],
+                    f'{row["seconds"]:.1f}']
+        table.append(line)
+        print(' | '.join(str(v) for v in line), flush=True)
     note = (f'Each design through `rad scene from-voxels`\'s code at a {args.unit:g} m unit, the default block set, '
             f'supply\'s --time-limit {args.time_limit:g} s, the hand\'s order asked, --supply auto; seconds: '
             f'the whole of it (fit, supply model, hand order, layout), one design at a time on this machine. '

@@ -1,5 +1,6 @@
 """What more than one benchmark uses: the generated scenes of Table II, the hand-made shape sets,
-the number format of the tables, the planning-step scene sets, and the results page.
+the number format of the tables, the planning-step scene sets, the large voxel designs, and the results
+page.
 
 A benchmark that publishes writes one page through `write_page`: docs/results/<name>.md (the
 command, the commit, the date, one table and a short note) and docs/results/<name>.rows.jsonl (one
@@ -16,8 +17,11 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
+
+import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / 'docs' / 'results'
@@ -222,3 +226,66 @@ def candidates(env, guide, rng, k: int) -> list:
     if unsupported:
         picked.append(unsupported[int(rng.integers(len(unsupported)))])
     return picked
+
+
+# ---- large voxel designs (bench_designs, bench_large --designs) ------------------------------------
+
+def _box(g, lo, hi):
+    g[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]] = True
+
+
+def _corners(g, xs, ys, size, height):
+    """Four posts (legs, wheels) of `size` (x, y) cells, from the ground to `height`, at each x in xs and y in ys."""
+    for x in xs:
+        for y in ys:
+            _box(g, (x, y, 0), (x + size[0], y + size[1], height))
+
+
+def designs() -> dict[str, np.ndarray]:
+    """name -> occupancy [x, y, z], z up."""
+    out = {}
+    g = np.zeros((16, 12, 9), dtype=bool)                       # table: a top on four legs
+    _box(g, (0, 0, 8), (16, 12, 9))
+    _corners(g, (0, 14), (0, 10), (2, 2), 8)
+    out['table'] = g
+    g = np.zeros((12, 12, 16), dtype=bool)                      # chair: seat, back, legs
+    _box(g, (0, 0, 6), (12, 12, 8))
+    _box(g, (0, 10, 8), (12, 12, 16))
+    _corners(g, (0, 10), (0, 10), (2, 2), 6)
+    out['chair'] = g
+    g = np.zeros((18, 10, 9), dtype=bool)                       # sofa: base, back, arms
+    _box(g, (0, 0, 0), (18, 8, 4))
+    _box(g, (0, 8, 0), (18, 10, 9))
+    _box(g, (0, 0, 4), (2, 8, 7))
+    _box(g, (16, 0, 4), (18, 8, 7))
+    out['sofa'] = g
+    g = np.zeros((18, 10, 8), dtype=bool)                       # car: wheels, body, cabin
+    _corners(g, (2, 13), (0, 8), (3, 2), 2)
+    _box(g, (0, 0, 2), (18, 10, 5))
+    _box(g, (5, 1, 5), (14, 9, 8))
+    out['car'] = g
+    g = np.zeros((20, 8, 10), dtype=bool)                       # train: engine with a chimney, two wagons
+    for x0, x1 in ((0, 7), (8, 13), (14, 20)):
+        _box(g, (x0, 0, 0), (x1, 8, 5))
+    _box(g, (0, 1, 5), (4, 7, 8))
+    _box(g, (5, 3, 5), (7, 5, 10))
+    out['train'] = g
+    out['solid 20 x 15 x 7'] = np.ones((20, 15, 7), dtype=bool)
+    return out
+
+
+def design_scene(name: str, grid: np.ndarray, unit: float, time_limit: float):
+    """One design through `rad scene from-voxels`'s code (`voxel_models`, `placement`, `place_regions`,
+    `supply` with the default block set, the hand's order asked, --supply auto): (scene, supply report,
+    the fit chosen as text). Raises RadError where the design cannot become a scene."""
+    from rad_core.allocation.supply import SupplyParams, supply
+    from rad_core.domain.blocks import DEFAULT_LIBRARY
+    from rad_core.domain.voxels import place_regions, placement, voxel_models
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / f'{name.split()[0]}.npy'
+        np.save(path, grid)
+        models = voxel_models([(name.split()[0], str(path))], unit)
+    chosen = placement(models, unit)
+    scene, report = supply(place_regions(models, unit), unit, dict(DEFAULT_LIBRARY),
+                           params=SupplyParams(time_limit_s=time_limit))
+    return scene, report, f'x {chosen.x:g} m, yaw {chosen.yaw}'

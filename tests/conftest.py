@@ -191,6 +191,15 @@ def pytest_report_header(config):
             f"profile {os.environ['FASTRTPS_DEFAULT_PROFILES_FILE']}")
 
 
+@pytest.fixture
+def set_down_hand(monkeypatch):
+    """The paper's hand, which only sets blocks down: every GAMP config the test makes without saying has
+    no drop (`rad_core.gamp.planner.DROP_BY_DEFAULT`). For the tests of what that hand cannot do."""
+    from rad_core.gamp import planner
+
+    monkeypatch.setattr(planner, 'DROP_BY_DEFAULT', False)
+
+
 @pytest.fixture(scope='session')
 def rclpy_session():
     """rclpy initialised once for the whole session (the default context)."""

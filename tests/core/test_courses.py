@@ -6,6 +6,7 @@ import pytest
 from rad_core.domain.large_shapes import SMALL_TYPES, feeder_scene
 from rad_core.domain.shapes import ShapeSpec, face, one_sided, two_sided
 from rad_core.env.robot_env import RobotAssemblyEnv, RobotEnvConfig
+from rad_core.gamp import planner as courses_planner
 from rad_core.sequencing.planning import courses
 from rad_core.sequencing.planning.courses import course_bound, course_line
 
@@ -14,18 +15,23 @@ pytestmark = pytest.mark.slow
 
 def flush_wall():
     """A two-deep flush wall, 6 long and 3 courses high at a 4 cm unit, its blocks in a feeder: no
-    top-down hand closes a full course of it (`large_shapes.FLUSH_LIMIT`), so 33 of its 36 cells
-    at most."""
+    top-down hand that only sets blocks down closes a full course of it (`large_shapes.FLUSH_LIMIT`),
+    so 33 of its 36 cells at most; with drops (`GampConfig.drop`) all 36."""
     drawn = face('######', '######', '######')
     return feeder_scene(ShapeSpec('flush_wall', 'wall', two_sided(drawn, drawn), SMALL_TYPES, ('cube', 'I2'),
                                   n_spare=2, why='a small two-deep flush wall'))
 
 
-def test_the_course_line_fills_all_but_one_cell_of_each_course_and_the_twin_builds_it_again():
+@pytest.mark.parametrize('drop', [False, True])
+def test_the_course_line_fills_a_flush_wall_but_a_cell_a_course_or_with_drops_whole(drop, monkeypatch):
+    monkeypatch.setattr(courses_planner, 'DROP_BY_DEFAULT', drop)
     scene = flush_wall()
     assert course_line(scene, 60.0) is None         # 16 blocks: one ordered cover takes it
     line = course_line(scene, 60.0, least_poses=0)
-    assert 32 / 36 <= line.coverage <= course_bound(scene) == pytest.approx(33 / 36)
+    if drop:                                        # the last cell of each course is dropped in
+        assert line.coverage == course_bound(scene) == 1.0
+    else:
+        assert 32 / 36 <= line.coverage <= course_bound(scene) == pytest.approx(33 / 36)
     assert line.covers >= 3                         # a cover per course at least
     with RobotAssemblyEnv(scene, RobotEnvConfig(execution='teleport')) as renv:
         renv.reset()
@@ -35,7 +41,7 @@ def test_the_course_line_fills_all_but_one_cell_of_each_course_and_the_twin_buil
         assert renv.env.coverage() == pytest.approx(line.coverage)
 
 
-def test_the_course_bound_loses_one_cell_per_full_course_of_a_flush_wall_and_none_of_a_single_leaf():
+def test_the_course_bound_loses_one_cell_per_full_course_of_a_flush_wall_and_none_of_a_single_leaf(set_down_hand):
     assert course_bound(flush_wall()) == pytest.approx(33 / 36)
     drawn = face('######', '######', '######')
     leaf = feeder_scene(ShapeSpec('leaf', 'wall', one_sided(drawn), SMALL_TYPES, ('cube', 'I2'), n_spare=1,
@@ -54,7 +60,7 @@ def test_the_course_line_ends_at_its_time_limit_with_the_line_so_far_and_leaves_
     assert course_line(queued, 60.0, least_poses=0) is None     # the queue, not the line, picks the blocks
 
 
-def test_order_repair_plans_the_course_line_of_a_large_structure(monkeypatch):
+def test_order_repair_plans_the_course_line_of_a_large_structure(monkeypatch, set_down_hand):
     from rad_core.sequencing.agent.agent_plan import AgentPlanner
     scene = flush_wall()
     monkeypatch.setattr(courses, 'COURSES_ABOVE', 0)
@@ -65,7 +71,7 @@ def test_order_repair_plans_the_course_line_of_a_large_structure(monkeypatch):
     assert plan.predicted_coverage >= line.coverage - 1e-9
 
 
-def test_the_ceiling_takes_the_course_bound_at_the_root_where_the_hands_order_proves_nothing(monkeypatch):
+def test_the_ceiling_takes_the_course_bound_where_the_hands_order_proves_nothing(monkeypatch, set_down_hand):
     # A 72-block wall's ordered bound is not proven in the ceiling's time: made to happen here by an
     # ordered bound that proves nothing (1.0), the course bound says 33 of 36 cells at most.
     from rad_core.allocation.bounds import ArmCoverageBound

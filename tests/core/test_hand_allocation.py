@@ -17,7 +17,7 @@ def hand_cells(sc, placements) -> int:
     return sum(int(grid.is_target[list(cells)].sum()) for cells in hand_order(sc, placements).order)
 
 
-def test_the_hand_allocation_trades_an_unplaceable_cover_for_one_the_hand_can_place_more_of():
+def test_the_hand_allocation_trades_an_unplaceable_cover_for_one_the_hand_can_place_more_of(set_down_hand):
     sc = flush_square()
     # Two I2s side by side fill it, but the second is flush against the first on one side and 10 cm
     # long the other way: the hand places only one. An I2 and two cubes let it place three.
@@ -43,7 +43,7 @@ def test_agents_and_reallocations_name_the_hand_support():
 
 
 @pytest.mark.slow   # plans a g = 5 scene with GAMP, two agents (a few seconds)
-def test_where_the_hands_allocation_falls_short_the_arms_plan_is_kept():
+def test_where_the_hands_allocation_falls_short_the_arms_plan_is_kept(set_down_hand):
     # g = 5 seed 9009: the hand's allocation is one its order places whole, but the plans of it stop
     # at 0.8; the arm's allocation has a pair the order cannot place both of, and its plan, with a
     # re-allocation on the way, builds everything. The default agent plans both and keeps the better.
@@ -61,7 +61,7 @@ def test_where_the_hands_allocation_falls_short_the_arms_plan_is_kept():
 
 
 @pytest.mark.slow   # the ceiling's search and three plans of a g = 5 scene with GAMP (about 30 s)
-def test_the_ceiling_part_builds_what_the_allocations_cannot():
+def test_the_ceiling_part_builds_what_the_allocations_cannot(set_down_hand):
     # g = 5 seed 16 (flush): the arm's and the hand's allocations fill every cell exactly, and no
     # order of either builds more than 7 of 9 (the ceiling's search exhausts them). Every pose
     # searched, an I3 one cell past the target where they take an exact I2 builds all 9.

@@ -46,7 +46,7 @@ def test_the_hand_fills_its_finger_columns_and_the_cells_under_its_palm_and_turn
         blocking_offsets(U, 0.0, OPEN, 45)
 
 
-def test_a_pose_hemmed_in_on_both_closing_axes_is_blocked_and_the_planner_refuses_it():
+def test_a_pose_hemmed_in_on_both_closing_axes_is_blocked_and_the_planner_refuses_it(set_down_hand):
     scene = corner_scene()
     grid = Grid(scene)
     hand = HandBlocked(scene, grid)
@@ -72,7 +72,7 @@ def test_a_pose_hemmed_in_on_both_closing_axes_is_blocked_and_the_planner_refuse
         assert not refused.success and refused.failure == 'placement' and 'at the placement' in refused.reason
 
 
-def test_the_arm_bound_drops_where_built_cells_hem_a_free_cell_in_and_the_plain_bound_does_not():
+def test_the_arm_bound_drops_where_built_cells_hem_a_free_cell_in_and_the_plain_bound_does_not(set_down_hand):
     scene = corner_scene()
     env = AssemblyEnv(scene)
     env.reset()
@@ -85,7 +85,7 @@ def test_the_arm_bound_drops_where_built_cells_hem_a_free_cell_in_and_the_plain_
     assert bound(env) == pytest.approx(2 / 3) and bound.hand_blocked > 0
 
 
-def test_the_ordered_bound_sees_that_no_hand_closes_a_flush_square_and_the_plain_one_does_not():
+def test_the_ordered_bound_sees_that_no_hand_closes_a_flush_square_and_the_plain_one_does_not(set_down_hand):
     from scenes import flush_square
     scene = flush_square()
     env = AssemblyEnv(scene)
@@ -124,7 +124,7 @@ def test_the_ordered_bound_is_never_below_what_the_robot_builds_from_a_state():
 
 
 @pytest.mark.slow
-def test_every_pose_the_hand_test_blocks_is_refused_by_the_planner_on_a_generated_scene():
+def test_every_pose_the_hand_test_blocks_is_refused_by_the_planner_on_a_generated_scene(set_down_hand):
     # Soundness on a scene nobody arranged for it: the allocation's poses are built one by one at
     # their exact poses; at each state every free pose the test calls blocked, for a block of its
     # type still on the table, is planned with GAMP, which must refuse it.

@@ -14,6 +14,8 @@ from rad_core.gamp.planner import GampConfig
 from scenes import scene as make_scene
 
 U = 0.05
+SET_DOWN = GampConfig(drop=False)
+"""The hand that only sets blocks down (no drop: `GampConfig.drop`), whose order these tests are about."""
 
 
 def square(n_cubes: int = 4) -> Scene:
@@ -25,11 +27,11 @@ def square(n_cubes: int = 4) -> Scene:
                                 'filled': [[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]]}])
 
 
-def replay(scene: Scene, found) -> None:
+def replay(scene: Scene, found, gamp=SET_DOWN) -> None:
     """Every pose of the order, placed in turn, has a way of being held that no earlier pose blocks,
     and the order keeps to its precedences."""
     grid = Grid(scene)
-    hand = HandBlocked(scene, grid)
+    hand = HandBlocked(scene, grid, gamp)
     occupied = np.zeros(grid.num_cells, dtype=bool)
     where = {cells: k for k, cells in enumerate(found.order)}
     for p in found.precedences:
@@ -45,7 +47,7 @@ def test_a_flush_square_places_three_cubes_in_an_order_the_hand_can_keep():
     scene = square()
     placements = solve(scene).placements
     assert len(placements) == 4
-    found = hand_order(scene, placements)
+    found = hand_order(scene, placements, gamp=SET_DOWN)
     assert len(found.order) == 3
     replay(scene, found)
     assert found.precedences           # at least one cube goes before a neighbour its fingers pass
@@ -68,7 +70,7 @@ def test_poses_needing_no_order_give_no_precedences_and_built_cells_count():
     built = Scene.from_dict(d)
     placements = solve(built).placements
     assert len(placements) == 3
-    found = hand_order(built, placements)
+    found = hand_order(built, placements, gamp=SET_DOWN)
     grid = Grid(built)
     corner = grid.index(0, (0, 0, 0))
     assert all(corner not in cells for cells in found.order)
@@ -148,9 +150,9 @@ def test_the_ordered_cover_picks_poses_and_an_order_the_hand_can_keep_within_the
 
     from scenes import flush_square
     scene = flush_square()
-    cover = ordered_cover(scene)
+    cover = ordered_cover(scene, gamp=SET_DOWN)
     assert cover.coverage == pytest.approx(0.75) and len(cover.order) == len(cover.placements)
-    grid, hand = Grid(scene), HandBlocked(scene, Grid(scene))
+    grid, hand = Grid(scene), HandBlocked(scene, Grid(scene), SET_DOWN)
     occupied = np.zeros(grid.num_cells, dtype=bool)
     counts: dict = {}
     for cells, p in zip(cover.order, cover.placements):

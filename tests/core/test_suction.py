@@ -25,6 +25,8 @@ from rad_core.sim.world import World, WorldConfig
 from box_scenes import BOX, box_but_one
 
 SUCTION = GampConfig(effector='suction')
+SET_DOWN = GampConfig(drop=False)
+"""The hand setting blocks down only: it may drop a block where the cup sets it down (tests/core/test_drop.py)."""
 SUCTION_WORLD = WorldConfig(effector='suction')
 
 
@@ -70,12 +72,12 @@ def test_the_vacuum_gripper_urdf_has_a_housing_and_a_cup_and_no_fingers():
 @pytest.fixture(scope='module')
 def box_last():
     """The solid 4 x 2 x 2 box at a 4 cm unit but its last block: the hand cannot set it down (its rows
-    are 80 mm, wider than the open hand takes), the cup can."""
+    are 80 mm, wider than the open hand takes; it can drop it), the cup can."""
     unit = 0.04
     scene = box_but_one(unit)
     place = (BOX[0] + unit, BOX[1], 1.5 * unit)
     with World(scene) as world:
-        hand = plan_action(world, 'm', place, 90)
+        hand = plan_action(world, 'm', place, 90, config=SET_DOWN)
     with World(scene, SUCTION_WORLD) as world:
         cup = plan_action(world, 'm', place, 90, config=SUCTION)
     return scene, place, hand, cup
@@ -154,7 +156,7 @@ def test_the_hand_model_of_the_cup_needs_nothing_beside_the_block():
     scene = box_but_one(unit)
     grid, occupied = scene_state(scene)
     last = grid.lookup(np.array([[BOX[0] + unit, BOX[1] + j * unit, 1.5 * unit] for j in range(2)]))
-    assert HandBlocked(scene, grid).blocked('I2', 90, last, occupied)
+    assert HandBlocked(scene, grid, SET_DOWN).blocked('I2', 90, last, occupied)
     assert not HandBlocked(scene, grid, SUCTION).blocked('I2', 90, last, occupied)
 
 
@@ -163,7 +165,7 @@ def test_supply_at_4_cm_finds_a_box_the_cup_places_whole_and_the_hand_does_not()
     box = TargetRegion('t', (BOX[0], BOX[1], unit / 2), (4, 2, 2),
                        tuple((i, j, k) for i in range(4) for j in range(2) for k in range(2)))
     types = {'I2': DEFAULT_LIBRARY['I2'], 'cube': DEFAULT_LIBRARY['cube']}
-    _, hand = choose_blocks([box], unit, types, params=SupplyParams(time_limit_s=10.0))
+    _, hand = choose_blocks([box], unit, types, params=SupplyParams(time_limit_s=10.0, drop=False))
     _, cup = choose_blocks([box], unit, types, params=SupplyParams(time_limit_s=10.0, effector='suction'))
     assert hand.hand_covered == 14 and len(hand.hand_left) == 2
     assert all('ways of being held' in d['why'] for d in hand.hand_left)

@@ -202,7 +202,7 @@ def _hand_placeable(placements, targets) -> int:
     return int(sum(grid.is_target[list(cells)].sum() for cells in found.order))
 
 
-def test_the_cover_is_one_a_top_down_hand_can_place_in_some_order():
+def test_the_cover_is_one_a_top_down_hand_can_place_in_some_order(set_down_hand):
     # A 3 x 2 floor with a step of two cells on it. The fewest blocks (a cube, an L3 and an upright
     # 2 x 2) leave a piece the hand cannot take between its neighbours; three others can all go in.
     step = np.zeros((3, 2, 2), dtype=bool)
@@ -218,7 +218,7 @@ def test_the_cover_is_one_a_top_down_hand_can_place_in_some_order():
     assert 'hand' not in report.summary()
 
 
-def test_where_no_cover_can_be_placed_whole_the_report_says_how_much_can():
+def test_where_no_cover_can_be_placed_whole_the_report_says_how_much_can(set_down_hand):
     # A flush 3 x 3 floor at 5 cm: whatever the blocks, the last one has neighbours on both sides both
     # ways, and no row fits the open hand. The rounds' covers fill all nine cells, of which the hand
     # can place at most seven; the order model's cover leaves one out and the hand places all eight.

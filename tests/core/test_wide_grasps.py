@@ -25,8 +25,8 @@ from rad_core.sim.world import World
 
 from box_scenes import BOX, box_but_one
 
-WIDE = GampConfig(wide_grasps=True)
-UNIT_ONLY = GampConfig(wide_grasps=False)
+WIDE = GampConfig(wide_grasps=True, drop=False)      # wide grasps alone: no drop after them
+UNIT_ONLY = GampConfig(wide_grasps=False, drop=False)
 
 
 # ---- which wide grasps a type offers ---------------------------------------------------------
@@ -217,10 +217,10 @@ def test_the_hand_model_counts_on_wide_grasps_where_gamp_takes_them():
     last = grid.lookup(np.array([[BOX[0] + unit, BOX[1] + j * unit, 1.5 * unit] for j in range(2)]))
     assert (last >= 0).all() and not occupied[last].any()
     assert HandBlocked(scene, grid, UNIT_ONLY).blocked('I2', 90, last, occupied)
-    assert not HandBlocked(scene, grid).blocked('I2', 90, last, occupied)
+    assert not HandBlocked(scene, grid, WIDE).blocked('I2', 90, last, occupied)
     # Its wide grasp's finger columns are the box's outer sides, off the target's grid: no cell that
     # is ever built blocks it, while each unit grasp has built cells in its way at both hand yaws.
-    hand = HandBlocked(scene, grid)
+    hand = HandBlocked(scene, grid, WIDE)
     ways = dict(zip(hand.grasps['I2'], hand.cells('I2', 90, last)))
     assert [g.span for g in ways] == [1, 1, 2]
     assert all(len(cells) == 0 for g, pair in ways.items() if g.span == 2 for cells in pair)
@@ -235,7 +235,7 @@ def test_supply_finds_a_cover_of_the_solid_box_the_hand_places_whole_where_rows_
     box = TargetRegion('t', (BOX[0], BOX[1], unit / 2), (4, 2, 2),
                        tuple((i, j, k) for i in range(4) for j in range(2) for k in range(2)))
     _, report = choose_blocks([box], unit, {'I2': DEFAULT_LIBRARY['I2'], 'cube': DEFAULT_LIBRARY['cube']},
-                              params=SupplyParams(time_limit_s=10.0))
+                              params=SupplyParams(time_limit_s=10.0, drop=False))
     assert report.covered == 16
     assert (report.hand_covered == 16) == whole, report    # at 4 cm: 80 mm rows, wider than the hand takes
 

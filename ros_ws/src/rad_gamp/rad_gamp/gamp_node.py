@@ -56,6 +56,7 @@ PARAMS = [
     Param('arm_controller', 'joint_trajectory_controller', 'the arm controller (its follow_joint_trajectory action)'),
     Param('gripper_action', 'franka_gripper/gripper_action', "the hand's GripperCommand action"),
     Param('wide_grasps', True, "grasps across a block's whole row where it fits the open hand"),
+    Param('drop', True, "let a block the hand cannot set down between built neighbours go 14 mm over its place"),
     Param('effector', 'hand', "what the arm carries: 'hand' or 'suction'"),
     Param('vacuum_ns', 'franka_vacuum_gripper', "the vacuum gripper node's namespace (effector 'suction')"),
 ]
@@ -73,7 +74,8 @@ class GampNode(Node):
         timing.validate()    # a bad robot, scale or force stops the node here with the reason
         effector = str(param('effector'))
         self.planner = MotionPlanner(GampConfig(seed=int(param('seed')), timing=timing,
-                                                wide_grasps=bool(param('wide_grasps')), effector=effector))
+                                                wide_grasps=bool(param('wide_grasps')), drop=bool(param('drop')),
+                                                effector=effector))
         on_set(self, self.retime)
         self.plant = ActionPlant(self, timing.model, str(param('arm_controller')), str(param('gripper_action')),
                                  vacuum_ns=str(param('vacuum_ns')) if effector == 'suction' else '')

@@ -35,10 +35,18 @@ from rad_core.allocation.placements import Candidate
 from rad_core.domain.blocks import rotation_z
 from rad_core.domain.grid import Grid, blocks_on_grid
 from rad_core.domain.scene import Scene
-from rad_core.gamp.grasps import grasp_lift, grasp_width, no_grasp_reason_for, scene_grasps, span_width
+from rad_core.gamp.grasps import (
+    DROP_HEIGHT,
+    drop_lift,
+    grasp_lift,
+    grasp_width,
+    no_grasp_reason_for,
+    scene_grasps,
+    span_width,
+)
 from rad_core.gamp.hand_cells import blocking_offsets
 from rad_core.gamp.ik import out_of_workspace
-from rad_core.gamp.planner import GampConfig, grasp_styles, suction_styles, wide_grasp_styles
+from rad_core.gamp.planner import GampConfig, drop_styles, grasp_styles, suction_styles, wide_grasp_styles
 
 
 @dataclass
@@ -97,9 +105,9 @@ def _unreachable(points: np.ndarray) -> str:
     return first
 
 
-def _both_heights(points: np.ndarray, lift: float) -> np.ndarray:
-    """Grasp targets at units' centres and, for the planner's tight grasp, `lift` over them."""
-    return np.concatenate([points, points + (0.0, 0.0, lift)])
+def _both_heights(points: np.ndarray, *lifts: float) -> np.ndarray:
+    """Grasp targets at units' centres and `lifts` over them (the planner's tight grasp, a drop's)."""
+    return np.concatenate([points] + [points + (0.0, 0.0, lift) for lift in lifts])
 
 
 def block_unit_centres(scene: Scene, b: int) -> np.ndarray:
@@ -118,7 +126,14 @@ def arm_filter(scene: Scene, grid: Grid, candidates: list[Candidate],
     gamp = gamp or GampConfig()
     grasps = type_grasps(scene, gamp)
     # A tight grasp's target over the unit's centre; the cup's, on its top face.
-    lift = suction_styles(scene.course, gamp)[0][1] if gamp.effector == 'suction' else grasp_lift(scene.course)
+    if gamp.effector == 'suction':
+        pick_lifts = place_lifts = (suction_styles(scene.course, gamp)[0][1],)
+    elif gamp.drop and scene.studs is None:
+        # A drop holds the unit near its top, and lets go of it over its place.
+        pick_lifts = (grasp_lift(scene.course), drop_lift(scene.course))
+        place_lifts = (grasp_lift(scene.course), drop_lift(scene.course) + DROP_HEIGHT)
+    else:
+        pick_lifts = place_lifts = (grasp_lift(scene.course),)
     report = ArmFilter()
     for name, gs in grasps.items():
         if not gs:
@@ -129,7 +144,7 @@ def arm_filter(scene: Scene, grid: Grid, candidates: list[Candidate],
         if b in placed or block.type in report.types:
             continue
         units = block_unit_centres(scene, b)[sorted({g.unit for g in grasps[block.type]})]
-        why = _unreachable(_both_heights(units, lift))
+        why = _unreachable(_both_heights(units, *pick_lifts))
         if why:
             report.blocks[block.id] = f'cannot be picked where it lies: {why}'
             continue
@@ -140,7 +155,7 @@ def arm_filter(scene: Scene, grid: Grid, candidates: list[Candidate],
         if name in report.types:
             continue
         centres = grid.centres[list(cand.cell_ids)][sorted({g.unit for g in grasps[name]})]
-        why = _unreachable(_both_heights(centres, lift))
+        why = _unreachable(_both_heights(centres, *place_lifts))
         if why:
             report.poses += 1
             key = why.split(':')[0] + ': ' + ('target below the table' if 'below' in why else 'beyond the reach')
@@ -195,7 +210,9 @@ class HandBlocked:
     blocked in a state is blocked in every state after it. Cells off the grid are never built.
 
     A wide grasp's cells count from the first unit of its row, the hand's target at the row's middle
-    (`grasp_shift`), its fingers opened off the row's outer faces (`planner.wide_grasp_styles`).
+    (`grasp_shift`), its fingers opened off the row's outer faces (`planner.wide_grasp_styles`). Where
+    GAMP drops blocks (`GampConfig.drop`), the drop is one more way: the hand `grasps.DROP_HEIGHT` over the
+    placement, holding the unit by its top (`planner.drop_styles`), its fingertips over the unit's level.
     With the vacuum gripper (`GampConfig.effector` 'suction') the cells are those its housing and
     cup enter, the cup's lip over the unit's top face; no finger goes down beside the block.
 
@@ -219,10 +236,13 @@ class HandBlocked:
             scene = self.scene
             if self.gamp.effector == 'suction':
                 styles = suction_styles(scene.course, self.gamp)
-            elif span == 1:
-                styles = grasp_styles(grasp_width(scene.unit, scene.clearance), scene.course, self.gamp)
             else:
-                styles = wide_grasp_styles(span_width(span, scene.unit, scene.clearance), scene.course, self.gamp)
+                width = grasp_width(scene.unit, scene.clearance) if span == 1 else span_width(span, scene.unit,
+                                                                                              scene.clearance)
+                styles = (grasp_styles if span == 1 else wide_grasp_styles)(width, scene.course, self.gamp)
+                if self.gamp.drop and scene.studs is None:
+                    # Let go over its place: the hand `DROP_HEIGHT` over where it would set the block down.
+                    styles += tuple((f, lift + DROP_HEIGHT) for f, lift in drop_styles(width, scene.course, self.gamp))
             course = None if scene.course == scene.unit else scene.course
             common = frozenset.intersection(*(blocking_offsets(scene.unit, scene.clearance, f, hand_yaw, lift, shift,
                                                                self.gamp.effector, course) for f, lift in styles))

@@ -27,7 +27,7 @@ step.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from ortools.sat.python import cp_model
@@ -38,6 +38,7 @@ from rad_core.allocation.placements import enumerate_candidates
 from rad_core.domain.grid import Grid, blocks_on_grid
 from rad_core.domain.scene import Scene
 from rad_core.domain.statics import order_statics
+from rad_core.gamp.planner import GampConfig
 
 
 @dataclass(frozen=True)
@@ -232,7 +233,23 @@ def ordered_cover(scene: Scene, time_limit_s: float = 2.0, gamp=None, avoid=()) 
     where an allocation's cover has no such order (a cantilever's end the hand can only reach
     before its neighbour is there, which needs another block below it), this one picks a cover
     that has. CP-SAT's best within `time_limit_s` (deterministic time); empty where it found none.
-    avoid: covers found before (their `order`s), not to be found again as they were."""
+    avoid: covers found before (their `order`s), not to be found again as they were.
+
+    Where GAMP drops (`GampConfig.drop`), the cover of a hand that only sets blocks down comes first, and
+    the drop's ways are asked for only where that cover leaves target cells (each solve in the whole
+    time): an order that sets every block down is one with drops too, and the drop's many more ways led
+    CP-SAT to worse covers in its time (measured: generated g = 6 seed 7, 15 of 16 cells where it had 16)."""
+    gamp = gamp or GampConfig()
+    if not (gamp.drop and gamp.effector == 'hand' and scene.studs is None):
+        return _ordered_cover(scene, time_limit_s, gamp, avoid)
+    first = _ordered_cover(scene, time_limit_s, replace(gamp, drop=False), avoid)
+    if first.coverage >= 1.0 - 1e-9:
+        return first
+    second = _ordered_cover(scene, time_limit_s, gamp, avoid)
+    return second if second.coverage > first.coverage + 1e-9 else first
+
+
+def _ordered_cover(scene: Scene, time_limit_s: float, gamp, avoid) -> HandOrder:
     grid, occupied = scene_state(scene)
     candidates, counts, hand, _ = cover_candidates(scene, grid, gamp)
     poses, items = candidate_poses(grid, hand, occupied, candidates, counts)

@@ -103,6 +103,8 @@ class SupplyParams:
     """At most this many solves, each ruling out the pieces the hand could not place."""
     effector: str = 'hand'
     """Whose placing `hand` asks about (`cell.panda.EFFECTORS`): the parallel hand or the vacuum gripper."""
+    drop: bool | None = None
+    """Whether the hand may let a block go over its place (`GampConfig.drop`); None: as GAMP by default."""
     start: str = 'auto'
     """Where the blocks start (`SUPPLY_STARTS`): on the 'table', in a 'feeder' presenting them at
     `station`, or 'auto': the table where they fit within reach, else the feeder (as `rad scene
@@ -112,8 +114,10 @@ class SupplyParams:
 
     @property
     def gamp(self):
-        """GAMP's settings the supply counts on (`GampConfig` with this effector)."""
-        return GampConfig(effector=self.effector)
+        """GAMP's settings the supply counts on (`GampConfig` with this effector and drop)."""
+        if self.drop is None:
+            return GampConfig(effector=self.effector)
+        return GampConfig(effector=self.effector, drop=self.drop)
 
     def validate(self, types: Mapping[str, BlockType]) -> None:
         if self.objective not in OBJECTIVES:

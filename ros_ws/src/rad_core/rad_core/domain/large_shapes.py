@@ -15,10 +15,9 @@ stays within the reach of a top-down hand (the far cells at 0.72 m from the base
 - `tall_cavity_wall`: the cavity wall with three more courses above its lintels, 100 blocks.
 
 And three with the two leaves flush, back to back (the generator's two-sided layout, filled):
-`wall_openings`, `viaduct` and `stepped_wall`. A parallel gripper taking blocks from above cannot
-fill such a wall whatever the order: every full course loses a cell (`FLUSH_LIMIT`;
-`sequencing.planning.courses.course_bound` puts their limit at 0.977-0.988). Built course by course
-(`sequencing.planning.courses.course_line`), rad gets 0.93-0.97 of them.
+`wall_openings`, `viaduct` and `stepped_wall`. A parallel gripper setting blocks down from above cannot
+fill such a wall whatever the order: every full course loses a cell (`FLUSH_LIMIT`). The hand fills
+them by dropping the last block of a course into its place (`gamp.planner.GampConfig.drop`).
 
 Their block multisets are exact stable tilings by small types plus a few spares: for the
 faces a bond drawn course by course (`coursed_tiling`: bars of three and two, joints staggered
@@ -52,7 +51,8 @@ CAVITY = 2
 """The cavity between the two leaves of a cavity wall, in cells: 8 cm at a 4 cm unit, room for a
 finger (the hand closes across a bar of a leaf, one finger outside, one in the cavity)."""
 
-FLUSH_LIMIT = """Why a two-deep flush wall cannot be filled by top-down parallel-jaw grasps. Take any course
+FLUSH_LIMIT = """Why a two-deep flush wall cannot be filled by top-down parallel-jaw grasps that set each block
+down (GAMP's drop, held by its top and let go over its place, gets around it). Take any course
 and the block placed last in it. The hand closes either across the wall, with one finger where
 the other leaf's block of this course lies, or along the wall, with a finger where the block
 beside it in its own leaf lies (and a bar of two or more cells, 8 cm and up, does not fit the

@@ -132,7 +132,8 @@ class MotionPlanner:
     """GAMP over a planning world of its own; each call loads the given scene state. A block goes to
     its cell's pose, moved by `seat_shift` clear of neighbours seen off their cells."""
 
-    def __init__(self, config: GampConfig = GampConfig()):
+    def __init__(self, config: GampConfig | None = None):
+        config = GampConfig() if config is None else config
         config.validate()
         self.config = config
         self.world = World(config=WorldConfig(effector=config.effector))

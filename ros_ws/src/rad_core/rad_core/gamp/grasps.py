@@ -74,6 +74,27 @@ the block rests on. A block thinner than that (a plate of a stud system) is held
 grasp, the pads on its upper part (`tip_floor_lift`)."""
 
 
+DROP_GRIP = 0.010
+"""A drop's hold (`drop_lift`): the pads cover this much (m) of the held unit's side under its top."""
+
+DROP_CLEAR = 0.004
+"""How far (m) a drop's fingertips stay over the placed block's top when the fingers let go."""
+
+DROP_HEIGHT = DROP_GRIP + DROP_CLEAR
+"""How far (m) over its place a dropped block is let go (`drop_lift`): the fingertips, `DROP_GRIP`
+under the held block's top, then clear the course it goes into by `DROP_CLEAR`."""
+
+
+def drop_lift(height: float) -> float:
+    """How far (m) a drop's grasp target sits above the held unit's centre, for a unit this high: the
+    pads, reaching `TIP_BELOW` under the target, cover the top `DROP_GRIP` of the unit's sides.
+
+    A drop is the hand's way into a place whose neighbours at its level are built on both sides:
+    held by its top, the block is let go `DROP_HEIGHT` over its place, the fingers above those
+    neighbours, and falls the rest (`planner.GampConfig.drop`)."""
+    return max(0.0, height / 2 - (DROP_GRIP - TIP_BELOW))
+
+
 def tip_floor_lift(hang: float) -> float:
     """How far (m) to raise a grasp whose target hangs `hang` above the held block's bottom, so that the
     fingertips stay `TIP_FLOOR` over what the block rests on (0 where they already do)."""

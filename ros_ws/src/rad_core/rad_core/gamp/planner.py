@@ -36,6 +36,7 @@ Everything runs inside one ``world.preserved()``: the world is unchanged after.
 from __future__ import annotations
 
 import math
+import re
 import time
 import weakref
 from dataclasses import dataclass, field
@@ -52,6 +53,8 @@ from rad_core.gamp.collision import CollisionConfig, attachment_from_world, chec
 from rad_core.gamp.grasps import (
     Grasp,
     grasp_centre,
+    DROP_HEIGHT,
+    drop_lift,
     grasp_lift,
     grasp_width,
     no_grasp_reason_for,
@@ -62,6 +65,12 @@ from rad_core.gamp.grasps import (
 from rad_core.gamp.ik import IkConfig, hand_yaw_options, solve_top_down
 from rad_core.gamp.trajectory import TimingConfig, plan_motion
 from rad_core.sim.world import World
+
+
+DROP_BY_DEFAULT = True
+"""`GampConfig.drop` where a config does not say (read when each config is made): the hand drops where it
+cannot set down. False gives every config made after it the paper's hand, which only sets blocks down
+(the tests of what that hand cannot do set it so)."""
 
 
 @dataclass(frozen=True)
@@ -110,6 +119,13 @@ class GampConfig:
     `gamp.action.MotionPlanner` (the gamp node's `move_aside` request; `plan_assembly` asks for
     it); `plan_action` itself plans one pick and place."""
     timing: TimingConfig = field(default_factory=TimingConfig)
+    drop: bool = field(default_factory=lambda: DROP_BY_DEFAULT)
+    """Where the hand picks the block but a finger or the hand hits a neighbour at the placement in every
+    way of holding it, try once more holding it by its top (`grasps.drop_lift`) and letting go of it
+    `grasps.DROP_HEIGHT` over its place, the fingertips above the neighbours at its level: the block falls
+    the rest (a drop; `GampResult.drop`). Tried last, so actions placed before are placed as before. Not
+    with the vacuum gripper (it sets a block down where it goes) nor with studded bricks (the press needs
+    the hand on the brick). Off: the hand only sets blocks down."""
     wide_grasps: bool = True
     """Also take a block across its whole extent along its x or y axis (`grasps.wide_grasps`), after
     every unit grasp failed: the fingers outside the block, at the tight grasp's height
@@ -167,6 +183,9 @@ class GampResult:
     hand_yaw_deg: float = 0.0         # hand yaw at the grasp
     timings: dict = field(default_factory=lambda: {'ik_s': 0.0, 'collision_s': 0.0, 'total_s': 0.0})
     ik_calls: int = 0
+    drop: float = 0.0
+    """How far (m) over its place the motion lets the block go (`GampConfig.drop`); 0: set down. A
+    dropping result's `reason` says why no grasp sets the block down."""
     moved_aside: list = field(default_factory=list)
     """Blocks the motion first moves out of the way on the table, in order:
     {'block', 'position' (anchor, m), 'yaw' (deg)}; the motion holds their pick and place first."""
@@ -238,12 +257,13 @@ class _Blocked(Exception):
 
 
 def plan_action(world: World, block_id: str, position, yaw_deg: float, start=None,
-                config: GampConfig = GampConfig()) -> GampResult:
+                config: GampConfig | None = None) -> GampResult:
     """Plan picking `block_id` where it lies and placing its anchor at `position` with `yaw_deg`.
 
-    start: (9,) joints the motion starts from (default: the robot's joints now).
+    start: (9,) joints the motion starts from (default: the robot's joints now). config: default `GampConfig()`.
     """
     t0 = time.perf_counter()
+    config = GampConfig() if config is None else config
     if world.scene is None or block_id not in world.blocks:
         raise RadError(f'unknown block id {block_id!r}')
     position = np.asarray(position, dtype=float).ravel()
@@ -276,20 +296,37 @@ def plan_action(world: World, block_id: str, position, yaw_deg: float, start=Non
         for grasp in grasps:
             done, pick_reason, place_reason = _try_grasp(job, grasp)
             if done is not None:
-                result._path, result.hand_yaw_deg = done
+                result._path, result.hand_yaw_deg, result.drop = done
                 result.grasp, result.success = grasp, True
                 return _finish(result, '', '', clock, t0)
             if place_reason:
-                place_failures.append(f'{grasp}: {place_reason}')
+                place_failures.append((grasp, place_reason))
             else:
                 pick_failures.append(f'{grasp}: {pick_reason}')
+        # No grasp sets the block down: where the hand hit a neighbour at the placement, let it go over it.
+        for k, (grasp, place_reason) in enumerate(place_failures):
+            if not _may_drop(job, place_reason):
+                continue
+            done, _, dropped = _try_grasp(job, grasp, drop=True)
+            if done is not None:
+                result._path, result.hand_yaw_deg, result.drop = done
+                result.grasp, result.success = grasp, True
+                # Why it could not be set down: a plan that takes no drops refuses it for that.
+                return _finish(result, '', _placement_reason(place_failures, len(grasps)), clock, t0)
+            if dropped:
+                # Where the drop failed, not what it hit: order repair learns its precedences from the
+                # blocks a refusal names, and those of the block set down are the ones to learn.
+                place_failures[k] = (grasp, f'{place_reason} (nor let go {DROP_HEIGHT * 1000:.0f} mm over it: '
+                                            f'{dropped.split(":")[0]})')
     if not place_failures:
         reason = f'grasp: all {len(grasps)} grasps blocked: ' + '; '.join(pick_failures)
         return _finish(result, 'grasp', reason, clock, t0)
-    n_ok = len(place_failures)
-    reason = (f'placement: {n_ok} of {len(grasps)} grasps feasible, none places the block: '
-              + '; '.join(place_failures))
-    return _finish(result, 'placement', reason, clock, t0)
+    return _finish(result, 'placement', _placement_reason(place_failures, len(grasps)), clock, t0)
+
+
+def _placement_reason(place_failures: list, n_grasps: int) -> str:
+    return (f'placement: {len(place_failures)} of {n_grasps} grasps feasible, none places the block: '
+            + '; '.join(f'{grasp}: {why}' for grasp, why in place_failures))
 
 
 def _over_the_studs(world: World, block_id: str, btype: BlockType, position, yaw_deg: float,
@@ -347,23 +384,38 @@ class _Job:
         self.final_rot = yaw_matrix(self.yaw_deg)
 
 
-def _try_grasp(job: _Job, grasp: Grasp) -> tuple[tuple | None, str, str]:
-    """Plan one grasp, both hand yaws: ((the result's path, hand yaw (deg)) or None, the pick's reason,
-    the placement's reason)."""
-    world, block_id, btype, unit, config = job.world, job.block_id, job.btype, job.unit, job.config
+def _try_grasp(job: _Job, grasp: Grasp, drop: bool = False) -> tuple[tuple | None, str, str]:
+    """Plan one grasp, both hand yaws: ((the result's path, hand yaw (deg), drop (m)) or None, the pick's
+    reason, the placement's reason). drop: held by its top and let go `DROP_HEIGHT` over its place
+    (`GampConfig.drop`), not set down."""
+    config = job.config
     if config.effector == 'suction':
         # The finger coordinate stands for the vacuum (the vacuum gripper has no fingers, and its URDF's
         # finger links no shape): open = off, closed = on, so that plan_motion places its commands.
         width, closed_f = float('nan'), 0.0
         styles = suction_styles(job.course, config)
-    elif grasp.span == 1:
-        width = grasp_width(unit, job.clearance)
-        styles = grasp_styles(width, job.course, config)
     else:
-        width = span_width(grasp.span, unit, job.clearance)
-        styles = wide_grasp_styles(width, job.course, config)
-    if config.effector != 'suction':
+        width = grasp_width(job.unit, job.clearance) if grasp.span == 1 else span_width(grasp.span, job.unit,
+                                                                                         job.clearance)
+        styles = (grasp_styles if grasp.span == 1 else wide_grasp_styles)(width, job.course, config)
         closed_f = max(0.0, width / 2 - config.grip_squeeze)
+    if drop:
+        return _try_styles(job, grasp, width, closed_f, drop_styles(width, job.course, config), DROP_HEIGHT)
+    return _try_styles(job, grasp, width, closed_f, styles, 0.0)
+
+
+def _may_drop(job: _Job, place_reason: str) -> bool:
+    """Whether a drop may help: the hand's, no studs, and the placement refused for the fingers, the hand or
+    the links rigid with it hitting a block (not the carried block, not the reach)."""
+    return (job.config.drop and job.config.effector == 'hand' and job.world.scene.studs is None
+            and re.search(r'(finger|hand|link7|link8) hits block', place_reason) is not None)
+
+
+def _try_styles(job: _Job, grasp: Grasp, width: float, closed_f: float, styles, drop: float
+                ) -> tuple[tuple | None, str, str]:
+    """`_try_grasp` in the given ways of holding the block (`grasp_styles`), the block let go `drop` (m)
+    over its place."""
+    world, block_id, btype, unit, config = job.world, job.block_id, job.btype, job.unit, job.config
     rot, final_rot = job.rot, job.final_rot
     turn = math.radians(job.yaw_deg) - job.block_yaw
     centre = grasp_centre(btype, grasp) * np.array([unit, unit, job.course])
@@ -397,7 +449,7 @@ def _try_grasp(job: _Job, grasp: Grasp) -> tuple[tuple | None, str, str]:
         if pick is None:
             pick_reason = pick_reason or '; '.join(why)
             continue
-        place_point = job.position + final_rot @ offset
+        place_point = job.position + final_rot @ offset + (0.0, 0.0, drop)
         rise_place = max(config.approach_height, transit_z - place_point[2])
         try:
             place = _plan_place(world, block_id, pick, place_point, job.position, job.yaw_deg,
@@ -408,7 +460,7 @@ def _try_grasp(job: _Job, grasp: Grasp) -> tuple[tuple | None, str, str]:
             continue
         vacuum = (config.vacuum, config.vacuum_timeout_ms) if config.effector == 'suction' else None
         path = (job.start, pick['waypoints'] + place['waypoints'], config.timing, width / 2, vacuum)
-        return (path, math.degrees(hand_yaw)), pick_reason, place_reason
+        return (path, math.degrees(hand_yaw), drop), pick_reason, place_reason
     return None, pick_reason, place_reason
 
 
@@ -448,6 +500,14 @@ def wide_grasp_styles(width: float, height: float,
         if tight != out[0]:
             out.append(tight)
     return tuple(out)
+
+
+def drop_styles(width: float, height: float, config: GampConfig = GampConfig()) -> tuple[tuple[float, float], ...]:
+    """How the planner holds a unit `width` wide (or a wide grasp's row) to drop it (`GampConfig.drop`), as
+    `grasp_styles` gives it: the fingers `tight_finger_clearance` off its faces (or `finger_clearance`
+    where tight grasps are off), the target `grasps.drop_lift` over the unit's centre."""
+    off = config.tight_finger_clearance if 0 < config.tight_finger_clearance else config.finger_clearance
+    return ((min(panda.FINGER_OPEN, width / 2 + off), drop_lift(height)),)
 
 
 def suction_styles(height: float, config: GampConfig = GampConfig()) -> tuple[tuple[float, float], ...]:
@@ -514,7 +574,7 @@ def _plan_place(world, block_id, pick, place_point, position, yaw_deg, hand_yaw,
     column = _vertical(world, place_point, q_place, hand_yaw, rise, config, clock, rng, 'above the placement')
     _check_column(carry, q_place, column, config, 'above the placement', 'on the descent')
     _segment(carry, top, column[-1], config, 'carrying the block over')
-    # Released: the block stays exactly at its final pose, the fingers open.
+    # Released: the block at its final pose (a dropped one falls there), the fingers open.
     world.set_block_pose(block_id, position, yaw_quaternion(yaw_deg))
     after = clock.timed(make_collision_fn(world, config=config.collision, remember=True))
     q_open = _with_fingers(q_place, open_f)

@@ -112,10 +112,11 @@ class Planning:
     line_won: bool = False        # ... and its line beat the first plan
 
     def plan(self, ranker, until: float, allocation: AllocationResult | None = None, precedences=(),
-             support: str | None = None) -> AssemblyPlan:
+             support: str | None = None, drops: bool = True) -> AssemblyPlan:
         """A plan ranked by `ranker`, ending by `until`: of `allocation` where given, else of a new
         allocation (the agent's support, or `support`) given at most the time left before the
-        deadline; keeping to `precedences` where the ranking allows. Recorded in `plans`."""
+        deadline; keeping to `precedences` where the ranking allows; drops: taking actions GAMP can
+        only drop in (`plan_assembly`). Recorded in `plans`."""
         if allocation is not None:
             def first(s):
                 return allocation
@@ -126,7 +127,7 @@ class Planning:
                              time_limit_s=until - time.perf_counter(),
                              reallocate=self.reallocate if self.spec.realloc else None,
                              reallocation=self.reallocation, verify=self.spec.verify, precedences=precedences,
-                             pace=self.pace)
+                             pace=self.pace, drops=drops)
         self.plans.append(made)
         return made
 

@@ -42,7 +42,7 @@ from rad_core.gamp.action import SceneAction, blocks_named
 from rad_core.sequencing.decide.actions import AllocationActions, mdp_actions, scene_action
 from rad_core.sequencing.decide.deciders import with_fallbacks
 from rad_core.sequencing.decide.episode import Decision, Episode, run_episode, stop
-from rad_core.sequencing.decide.policy import Policy, first_feasible, ranked_actions
+from rad_core.sequencing.decide.policy import Policy, first_feasible, ranked_actions, refused
 from rad_core.sequencing.planning.reallocation import ReallocationConfig, Reallocator, with_reallocation
 from rad_core.sim.physics import PhysicsStability
 
@@ -58,6 +58,7 @@ class MotionPlan:
     motion: dict | None = None        # rad_core.cell.motion.Motion.to_dict(): {"trajectories", "gripper"}
     moved_aside: list = field(default_factory=list)   # blocks moved out of the way first (GampResult.moved_aside)
     seconds: float = 0.0              # the planner's own time (the gamp node's planning_time_s), transport left out
+    drop: float = 0.0                 # how far over its place the block is let go (GampResult.drop); 0: set down
 
 
 def _span(grasp) -> int:
@@ -176,7 +177,8 @@ def moved(scene: Scene, block_id: str, position, yaw: int) -> Scene:
 
 def plan_assembly(scene: Scene, allocate: Allocate, plan_motion: PlanMotion, sequencer: Policy | Rank,
                   seed: int = 0, start=None, time_limit_s: float = 60.0, reallocate=None,
-                  reallocation=None, verify: bool = True, precedences=(), pace: dict | None = None) -> AssemblyPlan:
+                  reallocation=None, verify: bool = True, precedences=(), pace: dict | None = None,
+                  drops: bool = True) -> AssemblyPlan:
     """sequencer: a Policy (in-process scores of the MDP state) or a Rank callable.
     A Rank callable's RadError (say, the sequencer node is down) propagates.
     reallocate: (scene state, no-goods, time limit) -> AllocationResult, to re-allocate on
@@ -189,7 +191,9 @@ def plan_assembly(scene: Scene, allocate: Allocate, plan_motion: PlanMotion, seq
     it (as long as such calls took on average), nor a re-allocation once it has passed; the plan so
     far comes back, its `reason` saying the limit ended it (the allocation is the caller's to bound:
     `allocate` is called first, as it is). pace: {'rank': [seconds, count], 'motion': [...]} of the
-    calls made so far, updated here (plans of one agent's planning share it; default: this plan's)."""
+    calls made so far, updated here (plans of one agent's planning share it; default: this plan's).
+    drops: whether a verified plan may take an action GAMP can only drop in (`GampConfig.drop`;
+    `policy.first_feasible`); False: such an action counts as infeasible."""
     t0 = time.perf_counter()
     timings = {'allocation': 0.0, 'sequencing': 0.0, 'motion': 0.0}
     allocation = allocate(scene)
@@ -212,7 +216,7 @@ def plan_assembly(scene: Scene, allocate: Allocate, plan_motion: PlanMotion, seq
             plan.reason = (f'time limit of {time_limit_s:g} s reached: the allocation placed no block '
                            f'within it ({allocation.status})')
         return _done(plan, t0)
-    run = _Planning(plan, env, plan_motion, sequencer, start, verify, precedences, t0 + time_limit_s, pace)
+    run = _Planning(plan, env, plan_motion, sequencer, start, verify, precedences, t0 + time_limit_s, pace, drops)
     reallocator = None
     if reallocate is not None:
         reallocator = Reallocator(run.allowed, run.pose_check, reallocation or ReallocationConfig(),
@@ -249,8 +253,9 @@ class _Planning:
     and the arm joints), the plan so far, and the sequencer's and GAMP's answers in this state."""
 
     def __init__(self, plan: AssemblyPlan, env: AssemblyEnv, plan_motion: PlanMotion, sequencer, start,
-                 verify: bool, precedences, deadline: float, pace: dict | None = None):
+                 verify: bool, precedences, deadline: float, pace: dict | None = None, drops: bool = True):
         self.plan, self.env, self.timings = plan, env, plan.timings
+        self.drops = drops
         self.allowed = AllocationActions(env, plan.allocation.placements)   # its guide changes on re-allocation
         self.world = {'scene': plan.scene, 'q': start}
         self.sequencer, self.verify, self.precedences, self.deadline = sequencer, verify, precedences, deadline
@@ -336,8 +341,10 @@ class _Planning:
 
     def pose_check(self, action) -> MotionPlan:
         """What the plan's own steps are held to (`_checked_motion`), for a re-allocation's checks: a
-        pose whose block would tip the structure is as much a no-good as one the arm cannot reach."""
-        return self.check_motion(self.env, self.world['scene'], action, self.world['q'])
+        pose whose block would tip the structure is as much a no-good as one the arm cannot reach. A plan
+        that takes no drops refuses a pose GAMP can only drop in (`policy.first_feasible`)."""
+        found = self.check_motion(self.env, self.world['scene'], action, self.world['q'])
+        return found if self.drops or not found.success or found.drop <= 0 else refused(found)
 
     def decide(self, env: AssemblyEnv, rng, fallbacks: bool = False) -> Decision:
         """The best feasible action the sequencer ranks above stopping; fallbacks: of those it
@@ -353,7 +360,7 @@ class _Planning:
         if self.verify and self.precedences:
             ranked = precedences_last(env, ranked, self.precedences)
         found = _first_feasible(env, self.world['scene'], ranked if self.verify else ranked[:1], self.check_motion,
-                                self.world['q'], book=not self.verify)
+                                self.world['q'], book=not self.verify, drops=self.drops)
         if isinstance(found, str):
             return stop(found)
         action, step = found
@@ -497,7 +504,8 @@ def _checked_motion(env: AssemblyEnv, scene: Scene, action, plan_motion: PlanMot
     return motion
 
 
-def _first_feasible(env: AssemblyEnv, scene: Scene, ranked, check_motion, q, book: bool = False):
+def _first_feasible(env: AssemblyEnv, scene: Scene, ranked, check_motion, q, book: bool = False,
+                    drops: bool = True):
     """(action, PlanStep) of the best-ranked action GAMP can execute, or why none.
     check_motion(env, scene, action, q): `_checked_motion` with the plan's motion planner. book (an
     unverified agent, given its one best-ranked action): a failure comes back as (action,
@@ -505,7 +513,7 @@ def _first_feasible(env: AssemblyEnv, scene: Scene, ranked, check_motion, q, boo
     def check(action) -> MotionPlan:
         return check_motion(env, scene, action, q)
 
-    action, motion, failed = first_feasible(env, ranked, check)
+    action, motion, failed = first_feasible(env, ranked, check, drops)
     if action is None and book and failed:
         return ranked[0], failed[0][1]      # unverified: the one action, and why it fails (booked by act)
     if action is None:
@@ -543,6 +551,8 @@ def local_motion_planner(planner) -> PlanMotion:
         result, _, _ = planner(scene, action, start=start, move_aside=move_aside)
         if not result.success:
             return MotionPlan(False, result.failure, result.reason, seconds=time.perf_counter() - t0)
-        return MotionPlan(True, '', '', (int(result.grasp.unit), int(result.grasp.yaw), int(result.grasp.span)),
-                          result.motion.to_dict(), list(result.moved_aside), seconds=time.perf_counter() - t0)
+        return MotionPlan(True, '', result.reason if result.drop else '',
+                          (int(result.grasp.unit), int(result.grasp.yaw), int(result.grasp.span)),
+                          result.motion.to_dict(), list(result.moved_aside), seconds=time.perf_counter() - t0,
+                          drop=result.drop)
     return plan_motion
