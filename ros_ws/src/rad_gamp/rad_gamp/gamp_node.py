@@ -104,10 +104,12 @@ class GampNode(Node):
                 raise RadError(f'place_pose of block {a.block_id!r} puts it into the table (lowest unit centre '
                                f'z = {units[:, 2].min():.3f} m, on the table it is {scene.course / 2:.3f} m)')
             start = self.planner.load(scene, request.start_positions)
+            config = self.planner.config
             return plan_action(self.planner.world, a.block_id, position, yaw, start=start,
-                               config=self.planner.config)
+                               config=dataclasses.replace(config, drop=False) if request.set_down else config)
         action = SceneAction(a.block_id, a.unit, a.target, (a.cell.i, a.cell.j, a.cell.k), a.rotation)
-        result, _, _ = self.planner(scene, action, start=request.start_positions, move_aside=request.move_aside)
+        result, _, _ = self.planner(scene, action, start=request.start_positions, move_aside=request.move_aside,
+                                    set_down=request.set_down)
         return result
 
     def plan_action_callback(self, request, response):
@@ -129,6 +131,7 @@ class GampNode(Node):
             return response
         response.grasp.unit, response.grasp.yaw_deg = int(result.grasp.unit), int(result.grasp.yaw)
         response.grasp.span = int(result.grasp.span)
+        response.drop = float(result.drop)
         response.trajectories, response.gripper = motion_to_msgs(result.motion.to_dict(),
                                                                  self.get_parameter('frame_id').value)
         response.moved_aside_blocks, response.moved_aside_poses = moved_aside_to_msgs(result.moved_aside)

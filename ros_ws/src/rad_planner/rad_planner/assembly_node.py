@@ -514,10 +514,11 @@ class AssemblyNode(ManagedNode):
         when the agent's allocation is (`reallocation_support`)."""
         return self.allocate(scene, exclude, time_limit_s, support=reallocation_support(self.support))
 
-    def plan_motion(self, scene: Scene, action, start, move_aside: bool = False) -> MotionPlan:
+    def plan_motion(self, scene: Scene, action, start, move_aside: bool = False, set_down: bool = False) -> MotionPlan:
         request = self.plan_action_request(scene, start)
         request.action = action_to_msg(action)
         request.move_aside = bool(move_aside)
+        request.set_down = bool(set_down)
         return self.ask_plan_action(request, start)
 
     @staticmethod
@@ -542,9 +543,9 @@ class AssemblyNode(ManagedNode):
                                f'(trajectory {k}): {why}')
             start_q = np.asarray(traj['points'][-1]['positions'])
         grasp = (response.grasp.unit, response.grasp.yaw_deg, max(1, response.grasp.span))
-        return MotionPlan(True, '', '', grasp, motion,
+        return MotionPlan(True, '', response.reason if response.drop > 0 else '', grasp, motion,
                           moved_aside_from_msgs(response.moved_aside_blocks, response.moved_aside_poses),
-                          seconds=response.planning_time_s)
+                          seconds=response.planning_time_s, drop=float(response.drop))
 
     def plan(self, scene: Scene, time_limit: float, start, improve_until: float | None = None):
         plan = plan_for_agent(self.agent, scene, self.allocate, self.plan_motion, self.rank, self.reallocate,

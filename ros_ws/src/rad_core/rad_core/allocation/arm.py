@@ -37,7 +37,6 @@ from rad_core.domain.grid import Grid, blocks_on_grid
 from rad_core.domain.scene import Scene
 from rad_core.gamp.grasps import (
     DROP_HEIGHT,
-    drop_lift,
     grasp_lift,
     grasp_width,
     no_grasp_reason_for,
@@ -105,9 +104,9 @@ def _unreachable(points: np.ndarray) -> str:
     return first
 
 
-def _both_heights(points: np.ndarray, *lifts: float) -> np.ndarray:
-    """Grasp targets at units' centres and `lifts` over them (the planner's tight grasp, a drop's)."""
-    return np.concatenate([points] + [points + (0.0, 0.0, lift) for lift in lifts])
+def _both_heights(points: np.ndarray, lift: float) -> np.ndarray:
+    """Grasp targets at units' centres and, for the planner's tight grasp, `lift` over them."""
+    return np.concatenate([points, points + (0.0, 0.0, lift)])
 
 
 def block_unit_centres(scene: Scene, b: int) -> np.ndarray:
@@ -126,14 +125,7 @@ def arm_filter(scene: Scene, grid: Grid, candidates: list[Candidate],
     gamp = gamp or GampConfig()
     grasps = type_grasps(scene, gamp)
     # A tight grasp's target over the unit's centre; the cup's, on its top face.
-    if gamp.effector == 'suction':
-        pick_lifts = place_lifts = (suction_styles(scene.course, gamp)[0][1],)
-    elif gamp.drop and scene.studs is None:
-        # A drop holds the unit near its top, and lets go of it over its place.
-        pick_lifts = (grasp_lift(scene.course), drop_lift(scene.course))
-        place_lifts = (grasp_lift(scene.course), drop_lift(scene.course) + DROP_HEIGHT)
-    else:
-        pick_lifts = place_lifts = (grasp_lift(scene.course),)
+    lift = suction_styles(scene.course, gamp)[0][1] if gamp.effector == 'suction' else grasp_lift(scene.course)
     report = ArmFilter()
     for name, gs in grasps.items():
         if not gs:
@@ -144,7 +136,7 @@ def arm_filter(scene: Scene, grid: Grid, candidates: list[Candidate],
         if b in placed or block.type in report.types:
             continue
         units = block_unit_centres(scene, b)[sorted({g.unit for g in grasps[block.type]})]
-        why = _unreachable(_both_heights(units, *pick_lifts))
+        why = _unreachable(_both_heights(units, lift))
         if why:
             report.blocks[block.id] = f'cannot be picked where it lies: {why}'
             continue
@@ -155,7 +147,7 @@ def arm_filter(scene: Scene, grid: Grid, candidates: list[Candidate],
         if name in report.types:
             continue
         centres = grid.centres[list(cand.cell_ids)][sorted({g.unit for g in grasps[name]})]
-        why = _unreachable(_both_heights(centres, *place_lifts))
+        why = _unreachable(_both_heights(centres, lift))
         if why:
             report.poses += 1
             key = why.split(':')[0] + ': ' + ('target below the table' if 'below' in why else 'beyond the reach')

@@ -27,7 +27,7 @@ step.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 from ortools.sat.python import cp_model
@@ -69,6 +69,8 @@ class HandOrder:
     tipping: list[tuple[int, ...]] = field(default_factory=list)
     """Poses CP-SAT's order placed that would tip what holds them, in every walk tried
     (`domain.statics.order_statics`): left out of `order`."""
+    drops: bool = False
+    """Whether the order counts on GAMP's drops (`GampConfig.drop`; `ordered_cover`): a plan of it takes them."""
 
     def left_out(self, poses) -> list[int]:
         """Indices of `poses` (grid cells, sorted) this order does not place: those CP-SAT's order
@@ -233,27 +235,15 @@ def ordered_cover(scene: Scene, time_limit_s: float = 2.0, gamp=None, avoid=()) 
     where an allocation's cover has no such order (a cantilever's end the hand can only reach
     before its neighbour is there, which needs another block below it), this one picks a cover
     that has. CP-SAT's best within `time_limit_s` (deterministic time); empty where it found none.
-    avoid: covers found before (their `order`s), not to be found again as they were.
-
-    Where GAMP drops (`GampConfig.drop`), the cover of a hand that only sets blocks down comes first, and
-    the drop's ways are asked for only where that cover leaves target cells (each solve in the whole
-    time): an order that sets every block down is one with drops too, and the drop's many more ways led
-    CP-SAT to worse covers in its time (measured: generated g = 6 seed 7, 15 of 16 cells where it had 16)."""
+    avoid: covers found before (their `order`s), not to be found again as they were. Where the hand
+    drops (`GampConfig.drop`), the order counts on drops (`HandOrder.drops`)."""
     gamp = gamp or GampConfig()
-    if not (gamp.drop and gamp.effector == 'hand' and scene.studs is None):
-        return _ordered_cover(scene, time_limit_s, gamp, avoid)
-    first = _ordered_cover(scene, time_limit_s, replace(gamp, drop=False), avoid)
-    if first.coverage >= 1.0 - 1e-9:
-        return first
-    second = _ordered_cover(scene, time_limit_s, gamp, avoid)
-    return second if second.coverage > first.coverage + 1e-9 else first
-
-
-def _ordered_cover(scene: Scene, time_limit_s: float, gamp, avoid) -> HandOrder:
     grid, occupied = scene_state(scene)
     candidates, counts, hand, _ = cover_candidates(scene, grid, gamp)
     poses, items = candidate_poses(grid, hand, occupied, candidates, counts)
-    return solve_order(grid, occupied, poses, items, counts, time_limit_s, cover=True, avoid=avoid)
+    found = solve_order(grid, occupied, poses, items, counts, time_limit_s, cover=True, avoid=avoid)
+    found.drops = gamp.drop and gamp.effector == 'hand' and scene.studs is None
+    return found
 
 
 def cover_candidates(scene: Scene, grid: Grid, gamp=None):

@@ -151,21 +151,23 @@ class MotionPlanner:
             drop_obstacles_on_the_hand(self.world, panda.HOME if start is None else start)
         return start
 
-    def __call__(self, scene: Scene, action: SceneAction, start=None,
-                 move_aside: bool = False) -> tuple[GampResult, np.ndarray, int]:
+    def __call__(self, scene: Scene, action: SceneAction, start=None, move_aside: bool = False,
+                 set_down: bool = False) -> tuple[GampResult, np.ndarray, int]:
         """GAMP's answer, the anchor position and yaw of the action. move_aside: when the block's
         grasps are blocked by neighbours on the table, move them aside first (`_move_aside_first`;
-        at most `config.move_aside` of them); false: one pick and place."""
+        at most `config.move_aside` of them); false: one pick and place. set_down: never a drop
+        (`GampConfig.drop`), for a plan that takes none."""
         position, yaw = target_pose(scene, action)
         start = self.load(scene, start)
         seat = position + seat_shift(scene, action.block_id, position, yaw) if scene.measured_offsets else position
-        result = plan_action(self.world, action.block_id, seat, yaw, start=start, config=self.config)
-        if move_aside and result.failure == 'grasp' and self.config.move_aside > 0:
-            result = self._move_aside_first(scene, action.block_id, seat, yaw, start, result, self.config.move_aside)
+        config = replace(self.config, drop=False) if set_down and self.config.drop else self.config
+        result = plan_action(self.world, action.block_id, seat, yaw, start=start, config=config)
+        if move_aside and result.failure == 'grasp' and config.move_aside > 0:
+            result = self._move_aside_first(scene, action.block_id, seat, yaw, start, result, config.move_aside, config)
         return result, position, yaw
 
     def _move_aside_first(self, scene: Scene, block_id: str, seat, yaw: int, start, blocked: GampResult,
-                         moves: int) -> GampResult:
+                         moves: int, config: GampConfig) -> GampResult:
         """The block's pick is blocked: move a neighbour on the table that its grasps hit (as
         `blocked.reason` names them, nearest first, at most `MOVE_ASIDE_TRIES`) to a free place
         first, then plan the block's pick and place from there; where another neighbour still
@@ -181,7 +183,7 @@ class MotionPlanner:
                 tried.append(f'{other}: no free place on the table')
                 continue
             spot_position, spot_yaw = spot
-            first = plan_action(self.world, other, spot_position, spot_yaw, start=start, config=self.config)
+            first = plan_action(self.world, other, spot_position, spot_yaw, start=start, config=config)
             if not first.success:
                 tried.append(f'{other}: {first.reason}')
                 continue
@@ -189,13 +191,13 @@ class MotionPlanner:
             self.world.set_block_pose(other, spot_position, yaw_quaternion(spot_yaw))
             try:
                 then = plan_action(self.world, block_id, seat, yaw, start=first.motion.final_joints(),
-                                   config=self.config)
+                                   config=config)
                 if then.failure == 'grasp' and moves > 1:
                     aside = replace(scene, blocks=tuple(
                         replace(b, position=tuple(spot_position), yaw=spot_yaw) if b.id == other else b
                         for b in scene.blocks))
                     then = self._move_aside_first(aside, block_id, seat, yaw, first.motion.final_joints(), then,
-                                                 moves - 1)
+                                                 moves - 1, config)
             finally:
                 self.world.set_block_pose(other, *pose)
             if not then.success:

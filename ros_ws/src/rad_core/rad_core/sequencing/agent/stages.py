@@ -82,6 +82,19 @@ class Solvers:
     hand_order: Callable = hand_order
     ordered_cover: Callable = ordered_cover
     robot_ceiling: Callable = robot_ceiling
+    drop_cover: Callable | None = None
+    """An ordered cover counting on GAMP's drops (`GampConfig.drop`), the cover stage's last try where the
+    others (a hand that sets blocks down) leave cells; None: no such try."""
+
+
+def set_down(plan_motion):
+    """plan_motion asking GAMP for no drops (its `set_down`, where it takes one: `GampConfig.drop`)."""
+    if 'set_down' not in inspect.signature(plan_motion).parameters:
+        return plan_motion
+
+    def planned(scene, action, start, move_aside: bool = False):
+        return plan_motion(scene, action, start, move_aside=move_aside, set_down=True)
+    return planned
 
 
 @dataclass
@@ -112,18 +125,20 @@ class Planning:
     line_won: bool = False        # ... and its line beat the first plan
 
     def plan(self, ranker, until: float, allocation: AllocationResult | None = None, precedences=(),
-             support: str | None = None, drops: bool = True) -> AssemblyPlan:
+             support: str | None = None, drops: bool = False) -> AssemblyPlan:
         """A plan ranked by `ranker`, ending by `until`: of `allocation` where given, else of a new
         allocation (the agent's support, or `support`) given at most the time left before the
         deadline; keeping to `precedences` where the ranking allows; drops: taking actions GAMP can
-        only drop in (`plan_assembly`). Recorded in `plans`."""
+        only drop in (`plan_assembly`), for the allocations made counting on them (the ceiling's line,
+        a cover of the drops' order). Recorded in `plans`."""
         if allocation is not None:
             def first(s):
                 return allocation
         else:
             def first(s):
                 return self._allocate(s, support or self.support)
-        made = plan_assembly(self.scene, first, self.plan_motion, ranker, seed=self.seed, start=self.start,
+        made = plan_assembly(self.scene, first, self.plan_motion if drops else set_down(self.plan_motion), ranker,
+                             seed=self.seed, start=self.start,
                              time_limit_s=until - time.perf_counter(),
                              reallocate=self.reallocate if self.spec.realloc else None,
                              reallocation=self.reallocation, verify=self.spec.verify, precedences=precedences,
@@ -256,7 +271,7 @@ def ceiling_stage(planning: Planning, best: AssemblyPlan, deadline: float) -> As
     if line is None or deadline <= time.perf_counter():
         return None
     allocation, order = line
-    return planning.plan(planning.first_rank, deadline, allocation, order)
+    return planning.plan(planning.first_rank, deadline, allocation, order, drops=True)
 
 
 def search_stage(planning: Planning, best: AssemblyPlan, deadline: float) -> AssemblyPlan | None:
@@ -289,7 +304,15 @@ def cover_stage(planning: Planning, best: AssemblyPlan, deadline: float) -> Asse
             break
         avoid.append(cover.order)
         allocation = cover_allocation(cover, time.perf_counter() - now)
-        running, latest = chain(planning, allocation, cover.precedences, running, until)
+        running, latest = chain(planning, allocation, cover.precedences, running, until, cover.drops)
+    now = time.perf_counter()
+    if planning.solvers.drop_cover is not None and not full(running) and now < deadline:
+        # The drops' cover: the last cell of a flush course, the last block of a solid box.
+        cover = planning.solvers.drop_cover(planning.scene, min(ORDERED_COVER_S, (deadline - now) / 3))
+        if cover.coverage > running.predicted_coverage + EPS and time.perf_counter() < deadline:
+            allocation = cover_allocation(cover, time.perf_counter() - now)
+            running, latest = chain(planning, allocation, cover.precedences, running,
+                                    max(until, min(deadline, time.perf_counter() + planning.improve_time_s)), True)
     return _answer(best, running, latest)
 
 
@@ -301,7 +324,7 @@ STAGES: dict[str, Stage] = {'courses': courses_stage, 'repair': repair_stage, 'h
 # ---- order repair's rounds and chains -----------------------------------------------------------
 
 def repair_rounds(planning: Planning, latest: AssemblyPlan, known: dict, best: AssemblyPlan, last,
-                  until: float, allocation) -> tuple[AssemblyPlan, AssemblyPlan | None]:
+                  until: float, allocation, drops: bool = False) -> tuple[AssemblyPlan, AssemblyPlan | None]:
     """At most `REPAIR_ROUNDS` plans of `allocation` after `latest`, each keeping to `known` and what
     the refusals of the plan before taught (`AssemblyPlan.conflicts`), while the best plan leaves
     cells, time is left and the refusals teach something new: (the best plan, the last made, `last`
@@ -311,17 +334,19 @@ def repair_rounds(planning: Planning, latest: AssemblyPlan, known: dict, best: A
         if full(best) or until <= time.perf_counter() or not new or best.allocation is None:
             break
         known.update(dict.fromkeys(new))
-        latest = last = planning.plan(planning.first_rank, until, allocation, tuple(known))
+        latest = last = planning.plan(planning.first_rank, until, allocation, tuple(known), drops=drops)
         best = latest if kept(latest, best) else best
     return best, last
 
 
 def chain(planning: Planning, allocation, precedences, best: AssemblyPlan,
-          until: float) -> tuple[AssemblyPlan, AssemblyPlan]:
-    """A plan of `allocation` keeping to known `precedences`, then repair rounds after it."""
+          until: float, drops: bool = False) -> tuple[AssemblyPlan, AssemblyPlan]:
+    """A plan of `allocation` keeping to known `precedences`, then repair rounds after it (drops: as
+    `Planning.plan`)."""
     known = dict.fromkeys(precedences)
-    latest = planning.plan(planning.first_rank, until, allocation, tuple(known))
-    return repair_rounds(planning, latest, known, latest if kept(latest, best) else best, latest, until, allocation)
+    latest = planning.plan(planning.first_rank, until, allocation, tuple(known), drops=drops)
+    return repair_rounds(planning, latest, known, latest if kept(latest, best) else best, latest, until, allocation,
+                         drops)
 
 
 def _answer(best: AssemblyPlan, running: AssemblyPlan, last: AssemblyPlan | None) -> AssemblyPlan | None:

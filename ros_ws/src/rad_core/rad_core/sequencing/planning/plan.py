@@ -546,9 +546,10 @@ def _done(plan: AssemblyPlan, t0: float) -> AssemblyPlan:
 
 def local_motion_planner(planner) -> PlanMotion:
     """Adapt an in-process `gamp.action.MotionPlanner` to the PlanMotion signature."""
-    def plan_motion(scene: Scene, action: SceneAction, start, move_aside: bool = False) -> MotionPlan:
+    def plan_motion(scene: Scene, action: SceneAction, start, move_aside: bool = False,
+                    set_down: bool = False) -> MotionPlan:
         t0 = time.perf_counter()
-        result, _, _ = planner(scene, action, start=start, move_aside=move_aside)
+        result, _, _ = planner(scene, action, start=start, move_aside=move_aside, set_down=set_down)
         if not result.success:
             return MotionPlan(False, result.failure, result.reason, seconds=time.perf_counter() - t0)
         return MotionPlan(True, '', result.reason if result.drop else '',
