@@ -11,10 +11,15 @@ import pytest
 from scenes import doc
 
 
-def rad(*args, stdin=None):
+def rad(*args, stdin=None, env=None):
     exe = shutil.which('rad')
     cmd = [exe] if exe else [sys.executable, '-m', 'rad_core.cli']
-    return subprocess.run(cmd + list(args), input=stdin, capture_output=True, text=True, timeout=120)
+    return subprocess.run(cmd + list(args), input=stdin, capture_output=True, text=True, timeout=120,
+                          env=None if env is None else {**os.environ, **env})
+
+
+SET_DOWN = {'RAD_GAMP_DROP': '0'}
+"""The environment of a `rad` whose hand only sets blocks down (`gamp.planner.DROP_BY_DEFAULT`)."""
 
 
 def test_installed_rad_is_on_path_under_the_project_environment():
@@ -85,9 +90,13 @@ def test_rad_ceiling_says_how_each_search_ended_and_refuses_bad_options(tmp_path
     from scenes import flush_square
     square = tmp_path / 'square.json'
     square.write_text(flush_square().dumps())
-    # No top-down hand closes the flush square: the bound, which asks for an order the hand can keep,
-    # is three of four cells, and the first line reaches it.
+    # GAMP's drop closes the flush square (tests/core/test_drop.py): the first line reaches the bound.
     r = rad('ceiling', str(square), '--time-limit', '60')
+    assert r.returncode == 0 and 'square: ceiling 1.000, the ceiling over every allocation (it reached the bound)' \
+        in r.stdout
+    # No top-down hand that sets blocks down closes it: the bound, which asks for an order that hand can
+    # keep, is three of four cells, and the first line reaches it.
+    r = rad('ceiling', str(square), '--time-limit', '60', env=SET_DOWN)
     assert r.returncode == 0 and 'square: ceiling 0.750, the ceiling over every allocation (it reached the bound)' \
         in r.stdout
     # The vacuum gripper needs nothing beside the block: it closes the square.
@@ -97,7 +106,8 @@ def test_rad_ceiling_says_how_each_search_ended_and_refuses_bad_options(tmp_path
     # searched to the end below it, which proves nothing about allocations never taken...
     g5 = tmp_path / 'g5.json'
     g5.write_text(generate_scene(GeneratorConfig(grid=5, sides=2), 23).dumps())
-    r = rad('ceiling', str(g5), '--time-limit', '60', '--allocations-only', '--json', str(tmp_path / 'c.json'))
+    r = rad('ceiling', str(g5), '--time-limit', '60', '--allocations-only', '--json', str(tmp_path / 'c.json'),
+            env=SET_DOWN)
     assert r.returncode == 0, r.stderr
     assert ('g5: ceiling 0.833, the best found; the allocations searched do no better, any allocation '
             'covers at most 1.000' in r.stdout)
@@ -108,9 +118,9 @@ def test_rad_ceiling_says_how_each_search_ended_and_refuses_bad_options(tmp_path
     assert {step['block'] for step in row['line']} <= {b.id for b in generate_scene(GeneratorConfig(grid=5, sides=2),
                                                                                      23).blocks}
     # ... and every sequence of every pose searched as well: the true ceiling.
-    r = rad('ceiling', str(g5), '--time-limit', '120')
+    r = rad('ceiling', str(g5), '--time-limit', '120', env=SET_DOWN)
     assert r.returncode == 0 and 'ceiling 0.833, the ceiling over every allocation (every sequence' in r.stdout
-    r = rad('ceiling', str(square), '--time-limit', '1e-6')
+    r = rad('ceiling', str(square), '--time-limit', '1e-6', env=SET_DOWN)
     assert r.returncode == 0 and 'a lower bound (time limit' in r.stdout
     assert 'any build covers at most 0.750' in r.stdout
     r = rad('ceiling', str(square), '--support', 'arm,anywhere')

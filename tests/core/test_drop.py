@@ -102,3 +102,14 @@ def test_studded_bricks_and_the_cup_are_never_dropped():
     cup = GampConfig(effector='suction')
     assert np.array_equal(HandBlocked(scene, grid, cup).offsets(0),
                           HandBlocked(scene, grid, GampConfig(effector='suction', drop=False)).offsets(0))
+
+
+def test_the_robot_ceiling_closes_a_flush_square_that_setting_down_leaves_a_cell_of(set_down_hand, monkeypatch):
+    from rad_core.gamp import planner
+    from rad_core.sequencing.bounds.robot_ceiling import robot_ceiling
+
+    from scenes import flush_square
+    assert robot_ceiling(flush_square(), time_limit_s=60).coverage == pytest.approx(0.75)
+    monkeypatch.setattr(planner, 'DROP_BY_DEFAULT', True)
+    found = robot_ceiling(flush_square(), time_limit_s=60)
+    assert found.complete and found.coverage == 1.0

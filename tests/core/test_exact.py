@@ -202,7 +202,7 @@ def test_the_robot_ceiling_searches_orders_and_reallocations_to_a_proven_answer(
     assert found.complete and found.coverage == 1.0
 
 
-def test_an_exhausted_ceiling_searches_the_hands_allocation_then_every_pose_and_says_how_it_ended():
+def test_an_exhausted_ceiling_searches_the_hands_allocation_then_every_pose_and_says_how_it_ended(set_down_hand):
     from rad_core.sequencing.bounds.robot_ceiling import robot_ceiling
 
     from scenes import flush_square
@@ -210,7 +210,8 @@ def test_an_exhausted_ceiling_searches_the_hands_allocation_then_every_pose_and_
     # Without the hand order in its bound (ordered=False), the bound counts every cell.
     arm = robot_ceiling(sc, time_limit_s=60, support='arm', every_pose=False, ordered=False)
     both = robot_ceiling(sc, time_limit_s=60, every_pose=False, ordered=False)   # the arm's allocation, then the hand's
-    # Three of the four flush cells: no top-down hand closes the square. The bound (every cell) is
+    # Three of the four flush cells: no top-down hand that sets blocks down (`set_down_hand`: a drop closes
+    # it, tests/core/test_drop.py) closes the square. The bound (every cell) is
     # not reached, so the answer is the best of what was searched, and both allocations were.
     for found in (arm, both):
         assert found.complete and found.coverage == pytest.approx(0.75) and found.bound == 1.0

@@ -181,5 +181,5 @@ def test_order_repairs_fourth_chain_plans_the_ordered_cover_where_the_allocation
     cover = ho.ordered_cover(scene, agent_plan.ORDERED_COVER_S)
     assert cover.coverage == 1.0 and cover.precedences
     monkeypatch.setattr(agent_plan, 'ordered_cover', lambda *a, **k: ho.HandOrder())
-    without = planner(scene, None, 0)
+    without = agent_plan.AgentPlanner('default', time_limit_s=120)(scene, None, 0)   # its solvers made now
     assert without.predicted_coverage < 0.9

@@ -100,7 +100,8 @@ def test_from_voxels_with_two_named_regions_back_to_back(tmp_path, capsys):
     assert scene.num_target_cells == 8
 
 
-def test_from_voxels_chooses_blocks_the_hand_can_place_unless_any_order_is_asked(tmp_path, capsys):
+def test_from_voxels_chooses_blocks_the_hand_can_place_unless_any_order_is_asked(tmp_path, capsys, set_down_hand):
+    # The hand that only sets blocks down: with drops (the default) it places either cover.
     step = np.zeros((3, 2, 2), dtype=bool)     # a 3 x 2 floor with a two-cell step on it
     step[:, :, 0] = True
     step[0, :, 1] = True

@@ -36,6 +36,7 @@ Everything runs inside one ``world.preserved()``: the world is unchanged after.
 from __future__ import annotations
 
 import math
+import os
 import re
 import time
 import weakref
@@ -67,10 +68,10 @@ from rad_core.gamp.trajectory import TimingConfig, plan_motion
 from rad_core.sim.world import World
 
 
-DROP_BY_DEFAULT = True
+DROP_BY_DEFAULT = os.environ.get('RAD_GAMP_DROP', '1') != '0'
 """`GampConfig.drop` where a config does not say (read when each config is made): the hand drops where it
-cannot set down. False gives every config made after it the paper's hand, which only sets blocks down
-(the tests of what that hand cannot do set it so)."""
+cannot set down. False (`RAD_GAMP_DROP=0` in the environment) gives every config made after it the paper's
+hand, which only sets blocks down (the tests of what that hand cannot do set it so)."""
 
 
 @dataclass(frozen=True)

@@ -87,16 +87,6 @@ class Solvers:
     others (a hand that sets blocks down) leave cells; None: no such try."""
 
 
-def set_down(plan_motion):
-    """plan_motion asking GAMP for no drops (its `set_down`, where it takes one: `GampConfig.drop`)."""
-    if 'set_down' not in inspect.signature(plan_motion).parameters:
-        return plan_motion
-
-    def planned(scene, action, start, move_aside: bool = False):
-        return plan_motion(scene, action, start, move_aside=move_aside, set_down=True)
-    return planned
-
-
 @dataclass
 class Planning:
     """What the stages of one agent's planning share: the scene, the agent and its parts (as
@@ -137,8 +127,7 @@ class Planning:
         else:
             def first(s):
                 return self._allocate(s, support or self.support)
-        made = plan_assembly(self.scene, first, self.plan_motion if drops else set_down(self.plan_motion), ranker,
-                             seed=self.seed, start=self.start,
+        made = plan_assembly(self.scene, first, self.plan_motion, ranker, seed=self.seed, start=self.start,
                              time_limit_s=until - time.perf_counter(),
                              reallocate=self.reallocate if self.spec.realloc else None,
                              reallocation=self.reallocation, verify=self.spec.verify, precedences=precedences,

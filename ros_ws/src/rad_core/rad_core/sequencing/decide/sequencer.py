@@ -35,6 +35,7 @@ from rad_core.domain.scene import Scene
 from rad_core.env.mdp import AssemblyEnv, EnvConfig
 from rad_core.env.robot_env import RobotAssemblyEnv, RobotEnvConfig
 from rad_core.gamp.action import SceneAction, start_joints
+from rad_core.gamp.planner import GampConfig
 from rad_core.sequencing.decide import policy as ranking_rules
 from rad_core.sequencing.decide.actions import AllocationActions, mdp_actions, scene_action
 from rad_core.sequencing.decide.agents import SIMULATION_SEARCHES, AgentSpec, label, parse
@@ -280,9 +281,10 @@ class Sequencer:
         return renv
 
     def _twin(self, scene: Scene):
-        """The planning twin, one PyBullet world reused across requests."""
+        """The planning twin, one PyBullet world reused across requests. Its hand sets blocks down, as the
+        plans its searches rank for do (`agent.stages.Planning.plan`; `GampConfig.drop`)."""
         if self._renv is None:
-            self._renv = RobotAssemblyEnv(scene, RobotEnvConfig(execution='teleport'))
+            self._renv = RobotAssemblyEnv(scene, RobotEnvConfig(execution='teleport', gamp=GampConfig(drop=False)))
         else:
             self._renv.load(scene)
         return self._renv

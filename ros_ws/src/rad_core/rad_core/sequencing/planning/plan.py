@@ -178,7 +178,7 @@ def moved(scene: Scene, block_id: str, position, yaw: int) -> Scene:
 def plan_assembly(scene: Scene, allocate: Allocate, plan_motion: PlanMotion, sequencer: Policy | Rank,
                   seed: int = 0, start=None, time_limit_s: float = 60.0, reallocate=None,
                   reallocation=None, verify: bool = True, precedences=(), pace: dict | None = None,
-                  drops: bool = True) -> AssemblyPlan:
+                  drops: bool = False) -> AssemblyPlan:
     """sequencer: a Policy (in-process scores of the MDP state) or a Rank callable.
     A Rank callable's RadError (say, the sequencer node is down) propagates.
     reallocate: (scene state, no-goods, time limit) -> AllocationResult, to re-allocate on
@@ -192,9 +192,12 @@ def plan_assembly(scene: Scene, allocate: Allocate, plan_motion: PlanMotion, seq
     far comes back, its `reason` saying the limit ended it (the allocation is the caller's to bound:
     `allocate` is called first, as it is). pace: {'rank': [seconds, count], 'motion': [...]} of the
     calls made so far, updated here (plans of one agent's planning share it; default: this plan's).
-    drops: whether a verified plan may take an action GAMP can only drop in (`GampConfig.drop`;
-    `policy.first_feasible`); False: such an action counts as infeasible."""
+    drops: whether the plan may take an action GAMP can only drop in (`GampConfig.drop`); False (the
+    default): GAMP is asked to set blocks down (`set_down`), and a drop it answers anyway counts as
+    infeasible (`policy.first_feasible`)."""
     t0 = time.perf_counter()
+    if not drops:
+        plan_motion = set_down(plan_motion)
     timings = {'allocation': 0.0, 'sequencing': 0.0, 'motion': 0.0}
     allocation = allocate(scene)
     timings['allocation'] = time.perf_counter() - t0
@@ -542,6 +545,16 @@ def _book_failure(env: AssemblyEnv, action, motion: MotionPlan):
 def _done(plan: AssemblyPlan, t0: float) -> AssemblyPlan:
     plan.timings['total'] = time.perf_counter() - t0
     return plan
+
+
+def set_down(plan_motion: PlanMotion) -> PlanMotion:
+    """plan_motion asking GAMP for no drops (its `set_down`, where it takes one: `GampConfig.drop`)."""
+    if 'set_down' not in inspect.signature(plan_motion).parameters:
+        return plan_motion
+
+    def planned(scene, action, start, move_aside: bool = False):
+        return plan_motion(scene, action, start, move_aside=move_aside, set_down=True)
+    return planned
 
 
 def local_motion_planner(planner) -> PlanMotion:
