@@ -38,7 +38,6 @@ from rad_core.domain.scene import Scene
 from rad_core.gamp.grasps import (
     DROP_HEIGHT,
     grasp_lift,
-    grasp_width,
     no_grasp_reason_for,
     scene_grasps,
     span_width,
@@ -229,8 +228,7 @@ class HandBlocked:
             if self.gamp.effector == 'suction':
                 styles = suction_styles(scene.course, self.gamp)
             else:
-                width = grasp_width(scene.unit, scene.clearance) if span == 1 else span_width(span, scene.unit,
-                                                                                              scene.clearance)
+                width = span_width(span, scene.unit, scene.clearance)      # grasp_width's for one unit
                 styles = (grasp_styles if span == 1 else wide_grasp_styles)(width, scene.course, self.gamp)
                 if self.gamp.drop and scene.studs is None:
                     # Let go over its place: the hand `DROP_HEIGHT` over where it would set the block down.

@@ -57,7 +57,6 @@ from rad_core.gamp.grasps import (
     DROP_HEIGHT,
     drop_lift,
     grasp_lift,
-    grasp_width,
     no_grasp_reason_for,
     scene_grasps,
     span_width,
@@ -396,8 +395,7 @@ def _try_grasp(job: _Job, grasp: Grasp, drop: bool = False) -> tuple[tuple | Non
         width, closed_f = float('nan'), 0.0
         styles = suction_styles(job.course, config)
     else:
-        width = grasp_width(job.unit, job.clearance) if grasp.span == 1 else span_width(grasp.span, job.unit,
-                                                                                         job.clearance)
+        width = span_width(grasp.span, job.unit, job.clearance)      # grasp_width's for one unit
         styles = (grasp_styles if grasp.span == 1 else wide_grasp_styles)(width, job.course, config)
         closed_f = max(0.0, width / 2 - config.grip_squeeze)
     if drop:
