@@ -13,13 +13,13 @@ from rad_core.sequencing.planning.courses import course_bound, course_line
 pytestmark = pytest.mark.slow
 
 
-def flush_wall():
+def flush_wall(unit: float = 0.04):
     """A two-deep flush wall, 6 long and 3 courses high at a 4 cm unit, its blocks in a feeder: no
     top-down hand that only sets blocks down closes a full course of it (`large_shapes.FLUSH_LIMIT`),
     so 33 of its 36 cells at most; with drops (`GampConfig.drop`) all 36."""
     drawn = face('######', '######', '######')
     return feeder_scene(ShapeSpec('flush_wall', 'wall', two_sided(drawn, drawn), SMALL_TYPES, ('cube', 'I2'),
-                                  n_spare=2, why='a small two-deep flush wall'))
+                                  n_spare=2, why='a small two-deep flush wall'), unit)
 
 
 @pytest.mark.parametrize('drop', [False, True])
@@ -80,3 +80,25 @@ def test_the_ceiling_takes_the_course_bound_where_the_hands_order_proves_nothing
     found = robot_ceiling(flush_wall(), 5.0)
     assert found.bound == pytest.approx(33 / 36)
     assert found.coverage <= found.bound
+
+
+def test_at_a_2_cm_unit_the_line_counts_on_drops_where_the_set_down_hand_fits_no_block_beside_another():
+    # The fingertips closed on a 2 cm unit come within the planner's margin of the blocks beside it
+    # (`is_crowded`): setting down, the line leaves most of the wall; dropping, it builds it whole.
+    from rad_core.gamp.planner import GampConfig
+    from rad_core.sequencing.planning.courses import is_crowded
+    scene = flush_wall(0.02)
+    assert is_crowded(scene) and not is_crowded(flush_wall())
+    set_down, drops = GampConfig(drop=False), GampConfig(drop=True)
+    down = course_line(scene, 60.0, least_poses=0, gamp=set_down)
+    line = course_line(scene, 60.0, least_poses=0, gamp=set_down, crowded=drops)
+    assert not down.drops and line.drops
+    assert down.coverage < 0.7 and line.coverage == 1.0, (down.coverage, line.coverage)
+    with RobotAssemblyEnv(scene, RobotEnvConfig(execution='teleport', gamp=drops)) as renv:
+        renv.reset()
+        for action in line.actions:
+            result = renv.step(action)
+            assert not result.outcome.is_invalid, result.reason
+        assert renv.env.coverage() == 1.0
+    # At 4 cm the line sets blocks down whatever it is offered for crowded units.
+    assert not course_line(flush_wall(), 60.0, least_poses=0, gamp=set_down, crowded=drops).drops

@@ -13,9 +13,11 @@ from rad_core.gamp import allocated_pose, plan_action
 from rad_core.gamp.grasps import (
     MAX_GRASP_WIDTH,
     Grasp,
+    beside_blocks,
     block_grasps,
     grasp_centre,
     grasp_width,
+    scene_grasps,
     span_width,
     wide_grasps,
 )
@@ -80,6 +82,41 @@ def test_the_fingers_pass_no_unit_of_the_block_on_their_way_down():
     assert set(wide_grasps(lib['L3'], 0.03)) == {Grasp(0, 0, 2), Grasp(0, 90, 2)}
     # S4_up: its top row, whose finger columns are free at its level and above.
     assert wide_grasps(lib['S4_up'], 0.03) == (Grasp(2, 0, 2),)
+
+
+def test_where_the_fingers_are_wider_than_a_unit_the_blocks_diagonal_units_rule_out_a_grasp():
+    # At a 2 cm unit the 17.5 mm fingertips, with the planner's 2 mm margin, reach past a unit's sides:
+    # the T's bar units diagonal to the stem's finger columns (and the stem diagonal to the bar's ends')
+    # rule out every unit grasp of a flat T4; its wide grasps stay. At 2.5 cm there is room.
+    t4, l3 = DEFAULT_LIBRARY['T4'], DEFAULT_LIBRARY['L3']
+    assert set(scene_grasps(t4, 0.02)) == {Grasp(0, 0, 3), Grasp(1, 90, 2)}
+    assert {g for g in scene_grasps(t4, 0.025) if g.span == 1} == {Grasp(3, 0), Grasp(0, 90), Grasp(2, 90)}
+    assert all(g.span > 1 for g in scene_grasps(l3, 0.02))
+    assert beside_blocks(0, 0.02) and not beside_blocks(0, 0.022)
+    assert not beside_blocks(0, 0.02, clearance=0.2)                # faces set back 2 mm more
+    assert beside_blocks(1, 0.025) and not beside_blocks(1, 0.027)  # the 22 mm finger over the tips
+    # Blocks one unit wide keep every unit grasp: nothing of theirs lies diagonal to a finger.
+    for name in ('cube', 'I2', 'I3'):
+        assert block_grasps(DEFAULT_LIBRARY[name], 0.02) == block_grasps(DEFAULT_LIBRARY[name], 0.03)
+
+
+def test_the_grasps_the_finger_width_rules_out_are_those_gamp_refuses(monkeypatch):
+    # The rule is the planner's own: with it off, GAMP tries the T4's unit grasps at 2 cm and each
+    # finger hits the T itself; the wide grasps place it.
+    from rad_core.gamp import grasps as grasps_module
+    u = 0.02
+    scene = Scene.from_dict({
+        'format': 'rad-scene/1', 'unit': u, 'block_types': {'T4': [list(o) for o in DEFAULT_LIBRARY['T4'].offsets]},
+        'blocks': [{'id': 't', 'type': 'T4', 'position': [0.45, -0.25, u / 2], 'yaw': 0}],
+        'targets': [{'name': 'g', 'origin': [0.45, 0.15, u / 2], 'size': [3, 2, 1],
+                     'filled': [[0, 0, 0], [1, 0, 0], [2, 0, 0], [1, 1, 0]]}]})
+    with World(scene) as world:
+        on = plan_action(world, 't', (0.45, 0.15, u / 2), 0, config=WIDE)
+        monkeypatch.setattr(grasps_module, 'beside_blocks', lambda *a, **k: False)
+        unit_only = plan_action(world, 't', (0.45, 0.15, u / 2), 0, config=UNIT_ONLY)
+    assert on.success and on.grasp.span > 1, on.reason
+    assert not unit_only.success
+    assert unit_only.reason.count('finger hits block t') >= 3, unit_only.reason
 
 
 def test_wide_styles_hold_at_the_tight_grasp_height_never_wider_than_the_hand():

@@ -217,3 +217,44 @@ def test_joints_kept_puts_the_joints_back_exactly(world):
         world.set_joint_positions(panda.HOME + 0.1, hold=False)
     after = world.pybullet.getJointStates(world.robot, world.joints, physicsClientId=world.client)
     assert [s[:2] for s in after] == [s[:2] for s in before]
+
+
+
+def test_a_later_state_of_the_loaded_scene_is_reposed_as_load_scene_would_put_it():
+    # A planner loads each state of a plan: the same bodies, moved. `repose` puts them where a fresh
+    # `load_scene` does, with their masses; a scene of other blocks is left to `load_scene`. GAMP
+    # plans the next block the same from either world.
+    from rad_core.domain.large_shapes import large_scene
+    from rad_core.gamp.action import MotionPlanner, SceneAction
+    from rad_core.sequencing.planning.plan import moved
+    scene = large_scene('wall_openings')                   # its blocks in a feeder
+    placed = scene.feeder.blocks[0]
+    later = moved(scene, placed, (0.45, 0.25, scene.unit / 2), 90)
+    assert placed not in later.feeder.blocks
+    with World() as fresh, World() as kept:
+        fresh.load_scene(later)
+        kept.load_scene(scene)
+        bodies = dict(kept.blocks)
+        assert kept.repose(later)
+        assert kept.blocks == bodies and kept.parked == fresh.parked
+        for block in later.blocks:
+            if block.id not in fresh.parked:
+                for a, b in zip(kept.block_pose(block.id), fresh.block_pose(block.id)):
+                    assert np.allclose(a, b, atol=1e-9)
+        p = kept.pybullet
+        mass = p.getDynamicsInfo(fresh.blocks[placed], -1, physicsClientId=fresh.client)[0]
+        assert mass > 0 and p.getDynamicsInfo(kept.blocks[placed], -1, physicsClientId=kept.client)[0] == mass
+        assert not kept.repose(generate_scene(GeneratorConfig(grid=4), seed=0))
+    target = later.targets[0].name
+    action = SceneAction(later.feeder.blocks[0], 0, target, (0, 0, 0), 0)
+    first, again = MotionPlanner(), MotionPlanner()
+    try:
+        first(scene, action)                               # loads the first state
+        reposed, *_ = first(later, action)
+        made, *_ = again(later, action)
+    finally:
+        first.close()
+        again.close()
+    assert made.success, made.reason
+    assert (reposed.success, reposed.reason, reposed.grasp) == (made.success, made.reason, made.grasp)
+    assert np.allclose(reposed.final_joints(), made.final_joints())

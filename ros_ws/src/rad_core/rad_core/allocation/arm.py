@@ -42,7 +42,7 @@ from rad_core.gamp.grasps import (
     scene_grasps,
     span_width,
 )
-from rad_core.gamp.hand_cells import blocking_offsets
+from rad_core.gamp.hand_cells import DEPTH, NEAR_DEPTH, blocking_offsets
 from rad_core.gamp.ik import out_of_workspace
 from rad_core.gamp.planner import GampConfig, drop_styles, grasp_styles, suction_styles, wide_grasp_styles
 
@@ -208,12 +208,20 @@ class HandBlocked:
     cup enter, the cup's lip over the unit's top face; no finger goes down beside the block.
 
     gamp: the planner's settings (`GampConfig`), which say how the fingers may take a unit
-    (`planner.grasp_styles`): an offset blocks only where it blocks in every way."""
+    (`planner.grasp_styles`): an offset blocks only where it blocks in every way.
 
-    def __init__(self, scene: Scene, grid: Grid, gamp=None):
+    near: count too the cells whose block would come within the planner's collision margin of the
+    hand (`hand_cells.NEAR_DEPTH`), not only those it would enter, with the fingers open and closed on
+    the block (the planner probes both at the placement): what the planner refuses, for orders that
+    should agree with it (`sequencing.planning.courses.course_line`). At a 2 cm unit the 17.5 mm
+    fingertips then block the cells diagonal to their columns and beside the held unit too. Bounds keep
+    the default (a cell counts only where the hand surely enters it)."""
+
+    def __init__(self, scene: Scene, grid: Grid, gamp=None, near: bool = False):
         self.grid = grid
         self.scene = scene
         self.gamp = gamp or GampConfig()
+        self.depth = NEAR_DEPTH if near else DEPTH
         self.grasps = type_grasps(scene, self.gamp)
         self._offsets: dict[tuple, np.ndarray] = {}
         self._cells: dict[tuple, list] = {}
@@ -234,8 +242,17 @@ class HandBlocked:
                     # Let go over its place: the hand `DROP_HEIGHT` over where it would set the block down.
                     styles += tuple((f, lift + DROP_HEIGHT) for f, lift in drop_styles(width, scene.course, self.gamp))
             course = None if scene.course == scene.unit else scene.course
-            common = frozenset.intersection(*(blocking_offsets(scene.unit, scene.clearance, f, hand_yaw, lift, shift,
-                                                               self.gamp.effector, course) for f, lift in styles))
+            closed = max(0.0, width / 2 - self.gamp.grip_squeeze) if self.gamp.effector == 'hand' else None
+
+            def way(f, lift):
+                cells = blocking_offsets(scene.unit, scene.clearance, f, hand_yaw, lift, shift, self.gamp.effector,
+                                         course, self.depth)
+                if self.depth < 0 and closed is not None:
+                    # The planner also probes the hand at the placement closed on the block it carries.
+                    cells |= blocking_offsets(scene.unit, scene.clearance, closed, hand_yaw, lift, shift,
+                                              self.gamp.effector, course, self.depth)
+                return cells
+            common = frozenset.intersection(*(way(f, lift) for f, lift in styles))
             found = self._offsets[key] = np.array(sorted(common), dtype=float).reshape(-1, 3)
         return found
 

@@ -33,12 +33,18 @@ import numpy as np
 from ortools.sat.python import cp_model
 
 from rad_core.allocation.arm import HandBlocked, arm_filter
-from rad_core.allocation.constraints import cp_solver, support_options
+from rad_core.allocation.constraints import cp_solver, rests_now, support_options
 from rad_core.allocation.placements import enumerate_candidates
 from rad_core.domain.grid import Grid, blocks_on_grid
 from rad_core.domain.scene import Scene
 from rad_core.domain.statics import order_statics
 from rad_core.gamp.planner import GampConfig
+
+LARGE_POSES = 400
+"""Above this many poses (a large structure's courses: 2,000-4,000, where CP-SAT found no order at all
+in its time), `solve_order` starts CP-SAT from `greedy_order` and `order_model` holds each way against
+when its cells are filled. Below, a hint would only steer which of equal orders CP-SAT returns
+(generated and hand-made scenes have 17-274 poses), so those models stay as they were."""
 
 
 @dataclass(frozen=True)
@@ -132,14 +138,31 @@ def order_model(grid: Grid, occupied: np.ndarray, poses: list[tuple], counts: di
         for name, vars_ in by_type.items():
             if counts.get(name, 0) < len(vars_):
                 model.add(sum(vars_) <= counts.get(name, 0))
+    # Where there are thousands of poses (a large structure's course), each way is held against when
+    # its blocking cells are filled (`filled_at`), not against every pose that may fill them: the same
+    # rule in a tenth of the constraints (a 4,000-pose window: a million of them the other way).
+    filled_at: dict[int, cp_model.IntVar] | None = {} if len(poses) > LARGE_POSES else None
+
+    def when_filled(c: int):
+        var = filled_at.get(c)
+        if var is None:          # the position of the pose that fills c; past the last where none does
+            var = filled_at[c] = model.new_int_var(0, len(poses), f'c{c}')
+            for m in owners[c]:
+                model.add(var == order[m]).only_enforce_if(placed[m])
+        return var
+
     held_by: list[list] = []
     for n, (cells, ways, *_) in enumerate(poses):
         used = []
         for w, blocking in enumerate(ways):
             var = model.new_bool_var(f'w{n}_{w}')
             model.add_implication(var, placed[n])
-            for m in sorted({m for c in blocking.tolist() for m in owners.get(c, ())} - {n}):
-                model.add(order[n] < order[m]).only_enforce_if([var, placed[m]])
+            if filled_at is not None:
+                for c in sorted({c for c in blocking.tolist() if c in owners} - set(cells)):
+                    model.add(order[n] < when_filled(c)).only_enforce_if(var)
+            else:
+                for m in sorted({m for c in blocking.tolist() for m in owners.get(c, ())} - {n}):
+                    model.add(order[n] < order[m]).only_enforce_if([var, placed[m]])
             used.append((var, blocking))
         if used:          # none for a type without a top-down grasp: GAMP says why
             model.add_bool_or([v for v, _ in used]).only_enforce_if(placed[n])
@@ -246,15 +269,15 @@ def ordered_cover(scene: Scene, time_limit_s: float = 2.0, gamp=None, avoid=()) 
     return found
 
 
-def cover_candidates(scene: Scene, grid: Grid, gamp=None):
+def cover_candidates(scene: Scene, grid: Grid, gamp=None, near: bool = False):
     """What an ordered cover chooses from: every pose an arm-aware allocation may propose
     (`allocation.bounds.ArmCoverageBound.candidates`: fillers worth 0 included, the arm's filter
-    applied), the blocks per type the arm can pick, the hand's blocking cells (`HandBlocked`) and
-    the indices of the blocks it cannot pick where they lie."""
+    applied), the blocks per type the arm can pick, the hand's blocking cells (`HandBlocked`, near:
+    its) and the indices of the blocks it cannot pick where they lie."""
     fillers = [c for c in enumerate_candidates(scene, grid, positive_only=False) if c.value >= 0]
     candidates, counts, report = arm_filter(scene, grid, fillers, gamp)
     unpickable = {b for b, block in enumerate(scene.blocks) if block.id in report.blocks}
-    return candidates, counts, HandBlocked(scene, grid, gamp), unpickable
+    return candidates, counts, HandBlocked(scene, grid, gamp, near), unpickable
 
 
 def candidate_poses(grid: Grid, hand, occupied: np.ndarray, candidates, counts: dict[str, int]):
@@ -298,13 +321,37 @@ def solve_order(grid: Grid, occupied: np.ndarray, poses: list[tuple], items: lis
         ns = [index[cells] for cells in before if cells in index]
         if len(ns) == len(before) and ns:
             model.add(sum(placed[n] for n in ns) <= len(ns) - 1)
+    first = greedy_order(grid, occupied, poses, counts, cover=cover, way_down=way_down)
+    ways_of = {n: way for n, way in first}
+    for k, (n, way) in enumerate(first if len(poses) > LARGE_POSES else ()):
+        model.add_hint(placed[n], True)
+        model.add_hint(order[n], k)
+        for w, (var, _) in enumerate(held_by[n]):
+            model.add_hint(var, w == way)
+    for n in range(len(poses) if len(poses) > LARGE_POSES else 0):
+        if n not in ways_of:
+            model.add_hint(placed[n], False)
+            for var, _ in held_by[n]:
+                model.add_hint(var, False)
     solver = cp_solver(3.0 * time_limit_s if cover else time_limit_s)
     if cover:
         solver.parameters.max_deterministic_time = float(time_limit_s)
-    if solver.solve(model) not in (cp_model.OPTIMAL, cp_model.FEASIBLE):
-        return HandOrder()
-    chosen = sorted((n for n in range(len(poses)) if solver.boolean_value(placed[n])),
-                    key=lambda n: (solver.value(order[n]), n))
+    if solver.solve(model) in (cp_model.OPTIMAL, cp_model.FEASIBLE):
+        chosen = sorted((n for n in range(len(poses)) if solver.boolean_value(placed[n])),
+                        key=lambda n: (solver.value(order[n]), n))
+        held = {n: next((w for w, (var, _) in enumerate(held_by[n]) if solver.boolean_value(var)), None)
+                for n in chosen}
+        if len(poses) > LARGE_POSES and sum(poses[n][2] for n in chosen) < sum(poses[n][2] for n, _ in first):
+            chosen, held = [n for n, _ in first], ways_of       # CP-SAT did not get as far as its hint
+    else:
+        # CP-SAT found nothing in its time (presolve of thousands of poses can take all of it): the
+        # greedy order, which it would have started from, where it keeps out of `avoid`.
+        chosen, held = [n for n, _ in first], ways_of
+        if any(len(ns) == len(before) and ns and set(ns) <= set(chosen) for before in avoid
+               for ns in [[index[c] for c in before if c in index]]):
+            return HandOrder()
+        if not chosen:
+            return HandOrder()
     walk, waiting = order_statics(grid, [poses[n][0] for n in chosen], occupied, clutch=grid.clutch)
     tipping = [poses[chosen[k]][0] for k in waiting]
     chosen = [chosen[k] for k in walk]          # the structure stands as a whole after each pose
@@ -315,13 +362,66 @@ def solve_order(grid: Grid, occupied: np.ndarray, poses: list[tuple], items: lis
         if way_down:
             out += [Precedence(poses[n][0], poses[m][0], "the carried block's way down")
                     for m in path_precedences(grid, poses[n][0], owners, n)]
-        for var, blocking in held_by[n]:
-            if solver.boolean_value(var):
-                for m in sorted({owner[c] for c in blocking.tolist() if c in owner} - {n}):
-                    out.append(Precedence(poses[n][0], poses[m][0], 'hand order'))
-                break
+        if held[n] is not None:
+            blocking = held_by[n][held[n]][1]
+            for m in sorted({owner[c] for c in blocking.tolist() if c in owner} - {n}):
+                out.append(Precedence(poses[n][0], poses[m][0], 'hand order'))
     total = int(grid.is_target.sum())
     filled = int((grid.is_target & occupied).sum()) + sum(poses[n][2] for n in chosen)
     value = sum(2 * poses[n][2] - len(poses[n][0]) for n in chosen)
     return HandOrder([poses[n][0] for n in chosen], out, filled / total if total else 1.0,
                      [items[n] for n in chosen], value, tipping)
+
+
+def greedy_order(grid: Grid, occupied: np.ndarray, poses: list[tuple], counts=None, cover: bool = False,
+                 way_down: bool = False) -> list[tuple[int, int | None]]:
+    """A first answer to `order_model` in one sweep, feasible by construction: (pose index, the way it
+    is held, None for a type without a top-down grasp) in order. Poses are taken lowest first, then
+    those filling the most target cells with the fewest fillers; each where its cells are free, a block
+    of its type is left, one of its ways has no blocking cell filled before it, no pose before it lies
+    in the columns over it (way_down) and it rests as the model asks (cover: the 'stable' rule on what
+    is there; else a bottom unit on the table, a built cell or a pose before it). Sweeps again while a
+    sweep adds a pose (a pose may rest only on one taken after it in the sweep before)."""
+    if not poses:
+        return []
+    filled = occupied.copy()
+    left = dict(counts) if counts is not None else None
+    low = [float(grid.centres[list(cells), 2].min()) for cells, *_ in poses]
+    rank = sorted(range(len(poses)), key=lambda n: (low[n], -poses[n][2], len(poses[n][0]) - poses[n][2], n))
+    out: list[tuple[int, int | None]] = []
+    taken = np.zeros(len(poses), dtype=bool)
+    added = True
+    while added:
+        added = False
+        for n in rank:
+            cells, ways, _, name = poses[n][:4]
+            ids = list(cells)
+            if taken[n] or filled[ids].any() or (left is not None and left.get(name, 0) <= 0):
+                continue
+            way = next((w for w, blocking in enumerate(ways) if not filled[blocking].any()), None)
+            if ways and way is None:
+                continue
+            if way_down and filled[grid.columns_above(ids)].any():
+                continue
+            if cover:
+                if not rests_now(grid, ids, filled):
+                    continue
+            elif not _rests_on(grid, ids, filled):
+                continue
+            taken[n] = True
+            filled[ids] = True
+            if left is not None:
+                left[name] -= 1
+            out.append((n, way))
+            added = True
+    return out
+
+
+def _rests_on(grid: Grid, ids: list[int], filled: np.ndarray) -> bool:
+    """`order_model`'s rest rule: a unit on the table or over a filled cell not its own."""
+    ids_ = np.asarray(ids)
+    if grid.on_table[ids_].any():
+        return True
+    below = grid.below_idx[ids_]
+    below = below[(below >= 0) & ~np.isin(below, ids_)]
+    return bool(filled[below].any())

@@ -179,10 +179,11 @@ def large_scene(name: str) -> Scene:
     return feeder_scene(spec)
 
 
-def feeder_scene(spec: ShapeSpec) -> Scene:
-    """A shape drawn as the large ones are, with every block of its multiset in a feeder at `STATION`."""
+def feeder_scene(spec: ShapeSpec, unit: float = UNIT) -> Scene:
+    """A shape drawn as the large ones are, with every block of its multiset in a feeder at `STATION`;
+    at `UNIT` or the unit (m) given."""
     kinds = _multiset(spec)
-    blocks, feeder = feeder_of(kinds, spec.types, STATION, UNIT)
+    blocks, feeder = feeder_of(kinds, spec.types, STATION, unit)
     used = [n for n in spec.types if n in set(kinds)]
-    scene = Scene(UNIT, {n: spec.types[n] for n in used}, tuple(blocks), target_regions(spec, UNIT), feeder=feeder)
+    scene = Scene(unit, {n: spec.types[n] for n in used}, tuple(blocks), target_regions(spec, unit), feeder=feeder)
     return Scene.from_dict(scene.to_dict())

@@ -146,7 +146,8 @@ class MotionPlanner:
         or None: home); returns the start as 9 joints (None: home). Obstacles the robot touches there
         are left out (`drop_obstacles_on_the_hand`)."""
         start = start_joints([] if start is None else start)
-        self.world.load_scene(scene)
+        if not self.world.repose(scene):      # the next state of the scene loaded before: its bodies kept
+            self.world.load_scene(scene)
         if scene.obstacles:
             drop_obstacles_on_the_hand(self.world, panda.HOME if start is None else start)
         return start

@@ -21,6 +21,11 @@ unit u closing along axis d is offered when
 2. no unit of the same block lies in the two finger columns u + d and u - d at
    u's height or above (a finger would land on it or hit it on the way down).
 
+Where the fingers are wider than the unit (`beside_blocks`: at 2 cm units the 17.5 mm tips with the
+planner's 2 mm margin reach past the unit's sides), units of the same block in the four columns
+diagonal to u (u + d + e, u + d - e, ...; e across d) at u's level or above block the grasp too: the
+finger beside u would touch them (the 22 mm finger above the tips counts for the levels above u).
+
 Units below u's level are never touched (the fingertips stay within u). What
 the rule cannot see (the hand's palm, 0.21 x 0.06 m, passing 14 mm above u's
 top, 26 mm in a tight grasp, or neighbouring blocks) is left to the collision checks of the planner,
@@ -39,7 +44,8 @@ offered where
    `span` >= 2 units, and its width (`span_width`) with 5 mm on each side fits the open hand;
 2. no unit of the block lies above any unit of the row (the palm comes down on the row); and
 3. no unit of the block lies in the two finger columns just outside the row's ends at the row's
-   level or above (a finger would land on it or hit it on the way down).
+   level or above (a finger would land on it or hit it on the way down), nor, where the fingers are
+   wider than a unit (`beside_blocks`), in the columns diagonal to those.
 
 Suction grasps (`suction_grasps`, the vacuum gripper in the hand's place: `GampConfig.effector`):
 the cup centred on the top face of a unit no unit of the same block lies above, where the cup fits
@@ -166,10 +172,37 @@ def wide_grasps(btype: BlockType, unit: float, clearance: float = 0.0) -> tuple[
             up = [(0, 0, k) for k in range(1, height + 1)]
             covered = any(tuple(c + d) in cells for c in row for d in up)
             fingers = (first - step, row[-1] + step)
-            blocked = any(tuple(f + (0, 0, k)) in cells for f in fingers for k in range(height + 1))
+            blocked = any(tuple(f + (0, 0, k)) in cells for f in fingers for k in range(height + 1)) or \
+                any(_diagonal_blocked(cells, f, step, height, unit, clearance) for f in fingers)
             if not covered and not blocked:
                 out.append(Grasp(u, yaw, span))
     return tuple(grasp_order(btype, out))
+
+
+FINGER_TIP_HALF = panda.FINGER_BOXES[-1][2][0] / 2
+"""Half the fingertip's width across the closing axis (m): beside the held unit."""
+FINGER_HALF = max(size[0] for *_, size in panda.FINGER_BOXES) / 2
+"""Half the finger's widest part across the closing axis (m): beside the levels over the held unit."""
+FINGER_MARGIN = 0.002
+"""How close (m) a finger may come to a unit of the block it takes: the planner's collision margin
+(`gamp.collision.CollisionConfig.robot_margin`)."""
+
+
+def beside_blocks(level: int, unit: float, clearance: float = 0.0) -> bool:
+    """Whether a unit of the block diagonal to a held unit (or to a wide grasp's finger column),
+    `level` units over it (0: at its level), is in the way of the finger beside it: the finger's half
+    width there with `FINGER_MARGIN` reaches past the diagonal unit's face, half a unit from the held
+    unit's centre line plus the clearance it is set back by (m)."""
+    half = FINGER_TIP_HALF if level == 0 else FINGER_HALF
+    return half + FINGER_MARGIN > unit * (1.0 + clearance) / 2
+
+
+def _diagonal_blocked(cells: set, at, step, height: int, unit: float, clearance: float) -> bool:
+    """Whether a unit of the block (cells) lies diagonal to the finger column `at` (across `step`, the
+    closing axis) at its level or above, where the finger is wide enough to touch it (`beside_blocks`)."""
+    across = np.array([step[1], step[0], 0], dtype=np.int64)
+    return any(tuple(np.asarray(at) + t * across + (0, 0, k)) in cells and beside_blocks(k, unit, clearance)
+               for t in (1, -1) for k in range(height + 1))
 
 
 def no_grasp_reason(btype: BlockType, unit_size: float) -> str:
@@ -185,25 +218,29 @@ def block_grasps(btype: BlockType, unit_size: float = 0.05, wide: bool = False,
 
     unit_size: the width of one unit (a scene's `grasp_width`). wide: the wide grasps
     (`wide_grasps`) after the unit grasps, for the scene's unit `unit_size / (1 - clearance)`."""
-    unit_grasps = _unit_grasps(btype, unit_size)
+    unit = unit_size / (1.0 - clearance)
+    unit_grasps = _unit_grasps(btype, unit, clearance)
     if not wide:
         return unit_grasps
-    return unit_grasps + wide_grasps(btype, unit_size / (1.0 - clearance), clearance)
+    return unit_grasps + wide_grasps(btype, unit, clearance)
 
 
-def _unit_grasps(btype: BlockType, unit_size: float) -> tuple[Grasp, ...]:
-    if unit_size > MAX_GRASP_WIDTH:
+def _unit_grasps(btype: BlockType, unit: float, clearance: float = 0.0) -> tuple[Grasp, ...]:
+    if grasp_width(unit, clearance) > MAX_GRASP_WIDTH:
         return ()
     offsets = np.asarray(btype.offsets, dtype=np.int64)
     cells = {tuple(o) for o in offsets.tolist()}
+    height = _height(offsets)
     out = []
     for u, (x, y, z) in enumerate(offsets.tolist()):
-        if any((x, y, z + k) in cells for k in range(1, _height(offsets) + 1)):
+        if any((x, y, z + k) in cells for k in range(1, height + 1)):
             continue
         for yaw in GRASP_YAWS:
             dx, dy = (1, 0) if yaw == 0 else (0, 1)
             blocked = any((x + s * dx, y + s * dy, z + k) in cells
-                          for s in (1, -1) for k in range(_height(offsets) + 1))
+                          for s in (1, -1) for k in range(height + 1)) or \
+                any(_diagonal_blocked(cells, (x + s * dx, y + s * dy, z), (dx, dy, 0), height, unit, clearance)
+                    for s in (1, -1))
             if not blocked:
                 out.append(Grasp(u, yaw))
     return tuple(grasp_order(btype, out))
@@ -235,7 +272,7 @@ def scene_grasps(btype: BlockType, unit: float, clearance: float = 0.0, wide: bo
     (`allocation.arm.type_grasps`)."""
     if effector == 'suction':
         return suction_grasps(btype, unit, clearance)
-    unit_grasps = _unit_grasps(btype, grasp_width(unit, clearance))
+    unit_grasps = _unit_grasps(btype, unit, clearance)
     return unit_grasps + wide_grasps(btype, unit, clearance) if wide else unit_grasps
 
 

@@ -41,6 +41,11 @@ from rad_core.sim.physics import PhysicsConfig
 DEPTH = 0.004
 """How far (m) a neighbour's cube must sink into the hand for the offset to count as blocking."""
 
+NEAR_DEPTH = -0.0015
+"""A depth for orders that should agree with the planner rather than bound it: a cube closer than
+1.5 mm to those links, which the planner's 2 mm collision margin refuses (with half a millimetre for
+a block resting a little off its cell the other way)."""
+
 REACH = (4, 4, 4)
 """Offsets measured: |di|, |dj| up to 4 units (the palm is 0.21 m across), dk from -1 to 4."""
 
@@ -50,7 +55,7 @@ _RIGID = ('panda_link7', 'panda_link8', 'panda_hand', 'panda_leftfinger', 'panda
 @lru_cache(maxsize=64)
 def blocking_offsets(unit: float, clearance: float, finger_open: float, hand_yaw_deg: int,
                      lift: float = 0.0, shift: tuple[float, float] = (0.0, 0.0), effector: str = 'hand',
-                     course: float | None = None) -> frozenset:
+                     course: float | None = None, depth: float = DEPTH) -> frozenset:
     """The integer cell offsets (di, dj, dk) from a held unit whose built cube the hand, its fingers
     open `finger_open` each, or panda_link7 enters by more than `DEPTH`, the hand pointing down at
     `hand_yaw_deg` (a multiple of 90) with its grasp target `lift` (m) over the held unit's centre.
@@ -58,17 +63,18 @@ def blocking_offsets(unit: float, clearance: float, finger_open: float, hand_yaw
     wide grasp's target is the middle of its row: `grasps.grasp_centre`; offsets then count from
     the row's first unit). effector: the hand, or the vacuum gripper (`cell.panda.EFFECTORS`: its
     housing and cup, no fingers). course: the lattice's z pitch (m) where it is not the unit (a stud
-    system's course height)."""
+    system's course height). depth: how far the cube must sink in (m, default `DEPTH`); a negative one
+    counts a cube that comes closer than -depth (`NEAR_DEPTH`: what the planner's margin refuses)."""
     import pybullet as p  # pybullet: importing it prints a banner on stdout
 
     if hand_yaw_deg % 90:
         raise RadError(f'blocking_offsets: hand yaw must be a multiple of 90 deg, got {hand_yaw_deg}')
     with _PROBE_LOCK:
         return _measure(p, _probe(effector, os.getpid()), unit, clearance, finger_open, hand_yaw_deg, lift, shift,
-                        course)
+                        course, depth)
 
 
-def _measure(p, probe, unit, clearance, finger_open, hand_yaw_deg, lift, shift, course) -> frozenset:
+def _measure(p, probe, unit, clearance, finger_open, hand_yaw_deg, lift, shift, course, depth) -> frozenset:
     cid, robot, index, movable, cubes = probe
     q = list(panda.HOME)
     q[7:] = [finger_open, finger_open]
@@ -102,8 +108,9 @@ def _measure(p, probe, unit, clearance, finger_open, hand_yaw_deg, lift, shift, 
                     continue
                 centre = at + turn @ (np.array([di, dj, dk], dtype=float) * pitch)
                 p.resetBasePositionAndOrientation(cube, centre.tolist(), turned, physicsClientId=cid)
-                if any(pt[8] < -DEPTH for link in links
-                       for pt in p.getClosestPoints(cube, robot, 0.0, linkIndexB=link, physicsClientId=cid)):
+                if any(pt[8] < -depth for link in links
+                       for pt in p.getClosestPoints(cube, robot, max(0.0, -depth), linkIndexB=link,
+                                                    physicsClientId=cid)):
                     out.add((di, dj, dk))
     return frozenset(out)
 

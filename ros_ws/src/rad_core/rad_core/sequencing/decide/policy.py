@@ -185,12 +185,13 @@ def refused(result):
     return dataclasses.replace(result, success=False, failure='placement', reason=reason)
 
 
-def first_feasible(env: AssemblyEnv, ranked: list[Action], check, drops: bool = True):
+def first_feasible(env: AssemblyEnv, ranked: list[Action], check, drops: bool = True,
+                   lookahead: int = DROP_LOOKAHEAD):
     """Go down the ranking and return (action, result) of the first action whose
     check(action) answers with .success, plus the (action, result) pairs that failed
     before it; (None, None, failed) when none does. /plan_assembly and the
     heur-verified agent both choose this way (check = GAMP from the current state).
-    An action GAMP can only drop in waits for the next `DROP_LOOKAHEAD` actions: the
+    An action GAMP can only drop in waits for the next `lookahead` actions: the
     first of those it sets down is taken instead; drops False: such an action counts as failed.
 
     Ranked actions that only differ in the unit or rotation naming the same final
@@ -210,7 +211,7 @@ def first_feasible(env: AssemblyEnv, ranked: list[Action], check, drops: bool = 
         if not result.success or not drops:
             failed.append((action, result if not result.success else refused(result)))
         elif dropped is None:
-            dropped, left = (action, result), DROP_LOOKAHEAD + 1
+            dropped, left = (action, result), lookahead + 1
         if dropped is not None:
             left -= 1
             if left <= 0:

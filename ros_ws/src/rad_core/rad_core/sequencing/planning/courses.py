@@ -39,6 +39,7 @@ from rad_core.allocation.guide import AllocationGuide
 from rad_core.allocation.order import candidate_poses, cover_candidates, order_model, scene_state, solve_order
 from rad_core.domain.scene import Scene
 from rad_core.env.robot_env import RobotAssemblyEnv, RobotEnvConfig
+from rad_core.gamp.grasps import beside_blocks
 
 COURSES_ABOVE = 200
 """`course_line` plans where a scene has more candidate poses than this (`allocation.order.candidate_poses`):
@@ -69,21 +70,31 @@ class CourseLine:
     refused: list[str] = field(default_factory=list)
     covers: int = 0
     seconds: float = 0.0
+    drops: bool = False
+    """Whether the line counts on the hand dropping blocks (`GampConfig.drop`): its plan must take drops."""
 
 
-def course_line(scene: Scene, time_limit_s: float, least_poses: int | None = None, gamp=None) -> CourseLine | None:
+def course_line(scene: Scene, time_limit_s: float, least_poses: int | None = None, gamp=None,
+                crowded=None) -> CourseLine | None:
     """The line built course by course in the planning twin (module docstring) within
     `time_limit_s` (the line so far where it ends first); None where the scene has at most
     `least_poses` candidate poses (default `COURSES_ABOVE`: one ordered cover takes those), and
     where a queue feeder dictates the blocks' order (the line chooses its blocks). gamp: GAMP's
-    settings (`GampConfig`; default the defaults), its effector's among them."""
+    settings (`GampConfig`; default the defaults), its effector's among them. crowded: GAMP's settings
+    instead where the fingers crowd a unit's neighbours (`crowded`: at a 2 cm unit the hand can set a
+    block down beside no built one), e.g. the hand that drops (`GampConfig.drop`).
+
+    The cover's hand model is the planner's own (`HandBlocked` near: the cells within its collision
+    margin), so that the twin refuses few of the poses the covers order."""
     if scene.feeder is not None and scene.feeder.order == 'queue':
         return None
     t0 = time.perf_counter()
     deadline = t0 + time_limit_s
+    if crowded is not None and is_crowded(scene):
+        gamp = crowded
     config = RobotEnvConfig(execution='teleport', **({'gamp': gamp} if gamp is not None else {}))
     grid, occupied = scene_state(scene)
-    candidates, counts, hand, unpickable = cover_candidates(scene, grid, config.gamp)
+    candidates, counts, hand, unpickable = cover_candidates(scene, grid, config.gamp, near=True)
     least = COURSES_ABOVE if least_poses is None else least_poses
     if len(candidate_poses(grid, hand, occupied, candidates, counts)[0]) <= least:
         return None
@@ -95,7 +106,8 @@ def course_line(scene: Scene, time_limit_s: float, least_poses: int | None = Non
         for c in candidates:
             courses.setdefault(float(height[list(c.cell_ids)].min()), []).append(c)
         zs = sorted(courses)
-        line = CourseLine()
+        g = config.gamp
+        line = CourseLine(drops=g.drop and g.effector == 'hand' and scene.studs is None)
         guide_of = lambda placement: AllocationGuide(scene, [placement], grid)    # noqa: E731
         refused: set[tuple] = set()
         for i, z in enumerate(zs):
@@ -121,6 +133,13 @@ def course_line(scene: Scene, time_limit_s: float, least_poses: int | None = Non
         line.coverage = env.coverage()
         line.seconds = time.perf_counter() - t0
         return line
+
+
+def is_crowded(scene: Scene) -> bool:
+    """Whether the parallel hand's fingers crowd a unit's neighbours: at the scene's unit and clearance
+    its fingertips, closed on a unit, come within the planner's margin of the blocks beside it
+    (`grasps.beside_blocks`: units under about 21.5 mm), so it can set a block down beside no built one."""
+    return beside_blocks(0, scene.unit, scene.clearance)
 
 
 def heights(grid) -> np.ndarray:

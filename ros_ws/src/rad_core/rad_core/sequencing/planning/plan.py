@@ -39,10 +39,11 @@ from rad_core.cell.motion import Motion
 from rad_core.domain.scene import Block, Scene
 from rad_core.env.mdp import AssemblyEnv, EnvConfig, Outcome
 from rad_core.gamp.action import SceneAction, blocks_named
+from rad_core.gamp.grasps import beside_blocks
 from rad_core.sequencing.decide.actions import AllocationActions, mdp_actions, scene_action
 from rad_core.sequencing.decide.deciders import with_fallbacks
 from rad_core.sequencing.decide.episode import Decision, Episode, run_episode, stop
-from rad_core.sequencing.decide.policy import Policy, first_feasible, ranked_actions, refused
+from rad_core.sequencing.decide.policy import DROP_LOOKAHEAD, Policy, first_feasible, ranked_actions, refused
 from rad_core.sequencing.planning.reallocation import ReallocationConfig, Reallocator, with_reallocation
 from rad_core.sim.physics import PhysicsStability
 
@@ -259,6 +260,10 @@ class _Planning:
                  verify: bool, precedences, deadline: float, pace: dict | None = None, drops: bool = True):
         self.plan, self.env, self.timings = plan, env, plan.timings
         self.drops = drops
+        # Where the fingers crowd every neighbour (a 2 cm unit: `grasps.beside_blocks`), nearly every block
+        # is dropped in: waiting for one set down would cost `DROP_LOOKAHEAD` checks a step and find none.
+        scene = plan.scene
+        self.lookahead = 0 if beside_blocks(0, scene.unit, scene.clearance) else DROP_LOOKAHEAD
         self.allowed = AllocationActions(env, plan.allocation.placements)   # its guide changes on re-allocation
         self.world = {'scene': plan.scene, 'q': start}
         self.sequencer, self.verify, self.precedences, self.deadline = sequencer, verify, precedences, deadline
@@ -363,7 +368,7 @@ class _Planning:
         if self.verify and self.precedences:
             ranked = precedences_last(env, ranked, self.precedences)
         found = _first_feasible(env, self.world['scene'], ranked if self.verify else ranked[:1], self.check_motion,
-                                self.world['q'], book=not self.verify, drops=self.drops)
+                                self.world['q'], book=not self.verify, drops=self.drops, lookahead=self.lookahead)
         if isinstance(found, str):
             return stop(found)
         action, step = found
@@ -483,14 +488,18 @@ def precedences_last(env: AssemblyEnv, ranked: list, precedences) -> list:
     itself is still open. A soft order, as `pits_last`: such an action is still taken when nothing
     ranked before it can be done."""
     open_cells = env.state.occupancy < 0
-    active = [(frozenset(p.first), frozenset(p.then)) for p in precedences if open_cells[list(p.first)].any()]
-    if not active or len(ranked) < 2:
+    firsts: dict[int, list[tuple]] = {}          # a `then` cell -> the `first` cells of its active precedences
+    for p in precedences:
+        if open_cells[list(p.first)].any():
+            for c in p.then:
+                firsts.setdefault(int(c), []).append(p.first)
+    if not firsts or len(ranked) < 2:
         return ranked
     keep, later = [], []
     for action in ranked:
         cells, _ = env.resulting_cells(action)
         mine = frozenset() if cells is None else frozenset(int(c) for c in cells)
-        breaks = any(mine & then and any(open_cells[c] and c not in mine for c in first) for first, then in active)
+        breaks = any(open_cells[c] and c not in mine for t in mine for first in firsts.get(t, ()) for c in first)
         (later if breaks else keep).append(action)
     return keep + later
 
@@ -508,7 +517,7 @@ def _checked_motion(env: AssemblyEnv, scene: Scene, action, plan_motion: PlanMot
 
 
 def _first_feasible(env: AssemblyEnv, scene: Scene, ranked, check_motion, q, book: bool = False,
-                    drops: bool = True):
+                    drops: bool = True, lookahead: int = DROP_LOOKAHEAD):
     """(action, PlanStep) of the best-ranked action GAMP can execute, or why none.
     check_motion(env, scene, action, q): `_checked_motion` with the plan's motion planner. book (an
     unverified agent, given its one best-ranked action): a failure comes back as (action,
@@ -516,7 +525,7 @@ def _first_feasible(env: AssemblyEnv, scene: Scene, ranked, check_motion, q, boo
     def check(action) -> MotionPlan:
         return check_motion(env, scene, action, q)
 
-    action, motion, failed = first_feasible(env, ranked, check, drops)
+    action, motion, failed = first_feasible(env, ranked, check, drops, lookahead)
     if action is None and book and failed:
         return ranked[0], failed[0][1]      # unverified: the one action, and why it fails (booked by act)
     if action is None:
