@@ -215,7 +215,7 @@ def test_the_greedy_order_keeps_the_models_rules():
 
 def test_where_cp_sat_finds_no_order_in_its_time_the_greedy_order_is_the_answer(monkeypatch):
     # CP-SAT presolving thousands of poses can spend all its time: made to happen here by a solver
-    # that finds nothing. The answer is then the greedy order, with its precedences, not empty.
+    # that finds nothing. On a large model the answer is then the greedy order, with its precedences.
     from ortools.sat.python import cp_model
 
     from rad_core.allocation import order as order_module
@@ -230,6 +230,8 @@ def test_where_cp_sat_finds_no_order_in_its_time_the_greedy_order_is_the_answer(
     scene = square(n_cubes=3)
     grid, occupied, poses, items, counts, _ = _cover_poses(scene)
     monkeypatch.setattr(order_module, 'cp_solver', lambda seconds: NoAnswer())
+    assert solve_order(grid, occupied, poses, items, counts, 1.0, cover=True).order == []   # few poses: none
+    monkeypatch.setattr(order_module, 'LARGE_POSES', 0)          # as with thousands of poses
     found = solve_order(grid, occupied, poses, items, counts, 1.0, cover=True)
     first = greedy_order(grid, occupied, poses, counts, cover=True)
     assert found.order == [poses[n][0] for n, _ in first] and len(found.order) == 3

@@ -42,8 +42,8 @@ from rad_core.gamp.planner import GampConfig
 
 LARGE_POSES = 400
 """Above this many poses (a large structure's courses: 2,000-4,000, where CP-SAT found no order at all
-in its time), `solve_order` starts CP-SAT from `greedy_order` and `order_model` holds each way against
-when its cells are filled. Below, a hint would only steer which of equal orders CP-SAT returns
+in its time), `solve_order` starts CP-SAT from `greedy_order`, answers with it where CP-SAT finds none,
+and `order_model` holds each way against when its cells are filled. Below, a hint would only steer which of equal orders CP-SAT returns
 (generated and hand-made scenes have 17-274 poses), so those models stay as they were."""
 
 
@@ -321,7 +321,8 @@ def solve_order(grid: Grid, occupied: np.ndarray, poses: list[tuple], items: lis
         ns = [index[cells] for cells in before if cells in index]
         if len(ns) == len(before) and ns:
             model.add(sum(placed[n] for n in ns) <= len(ns) - 1)
-    first = greedy_order(grid, occupied, poses, counts, cover=cover, way_down=way_down)
+    first = greedy_order(grid, occupied, poses, counts, cover=cover, way_down=way_down) \
+        if len(poses) > LARGE_POSES else []
     ways_of = {n: way for n, way in first}
     for k, (n, way) in enumerate(first if len(poses) > LARGE_POSES else ()):
         model.add_hint(placed[n], True)
@@ -343,9 +344,13 @@ def solve_order(grid: Grid, occupied: np.ndarray, poses: list[tuple], items: lis
                 for n in chosen}
         if len(poses) > LARGE_POSES and sum(poses[n][2] for n in chosen) < sum(poses[n][2] for n, _ in first):
             chosen, held = [n for n, _ in first], ways_of       # CP-SAT did not get as far as its hint
+    elif len(poses) <= LARGE_POSES:
+        return HandOrder()
     else:
         # CP-SAT found nothing in its time (presolve of thousands of poses can take all of it): the
-        # greedy order, which it would have started from, where it keeps out of `avoid`.
+        # greedy order, which it would have started from, where it keeps out of `avoid`. Not on fewer
+        # poses: there the course line's one-course cover is better than a greedy two-course one (g = 8
+        # seed 7000 of `benchmarks/bench_large.py` fell from 1.0 to 0.94).
         chosen, held = [n for n, _ in first], ways_of
         if any(len(ns) == len(before) and ns and set(ns) <= set(chosen) for before in avoid
                for ns in [[index[c] for c in before if c in index]]):
