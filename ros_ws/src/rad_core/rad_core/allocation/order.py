@@ -43,8 +43,9 @@ from rad_core.gamp.planner import GampConfig
 LARGE_POSES = 400
 """Above this many poses (a large structure's courses: 2,000-4,000, where CP-SAT found no order at all
 in its time), `solve_order` starts CP-SAT from `greedy_order`, answers with it where CP-SAT finds none,
-and `order_model` holds each way against when its cells are filled. Below, a hint would only steer which of equal orders CP-SAT returns
-(generated and hand-made scenes have 17-274 poses), so those models stay as they were."""
+and `order_model` holds each way against when its cells are filled. Below, a hint would only steer
+which of equal orders CP-SAT returns (generated and hand-made scenes have 17-274 poses), so those
+models stay as they were."""
 
 
 @dataclass(frozen=True)
