@@ -174,25 +174,8 @@ def order_model(grid: Grid, occupied: np.ndarray, poses: list[tuple], counts: di
         if cover:
             _stands(model, grid, occupied, cells, n, placed, order, owners)
             continue
-        if not rest:
-            continue
-        # Resting on something: the table, a built cell, or a pose placed before it.
-        ids = np.asarray(cells)
-        if grid.on_table[ids].any():
-            continue
-        below = grid.below_idx[ids]
-        below = below[(below >= 0) & ~np.isin(below, ids)]
-        if occupied[below].any():
-            continue
-        under = sorted({m for c in below.tolist() for m in owners.get(int(c), ())})
-        if not under:
-            model.add(placed[n] == 0)
-            continue
-        rests = [model.new_bool_var(f's{n}_{m}') for m in under]
-        model.add_bool_or(rests).only_enforce_if(placed[n])
-        for var, m in zip(rests, under):
-            model.add_implication(var, placed[m])
-            model.add(order[m] < order[n]).only_enforce_if(var)
+        if rest:
+            _rests(model, grid, occupied, cells, n, placed, order, owners)
     filled = sum(pose[2] * placed[n] for n, pose in enumerate(poses))
     if cover:
         outside = [len(pose[0]) - pose[2] for pose in poses]
@@ -200,6 +183,27 @@ def order_model(grid: Grid, occupied: np.ndarray, poses: list[tuple], counts: di
     else:
         model.maximize(filled)
     return model, placed, order, held_by
+
+
+def _rests(model, grid: Grid, occupied: np.ndarray, cells, n: int, placed, order, owners) -> None:
+    """Pose n, where placed, rests on something: the table, a built cell, or a pose placed before it
+    under one of its units."""
+    ids = np.asarray(cells)
+    if grid.on_table[ids].any():
+        return
+    below = grid.below_idx[ids]
+    below = below[(below >= 0) & ~np.isin(below, ids)]
+    if occupied[below].any():
+        return
+    under = sorted({m for c in below.tolist() for m in owners.get(int(c), ())})
+    if not under:
+        model.add(placed[n] == 0)
+        return
+    rests = [model.new_bool_var(f's{n}_{m}') for m in under]
+    model.add_bool_or(rests).only_enforce_if(placed[n])
+    for var, m in zip(rests, under):
+        model.add_implication(var, placed[m])
+        model.add(order[m] < order[n]).only_enforce_if(var)
 
 
 def path_precedences(grid: Grid, cells, owners: dict[int, list[int]], n: int) -> list[int]:
