@@ -189,11 +189,8 @@ def _rests(model, grid: Grid, occupied: np.ndarray, cells, n: int, placed, order
     """Pose n, where placed, rests on something: the table, a built cell, or a pose placed before it
     under one of its units."""
     ids = np.asarray(cells)
-    if grid.on_table[ids].any():
-        return
-    below = grid.below_idx[ids]
-    below = below[(below >= 0) & ~np.isin(below, ids)]
-    if occupied[below].any():
+    below = _cells_below(grid, ids)
+    if below is None or occupied[below].any():
         return
     under = sorted({m for c in below.tolist() for m in owners.get(int(c), ())})
     if not under:
@@ -322,19 +319,19 @@ def solve_order(grid: Grid, occupied: np.ndarray, poses: list[tuple], items: lis
         return HandOrder()
     model, placed, order, held_by = order_model(grid, occupied, poses, counts, cover=cover, way_down=way_down)
     index = {pose[0]: n for n, pose in enumerate(poses)}
-    for before in avoid:
-        ns = [index[cells] for cells in before if cells in index]
-        if len(ns) == len(before) and ns:
-            model.add(sum(placed[n] for n in ns) <= len(ns) - 1)
-    first = greedy_order(grid, occupied, poses, counts, cover=cover, way_down=way_down) \
-        if len(poses) > LARGE_POSES else []
+    avoided = [ns for before in avoid for ns in [[index[cells] for cells in before if cells in index]]
+               if len(ns) == len(before) and ns]
+    for ns in avoided:
+        model.add(sum(placed[n] for n in ns) <= len(ns) - 1)
+    large = len(poses) > LARGE_POSES
+    first = greedy_order(grid, occupied, poses, counts, cover=cover, way_down=way_down) if large else []
     ways_of = {n: way for n, way in first}
-    for k, (n, way) in enumerate(first if len(poses) > LARGE_POSES else ()):
+    for k, (n, way) in enumerate(first):
         model.add_hint(placed[n], True)
         model.add_hint(order[n], k)
         for w, (var, _) in enumerate(held_by[n]):
             model.add_hint(var, w == way)
-    for n in range(len(poses) if len(poses) > LARGE_POSES else 0):
+    for n in (range(len(poses)) if large else ()):
         if n not in ways_of:
             model.add_hint(placed[n], False)
             for var, _ in held_by[n]:
@@ -347,9 +344,9 @@ def solve_order(grid: Grid, occupied: np.ndarray, poses: list[tuple], items: lis
                         key=lambda n: (solver.value(order[n]), n))
         held = {n: next((w for w, (var, _) in enumerate(held_by[n]) if solver.boolean_value(var)), None)
                 for n in chosen}
-        if len(poses) > LARGE_POSES and sum(poses[n][2] for n in chosen) < sum(poses[n][2] for n, _ in first):
+        if large and sum(poses[n][2] for n in chosen) < sum(poses[n][2] for n, _ in first):
             chosen, held = [n for n, _ in first], ways_of       # CP-SAT did not get as far as its hint
-    elif len(poses) <= LARGE_POSES:
+    elif not large:
         return HandOrder()
     else:
         # CP-SAT found nothing in its time (presolve of thousands of poses can take all of it): the
@@ -357,10 +354,7 @@ def solve_order(grid: Grid, occupied: np.ndarray, poses: list[tuple], items: lis
         # poses: there the course line's one-course cover is better than a greedy two-course one (g = 8
         # seed 7000 of `benchmarks/bench_large.py` fell from 1.0 to 0.94).
         chosen, held = [n for n, _ in first], ways_of
-        if any(len(ns) == len(before) and ns and set(ns) <= set(chosen) for before in avoid
-               for ns in [[index[c] for c in before if c in index]]):
-            return HandOrder()
-        if not chosen:
+        if not chosen or any(set(ns) <= set(chosen) for ns in avoided):
             return HandOrder()
     walk, waiting = order_statics(grid, [poses[n][0] for n in chosen], occupied, clutch=grid.clutch)
     tipping = [poses[chosen[k]][0] for k in waiting]
@@ -427,11 +421,15 @@ def greedy_order(grid: Grid, occupied: np.ndarray, poses: list[tuple], counts=No
     return out
 
 
+def _cells_below(grid: Grid, ids: np.ndarray) -> np.ndarray | None:
+    """The cells under a pose's bottom units (not its own), or None where a unit stands on the table."""
+    if grid.on_table[ids].any():
+        return None
+    below = grid.below_idx[ids]
+    return below[(below >= 0) & ~np.isin(below, ids)]
+
+
 def _rests_on(grid: Grid, ids: list[int], filled: np.ndarray) -> bool:
     """`order_model`'s rest rule: a unit on the table or over a filled cell not its own."""
-    ids_ = np.asarray(ids)
-    if grid.on_table[ids_].any():
-        return True
-    below = grid.below_idx[ids_]
-    below = below[(below >= 0) & ~np.isin(below, ids_)]
-    return bool(filled[below].any())
+    below = _cells_below(grid, np.asarray(ids))
+    return below is None or bool(filled[below].any())
