@@ -112,7 +112,10 @@ def order_model(grid: Grid, occupied: np.ndarray, poses: list[tuple], counts: di
     in a pinwheel, each over the next) can never be built. The planner's stages do not: there the
     rule changed which cover CP-SAT picks and lost 4 of the 78 scenes of `benchmarks/bench_eval.py` to
     the hand model's other misses, while GAMP refuses such a placement and order repair learns the
-    precedence from the refusal. A pose under a built cell has no way in either way (`hand_ways`).
+    precedence from the refusal. The one exception is the cover stage's last try, the drops' cover
+    (`agent_plan.effector_solvers`): without the rule, the solid 3 x 3 x 2 box's drop cover put a block
+    under one placed before it, and the repair rounds after it built less than the set-down plan.
+    A pose under a built cell has no way in either way (`hand_ways`).
     Where poses overlap (candidates, not an allocation), at most one fills a cell, and counts caps the
     poses of each type.
     Maximizes the target cells placed.
@@ -251,7 +254,7 @@ def hand_order(scene: Scene, placements, time_limit_s: float = 1.0, gamp=None, w
     return solve_order(grid, occupied, poses, items, None, time_limit_s, way_down=way_down)
 
 
-def ordered_cover(scene: Scene, time_limit_s: float = 2.0, gamp=None, avoid=()) -> HandOrder:
+def ordered_cover(scene: Scene, time_limit_s: float = 2.0, gamp=None, avoid=(), way_down: bool = False) -> HandOrder:
     """The allocation and its order at once: among every pose an arm-aware allocation may propose
     (`allocation.bounds.ArmCoverageBound.candidates`: fillers worth 0 included, the arm's filter
     applied) and the blocks the arm can pick, the disjoint ones with an order in which the hand
@@ -261,12 +264,13 @@ def ordered_cover(scene: Scene, time_limit_s: float = 2.0, gamp=None, avoid=()) 
     before its neighbour is there, which needs another block below it), this one picks a cover
     that has. CP-SAT's best within `time_limit_s` (deterministic time); empty where it found none.
     avoid: covers found before (their `order`s), not to be found again as they were. Where the hand
-    drops (`GampConfig.drop`), the order counts on drops (`HandOrder.drops`)."""
+    drops (`GampConfig.drop`), the order counts on drops (`HandOrder.drops`). way_down: `order_model`'s."""
     gamp = gamp or GampConfig()
     grid, occupied = scene_state(scene)
     candidates, counts, hand, _ = cover_candidates(scene, grid, gamp)
     poses, items = candidate_poses(grid, hand, occupied, candidates, counts)
-    found = solve_order(grid, occupied, poses, items, counts, time_limit_s, cover=True, avoid=avoid)
+    found = solve_order(grid, occupied, poses, items, counts, time_limit_s, cover=True, avoid=avoid,
+                        way_down=way_down)
     found.drops = gamp.drop and gamp.effector == 'hand' and scene.studs is None
     return found
 
