@@ -112,7 +112,7 @@ def order_model(grid: Grid, occupied: np.ndarray, poses: list[tuple], counts: di
     in a pinwheel, each over the next) can never be built. The planner's stages do not: there the
     rule changed which cover CP-SAT picks and lost 4 of the 78 scenes of `benchmarks/bench_eval.py` to
     the hand model's other misses, while GAMP refuses such a placement and order repair learns the
-    precedence from the refusal. The one exception is the cover stage's last try, the drops' cover
+    precedence from the refusal. The one exception is the cover stage's last try, a second drops' cover
     (`agent_plan.effector_solvers`): without the rule, the solid 3 x 3 x 2 box's drop cover put a block
     under one placed before it, and the repair rounds after it built less than the set-down plan.
     A pose under a built cell has no way in either way (`hand_ways`).

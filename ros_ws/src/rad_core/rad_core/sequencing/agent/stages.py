@@ -82,9 +82,9 @@ class Solvers:
     hand_order: Callable = hand_order
     ordered_cover: Callable = ordered_cover
     robot_ceiling: Callable = robot_ceiling
-    drop_cover: Callable | None = None
-    """An ordered cover counting on GAMP's drops (`GampConfig.drop`), the cover stage's last try where the
-    others (a hand that sets blocks down) leave cells; None: no such try."""
+    drop_covers: tuple[Callable, ...] = ()
+    """Ordered covers counting on GAMP's drops (`GampConfig.drop`), the cover stage's last tries, in turn
+    while the plans before (a hand that sets blocks down) leave cells; none: no such try."""
 
 
 @dataclass
@@ -294,10 +294,12 @@ def cover_stage(planning: Planning, best: AssemblyPlan, deadline: float) -> Asse
         avoid.append(cover.order)
         allocation = cover_allocation(cover, time.perf_counter() - now)
         running, latest = chain(planning, allocation, cover.precedences, running, until, cover.drops)
-    now = time.perf_counter()
-    if planning.solvers.drop_cover is not None and not full(running) and now < deadline:
+    for drop_cover in planning.solvers.drop_covers:
         # The drops' cover: the last cell of a flush course, the last block of a solid box.
-        cover = planning.solvers.drop_cover(planning.scene, min(ORDERED_COVER_S, (deadline - now) / 3))
+        now = time.perf_counter()
+        if full(running) or now >= deadline:
+            break
+        cover = drop_cover(planning.scene, min(ORDERED_COVER_S, (deadline - now) / 3))
         if cover.coverage > running.predicted_coverage + EPS and time.perf_counter() < deadline:
             allocation = cover_allocation(cover, time.perf_counter() - now)
             running, latest = chain(planning, allocation, cover.precedences, running,
