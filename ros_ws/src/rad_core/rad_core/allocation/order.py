@@ -323,8 +323,11 @@ def solve_order(grid: Grid, occupied: np.ndarray, poses: list[tuple], items: lis
         return HandOrder()
     model, placed, order, held_by = order_model(grid, occupied, poses, counts, cover=cover, way_down=way_down)
     index = {pose[0]: n for n, pose in enumerate(poses)}
-    avoided = [ns for before in avoid for ns in [[index[cells] for cells in before if cells in index]]
-               if len(ns) == len(before) and ns]
+    avoided = []                 # the poses of each cover found before, where all of them are here
+    for before in avoid:
+        ns = [index[cells] for cells in before if cells in index]
+        if ns and len(ns) == len(before):
+            avoided.append(ns)
     for ns in avoided:
         model.add(sum(placed[n] for n in ns) <= len(ns) - 1)
     large = len(poses) > LARGE_POSES
