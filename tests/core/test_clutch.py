@@ -262,3 +262,14 @@ def test_a_studded_scene_is_stepped_in_shorter_steps_and_a_plain_one_as_before()
         assert world.substeps == 1 and bullet() == before
     with pytest.raises(RadError, match='stud_substeps'):
         WorldConfig(stud_substeps=0)
+
+
+def test_the_scene_keeps_the_designs_bricks_as_its_design():
+    from rad_core.sequencing.agent.stages import design_allocation
+    scene = cantilever_scene(built=False)
+    region = scene.targets[0]
+    assert [p.type for p in scene.design] == [b.type for b in scene.blocks]
+    assert sorted(c for p in scene.design for c in p.cells) == sorted(region.filled)
+    assert [min(c[2] for c in p.cells) for p in scene.design] == [0, 1]      # the file's order
+    # With the base built, what is left of the design is the top brick.
+    assert [p.cells for p in design_allocation(cantilever_scene()).placements] == [scene.design[1].cells]

@@ -173,3 +173,31 @@ def test_a_measured_turn_is_an_offset_of_at_most_45_degrees():
     d['measured_offsets'] = {'c1': [0.0, 0.0, 50.0]}
     with pytest.raises(SceneError, match='more than 45'):
         Scene.from_dict(d)
+
+
+def test_a_design_round_trips_and_each_pose_is_checked():
+    d = doc()
+    d['design'] = [{'type': 'L3_up', 'target': 'front', 'yaw': 0, 'cells': [[0, 0, 0], [1, 0, 0], [0, 0, 1]]},
+                   {'type': 'I2', 'target': 'front', 'yaw': 90, 'cells': [[2, 0, 1], [2, 0, 0]]}]
+    with pytest.raises(SceneError, match=r'not the cells of a I2 at yaw 90') as e:
+        Scene.from_dict(d)                  # at yaw 90 an I2 lies along y; the region is one cell deep
+    assert e.value.field == 'design[1].cells'
+    d['design'][1] = {'type': 'cube', 'target': 'front', 'yaw': 0, 'cells': [[2, 0, 0]]}
+    s = Scene.from_dict(d)
+    assert [(p.type, p.cells) for p in s.design] == [('L3_up', ((0, 0, 0), (1, 0, 0), (0, 0, 1))),
+                                                     ('cube', ((2, 0, 0),))]
+    assert Scene.loads(s.dumps()) == s and 'design' not in scene().to_dict()
+    cube = {'type': 'cube', 'target': 'front', 'yaw': 0}
+    for pose, field, problem in [({**cube, 'cells': [[0, 0, 1]]}, 'design[2].cells', r'also in design\[0\]'),
+                                 ({**cube, 'cells': [[3, 0, 0]]}, 'design[2].cells', 'outside region'),
+                                 ({**cube, 'cells': [[2, 0, 1], [1, 0, 1]]}, 'design[2].cells', 'the 1 cells'),
+                                 ({**cube, 'target': 'back', 'cells': [[2, 0, 1]]}, 'design[2].target',
+                                  'unknown target region'),
+                                 ({**cube, 'type': 'S4', 'cells': [[2, 0, 1]]}, 'design[2].type', 'unknown block'),
+                                 ({**cube, 'yaw': 45, 'cells': [[2, 0, 1]]}, 'design[2].yaw', 'multiple of 90'),
+                                 ({'type': 'cube', 'cells': [[2, 0, 1]]}, 'design[2]', 'missing field')]:
+        bad = copy.deepcopy(d)
+        bad['design'].append(pose)
+        with pytest.raises(SceneError, match=problem) as e:
+            Scene.from_dict(bad)
+        assert e.value.field == field

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 
 import pytest
 from rad_core.allocation import solve
@@ -11,10 +12,14 @@ from rad_core.domain.generator import GeneratorConfig, generate_scene
 from rad_core.env.mdp import Outcome
 from rad_core.sequencing import HeurPolicy
 from rad_core.sequencing.agent.agent_plan import AgentPlanner
-from rad_core.sequencing.agent.stages import STAGES, Planning, Solvers, improve, stages_for
+from rad_core.domain.scene import Scene
+from rad_core.sequencing.agent.stages import (STAGES, Planning, Solvers, design_allocation, design_stage, improve,
+                                              stages_for)
 from rad_core.sequencing.decide.agents import parse
 from rad_core.sequencing.decide.episode import Episode
 from rad_core.sequencing.planning.plan import AssemblyPlan, MotionPlan, plan_assembly
+
+from scenes import U, doc, scene
 
 
 def made(coverage: float, refused: bool = False) -> AssemblyPlan:
@@ -61,11 +66,12 @@ def test_the_agent_text_selects_the_stages_and_their_order_is_fixed():
         spec = parse(text)
         return [n for n, _ in stages_for(spec, support or spec.support, anytime, improve_s)]
     order = list(STAGES)
-    assert order == ['courses', 'repair', 'hand-order', 'arm', 'ceiling', 'search', 'cover']
-    assert names('default') == ['courses', 'repair', 'hand-order', 'arm', 'cover']
-    assert names('milp-dqn-mixed+verify+realloc+repair+support:arm') == ['courses', 'repair', 'hand-order', 'cover']
-    assert names('heur+verify+repair', 'none') == ['repair', 'hand-order']
-    assert names('default+ceiling:30') == ['courses', 'repair', 'hand-order', 'arm', 'ceiling', 'cover']
+    assert order == ['design', 'courses', 'repair', 'hand-order', 'arm', 'ceiling', 'search', 'cover']
+    assert names('default') == ['design', 'courses', 'repair', 'hand-order', 'arm', 'cover']
+    assert names('milp-dqn-mixed+verify+realloc+repair+support:arm') == ['design', 'courses', 'repair', 'hand-order',
+                                                                        'cover']
+    assert names('heur+verify+repair', 'none') == ['design', 'repair', 'hand-order']
+    assert names('default+ceiling:30') == ['design', 'courses', 'repair', 'hand-order', 'arm', 'ceiling', 'cover']
     assert names('greedy') == [] and names('paper') == []
     assert names('milp-dqn-mixed+lookahead:5+verify+support:arm', anytime=True) == ['search']
     assert names('milp-dqn-mixed+lookahead:5+verify+support:arm', anytime=False) == []
@@ -167,3 +173,38 @@ def test_with_an_anytime_deadline_the_first_plan_completes_and_no_stage_starts_a
                           improve_until_s=1e-3, solvers=Solvers(course_line=courses))
     assert plan.steps and not plan.episode.timed_out and "time limit" not in plan.reason
     assert [a['plan'] for a in plan.anytime] == ['scorer'] and not seen
+
+
+def designed(*poses, blocks=None) -> Scene:
+    """The default test scene (a row of three and one on its end; two cubes and an I2) with a design of
+    (type, cells) poses at yaw 0."""
+    d = doc(blocks=blocks)
+    d['design'] = [{'type': t, 'target': 'front', 'yaw': 0, 'cells': [list(c) for c in cells]} for t, cells in poses]
+    return Scene.from_dict(d)
+
+
+def test_the_design_as_an_allocation_keeps_the_poses_the_blocks_left_can_fill():
+    cube, bar = ('cube', [(0, 0, 1)]), ('I2', [(1, 0, 0), (2, 0, 0)])
+    found = design_allocation(designed(cube, bar, ('cube', [(0, 0, 0)]), ('cube', [(1, 0, 1)])))
+    # The scene has two cubes: the third cube pose is left out; its order is the design's.
+    assert found.solver == 'design' and found.objective == 4.0
+    assert [(p.type, p.cells) for p in found.placements] == [('cube', ((0, 0, 1),)), ('I2', ((1, 0, 0), (2, 0, 0))),
+                                                             ('cube', ((0, 0, 0),))]
+    # A cube already on the row's last cell: the bar's pose over it is left out, and so is one cube.
+    blocks = doc()['blocks']
+    blocks[1] = {**blocks[1], 'position': [0.45 + 2 * U, 0.1, U / 2]}
+    found = design_allocation(designed(cube, bar, ('cube', [(0, 0, 0)]), blocks=blocks))
+    assert [(p.type, p.cells) for p in found.placements] == [('cube', ((0, 0, 1),))]
+    assert design_allocation(scene()) is None
+
+
+def test_the_design_stage_plans_the_design_in_the_hands_order(default_planner):
+    # Listed top first: the stage's order puts the cube on its end after the one under it.
+    s = designed(('cube', [(0, 0, 1)]), ('cube', [(0, 0, 0)]), ('I2', [(1, 0, 0), (2, 0, 0)]))
+    p = default_planner
+    planning = Planning(p.spec, s, p.support, p.allocate, p.motion, p.sequencer.rank, p.sequencer.rank,
+                        solvers=p.solvers)
+    plan = design_stage(planning, made(0.0), time.perf_counter() + 30)
+    assert plan.allocation.solver == 'design' and plan.predicted_coverage == 1.0 and len(plan.steps) == 3
+    assert design_stage(replace(planning, scene=scene()), made(0.0), time.perf_counter() + 30) is None
+    assert design_stage(planning, made(1.0), time.perf_counter() + 30) is None     # nothing to gain

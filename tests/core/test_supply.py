@@ -233,3 +233,12 @@ def test_where_no_cover_can_be_placed_whole_the_report_says_how_much_can(set_dow
 def test_hand_rounds_must_be_positive():
     with pytest.raises(RadError, match='hand_rounds'):
         sp.choose_blocks(regions(bar(2)), UNIT, types('cube', 'I2'), params=sp.SupplyParams(hand_rounds=0))
+
+
+def test_the_scene_keeps_the_cover_as_its_design():
+    scene, report = sp.supply(regions(chair()), UNIT, dict(DEFAULT_LIBRARY))
+    assert sorted(p.type for p in scene.design) == sorted(b.type for b in scene.blocks)
+    cells = [(p.target, c) for p in scene.design for c in p.cells]
+    assert len(cells) == len(set(cells)) == report.covered + report.filler_cells
+    lowest = [min(c[2] for c in p.cells) for p in scene.design]
+    assert lowest == sorted(lowest) and lowest[-1] > 0          # course by course from the bottom

@@ -5,7 +5,8 @@ validator the CLI uses, so a bad message gets the same field-naming errors.
 
 A scene's ``clearance`` (rad_core.domain.scene) travels in rad_msgs/Scene's ``clearance``
 field (0 = flush, as in a scene document without the key), its ``studs`` in ``studs`` (at most
-one rad_msgs/Studs; none: blocks that only rest).
+one rad_msgs/Studs; none: blocks that only rest). What registration and design add to a scene
+(``measured_offsets``, ``obstacles``, ``design``) travels in a request's ``scene_json`` only.
 """
 
 from __future__ import annotations

@@ -5,7 +5,8 @@ A design (`brick_designs`) counts in studs and plates; a scene in metres on a la
 pitch (``unit``) by the course height (`studs`). The course is the coarsest one every brick sits
 on: a brick's height where the design has bricks only, a plate's where plates shift them (a LEGO
 brick is then three cells high). The target stands where `voxels.fit_target` puts a model of its
-height in metres, turned a quarter where only that fits the reach (``yaw`` fixes it).
+height in metres, turned a quarter where only that fits the reach (``yaw`` fixes it). The scene keeps
+the bricks' places as its design (`Scene.design`, `design_poses`), in the file's order.
 
 A design that does not stand even with the bricks' clutch, placed brick by brick in the file's
 order or in any order the statics walk finds, is refused naming the brick that falls
@@ -16,6 +17,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
+from typing import Mapping
 
 import numpy as np
 
@@ -24,7 +26,7 @@ from rad_core.domain.blocks import BlockType
 from rad_core.domain.brick_designs import PLATES_PER_BRICK, Brick, BrickDesign
 from rad_core.domain.errors import RadError
 from rad_core.domain.grid import Grid
-from rad_core.domain.scene import Block, Feeder, Scene, TargetRegion
+from rad_core.domain.scene import Block, DesignPose, Feeder, Scene, TargetRegion
 from rad_core.domain.statics import Statics, first_failure, order_statics
 from rad_core.domain.studs import GRAVITY, SYSTEMS, Studs
 from rad_core.domain.voxels import fit_target
@@ -136,6 +138,19 @@ def built_blocks(design: BrickDesign, lattice: BrickLattice, region: TargetRegio
     return types, blocks
 
 
+def design_poses(placed: list[Block], types: Mapping[str, BlockType], region: TargetRegion,
+                 lattice: BrickLattice) -> tuple[DesignPose, ...]:
+    """The bricks at their places in the target (`built_blocks`) as the scene's design (`Scene.design`),
+    in the design's order."""
+    pitch = np.array([lattice.unit, lattice.unit, lattice.course])
+    poses = []
+    for block in placed:
+        anchor = np.rint((np.asarray(block.position) - np.asarray(region.origin)) / pitch).astype(int)
+        cells = tuple(tuple(int(v) for v in anchor + o) for o in types[block.type].rotated(block.yaw))
+        poses.append(DesignPose(block.type, region.name, block.yaw, cells))
+    return tuple(poses)
+
+
 def design_verdict(design: BrickDesign, lattice: BrickLattice, clutch: bool = True) -> tuple[str, str]:
     """('stands' or 'falls', a line saying why): whether the design stands with its bricks' clutch
     (`clutch` False: held by gravity alone), placed in the file's order, and if not there, whether
@@ -203,7 +218,7 @@ def scene_from_design(design: BrickDesign, system: str | None = None, unit: floa
     kinds = [b.type for b in placed]
     blocks, feeder = _supply(kinds, types, region, lattice, seed, start)
     scene = Scene.from_dict(Scene(lattice.unit, types, tuple(blocks), (region,), feeder=feeder,
-                                  studs=lattice.studs).to_dict())
+                                  studs=lattice.studs, design=design_poses(placed, types, region, lattice)).to_dict())
     lines = [f'{len(design.bricks)} {lattice.system} bricks, {len(region.filled)} cells on a '
              f'{lattice.unit * 1000:g} mm pitch and {lattice.course * 1000:.2f} mm courses '
              f'({lattice.course_plates} plate{"s" if lattice.course_plates > 1 else ""}), clutch '

@@ -35,7 +35,9 @@ whole after each piece (`domain.statics`).
 (`shapes.lay_out`: every unit 0.32..0.63 m from the base within 75 degrees of +x, 5 cm
 between blocks for the open gripper's fingers, 7 cm clear of the target regions); where they do not
 fit (`SupplyParams.start` 'auto'), or always ('feeder'), a feeder presents them at a station instead
-(`feeder_blocks`).
+(`feeder_blocks`). The scene keeps the cover as its design (`Scene.design`, `design_of`), which the
+planner plans beside its own allocations: the allocation over exactly these blocks finds a cover as
+good, but not always one the hand can build in some order, as this one is where the order model chose it.
 
 A large target's model can outlast the time limit in presolve: `course_cover`, a cover laid course by
 course from the bottom, is CP-SAT's first solution (a hint) and the answer where CP-SAT finds none.
@@ -64,7 +66,7 @@ from rad_core.domain import shapes
 from rad_core.domain.blocks import BlockType
 from rad_core.domain.errors import RadError
 from rad_core.domain.grid import Grid
-from rad_core.domain.scene import MAX_BLOCKS, Block, Feeder, Scene, TargetRegion, feeder_of
+from rad_core.domain.scene import MAX_BLOCKS, Block, DesignPose, Feeder, Scene, TargetRegion, feeder_of
 from rad_core.domain.statics import order_statics
 from rad_core.domain.voxels import MAX_UNIT
 
@@ -534,8 +536,17 @@ def supply(targets: Sequence[TargetRegion], unit: float, types: Mapping[str, Blo
     if blocks is None:
         blocks, feeder = feeder_blocks(kinds, types, targets, unit, params.station)
     used = [n for n in types if n in set(kinds)]
-    scene = Scene(unit, {n: types[n] for n in used}, tuple(blocks), tuple(targets), clearance, feeder=feeder)
+    scene = Scene(unit, {n: types[n] for n in used}, tuple(blocks), tuple(targets), clearance, feeder=feeder,
+                  design=design_of(placements, report.ordered))
     return Scene.from_dict(scene.to_dict()), report
+
+
+def design_of(placements, ordered: bool) -> tuple[DesignPose, ...]:
+    """The cover as the scene's design (`Scene.design`): in the order model's order where it chose the
+    cover (`ordered`), else course by course from the bottom."""
+    if not ordered:
+        placements = sorted(placements, key=lambda p: min(c[2] for c in p.cells))
+    return tuple(DesignPose(p.type, p.target, p.yaw, p.cells) for p in placements)
 
 
 def target_only(targets: Sequence[TargetRegion], unit: float, types: Mapping[str, BlockType],

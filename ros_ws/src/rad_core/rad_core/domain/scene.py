@@ -53,6 +53,15 @@ proportion to the unit (the stud pitch). The lattice is
 then ``unit`` along x and y and ``course`` along z (`Scene.pitch`): a block type's cells
 are studs by courses, and every position of the scene, a block's and a region's, lies on
 that lattice. Blocks sit on the table with their lowest cells' centres ``course / 2`` up.
+
+A scene made from a design may also say how the design fills its targets (``design``, optional): a
+list of poses, each ``{type, target, yaw, cells}`` as an allocation answers them (the region's cells
+[i, j, k] the block fills, its type's cells turned by ``yaw`` and moved), in the order they were
+designed to go in. `rad scene from-voxels` and `from-mesh` write the cover supply chose for the blocks
+they lay out, `rad scene from-bricks` the design's own bricks. It is a proposal, not an instruction:
+the planner plans it as one more allocation (`sequencing.agent.stages`, the design stage) beside its
+own, and keeps whichever plan fills more. The poses must be disjoint and inside their regions; a pose
+whose cells are filled already, or one more of a type than the scene has blocks of, is left out then.
 """
 
 from __future__ import annotations
@@ -100,6 +109,19 @@ class Block:
 
     def to_dict(self) -> dict:
         return {'id': self.id, 'type': self.type, 'position': list(self.position), 'yaw': self.yaw}
+
+
+@dataclass(frozen=True)
+class DesignPose:
+    """One block of a scene's design (module docstring): a block type at a pose in one region."""
+
+    type: str
+    target: str
+    yaw: int
+    cells: tuple[tuple[int, int, int], ...]
+
+    def to_dict(self) -> dict:
+        return {'type': self.type, 'target': self.target, 'yaw': self.yaw, 'cells': [list(c) for c in self.cells]}
 
 
 @dataclass(frozen=True)
@@ -210,6 +232,8 @@ class Scene:
     """Blocks that arrive at a pick station instead of lying on the table (module docstring)."""
     studs: Studs | None = None
     """The blocks' stud system, None for blocks that only rest (module docstring)."""
+    design: tuple[DesignPose, ...] = ()
+    """How the design these blocks were chosen for fills the targets, in its order (module docstring)."""
     _by_id: dict = field(default=None, repr=False, compare=False)
 
     def __post_init__(self):
@@ -303,6 +327,8 @@ class Scene:
             doc['obstacles'] = [o.to_dict() for o in self.obstacles]
         if self.feeder is not None:
             doc['feeder'] = self.feeder.to_dict()
+        if self.design:
+            doc['design'] = [p.to_dict() for p in self.design]
         return doc
 
     def dumps(self) -> str:
@@ -518,7 +544,7 @@ def _parse_target(doc: Any, i: int) -> TargetRegion:
 def _parse_scene(doc: Any) -> Scene:
     _expect(isinstance(doc, dict), '', 'a scene must be a JSON object')
     _check_keys(doc, '', {'format', 'unit', 'block_types', 'blocks', 'targets'},
-                {'clearance', 'measured_offsets', 'obstacles', 'feeder', 'studs'})
+                {'clearance', 'measured_offsets', 'obstacles', 'feeder', 'studs', 'design'})
     _expect(doc['format'] == FORMAT, 'format', f'expected {FORMAT!r}, got {_show(doc["format"])}')
     unit = _number(doc['unit'], 'unit')
     _expect(UNIT_RANGE[0] <= unit <= UNIT_RANGE[1], 'unit', f'{unit} m is outside {UNIT_RANGE[0]}..{UNIT_RANGE[1]} m')
@@ -556,9 +582,43 @@ def _parse_scene(doc: Any) -> Scene:
     if feeder is not None:
         _expect(not any(b in offsets for b in feeder.blocks), 'measured_offsets',
                 'a block in the feeder has no measured offset (it is not on the table)')
-    scene = Scene(unit, types, blocks, targets, clearance, offsets, obstacles, feeder, studs)
+    design = _parse_design(doc.get('design', []), types, targets)
+    scene = Scene(unit, types, blocks, targets, clearance, offsets, obstacles, feeder, studs, design)
     _check_geometry(scene)
     return scene
+
+
+def _parse_design(doc: Any, types: Mapping[str, BlockType], targets) -> tuple[DesignPose, ...]:
+    """``design``: poses {type, target, yaw, cells}, each its type's cells turned by yaw, inside its
+    region, no cell in two poses."""
+    _expect(isinstance(doc, list), 'design', 'expected a list of poses {type, target, yaw, cells}')
+    _expect(len(doc) <= MAX_BLOCKS, 'design', f'{len(doc)} poses exceed the limit of {MAX_BLOCKS}')
+    regions = {t.name: t for t in targets}
+    poses, taken = [], {}
+    for i, pose in enumerate(doc):
+        where = f'design[{i}]'
+        _expect(isinstance(pose, dict), where, 'expected an object {type, target, yaw, cells}')
+        _check_keys(pose, where, {'type', 'target', 'yaw', 'cells'})
+        kind = _name(pose['type'], f'{where}.type')
+        _expect(kind in types, f'{where}.type', f'unknown block type {kind!r} (not in block_types)')
+        region = regions.get(_name(pose['target'], f'{where}.target'))
+        _expect(region is not None, f'{where}.target', f'unknown target region {pose["target"]!r}')
+        yaw = _yaw(pose['yaw'], f'{where}.yaw')
+        cells = pose['cells']
+        _expect(isinstance(cells, list) and len(cells) == len(types[kind].offsets), f'{where}.cells',
+                f'expected the {len(types[kind].offsets)} cells [i, j, k] a {kind} fills')
+        cells = tuple(_vec3(c, f'{where}.cells[{k}]', _integer) for k, c in enumerate(cells))
+        shape = types[kind].rotated(yaw)
+        got = np.array(cells)
+        _expect(sorted(map(tuple, got - got.min(axis=0))) == sorted(map(tuple, shape - shape.min(axis=0))),
+                f'{where}.cells', f'are not the cells of a {kind} at yaw {yaw}')
+        for cell in cells:
+            _expect(region.contains_index(cell), f'{where}.cells',
+                    f'cell {list(cell)} is outside region {region.name!r} (size {list(region.size)})')
+            other = taken.setdefault((region.name, cell), i)
+            _expect(other == i, f'{where}.cells', f'cell {list(cell)} of {region.name!r} is also in design[{other}]')
+        poses.append(DesignPose(kind, region.name, yaw, cells))
+    return tuple(poses)
 
 
 def _parse_obstacles(doc: Any, ids: Mapping[str, int], types) -> tuple[Obstacle, ...]:

@@ -13,9 +13,13 @@ action) and stops near the deadline (`RESERVE`) or once a plan fills every targe
 The agent's text (`AgentSpec`) selects the stages (`stages_for`); they run in this order:
 
     stage        selected by                 what it plans
+    design       repair                      the scene's design (`Scene.design`, written by the command
+                                             that made the scene) as the allocation, in the hand's own
+                                             order of it (`hand_order`), then rounds
     courses      repair, support arm|hand    a large structure's line, built course by course
-                                             (`courses.course_line`); where it wins, the stages
-                                             below that re-plan the first allocation are skipped
+                                             (`courses.course_line`); where it wins on more than
+                                             `REPLAN_BLOCKS` blocks, the stages below that re-plan
+                                             the first allocation are skipped
     repair       repair                      rounds of order repair after the first plan: what its
                                              refusals taught as precedences (`AssemblyPlan.conflicts`)
     hand-order   repair                      the hand's own order of the first allocation
@@ -27,10 +31,10 @@ The agent's text (`AgentSpec`) selects the stages (`stages_for`); they run in th
     cover        repair, support arm|hand    the cover and its order at once (`ordered_cover`), then
                                              rounds; another cover where those fall short
 
-A time rule of a stage's own (the hand-order and arm stages: as long again as everything before
-took; the search: `improve_time_s`, at least as long as the first plan took; the cover: that and at
-least one CP-SAT time) only caps it within the deadline, and every solver a stage calls gets at
-most the time left before the deadline.
+A time rule of a stage's own (the design stage's order: `HAND_ORDER_S`; the hand-order and arm
+stages: as long again as everything before took; the search: `improve_time_s`, at least as long as
+the first plan took; the cover: that and at least one CP-SAT time) only caps it within the deadline,
+and every solver a stage calls gets at most the time left before the deadline.
 """
 
 from __future__ import annotations
@@ -40,9 +44,10 @@ import time
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
-from rad_core.allocation.order import Precedence, hand_order, ordered_cover
+from rad_core.allocation.order import Precedence, hand_order, ordered_cover, scene_state
 from rad_core.allocation.placements import Placement
 from rad_core.allocation.result import AllocationResult
+from rad_core.domain.grid import blocks_on_grid
 from rad_core.domain.scene import Scene
 from rad_core.env.mdp import AssemblyEnv
 from rad_core.sequencing.bounds.robot_ceiling import robot_ceiling
@@ -68,6 +73,12 @@ left: a solver's set-up before its own time limit counts (CP-SAT's models, about
 and what a stage started late overruns by must fit in the answer's margin."""
 
 RESERVE_MAX_S = 1.0
+
+REPLAN_BLOCKS = 40
+"""Where the course line beats the first plan of a scene of more blocks, the first allocation is not
+planned again (`courses_stage`). On fewer (a dense design of 11 blocks at 3 cm, whose many block types
+make it "large" by candidate poses), the line takes a second and order repair of the first allocation
+finishes what the line leaves (bricks10-s1 of `benchmarks/bench_dense.py`: 0.977 -> 1.0)."""
 
 HAND_ORDER_S = 1.0
 """The hand-order stage's most CP-SAT seconds for the hand's order of the first allocation (`hand_order`)."""
@@ -190,7 +201,7 @@ def stages_for(spec: AgentSpec, support: str, anytime_search: bool, improve_time
     no improving but the ceiling's."""
     repair = spec.repair and spec.verify and improve_time_s > 0
     arm_aware = support in ('arm', 'hand')
-    selected = {'courses': repair and arm_aware, 'repair': repair, 'hand-order': repair,
+    selected = {'design': repair, 'courses': repair and arm_aware, 'repair': repair, 'hand-order': repair,
                 'arm': repair and support == 'hand', 'ceiling': bool(spec.ceiling and spec.verify),
                 'search': anytime_search and improve_time_s > 0, 'cover': repair and arm_aware}
     return [(name, stage) for name, stage in STAGES.items() if selected[name]]
@@ -198,11 +209,28 @@ def stages_for(spec: AgentSpec, support: str, anytime_search: bool, improve_time
 
 # ---- the stages -------------------------------------------------------------------------------
 
+def design_stage(planning: Planning, best: AssemblyPlan, deadline: float) -> AssemblyPlan | None:
+    """The scene's design as the allocation (`design_allocation`), keeping to the hand's own order of
+    it (`hand_order`, at most `HAND_ORDER_S`), and rounds after it, where that order places more than
+    the best plan. A design is a cover some order model, or the design's author, knew how to build:
+    supply's ordered cover of a flush design (blocks only a suction cup lays whole, all from above)
+    is one the planner's own ordered cover, bound to the scene's exact blocks, does not find again."""
+    allocation = design_allocation(planning.scene)
+    if allocation is None or deadline <= time.perf_counter():
+        return None
+    seconds = max(1e-3, min(HAND_ORDER_S, deadline - time.perf_counter()))
+    guess = planning.solvers.hand_order(planning.scene, allocation.placements, seconds)
+    if guess.coverage <= best.predicted_coverage + EPS:
+        return None
+    return _answer(best, *chain(planning, allocation, guess.precedences, best, deadline))
+
+
 def courses_stage(planning: Planning, best: AssemblyPlan, deadline: float) -> AssemblyPlan | None:
     """A large structure's line (more candidate poses than one ordered cover takes), built course by
     course in the planning twin, planned as the allocation with its order (ranked by `LinePolicy`)
     where it fills more than the best plan. Where that plan wins, the first allocation is beaten: at
-    this size each re-plan of it takes as long as the line did."""
+    this size each re-plan of it takes as long as the line did; on a scene of at most `REPLAN_BLOCKS`
+    blocks it is planned again all the same."""
     line = planning.solvers.course_line(planning.scene, deadline - time.perf_counter())
     planning.large = line is not None
     if not (planning.large and line.actions and line.coverage > best.predicted_coverage + EPS
@@ -211,7 +239,7 @@ def courses_stage(planning: Planning, best: AssemblyPlan, deadline: float) -> As
     allocation, order, poses = line_allocation(planning.scene, line.actions, 'courses', 'the course line',
                                                line.seconds)
     made = planning.plan(LinePolicy(poses), deadline, allocation, order, drops=line.drops)
-    planning.line_won = kept(made, best)
+    planning.line_won = kept(made, best) and len(planning.scene.blocks) > REPLAN_BLOCKS
     return made
 
 
@@ -307,8 +335,9 @@ def cover_stage(planning: Planning, best: AssemblyPlan, deadline: float) -> Asse
     return _answer(best, running, latest)
 
 
-STAGES: dict[str, Stage] = {'courses': courses_stage, 'repair': repair_stage, 'hand-order': hand_order_stage,
-                            'arm': arm_stage, 'ceiling': ceiling_stage, 'search': search_stage, 'cover': cover_stage}
+STAGES: dict[str, Stage] = {'design': design_stage, 'courses': courses_stage, 'repair': repair_stage,
+                            'hand-order': hand_order_stage, 'arm': arm_stage, 'ceiling': ceiling_stage,
+                            'search': search_stage, 'cover': cover_stage}
 """Every stage by name, in the order they run."""
 
 
@@ -351,6 +380,32 @@ def cover_allocation(cover, seconds: float) -> AllocationResult:
     """An `AllocationResult` of an `ordered_cover`'s poses (FEASIBLE, its c^T g), solved in `seconds`."""
     return AllocationResult('FEASIBLE', float(cover.value), float(cover.value), seconds, tuple(cover.placements),
                             solver='ordered cover')
+
+
+def design_allocation(scene: Scene) -> AllocationResult | None:
+    """The scene's design (`Scene.design`) as an `AllocationResult` (FEASIBLE, its c^T g; solver
+    'design'): its poses in its order, but those on a cell filled already and those beyond the blocks
+    of their type not in a target yet; None where no pose is left."""
+    if not scene.design:
+        return None
+    grid, occupied = scene_state(scene)
+    on_grid = blocks_on_grid(scene, grid)
+    left = {name: 0 for name in scene.block_types}
+    for n, block in enumerate(scene.blocks):
+        left[block.type] += n not in on_grid
+    regions = [t.name for t in scene.targets]
+    placements, value = [], 0
+    for pose in scene.design:
+        ids = [grid.index(regions.index(pose.target), c) for c in pose.cells]
+        if left[pose.type] == 0 or None in ids or occupied[ids].any():
+            continue
+        left[pose.type] -= 1
+        occupied[ids] = True
+        placements.append(Placement(pose.type, pose.target, pose.yaw, pose.cells))
+        value += int(grid.weights[ids].sum())
+    if not placements:
+        return None
+    return AllocationResult('FEASIBLE', float(value), float(value), 0.0, tuple(placements), solver='design')
 
 
 def ceiling_line(planning: Planning, incumbent: float, seconds: float):
