@@ -328,3 +328,25 @@ def test_the_default_agent_builds_the_solid_box_whole_with_the_hand():
     plan = AgentPlanner('default', time_limit_s=120)(solid_box_scene(), None, 0)
     assert plan.predicted_coverage == 1.0 and plan.success
     assert plan.anytime[-1]['plan'] == 'cover'           # the drops' cover, the stages' last try
+
+
+@pytest.mark.slow
+def test_on_a_few_blocks_a_winning_course_line_leaves_order_repair_to_finish():
+    # bricks10-s1 of benchmarks/bench_dense.py: 11 blocks at 3 cm, of so many types that the scene has
+    # more candidate poses than `COURSES_ABOVE`. The course line beats the first plan at 43 of 44 cells;
+    # order repair of the first allocation after it fills the target (skipped after a winning line
+    # before, which left it at 43).
+    from rad_core.allocation.supply import SupplyParams, supply
+    from rad_core.domain.blocks import BRICK_TYPES, DEFAULT_LIBRARY
+    from rad_core.domain.dense_shapes import designs
+    from rad_core.domain.voxels import Model, place_regions
+    from rad_core.sequencing.agent.agent_plan import AgentPlanner
+    from rad_core.sequencing.agent.stages import REPLAN_BLOCKS
+    types = {**BRICK_TYPES, 'I2': DEFAULT_LIBRARY['I2'], 'cube': DEFAULT_LIBRARY['cube']}
+    targets = place_regions([Model('bricks10-s1', '', designs()['bricks']['bricks10-s1'])], 0.03)
+    scene, report = supply(targets, 0.03, types, params=SupplyParams(time_limit_s=60.0))
+    assert report.hand_covered == report.covered == 44 and len(scene.blocks) <= REPLAN_BLOCKS
+    plan = AgentPlanner('default', time_limit_s=120)(scene, None, 0)
+    made_by = [a['plan'] for a in plan.anytime]
+    assert 'courses' in made_by and made_by[-1] != 'courses'
+    assert plan.predicted_coverage == 1.0 and plan.success
