@@ -74,11 +74,12 @@ and what a stage started late overruns by must fit in the answer's margin."""
 
 RESERVE_MAX_S = 1.0
 
-REPLAN_BLOCKS = 40
+REPLAN_BLOCKS = 20
 """Where the course line beats the first plan of a scene of more blocks, the first allocation is not
 planned again (`courses_stage`). On fewer (a dense design of 11 blocks at 3 cm, whose many block types
 make it "large" by candidate poses), the line takes a second and order repair of the first allocation
-finishes what the line leaves (bricks10-s1 of `benchmarks/bench_dense.py`: 0.977 -> 1.0)."""
+finishes what the line leaves (bricks10-s1 of `benchmarks/bench_dense.py`: 0.977 -> 1.0). At 32 blocks
+(g = 10 seed 7000 of `benchmarks/bench_large.py`) the re-plans took 38 s more and gained nothing."""
 
 HAND_ORDER_S = 1.0
 """The hand-order stage's most CP-SAT seconds for the hand's order of the first allocation (`hand_order`)."""
