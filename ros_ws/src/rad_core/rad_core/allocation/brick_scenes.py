@@ -26,7 +26,7 @@ from rad_core.domain.blocks import BlockType
 from rad_core.domain.brick_designs import PLATES_PER_BRICK, Brick, BrickDesign
 from rad_core.domain.errors import RadError
 from rad_core.domain.grid import Grid
-from rad_core.domain.scene import Block, DesignPose, Feeder, Scene, TargetRegion
+from rad_core.domain.scene import Block, Feeder, Placement, Scene, TargetRegion
 from rad_core.domain.statics import Statics, first_failure, order_statics
 from rad_core.domain.studs import GRAVITY, SYSTEMS, Studs
 from rad_core.domain.voxels import fit_target
@@ -139,7 +139,7 @@ def built_blocks(design: BrickDesign, lattice: BrickLattice, region: TargetRegio
 
 
 def design_poses(placed: list[Block], types: Mapping[str, BlockType], region: TargetRegion,
-                 lattice: BrickLattice) -> tuple[DesignPose, ...]:
+                 lattice: BrickLattice) -> tuple[Placement, ...]:
     """The bricks at their places in the target (`built_blocks`) as the scene's design (`Scene.design`),
     in the design's order."""
     pitch = np.array([lattice.unit, lattice.unit, lattice.course])
@@ -147,7 +147,7 @@ def design_poses(placed: list[Block], types: Mapping[str, BlockType], region: Ta
     for block in placed:
         anchor = np.rint((np.asarray(block.position) - np.asarray(region.origin)) / pitch).astype(int)
         cells = tuple(tuple(int(v) for v in anchor + o) for o in types[block.type].rotated(block.yaw))
-        poses.append(DesignPose(block.type, region.name, block.yaw, cells))
+        poses.append(Placement(block.type, region.name, block.yaw, cells))
     return tuple(poses)
 
 

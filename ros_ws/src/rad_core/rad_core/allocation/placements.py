@@ -8,21 +8,7 @@ import numpy as np
 
 from rad_core.domain.blocks import BlockType
 from rad_core.domain.grid import Grid, blocks_on_grid
-from rad_core.domain.scene import Scene
-
-
-@dataclass(frozen=True)
-class Placement:
-    """A block type at a pose in one region: cells = anchor + R(yaw) offsets."""
-
-    type: str
-    target: str
-    yaw: int
-    cells: tuple[tuple[int, int, int], ...]
-
-    def to_dict(self) -> dict:
-        return {'type': self.type, 'target': self.target, 'yaw': self.yaw,
-                'cells': [list(c) for c in self.cells]}
+from rad_core.domain.scene import Placement, Scene
 
 
 @dataclass(frozen=True)

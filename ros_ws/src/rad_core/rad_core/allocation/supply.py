@@ -61,12 +61,12 @@ from rad_core.allocation.cpsat import build_model, hand_unplaced, solve_rounds
 from rad_core.allocation.order import candidate_poses, hand_order, solve_order
 from rad_core.cell.panda import check_effector
 from rad_core.gamp.planner import GampConfig
-from rad_core.allocation.placements import enumerate_candidates
+from rad_core.allocation.placements import Placement, enumerate_candidates
 from rad_core.domain import shapes
 from rad_core.domain.blocks import BlockType
 from rad_core.domain.errors import RadError
 from rad_core.domain.grid import Grid
-from rad_core.domain.scene import MAX_BLOCKS, Block, DesignPose, Feeder, Scene, TargetRegion, feeder_of
+from rad_core.domain.scene import MAX_BLOCKS, Block, Feeder, Scene, TargetRegion, feeder_of
 from rad_core.domain.statics import order_statics
 from rad_core.domain.voxels import MAX_UNIT
 
@@ -541,12 +541,12 @@ def supply(targets: Sequence[TargetRegion], unit: float, types: Mapping[str, Blo
     return Scene.from_dict(scene.to_dict()), report
 
 
-def design_of(placements, ordered: bool) -> tuple[DesignPose, ...]:
+def design_of(placements, ordered: bool) -> tuple[Placement, ...]:
     """The cover as the scene's design (`Scene.design`): in the order model's order where it chose the
     cover (`ordered`), else course by course from the bottom."""
     if not ordered:
         placements = sorted(placements, key=lambda p: min(c[2] for c in p.cells))
-    return tuple(DesignPose(p.type, p.target, p.yaw, p.cells) for p in placements)
+    return tuple(placements)
 
 
 def target_only(targets: Sequence[TargetRegion], unit: float, types: Mapping[str, BlockType],

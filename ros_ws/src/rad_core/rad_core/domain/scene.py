@@ -112,8 +112,10 @@ class Block:
 
 
 @dataclass(frozen=True)
-class DesignPose:
-    """One block of a scene's design (module docstring): a block type at a pose in one region."""
+class Placement:
+    """A block type at a pose in one region: cells = anchor + R(yaw) offsets (the region's cells
+    [i, j, k]). What an allocation answers (`allocation.placements`), and a scene's design is made of
+    (module docstring)."""
 
     type: str
     target: str
@@ -232,7 +234,7 @@ class Scene:
     """Blocks that arrive at a pick station instead of lying on the table (module docstring)."""
     studs: Studs | None = None
     """The blocks' stud system, None for blocks that only rest (module docstring)."""
-    design: tuple[DesignPose, ...] = ()
+    design: tuple[Placement, ...] = ()
     """How the design these blocks were chosen for fills the targets, in its order (module docstring)."""
     _by_id: dict = field(default=None, repr=False, compare=False)
 
@@ -588,7 +590,7 @@ def _parse_scene(doc: Any) -> Scene:
     return scene
 
 
-def _parse_design(doc: Any, types: Mapping[str, BlockType], targets) -> tuple[DesignPose, ...]:
+def _parse_design(doc: Any, types: Mapping[str, BlockType], targets) -> tuple[Placement, ...]:
     """``design``: poses {type, target, yaw, cells}, each its type's cells turned by yaw, inside its
     region, no cell in two poses."""
     _expect(isinstance(doc, list), 'design', 'expected a list of poses {type, target, yaw, cells}')
@@ -617,7 +619,7 @@ def _parse_design(doc: Any, types: Mapping[str, BlockType], targets) -> tuple[De
                     f'cell {list(cell)} is outside region {region.name!r} (size {list(region.size)})')
             other = taken.setdefault((region.name, cell), i)
             _expect(other == i, f'{where}.cells', f'cell {list(cell)} of {region.name!r} is also in design[{other}]')
-        poses.append(DesignPose(kind, region.name, yaw, cells))
+        poses.append(Placement(kind, region.name, yaw, cells))
     return tuple(poses)
 
 

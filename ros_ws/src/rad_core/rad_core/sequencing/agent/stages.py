@@ -402,7 +402,7 @@ def design_allocation(scene: Scene) -> AllocationResult | None:
             continue
         left[pose.type] -= 1
         occupied[ids] = True
-        placements.append(Placement(pose.type, pose.target, pose.yaw, pose.cells))
+        placements.append(pose)
         value += int(grid.weights[ids].sum())
     if not placements:
         return None
