@@ -75,7 +75,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from rad_core.domain import jsonfmt
-from rad_core.domain.blocks import BlockType
+from rad_core.domain.blocks import BlockType, canonical_shape
 from rad_core.domain.errors import SceneError
 from rad_core.domain.studs import SYSTEMS, Studs, stud_height
 
@@ -610,10 +610,8 @@ def _parse_design(doc: Any, types: Mapping[str, BlockType], targets) -> tuple[Pl
         _expect(isinstance(cells, list) and len(cells) == len(types[kind].offsets), f'{where}.cells',
                 f'expected the {len(types[kind].offsets)} cells [i, j, k] a {kind} fills')
         cells = tuple(_vec3(c, f'{where}.cells[{k}]', _integer) for k, c in enumerate(cells))
-        shape = types[kind].rotated(yaw)
-        got = np.array(cells)
-        _expect(sorted(map(tuple, got - got.min(axis=0))) == sorted(map(tuple, shape - shape.min(axis=0))),
-                f'{where}.cells', f'are not the cells of a {kind} at yaw {yaw}')
+        _expect(canonical_shape(cells) == canonical_shape(types[kind].rotated(yaw)), f'{where}.cells',
+                f'are not the cells of a {kind} at yaw {yaw}')
         for cell in cells:
             _expect(region.contains_index(cell), f'{where}.cells',
                     f'cell {list(cell)} is outside region {region.name!r} (size {list(region.size)})')
