@@ -208,3 +208,7 @@ def test_the_design_stage_plans_the_design_in_the_hands_order(default_planner):
     assert plan.allocation.solver == 'design' and plan.predicted_coverage == 1.0 and len(plan.steps) == 3
     assert design_stage(replace(planning, scene=scene()), made(0.0), time.perf_counter() + 30) is None
     assert design_stage(planning, made(1.0), time.perf_counter() + 30) is None     # nothing to gain
+    # Where the hand's fingers crowd the unit (2 cm), the design stage leaves the structure to the course line.
+    assert not p.solvers.crowded(s) and p.solvers.crowded(replace(s, unit=0.02))
+    crowded = replace(planning, solvers=replace(p.solvers, crowded=lambda scene: True))
+    assert design_stage(crowded, made(0.0), time.perf_counter() + 30) is None

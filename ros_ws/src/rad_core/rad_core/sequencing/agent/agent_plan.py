@@ -28,7 +28,7 @@ from rad_core.sequencing.agent.stages import (COVER_TRIES, ORDERED_COVER_S, REPA
 from rad_core.sequencing.bounds.robot_ceiling import robot_ceiling
 from rad_core.sequencing.decide.agents import AgentSpec, label, parse
 from rad_core.sequencing.decide.sequencer import Sequencer, SequencerConfig
-from rad_core.sequencing.planning.courses import course_line
+from rad_core.sequencing.planning.courses import course_line, is_crowded
 from rad_core.sequencing.planning.plan import AssemblyPlan, local_motion_planner
 from rad_core.sequencing.planning.reallocation import ReallocationConfig, reallocation_support
 
@@ -162,14 +162,15 @@ def effector_solvers(effector: str) -> Solvers:
     the only try it lost g = 5 seeds 0 and 17 (1.0 -> 0.93), which the first fills. The course line
     sets blocks down (counting on drops at a 5 cm unit, the 72-block wall_openings built 0.51 where
     setting down built 0.97), except where the fingers crowd a unit's neighbours
-    (`courses.is_crowded`: 2 cm units), where it counts on drops and its plan takes them."""
+    (`courses.is_crowded`: 2 cm units), where it counts on drops and its plan takes them; there the
+    design stage steps aside (`Solvers.crowded`)."""
     if effector == 'hand':
         set_down, drops = GampConfig(drop=False), GampConfig()
         return Solvers(partial(course_line, gamp=set_down, crowded=drops if drops.drop else None),
                        partial(hand_order, gamp=set_down),
                        partial(ordered_cover, gamp=set_down), robot_ceiling,
                        (partial(ordered_cover, gamp=drops), partial(ordered_cover, gamp=drops, way_down=True))
-                       if drops.drop else ())
+                       if drops.drop else (), is_crowded)
     gamp = GampConfig(effector=effector)
     return Solvers(partial(course_line, gamp=gamp), partial(hand_order, gamp=gamp), partial(ordered_cover, gamp=gamp),
                    robot_ceiling)
