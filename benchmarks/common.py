@@ -274,6 +274,42 @@ def designs() -> dict[str, np.ndarray]:
     return out
 
 
+THIN_LETTERS = {
+    # Rows top first; '#' is a stroke two cells wide and three courses high, two cells deep.
+    'H': ['#.#', '#.#', '###', '#.#', '#.#'],
+    'T': ['###', '.#.', '.#.', '.#.', '.#.'],
+    'E': ['###', '#..', '##.', '#..', '###'],
+    'A': ['.#.', '#.#', '###', '#.#', '#.#'],
+}
+
+
+def thin_designs() -> dict[str, np.ndarray]:
+    """name -> occupancy [x, y, z], z up: thin, tall designs two cells deep (letters, stairs, towers, a
+    wall with a door), as people draw them for a 2 cm unit. Some overhang (T's bar, A's apex, E's arms,
+    the door's lintel), so part of them cannot stand on blocks that only rest."""
+    out = {}
+    for ch, rows in THIN_LETTERS.items():
+        g = np.zeros((6, 2, 15), dtype=bool)
+        for r, row in enumerate(rows):
+            z0 = 3 * (len(rows) - 1 - r)
+            for c, v in enumerate(row):
+                if v == '#':
+                    _box(g, (2 * c, 0, z0), (2 * c + 2, 2, z0 + 3))
+        out[f'letter {ch}'] = g
+    g = np.zeros((14, 2, 14), dtype=bool)                       # stairs: one cell a step
+    for x in range(14):
+        _box(g, (x, 0, 0), (x + 1, 2, x + 1))
+    out['stairs'] = g
+    out['tower'] = np.ones((2, 2, 16), dtype=bool)
+    g = np.ones((3, 2, 16), dtype=bool)                         # a tower that steps in halfway up
+    g[2, :, 8:] = False
+    out['stepped tower'] = g
+    g = np.ones((12, 2, 10), dtype=bool)                        # a wall with a door
+    g[4:8, :, :6] = False
+    out['door wall'] = g
+    return out
+
+
 def design_scene(name: str, grid: np.ndarray, unit: float, time_limit: float):
     """One design through `rad scene from-voxels`'s code (`voxel_models`, `placement`, `place_regions`,
     `supply` with the default block set, the hand's order asked, --supply auto): (scene, supply report,
