@@ -10,6 +10,7 @@ import pytest
 from rad_core.domain.errors import RadError
 from rad_core.env.mdp import Action, AssemblyEnv, EnvConfig, Outcome
 from rad_core.sim.physics import (
+    BLOCK_PLAY,
     PhysicsConfig,
     PhysicsStability,
     add_block_body,
@@ -247,3 +248,12 @@ def test_a_block_of_more_units_than_a_pybullet_compound_holds_collides_on_every_
         assert not p.getClosestPoints(body, probe, 0.0, physicsClientId=client)
     finally:
         p.disconnect(client)
+
+
+def test_the_check_gives_its_blocks_the_twins_play():
+    # The stability check and the twin model the same blocks: what the check holds up by friction
+    # against a neighbour across a hairline, the twin's blocks, with play, let fall.
+    from rad_core.sim.twin import twin_world_config
+    with PhysicsStability() as c:
+        assert c.config.side_gap == BLOCK_PLAY == twin_world_config().physics.side_gap > PhysicsConfig().side_gap
+    assert PhysicsStability(PhysicsConfig()).config.side_gap == PhysicsConfig().side_gap

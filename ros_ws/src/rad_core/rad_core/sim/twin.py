@@ -92,6 +92,7 @@ from rad_core.domain.errors import RadError
 from rad_core.domain.scene import Scene
 from rad_core.domain.transforms import matrix_from_quaternion, yaw_quaternion
 from rad_core.sim.faults import KINDS, FaultConfig
+from rad_core.sim.physics import BLOCK_PLAY
 from rad_core.sim.world import World, WorldConfig
 
 SEAL_GAP = 0.007
@@ -102,15 +103,12 @@ SEAL_TILT_DEG = 3.0
 VACUUM_BUILD_UP_S = 0.05
 """Simulated seconds a vacuum takes to reach its level on a sealed face."""
 
-BLOCK_PLAY = 0.01
-"""Play of a block between its neighbours in the twin (fraction of a unit per side face: 0.5 mm at
-5 cm). The planning worlds (GAMP, the stability check, the MDP's robot env) keep the hairline
-`PhysicsConfig.side_gap` (0.1 mm); the twin that stands in for the cell gives its blocks the play
-real blocks have. With 0.1 mm a block lowered into a pocket between neighbours jams on an edge
-at the twin's own tracking error (its joints lag the command by one 4 ms physics step, up to
-7.6 mrad), so with the whole arm motion simulated, packed targets lost blocks a real cell
-(chamfered, slightly compliant blocks, a 0.1 mm repeatable arm) would place: measured on the
-held-out cube3, 0.26 coverage with 0.1 mm and 0.81 (as teleporting) with 0.5 mm."""
+# BLOCK_PLAY (`sim.physics`): the play real blocks have between their neighbours. With the planning
+# worlds' 0.1 mm hairline a block lowered into a pocket between neighbours jammed on an edge at the
+# twin's own tracking error (its joints lag the command by one 4 ms physics step, up to 7.6 mrad), so
+# with the whole arm motion simulated, packed targets lost blocks a real cell (chamfered, slightly
+# compliant blocks, a 0.1 mm repeatable arm) would place: measured on the held-out cube3, 0.26
+# coverage with 0.1 mm and 0.81 (as teleporting) with 0.5 mm.
 
 
 AVERAGE_FRAMES = 10
