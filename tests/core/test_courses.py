@@ -102,3 +102,29 @@ def test_at_a_2_cm_unit_the_line_counts_on_drops_where_the_set_down_hand_fits_no
         assert renv.env.coverage() == 1.0
     # At 4 cm the line sets blocks down whatever it is offered for crowded units.
     assert not course_line(flush_wall(), 60.0, least_poses=0, gamp=set_down, crowded=drops).drops
+
+
+def test_at_a_2_cm_unit_every_plan_counts_on_drops_and_the_line_runs_at_any_size():
+    # The 16-block wall has fewer poses than the line's threshold, but at 2 cm the line counting on
+    # drops is how the hand fills a course; and a plan that sets blocks down stops early.
+    from dataclasses import replace
+    from rad_core.gamp.planner import GampConfig
+    from rad_core.sequencing.agent.agent_plan import AgentPlanner, effector_solvers, plan_for_agent
+    from rad_core.sequencing.agent.stages import never_crowded
+    scene = flush_wall(0.02)
+    set_down, drops = GampConfig(drop=False), GampConfig(drop=True)
+    assert course_line(scene, 60.0, gamp=set_down) is None
+    assert course_line(scene, 60.0, gamp=set_down, crowded=drops).coverage == 1.0
+    planner = AgentPlanner('default', time_limit_s=60.0)
+    firsts = []
+    try:
+        for solvers in (effector_solvers('hand'), replace(effector_solvers('hand'), crowded=never_crowded)):
+            first = plan_for_agent(planner.spec, scene, planner.allocate, planner.motion, planner.sequencer.rank,
+                                   planner.reallocate, support=planner.support, time_limit_s=60.0,
+                                   reallocation=planner.reallocation, quick_rank=planner.quick_rank,
+                                   improve_until_s=1e-3, solvers=solvers)
+            assert [a['plan'] for a in first.anytime] == ['scorer']
+            firsts.append(first.predicted_coverage)
+    finally:
+        planner.close()
+    assert firsts[0] >= 0.9 > firsts[1], firsts

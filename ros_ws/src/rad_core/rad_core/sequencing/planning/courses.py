@@ -78,7 +78,10 @@ def course_line(scene: Scene, time_limit_s: float, least_poses: int | None = Non
                 crowded=None) -> CourseLine | None:
     """The line built course by course in the planning twin (module docstring) within
     `time_limit_s` (the line so far where it ends first); None where the scene has at most
-    `least_poses` candidate poses (default `COURSES_ABOVE`: one ordered cover takes those), and
+    `least_poses` candidate poses (default `COURSES_ABOVE`: one ordered cover takes those; 0 where the
+    fingers crowd and `crowded` is given: there the line, counting on drops, is how the hand fills a
+    course of any size, where plans that set blocks down stop at one block of each pair: a 2 x 2
+    tower of 16 O4_up at 2 cm planned 8), and
     where a queue feeder dictates the blocks' order (the line chooses its blocks). gamp: GAMP's
     settings (`GampConfig`; default the defaults), its effector's among them. crowded: GAMP's settings
     instead where the fingers crowd a unit's neighbours (`crowded`: at a 2 cm unit the hand can set a
@@ -98,7 +101,7 @@ def course_line(scene: Scene, time_limit_s: float, least_poses: int | None = Non
     config = RobotEnvConfig(execution='teleport', **({'gamp': gamp} if gamp is not None else {}))
     grid, occupied = scene_state(scene)
     candidates, counts, hand, unpickable = cover_candidates(scene, grid, config.gamp, near=near)
-    least = COURSES_ABOVE if least_poses is None else least_poses
+    least = (0 if near and crowded is not None else COURSES_ABOVE) if least_poses is None else least_poses
     if len(candidate_poses(grid, hand, occupied, candidates, counts)[0]) <= least:
         return None
     with RobotAssemblyEnv(scene, config) as renv:
