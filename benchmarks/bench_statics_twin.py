@@ -27,14 +27,13 @@ are asked again at other margins, and a twin with a `--recheck` times shorter ti
 from __future__ import annotations
 
 import argparse
-import itertools
-import math
 import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from rad_core.domain.brick_tasks import lego_designs
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))     # `common`, also where a test loads this file
 
@@ -78,222 +77,6 @@ GONE = (1.0, 10.0)
 AWAY = (2.6, -0.215, 0.0, -2.57, 0.0, 2.356, 2.356, 0.04, 0.04)
 """The arm's joints while the twin judges: HOME turned 150 degrees about the base, away from the
 structure in front of it."""
-
-
-# ---- designs -----------------------------------------------------------------------------------
-
-LENGTHS = (4, 2, 3, 6, 8, 1, 10)
-"""Brick lengths (studs) a row is tiled with, fours preferred: 1 x N and 2 x N bricks LEGO makes."""
-
-
-class Builder:
-    """A design in the text format, course by course, every brick resting on at least one stud of
-    the course under it (or the table): a design a robot presses together from above. A row of
-    studs is tiled with bricks of `LENGTHS`, the cheapest tiling: a brick costs 0.5, 0.25 a stud it is
-    longer or shorter than four, 1 where its end falls over a joint of the course under it (so
-    courses run in bond), and 0.05 for each of its studs over nothing, more the further they reach
-    out (`hangs`)."""
-
-    def __init__(self):
-        self.owner: dict[tuple[int, int, int], int] = {}
-        self.lines: list[str] = []
-
-    def row(self, z: int, studs, depth: int = 1, at: int = 0, along: str = 'x', lengths=LENGTHS) -> None:
-        """Tile the studs (along `along`) of course z, `depth` studs deep from `at` on the other axis,
-        with bricks of these lengths."""
-        for a, b in _runs(studs):
-            self._run(z, a, b, depth, at, along, lengths)
-
-    @staticmethod
-    def _cell(along: str, i: int, j: int, z: int) -> tuple[int, int, int]:
-        return (i, j, z) if along == 'x' else (j, i, z)
-
-    def _run(self, z: int, a: int, b: int, depth: int, at: int, along: str, lengths) -> None:
-        def cells(start, n, zz=z):
-            return [self._cell(along, start + i, at + j, zz) for i in range(n) for j in range(depth)]
-
-        def held(start, n) -> list[bool]:
-            """Per stud along the brick: whether the course under it holds it there."""
-            return [z == 0 or any(self._cell(along, start + i, at + j, z - 1) in self.owner for j in range(depth))
-                    for i in range(n)]
-
-        def hangs(start, n) -> float:
-            """What the brick's studs over nothing cost: each run of them squared at an end of the
-            brick (a cantilever's moment grows so), a half run squared between two held studs;
-            infinite where none is held."""
-            under = held(start, n)
-            if not any(under):
-                return math.inf
-            cost, i = 0.0, 0
-            for key, run in itertools.groupby(under):
-                k = len(list(run))
-                if not key:
-                    cost += k * k if i == 0 or i + k == n else (k / 2) ** 2
-                i += k
-            return cost
-
-        def over_joint(x):
-            """Whether a joint at x (between studs x - 1 and x) lies over a joint of the course under it."""
-            for j in range(depth):
-                lo = self.owner.get(self._cell(along, x - 1, at + j, z - 1))
-                hi = self.owner.get(self._cell(along, x, at + j, z - 1))
-                if lo is not None and hi is not None and lo != hi:
-                    return True
-            return False
-
-        n = b - a
-        best = [(math.inf, None)] * (n + 1)
-        best[0] = (0.0, None)
-        for i in range(n):
-            if best[i][0] == math.inf:
-                continue
-            for k in lengths:
-                hanging = hangs(a + i, k) if i + k <= n else math.inf
-                if hanging == math.inf:
-                    continue
-                cost = best[i][0] + 0.5 + 1.0 * (i > 0 and over_joint(a + i)) + 0.25 * abs(k - 4) + 0.05 * hanging
-                if cost < best[i + k][0]:
-                    best[i + k] = (cost, (i, k))
-        if best[n][0] == math.inf:
-            raise ValueError(f'course {z}: studs {a}..{b - 1} cannot all rest on the course under them')
-        pieces, i = [], n
-        while i:
-            i, k = best[i][1]
-            pieces.append((i, k))
-        for i, k in sorted(pieces):
-            if along == 'x':
-                self.lines.append(f'{k}x{depth} ({a + i},{at},{z})')
-            else:
-                self.lines.append(f'{depth}x{k} ({at},{a + i},{z})')
-            for cell in cells(a + i, k):
-                self.owner[cell] = len(self.lines) - 1
-
-    def text(self) -> str:
-        return '\n'.join(self.lines) + '\n'
-
-
-def _runs(xs) -> list[tuple[int, int]]:
-    """Sorted integers as (start, end) runs of consecutive values, end exclusive."""
-    out: list[tuple[int, int]] = []
-    for x in sorted(xs):
-        if out and out[-1][1] == x:
-            out[-1] = (out[-1][0], x + 1)
-        else:
-            out.append((x, x + 1))
-    return out
-
-
-def wall(length: int, courses: int, depth: int = 1, reach: int = 0, corbel: int = 0) -> str:
-    """A wall `length` studs long, `depth` deep, in running bond; its top `corbel` courses step out
-    past its right end, one stud a course (more where `reach` asks more), to `reach` studs out."""
-    build = Builder()
-    for z in range(courses):
-        k = z - (courses - corbel)
-        out = 0 if k < 0 else round(reach * (k + 1) / corbel)
-        build.row(z, range(length + out), depth)
-    return build.text()
-
-
-def box_tower(width: int, depth: int, courses: int, reach: int = 0, corbel: int = 0) -> str:
-    """Four walls one stud thick round a width x depth footprint, their corners bonded (the front and
-    back walls run through the corners on even courses, the sides on odd ones); the top `corbel`
-    courses of the front wall (y = 0) step out past the right side, to `reach` studs at the top (an
-    odd course as far as the even one under it)."""
-    build = Builder()
-    for z in range(courses):
-        k = z - z % 2 - (courses - corbel)
-        out = 0 if k < 0 else round(reach * (k + 1) / corbel)
-        if z % 2 == 0:
-            build.row(z, range(width + out), 1, 0)
-            build.row(z, range(width), 1, depth - 1)
-            for x in (0, width - 1):
-                build.row(z, range(1, depth - 1), 1, x, along='y')
-        else:
-            for x in (0, width - 1):
-                build.row(z, range(depth), 1, x, along='y')
-            build.row(z, [*range(1, width - 1), *range(width, width + out)], 1, 0)
-            build.row(z, range(1, width - 1), 1, depth - 1)
-    return build.text()
-
-
-LETTERS = {
-    # Rows top first; each character `stroke` studs wide and `rows` courses high where '#'.
-    'T': ['###',
-          '.#.',
-          '.#.',
-          '.#.',
-          '.#.'],
-    'F': ['###',
-          '#..',
-          '##.',
-          '#..',
-          '#..'],
-    'E': ['###',
-          '#..',
-          '##.',
-          '#..',
-          '###'],
-    'P': ['###',
-          '#.#',
-          '###',
-          '#..',
-          '#..'],
-}
-
-
-def letter(ch: str, stroke: int = 4, rows: int = 4) -> str:
-    """The letter standing up, two studs deep: each character of `LETTERS[ch]` is `stroke` studs wide
-    and `rows` courses high."""
-    pattern = LETTERS[ch]
-    build = Builder()
-    for z in range(len(pattern) * rows):
-        row = pattern[len(pattern) - 1 - z // rows]
-        build.row(z, [c * stroke + i for c, v in enumerate(row) if v == '#' for i in range(stroke)], 2)
-    return build.text()
-
-
-def arch(pillar: int = 4, gap: int = 8, legs: int = 10, lintel: int = 3, reach: int = 6) -> str:
-    """Two pillars `pillar` studs wide, two deep, `legs` courses high, `gap` studs apart; a lintel of
-    `lintel` courses across them stepping out past the right pillar, `reach` studs at its top."""
-    build = Builder()
-    span = 2 * pillar + gap
-    for z in range(legs):
-        build.row(z, [*range(pillar), *range(pillar + gap, span)], 2)
-    for k in range(lintel):
-        build.row(legs + k, range(span + round(reach * k / max(1, lintel - 1))), 2)
-    return build.text()
-
-
-def chair(size: int = 10, legs: int = 8, back: int = 7) -> str:
-    """Four legs of 2 x 2 studs at the corners of a size x size seat (at most 10), `legs` courses high;
-    the seat: two beams along x bridging the legs, bricks along y bridging the beams, a course along
-    x on top; a backrest one stud deep along the back edge, `back` courses high."""
-    build = Builder()
-    for z in range(legs):
-        for x in (0, size - 2):
-            build.row(z, [*range(2), *range(size - 2, size)], 2, x, along='y')
-    for y in (0, size - 2):
-        build.row(legs, range(size), 2, y, lengths=(size,))
-    for x in range(0, size, 2):
-        build.row(legs + 1, range(size), 2, x, along='y', lengths=(size,))
-    for y in range(0, size, 2):
-        build.row(legs + 2, range(size), 2, y)
-    for z in range(back):
-        build.row(legs + 3 + z, range(size), 1, size - 1)
-    return build.text()
-
-
-def diving_board(base: int = 8, courses: int = 10, reach: int = 14, steps: int = 4) -> str:
-    """A wall `base` studs long, two deep, `courses` high, and on it a board of `steps` courses, each
-    reaching further past the wall's right end, `reach` studs at the top: too far. Its last brick
-    tips the whole on the table where the wall is light (6, 14, 18, 6), pulls off its studs where the
-    wall is heavy (10, 8, 14, 2)."""
-    build = Builder()
-    for z in range(courses):
-        build.row(z, range(base), 2)
-    for k in range(steps):
-        build.row(courses + k, range(base + round(reach * (k + 1) / steps)), 2)
-    return build.text()
 
 
 # ---- a design on its lattice ---------------------------------------------------------------------
@@ -477,23 +260,6 @@ def structures(lay: Layout, prefixes: int) -> tuple[list[dict], int]:
 
 
 # ---- the design sets -------------------------------------------------------------------------------
-
-def lego_designs(quick: bool = False) -> dict[str, list[tuple[str, str]]]:
-    """Set -> (name, text) of the generated LEGO-style designs."""
-    sets = {
-        'walls': [('wall-1x', wall(12, 18, 1, reach=12, corbel=6)),
-                  ('wall-2x', wall(16, 20, 2, reach=8, corbel=5)),
-                  ('tower', box_tower(13, 8, 20, reach=8, corbel=6))],
-        'letters': [(f'letter-{ch}', letter(ch)) for ch in 'TEFP'],
-        'arch, chair, cantilevers': [('arch', arch(5, 6, 14, 4, 6)), ('chair', chair()),
-                                     ('cantilever-too-long', diving_board(6, 14, 18, 6)),
-                                     ('board-too-long', diving_board(10, 8, 14, 2))],
-    }
-    if quick:
-        sets = {'walls': sets['walls'][:1], 'letters': sets['letters'][:1],
-                'arch, chair, cantilevers': sets['arch, chair, cantilevers'][2:3]}
-    return sets
-
 
 DUPLO_COUNTS = (8, 12, 16, 20, 24)
 QUICK_COUNTS = (8, 16)
