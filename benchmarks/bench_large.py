@@ -42,7 +42,7 @@ import sys
 import time
 from pathlib import Path
 
-from common import RESULTS, design_scene, designs, thin_designs, write_page
+from common import RESULTS, design_scene, designs, fmt, thin_designs, write_page
 
 
 def design_cases(names: list[str], unit: float, supply_time_limit: float):
@@ -142,10 +142,6 @@ def headers(rows: list[dict]) -> tuple:
     return HEADERS + (DESIGN_HEADERS if any('covered' in r for r in rows) else ())
 
 
-def fmt_opt(value, spec: str = '') -> str:
-    return '' if value is None else format(value, spec)
-
-
 def table(rows: list[dict]) -> list[list]:
     designs = any('covered' in r for r in rows)
     out = []
@@ -154,8 +150,8 @@ def table(rows: list[dict]) -> list[list]:
                 f"{r['planning_s']:.1f}", f"{r['s_per_block']:.2f}", f"{r['predicted']:.3f}", f"{r['built']:.3f}",
                 f"{r['course_bound']:.3f}", len(r['lost'])]
         if designs:
-            line += ([r['covered'], 'yes' if r['stands'] else 'no', fmt_opt(r.get('hand_covered')), r['built_cells'],
-                      f"{r['built_of_covered']:.3f}", fmt_opt(r.get('built_of_placeable'), '.3f')]
+            line += ([r['covered'], 'yes' if r['stands'] else 'no', fmt(r.get('hand_covered'), 'd'), r['built_cells'],
+                      f"{r['built_of_covered']:.3f}", fmt(r.get('built_of_placeable'), '.3f')]
                      if 'covered' in r else [''] * len(DESIGN_HEADERS))
         out.append(line)
     return out

@@ -47,8 +47,8 @@ def shape_scenes(split: str):
     return [(name, shapes.shape_scene(name)) for name in shapes.SPLITS[split]]
 
 
-def fmt(v) -> str:
-    return '' if v is None else f'{v:.2f}'
+def fmt(v, spec: str = '.2f') -> str:
+    return '' if v is None else format(v, spec)
 
 
 def command_line() -> str:

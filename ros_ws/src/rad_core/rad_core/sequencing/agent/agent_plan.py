@@ -86,10 +86,10 @@ def plan_for_agent(spec: AgentSpec, scene: Scene, allocate, plan_motion, rank, r
     planning = Planning(spec, scene, support, allocate, plan_motion, rank, first_rank, reallocate, reallocation,
                         seed, start, t0=t0, deadline=t0 + time_limit_s, improve_time_s=improve_time_s,
                         solvers=solvers or effector_solvers('hand'))
-    # Plans set every block down, but those of allocations made counting on drops (`Planning.plan`):
-    # taken as GAMP offered them, drops led the sequencer into orders it was never trained on
-    # (measured: generated g = 6 seeds 6, 7, 12 and 19 fell from 1.0 to 0.93-0.95), and where the
-    # effector is crowded.
+    # Plans set every block down, but those of allocations made counting on drops and every plan where
+    # the effector is crowded (`Planning.plan`): taken as GAMP offered them, drops led the sequencer
+    # into orders it was never trained on (measured: generated g = 6 seeds 6, 7, 12 and 19 fell from
+    # 1.0 to 0.93-0.95).
     best = planning.first = planning.plan(first_rank, planning.deadline)
     if improve_until_s is not None:
         planning.deadline = min(planning.deadline, t0 + improve_until_s)

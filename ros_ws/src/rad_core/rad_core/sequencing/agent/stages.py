@@ -104,9 +104,9 @@ class Solvers:
     while the plans before (a hand that sets blocks down) leave cells; none: no such try."""
     crowded: Callable = never_crowded
     """crowded(scene): whether the effector sets no block down beside a built one at the scene's unit
-    (the parallel hand's fingers at 2 cm, `courses.is_crowded`). A plan that keeps to a design's order
-    from above is then refused at step after step, so the design stage steps aside for the course line,
-    which counts on drops there."""
+    (the parallel hand's fingers at 2 cm, `courses.is_crowded`). There every plan takes drops
+    (`Planning.plan`), and the design stage steps aside for the course line: a plan that keeps to a
+    design's order from above is refused at step after step."""
 
 
 @dataclass
