@@ -81,11 +81,12 @@ def test_the_agent_text_selects_the_stages_and_their_order_is_fixed():
 
 def test_plan_assembly_stops_at_its_deadline_with_the_plan_so_far(motion):
     scene = generate_scene(GeneratorConfig(grid=3), 2)
-    asked = []
+    asked, started = [], []
 
     def slow(scene_now, action, start, move_aside=False):
         """A motion planner that takes 0.2 s per answer and refuses the first block's first pose."""
         asked.append(action)
+        started.append(time.perf_counter())
         time.sleep(0.2)
         if len(asked) == 1:
             return MotionPlan(False, 'placement', 'refused on purpose')
@@ -96,14 +97,14 @@ def test_plan_assembly_stops_at_its_deadline_with_the_plan_so_far(motion):
     # With 0.5 s: the refusal and the first step take 0.4 s; a third motion, as long as those took,
     # would end past the deadline, and is not asked for (within the step, before its first motion).
     asked.clear()
+    started.clear()
     t0 = time.perf_counter()
     plan = plan_assembly(scene, lambda s: allocation, slow, HeurPolicy(), seed=1, time_limit_s=0.5)
-    seconds = time.perf_counter() - t0
     assert plan.episode.timed_out and plan.reason == 'time limit of 0.5 s reached after 1 steps'
     assert len(asked) == 2 and len(plan.steps) == 1 and not plan.success and plan.predicted_coverage > 0
-    # The motions took 0.4 s; what else the plan does is small, but a loaded machine stretches it, so the
-    # bound is the deadline plus less than the motion it did not ask for (len(asked) checks that one).
-    assert seconds < 0.5 + 0.15, seconds
+    # Every motion it asked for began before the deadline. How long the real motion planning and the
+    # step around it take depends on the machine's load, so the test counts motions, not seconds.
+    assert all(t - t0 < 0.5 for t in started), [t - t0 for t in started]
 
 
 def test_an_empty_allocation_cut_by_the_time_limit_says_the_limit_ended_it(motion):
