@@ -13,7 +13,9 @@ from rad_core.domain.errors import RadError
 from rad_core.domain.generator import GeneratorConfig, generate_scene
 from rad_core.env.mdp import Action, AssemblyEnv, EnvConfig
 from rad_core.sequencing import HeurPolicy
-from rad_core.sequencing.agent.agent_plan import plan_for_agent, remembered_motion, remembered_rank
+from rad_core.allocation.result import AllocationResult
+from rad_core.sequencing.agent.agent_plan import (plan_for_agent, remembered_motion, remembered_rank,
+                                                remembered_reallocation)
 from rad_core.sequencing.decide.actions import AllocationActions
 from rad_core.sequencing.decide.agents import label, parse
 from rad_core.sequencing.planning.plan import MotionPlan, conflicts_of, plan_assembly, precedences_last
@@ -94,6 +96,28 @@ def test_remembered_motion_asks_once_per_world_and_books_no_time_for_an_answer_f
         return len(ranks)
     remembered = remembered_rank(rank)
     assert remembered(scene, [], None) == remembered(scene, [], None) == 1 and len(ranks) == 1
+
+
+def test_remembered_reallocation_reuses_an_answer_only_where_asking_again_could_not_do_better():
+    scene = generate_scene(GeneratorConfig(grid=3), 2)
+    placements = solve(scene).placements
+    asked = []
+
+    def reallocate(scene_now, exclude, time_limit_s=None):
+        asked.append(time_limit_s)
+        status = 'OPTIMAL' if time_limit_s is None or time_limit_s >= 5 else 'FEASIBLE'
+        return AllocationResult(status, 4.0, 4.0, 0.5, placements[:1])
+    remembered = remembered_reallocation(reallocate)
+    a = remembered(scene, [placements[1]], 1.0)
+    b = remembered(scene, [placements[1]], 0.5)            # less time than before: the same answer
+    assert (a.status, b.status, a.solve_time_s, b.solve_time_s, len(asked)) == ('FEASIBLE', 'FEASIBLE', 0.5, 0.0, 1)
+    assert remembered(scene, [placements[1]], 2.0).status == 'FEASIBLE' and asked == [1.0, 2.0]   # more time: again
+    remembered(scene, [placements[0]], 2.0)                # other no-goods: another question
+    remembered(scene, [], 9.0)
+    assert remembered(scene, [], 20.0).solve_time_s == 0.0 and len(asked) == 4      # proven: never again
+    moved = generate_scene(GeneratorConfig(grid=3), 3)     # another state of the world
+    remembered(moved, [], 9.0)
+    assert len(asked) == 5
 
 
 def test_order_repair_builds_what_the_first_order_walled_off(motion):

@@ -17,7 +17,7 @@ from functools import partial
 
 import numpy as np
 
-from rad_core.allocation.cpsat import AllocationParams, solve
+from rad_core.allocation.cpsat import AllocationParams, pose_key, solve
 from rad_core.allocation.order import hand_order, ordered_cover
 from rad_core.domain.errors import RadError
 from rad_core.domain.scene import Scene
@@ -33,7 +33,7 @@ from rad_core.sequencing.planning.plan import AssemblyPlan, local_motion_planner
 from rad_core.sequencing.planning.reallocation import ReallocationConfig, reallocation_support
 
 __all__ = ['COVER_TRIES', 'IMPROVE_TIME_S', 'ORDERED_COVER_S', 'REPAIR_ROUNDS', 'AgentPlanner', 'plan_for_agent',
-           'remembered_motion', 'remembered_rank']
+           'remembered_motion', 'remembered_rank', 'remembered_reallocation']
 
 IMPROVE_TIME_S = 2.0
 """The search stage's least budget (s) after the first plan (at least as long as the first plan took;
@@ -83,6 +83,8 @@ def plan_for_agent(spec: AgentSpec, scene: Scene, allocate, plan_motion, rank, r
         plan_motion = remembered_motion(plan_motion)
         if not hasattr(first_rank, 'scores'):      # (a Policy ranks in process, at no such cost)
             first_rank = remembered_rank(first_rank)
+    if reallocate is not None:
+        reallocate = remembered_reallocation(reallocate)
     planning = Planning(spec, scene, support, allocate, plan_motion, rank, first_rank, reallocate, reallocation,
                         seed, start, t0=t0, deadline=t0 + time_limit_s, improve_time_s=improve_time_s,
                         solvers=solvers or effector_solvers('hand'))
@@ -151,6 +153,27 @@ def remembered_rank(rank):
             return replace(hit, timings={}) if is_dataclass(hit) else hit
         memo[key] = rank(scene, placements, start)
         return memo[key]
+    return remembered
+
+
+def remembered_reallocation(reallocate):
+    """reallocate (scene, no-goods, time limit) answering a question it was asked before from memory,
+    where that answer is as good as asking again: proven (OPTIMAL, INFEASIBLE), or found with at least
+    the time asked for now (a `None` limit: the caller's own, the most). An episode that stalls twice in
+    one state asks the same question twice (the second answer shows nothing new), and plans that share
+    a prefix of steps reach the same states; at a 2 cm unit a hand-ordered re-solve takes seconds."""
+    memo: dict = {}
+
+    def remembered(scene: Scene, exclude, time_limit_s: float | None = None):
+        key = (scene.dumps(), frozenset(pose_key(p.type, p.target, p.cells) for p in exclude))
+        asked = math.inf if time_limit_s is None else float(time_limit_s)
+        if key in memo:
+            answer, had = memo[key]
+            if answer.status in ('OPTIMAL', 'INFEASIBLE') or had >= asked:
+                return replace(answer, solve_time_s=0.0)
+        answer = reallocate(scene, exclude, time_limit_s)
+        memo[key] = (answer, asked)
+        return answer
     return remembered
 
 
