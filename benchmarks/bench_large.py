@@ -1,6 +1,6 @@
 """Planning time and coverage against structure size: up to 100 blocks from a feeder, large voxel designs.
 
-    python benchmarks/bench_large.py [--agent greedy] [--grids 4,6,8,10] [--seeds 3] [--seed 7000]
+    python benchmarks/bench_large.py [--agent default] [--grids 4,6,8,10] [--seeds 3] [--seed 7000]
                                      [--large all] [--designs none] [--effector hand] [--time-limit 120]
                                      [--improve-time-s S] [--unit 0.02] [--supply-time-limit 10]
                                      [--out docs/results] [--page large]
@@ -189,7 +189,7 @@ def write(rows: list[dict], out: Path, command: str, agent: str, page: str = 'la
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
-    ap.add_argument('--agent', default='greedy')
+    ap.add_argument('--agent', default='default', help="the agent (default: what /plan_assembly runs)")
     ap.add_argument('--grids', default='4,6,8,10')
     ap.add_argument('--seeds', type=int, default=3)
     ap.add_argument('--seed', type=int, default=7000, help='first seed of the generated scenes')
