@@ -53,6 +53,18 @@ def test_a_design_that_falls_even_with_clutch_is_refused_naming_the_brick(tmp_pa
     assert code == 1 and 'falls' in stdout
 
 
+def test_a_design_that_tips_on_a_bare_table_stands_on_a_baseplate(tmp_path, capsys, monkeypatch):
+    design = write(tmp_path, '2x2 (0,0,0)\n4x2 (1,0,1)\n')        # its weight past the 2 x 2's edge
+    common = ('--system', 'duplo', '--unit', '0.03')
+    code, stdout, _ = rad(capsys, monkeypatch, 'scene', 'check', design, *common)
+    assert code == 1 and 'tips over the edge' in stdout
+    code, stdout, _ = rad(capsys, monkeypatch, 'scene', 'check', design, *common, '--baseplate')
+    assert code == 0 and 'stands' in stdout
+    out = tmp_path / 'x.json'
+    code, stdout, _ = rad(capsys, monkeypatch, 'scene', 'from-bricks', design, *common, '--baseplate', '-o', str(out))
+    assert code == 0 and 'on a baseplate' in stdout and Scene.load(out).studs.baseplate
+
+
 @pytest.mark.parametrize('text,args,expected', [
     ('2x4 (0,0,0)\n', (), 'give --system'),
     ('2x4 (0,0)\n', ('--system', 'duplo'), 'design.txt line 1'),

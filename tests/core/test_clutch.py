@@ -273,3 +273,64 @@ def test_the_scene_keeps_the_designs_bricks_as_its_design():
     assert [min(c[2] for c in p.cells) for p in scene.design] == [0, 1]      # the file's order
     # With the base built, what is left of the design is the top brick.
     assert [p.cells for p in design_allocation(cantilever_scene()).placements] == [scene.design[1].cells]
+
+
+TIPPING = '2x2 (0,0,0)\n4x2 (1,0,1)\n'
+"""A 2 x 4 on a 2 x 2 one stud column in and three out: together their weight lies past the 2 x 2's
+edge, so the pair tips over on a bare table; a baseplate's studs hold the 2 x 2 down."""
+
+
+@pytest.mark.parametrize('baseplate', [False, True])
+def test_a_baseplate_holds_down_what_would_tip_over_on_a_bare_table(baseplate):
+    from rad_core.allocation.brick_scenes import design_verdict
+    design = parse_text(TIPPING, 'tipping.txt')
+    verdict, why = design_verdict(design, lattice_of(design, 'duplo', 0.03, CLUTCH, baseplate=baseplate))
+    assert verdict == ('stands' if baseplate else 'falls'), why
+    if not baseplate:
+        assert 'tips over the edge' in why
+
+
+@pytest.mark.parametrize('baseplate', [False, True])
+def test_a_brick_pressed_onto_a_baseplate_is_joined_to_the_table_and_holds_there(baseplate):
+    from rad_core.sim.clutch import TABLE
+    from rad_core.sim.world import World
+    design = parse_text(TIPPING, 'tipping.txt')
+    scene, lines = scene_from_design(design, 'duplo', 0.03, CLUTCH, baseplate=True)   # refused on a bare table
+    assert scene.studs.baseplate and 'on a baseplate' in lines[0]
+    if not baseplate:
+        doc = scene.to_dict()
+        del doc['studs']['baseplate']
+        scene = Scene.from_dict(doc)
+    lattice = lattice_of(design, 'duplo', 0.03, CLUTCH, baseplate=baseplate)
+    _, region, _ = target_of(design, lattice)
+    _, placed = built_blocks(design.normalised(), lattice, region)
+    with World(scene) as world:
+        ids = {}
+        for at in placed:           # each supply brick of the design's type where the design has it
+            block = next(b for b in scene.blocks if b.type == at.type)
+            world.set_block_pose(block.id, at.position, yaw_quaternion(at.yaw))
+            ids[at.type] = block.id
+        base, top = ids['brick2x2'], ids['brick2x4']
+        assert world.studs.join(world, base) == ([TABLE] if baseplate else [])
+        assert world.studs.join(world, top) == [base]
+        assert len(world.studs.studs) == (4 if baseplate else 0) + 2      # 2 x 2 studs under the base
+        moved = _settled(world, top)
+        assert (moved < 0.001) == baseplate, moved
+
+
+def test_a_sleeping_brick_moved_by_the_twin_wakes_and_falls():
+    from rad_core.sim.world import World, WorldConfig
+    from rad_core.domain.errors import RadError
+    scene = cantilever_scene()
+    top, position, yaw = top_pose(scene)
+    with World(scene) as world:
+        world.set_block_pose(top, position, yaw_quaternion(yaw))
+        world.studs.join(world, top)
+        assert _settled(world, top, 3.0) < 0.001               # still for 3 s: asleep (`stud_sleep`)
+        world.studs.let_go(world, top)
+        lifted = position + (0.0, 0.0, 0.05)
+        world.set_block_pose(top, lifted, yaw_quaternion(yaw))
+        world.step(int(0.5 / world.config.physics.time_step))
+        assert world.block_pose(top)[0][2] < lifted[2] - 0.04      # it fell back down, not hung in the air
+    with pytest.raises(RadError, match='stud_sleep'):
+        WorldConfig(stud_sleep=-1.0)

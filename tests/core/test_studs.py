@@ -32,6 +32,13 @@ def test_a_named_system_fills_in_its_course_and_clutch():
     assert s.pitch == pytest.approx([UNIT, UNIT, COURSE])
     again = Scene.loads(s.dumps())
     assert again.studs == s.studs and again.to_dict() == s.to_dict()
+    assert not s.studs.baseplate and 'baseplate' not in s.to_dict()['studs']
+
+
+def test_a_baseplate_is_kept_and_read_back():
+    s = Scene.from_dict(brick_doc({'system': 'duplo', 'baseplate': True}))
+    assert s.studs.baseplate and s.to_dict()['studs']['baseplate'] is True
+    assert Scene.loads(s.dumps()).studs == s.studs
 
 
 def test_without_studs_the_lattice_is_cubes_and_the_document_unchanged():
@@ -61,6 +68,7 @@ def test_the_grid_follows_the_course_height():
     ({'system': 'mine', 'course': 0.03, 'clutch': 1}, 'give its mass'),
     ({'system': 'duplo', 'mass': 2}, 'studs.mass: 2.0 kg is outside'),
     (7, "studs: expected 'none', a system name"),
+    ({'system': 'duplo', 'baseplate': 'yes'}, 'studs.baseplate: expected true or false, got "yes"'),
 ])
 def test_bad_studs_are_named(studs, expected):
     with pytest.raises(SceneError) as e:

@@ -103,6 +103,10 @@ def test_a_stud_system_travels_in_the_scene_message():
     assert s.design and not back.design
     assert back.studs == s.studs and back.to_dict() == {k: v for k, v in s.to_dict().items() if k != 'design'}
     assert list(scene_to_msg(scene()).studs) == []
+    assert not msg.studs[0].baseplate
+    on_plate, _ = scene_from_design(design, unit=0.03, baseplate=True)
+    plate_msg = scene_to_msg(on_plate)
+    assert plate_msg.studs[0].baseplate and scene_from_msg(plate_msg).studs == on_plate.studs
     msg.studs[0].clutch = -1.0
     with pytest.raises(RadError, match='studs.clutch'):
         scene_from_msg(msg)

@@ -114,7 +114,7 @@ def _check_design(args) -> int:
     from rad_core.domain.brick_designs import read_design  # numpy: this command only
     from rad_core.allocation.brick_scenes import design_verdict, lattice_of  # ortools: this command only
     design = read_design(args.scene)
-    lattice = lattice_of(design, args.system, args.unit, args.clutch)
+    lattice = lattice_of(design, args.system, args.unit, args.clutch, args.baseplate)
     verdict, words = design_verdict(design, lattice)
     print(f'{args.scene}: {len(design.bricks)} {lattice.system} bricks: {words}')
     if verdict == 'stands':
@@ -127,7 +127,7 @@ def cmd_scene_from_bricks(args) -> int:
     from rad_core.domain.brick_designs import read_design  # numpy: this command only
     from rad_core.allocation.brick_scenes import scene_from_design  # ortools: this command only
     scene, lines = scene_from_design(read_design(args.design), args.system, args.unit, args.clutch, args.yaw,
-                                     args.seed, args.supply)
+                                     args.seed, args.supply, args.baseplate)
     _write_text(scene.dumps(), args.output)
     for line in lines:
         _say(args, line)
@@ -607,6 +607,9 @@ def _add_brick_args(p) -> None:
     p.add_argument('--unit', type=float, help='the stud pitch in the scene, m (default: the system\'s own, 8 or 16 mm; '
                                               'courses keep the system\'s proportion)')
     p.add_argument('--clutch', type=float, help='the pull one stud connection holds, N (default: the system\'s)')
+    p.add_argument('--baseplate', action='store_true',
+                   help="the table is a baseplate of the system's studs: the first course is pressed onto it "
+                        "and held (default: the bricks sit loose on the table)")
 
 
 def _add_target_args(p: argparse.ArgumentParser) -> None:

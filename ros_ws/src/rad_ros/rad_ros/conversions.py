@@ -49,7 +49,8 @@ def scene_to_msg(scene: Scene, frame_id: str = 'world') -> SceneMsg:
                                 order=f.order, window=int(f.window), blocks=list(f.blocks))]
     if scene.studs is not None:
         s = scene.studs
-        msg.studs = [StudsMsg(system=s.system, course=float(s.course), clutch=float(s.clutch), mass=float(s.mass))]
+        msg.studs = [StudsMsg(system=s.system, course=float(s.course), clutch=float(s.clutch), mass=float(s.mass),
+                              baseplate=bool(s.baseplate))]
     return msg
 
 
@@ -67,7 +68,8 @@ def scene_msg_to_dict(msg: SceneMsg) -> dict:
         **{'feeder': {'station': [f.station_x, f.station_y], 'yaw': f.yaw_deg, 'order': f.order,
                       **({'window': int(f.window)} if f.order == 'queue' else {}), 'blocks': list(f.blocks)}
            for f in msg.feeder[:1]},
-        **{'studs': {'system': s.system, 'course': s.course, 'clutch': s.clutch, 'mass': s.mass}
+        **{'studs': {'system': s.system, 'course': s.course, 'clutch': s.clutch, 'mass': s.mass,
+                     **({'baseplate': True} if s.baseplate else {})}
            for s in msg.studs[:1]},
     }
 

@@ -43,16 +43,19 @@ class BrickLattice:
     course: float
     clutch: float
     mass: float
+    baseplate: bool = False
+    """Whether the table is a baseplate (``studs.baseplate``): the first course is held by its studs."""
 
     @property
     def studs(self) -> Studs:
-        return Studs(self.system, round(self.course, 9), self.clutch, round(self.mass, 9))
+        return Studs(self.system, round(self.course, 9), self.clutch, round(self.mass, 9), self.baseplate)
 
 
 def lattice_of(design: BrickDesign, system: str | None = None, unit: float | None = None,
-               clutch: float | None = None) -> BrickLattice:
+               clutch: float | None = None, baseplate: bool = False) -> BrickLattice:
     """The lattice a design is built on: its own system (or `system` where the format cannot say),
-    the system's real pitch unless `unit` scales it, the system's clutch unless `clutch` is given."""
+    the system's real pitch unless `unit` scales it, the system's clutch unless `clutch` is given;
+    on a baseplate where `baseplate` says so."""
     name = design.system or system
     if design.system and system and design.system != system:
         raise RadError(f'{design.name or "the design"} is made of {design.system} parts, not {system}')
@@ -70,7 +73,7 @@ def lattice_of(design: BrickDesign, system: str | None = None, unit: float | Non
     plates = design.course_plates()
     course = unit * known.brick / PLATES_PER_BRICK * plates / known.pitch
     return BrickLattice(name, unit, plates, course, known.clutch if clutch is None else float(clutch),
-                        known.cell_mass(unit, course))
+                        known.cell_mass(unit, course), bool(baseplate))
 
 
 def brick_type(brick: Brick, course_plates: int) -> tuple[BlockType, int]:
@@ -203,13 +206,14 @@ def feeder_station(region: TargetRegion, unit: float) -> tuple[float, float]:
 
 def scene_from_design(design: BrickDesign, system: str | None = None, unit: float | None = None,
                       clutch: float | None = None, yaw: int | None = None, seed: int = 0,
-                      start: str = 'auto') -> tuple[Scene, list[str]]:
+                      start: str = 'auto', baseplate: bool = False) -> tuple[Scene, list[str]]:
     """The scene of a design (module docstring) and lines for the user saying what was chosen.
     start: 'table', 'feeder', or 'auto' (the table where the bricks fit within reach, else a feeder).
+    baseplate: the table is a baseplate (``studs.baseplate``), whose studs hold the first course.
     RadError where the design does not stand even with clutch, naming the brick that falls."""
     if not design.bricks:
         raise RadError(f'no bricks in {design.name or "the design"}')
-    lattice = lattice_of(design, system, unit, clutch)
+    lattice = lattice_of(design, system, unit, clutch, baseplate)
     verdict, words = design_verdict(design, lattice)
     if verdict == 'falls':
         raise RadError(f'{design.name or "the design"} {words}')
@@ -222,7 +226,7 @@ def scene_from_design(design: BrickDesign, system: str | None = None, unit: floa
     lines = [f'{len(design.bricks)} {lattice.system} bricks, {len(region.filled)} cells on a '
              f'{lattice.unit * 1000:g} mm pitch and {lattice.course * 1000:.2f} mm courses '
              f'({lattice.course_plates} plate{"s" if lattice.course_plates > 1 else ""}), clutch '
-             f'{lattice.clutch:g} N a stud',
+             f'{lattice.clutch:g} N a stud' + (', on a baseplate' if lattice.baseplate else ''),
              f'the target stands at x = {region.origin[0] + lattice.unit * (region.size[0] - 1) / 2:.3f} m'
              + (f', turned {turn} deg' if turn else ''),
              words]

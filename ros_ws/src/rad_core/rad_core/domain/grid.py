@@ -22,6 +22,8 @@ class Grid:
         """The lattice's pitch along x, y, z (m): the unit, and along z the scene's course height."""
         self.clutch = None if scene.studs is None else scene.studs.clutch_in_weights
         """The pull a stud connection holds, in the weights of a cell (`domain.statics`); None: no studs."""
+        self.table_clutch = scene.studs is not None and scene.studs.baseplate
+        """Whether the table's studs hold the bricks on it too (a baseplate, ``studs.baseplate``)."""
         self.regions = scene.targets
         sizes = [t.num_cells for t in scene.targets]
         self.offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)

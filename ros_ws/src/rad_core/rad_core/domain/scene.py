@@ -49,7 +49,8 @@ A scene of studded bricks names its stud system in ``studs`` (optional, absent o
 the lattice's z pitch: a brick's height without studs), ``clutch`` (N, the pull one
 stud connection holds) and ``mass`` (kg, of one lattice cell of a brick) given; a named
 system (`rad_core.domain.studs.SYSTEMS`) fills in what is left out, its course and mass in
-proportion to the unit (the stud pitch). The lattice is
+proportion to the unit (the stud pitch); ``baseplate`` (default false) says the table is a
+plate of the system's studs, which hold the first course as bricks hold the bricks on them. The lattice is
 then ``unit`` along x and y and ``course`` along z (`Scene.pitch`): a block type's cells
 are studs by courses, and every position of the scene, a block's and a region's, lies on
 that lattice. Blocks sit on the table with their lowest cells' centres ``course / 2`` up.
@@ -423,15 +424,15 @@ def _clearance(v: Any) -> float:
 
 
 def _parse_studs(doc: Any, unit: float) -> Studs | None:
-    """``studs``: 'none', a system's name, or {system, course?, clutch?}; a named system fills in its
-    course height (its brick's, in proportion to the unit) and clutch."""
+    """``studs``: 'none', a system's name, or {system, course?, clutch?, mass?, baseplate?}; a named
+    system fills in its course height (its brick's, in proportion to the unit), clutch and mass."""
     if doc == 'none':
         return None
     if isinstance(doc, str):
         doc = {'system': doc}
     _expect(isinstance(doc, dict), 'studs', f"expected 'none', a system name ({', '.join(SYSTEMS)}) or "
                                             f"{{system, course, clutch}}, got {_show(doc)}")
-    _check_keys(doc, 'studs', {'system'}, {'course', 'clutch', 'mass'})
+    _check_keys(doc, 'studs', {'system'}, {'course', 'clutch', 'mass', 'baseplate'})
     name = _name(doc['system'], 'studs.system')
     known = SYSTEMS.get(name)
     for key in ('course', 'clutch', 'mass'):
@@ -444,7 +445,9 @@ def _parse_studs(doc: Any, unit: float) -> Studs | None:
     _expect(0 < clutch <= 100, 'studs.clutch', f'{clutch} N is outside 0 < clutch <= 100 N per stud connection')
     mass = _number(doc['mass'], 'studs.mass') if 'mass' in doc else round(known.cell_mass(unit, course), 9)
     _expect(1e-5 <= mass <= 1.0, 'studs.mass', f'{mass} kg is outside 0.00001..1 kg (one lattice cell of a brick)')
-    return Studs(name, round(course, 9), clutch, mass)
+    baseplate = doc.get('baseplate', False)
+    _expect(isinstance(baseplate, bool), 'studs.baseplate', f'expected true or false, got {_show(baseplate)}')
+    return Studs(name, round(course, 9), clutch, mass, baseplate)
 
 
 def _parse_block_types(doc: Any) -> dict[str, BlockType]:

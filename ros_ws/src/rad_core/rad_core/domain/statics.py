@@ -21,7 +21,8 @@ pull at its knobs (Luo et al., "Legolization", SIGGRAPH Asia 2015; Liu et al., "
 whose knob friction is capped per contact point; Kollsker & Malaguti, EJOR 2021, with a capacity
 per connection; Funes & Pollack, 1998, measured joint capacities). One capped pull per stud stands
 for a knob's friction points. `clutch` is in units of one cell's weight (the caller converts
-newtons); the table holds nothing down (rad's bricks sit loose on it) unless `table_clutch`. The
+newtons); the table holds nothing down (rad's bricks sit loose on it) unless `table_clutch` (a baseplate,
+``studs.baseplate``). The
 stud is at the square's centre, the pushes `margin` in from its edges: a bar of L units resting on
 one stud by its end needs a pull of L ((L - 1) / 2 / d - 1), d = 0.5 - margin (9.33 for L = 4).
 
@@ -109,20 +110,21 @@ def overhangs(grid: Grid, pieces: Sequence[Sequence[int]], ground=None) -> list[
 
 
 def structure_statics(grid: Grid, pieces: Sequence[Sequence[int]], ground=None, margin: float = MARGIN,
-                      clutch: float | None = None, table_clutch: bool = False, explain: bool = True,
+                      clutch: float | None = None, table_clutch: bool | None = None, explain: bool = True,
                       loads: Sequence[tuple[float, float, float] | None] | None = None) -> Statics:
     """Whether the pieces (grid cell ids each) stand together on the table (module docstring).
     loads: per piece, None or a push down on it besides its weight (the press that seats a brick on
     its studs): (how hard, in cell weights; where, x and y in cells as grid.centres[:, :2] / unit).
     ground: a mask of grid cells built before, taken as fixed as the table (None: none).
     clutch: the pull one stud connection holds, in cell weights (None: no studs, nothing pulls).
-    table_clutch: whether the table's studs hold too. explain: say why each falling piece falls
-    (with clutch, one or two more solves, only when it does not stand)."""
+    table_clutch: whether the table's studs hold too (None: as the grid's scene says, a baseplate).
+    explain: say why each falling piece falls (with clutch, one or two more solves, only when it does
+    not stand)."""
     pieces = [np.asarray(p, dtype=int).ravel() for p in pieces]
     owner = _owner(grid, pieces, ground)
     if not any((_under(grid, owner, cells) == -2).any() for cells in pieces):
         return Statics(True)
-    program = _Program(grid, pieces, owner, margin, clutch, table_clutch, loads)
+    program = _Program(grid, pieces, owner, margin, clutch, _table_clutch(grid, table_clutch), loads)
     solved = program.solve()
     if solved is None:
         return Statics(False, tuple(range(len(pieces))),
@@ -287,7 +289,7 @@ class _Program:
 
 
 def first_failure(grid: Grid, pieces: Sequence[Sequence[int]], ground=None, clutch: float | None = None,
-                  margin: float = MARGIN, table_clutch: bool = False) -> tuple[int, Statics] | None:
+                  margin: float = MARGIN, table_clutch: bool | None = None) -> tuple[int, Statics] | None:
     """The first step of building the pieces in the order given after which the structure does not
     stand: (the index of the piece just placed, the verdict on the structure then, which names the
     pieces that fall and why); None when it stands after every step. Only steps whose load reaches
@@ -297,6 +299,11 @@ def first_failure(grid: Grid, pieces: Sequence[Sequence[int]], ground=None, clut
         if not walk.add(np.asarray(cells, dtype=int).ravel())[0]:
             return n, walk.verdict
     return None
+
+
+def _table_clutch(grid: Grid, table_clutch: bool | None) -> bool:
+    """Whether the table's studs hold: as asked, else as the grid's scene says (``studs.baseplate``)."""
+    return bool(getattr(grid, 'table_clutch', False)) if table_clutch is None else bool(table_clutch)
 
 
 def press_load(grid: Grid, owner: np.ndarray, cells, clutch: float) -> tuple[float, float, float] | None:
@@ -314,7 +321,7 @@ def press_load(grid: Grid, owner: np.ndarray, cells, clutch: float) -> tuple[flo
 
 
 def order_statics(grid: Grid, pieces: Sequence[Sequence[int]], ground=None, margin: float = MARGIN,
-                  clutch: float | None = None, table_clutch: bool = False,
+                  clutch: float | None = None, table_clutch: bool | None = None,
                   press: bool = True) -> tuple[list[int], list[int]]:
     """(the order the pieces are placed in, the pieces that wait to the end), indices into `pieces`,
     of a walk that keeps the structure standing (clutch, table_clutch: `structure_statics`); with
@@ -355,9 +362,9 @@ class _Walk:
     `verdict`: the last verdict asked for (Statics(True) until one is)."""
 
     def __init__(self, grid: Grid, ground, margin: float, clutch: float | None = None,
-                 table_clutch: bool = False, explain: bool = False, press: bool = True):
+                 table_clutch: bool | None = None, explain: bool = False, press: bool = True):
         self.grid, self.ground, self.margin = grid, ground, margin
-        self.clutch, self.table_clutch, self.explain = clutch, table_clutch, explain
+        self.clutch, self.table_clutch, self.explain = clutch, _table_clutch(grid, table_clutch), explain
         self.press = press and clutch is not None
         self.owner = _owner(grid, [], ground)
         self.placed: list[np.ndarray] = []

@@ -78,6 +78,10 @@ class Studs:
     clutch: float
     mass: float
     """kg of one lattice cell of a brick (module docstring)."""
+    baseplate: bool = False
+    """Whether the table is a baseplate of the system's studs: a brick on the table is pressed onto
+    them and held by their clutch, as the bricks above are by the bricks under them. False: the
+    bricks of the first course sit loose on the table (gravity and friction)."""
 
     @property
     def clutch_in_weights(self) -> float:
@@ -85,4 +89,5 @@ class Studs:
         return self.clutch / (self.mass * GRAVITY)
 
     def to_dict(self) -> dict:
-        return {'system': self.system, 'course': self.course, 'clutch': self.clutch, 'mass': self.mass}
+        doc = {'system': self.system, 'course': self.course, 'clutch': self.clutch, 'mass': self.mass}
+        return {**doc, 'baseplate': True} if self.baseplate else doc

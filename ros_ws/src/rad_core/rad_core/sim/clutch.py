@@ -13,8 +13,10 @@ its shape, not by the clutch, so a brick pushed along the one under it comes bac
 held by one column of studs fell with it.
 
 Only bricks pressed home are joined (`join`): the twin's press, or a teleported placement, which
-stands for one. A brick set down unpressed only rests. Joints are part of a world's snapshot:
-restored, a world has the joints, broken or not, it had then.
+stands for one. On a baseplate (``studs.baseplate``) a brick pressed onto the table is joined to it
+in the same way, at the studs of the target's lattice (`TABLE` its lower id). A brick set down
+unpressed only rests. Joints are part of a world's snapshot: restored, a world has the joints,
+broken or not, it had then.
 """
 
 from __future__ import annotations
@@ -31,6 +33,9 @@ bear that."""
 BREAK_SLIDE = 0.1
 """How far (a fraction of the unit) a stud's joint may be slid along the brick under it before it
 counts as pushed off its stud: a brick that slides that far has left its socket."""
+
+TABLE = '(table)'
+"""The lower id of a stud joint that holds a brick onto a baseplate (`World.table`)."""
 
 SEATED = 0.15
 """How far (a fraction of the unit, and of the course height) a brick may sit off the lattice above
@@ -73,13 +78,14 @@ class StudJoints:
         upper = world.blocks[block_id]
         half = np.array([0.0, 0.0, scene.course / 2])
         for other, pairs in found.items():
-            lower = world.blocks[other]
+            lower = _body(world, other)
             for i, j in pairs:
                 # Each stud where the lattice puts it in both bricks (the middle of the face they share),
                 # not where they happen to be: the joint pulls a brick still pressed in, or a hair off,
                 # to its seat.
                 in_upper = world.in_inertial_frame(block_id, _offset(world, block_id, i) - half)
-                in_lower = world.in_inertial_frame(other, _offset(world, other, j) + half)
+                in_lower = (_in_table(world, j) if other == TABLE
+                            else world.in_inertial_frame(other, _offset(world, other, j) + half))
                 c = p.createConstraint(lower, -1, upper, -1, p.JOINT_POINT2POINT, [0, 0, 0],
                                        parentFramePosition=in_lower, childFramePosition=in_upper,
                                        physicsClientId=cid)
@@ -93,10 +99,11 @@ class StudJoints:
 
     def unpressed(self, world, block_id: str) -> bool:
         """Whether the brick stands on the studs of a brick under it, within `SEATED` of its seat, without
-        being joined to them: set down or knocked loose, never pressed home."""
+        being joined to them: set down or knocked loose, never pressed home. Bricks only: a brick that
+        rests on a baseplate unpressed is not told from one lying on the table."""
         scene = world.scene
         return (scene is not None and scene.studs is not None and not self.joined(block_id)
-                and bool(_seated_on(world, block_id)))
+                and bool(set(_seated_on(world, block_id)) - {TABLE}))
 
     def let_go(self, world, block_id: str) -> list[str]:
         """Break every stud that holds the brick onto the bricks under it (a knock); the lower ids."""
@@ -118,7 +125,7 @@ class StudJoints:
         for stud in self.studs.values():
             if stud.broken:
                 continue
-            d = _world(p, cid, world.blocks[stud.upper], stud.in_upper) - _world(p, cid, world.blocks[stud.lower],
+            d = _world(p, cid, world.blocks[stud.upper], stud.in_upper) - _world(p, cid, _body(world, stud.lower),
                                                                                   stud.in_lower)
             if d[2] > BREAK_STRETCH or np.hypot(d[0], d[1]) > slide:
                 _give_way(p, cid, stud)
@@ -150,12 +157,45 @@ def _give_way(p, cid: int, stud: Stud) -> None:
     p.changeConstraint(stud.constraint, maxForce=0.0, physicsClientId=cid)
 
 
+def _body(world, block_id: str) -> int:
+    return world.table if block_id == TABLE else world.blocks[block_id]
+
+
+def _table_studs(world) -> np.ndarray | None:
+    """Where the baseplate's studs are: the target lattice's columns at the table's top, as an
+    origin (x, y, 0) they lie at whole pitches from; None without a baseplate."""
+    scene = world.scene
+    if scene.studs is None or not scene.studs.baseplate or not scene.targets:
+        return None
+    return np.array([*scene.targets[0].origin[:2], 0.0])
+
+
+def _in_table(world, column: int) -> list[float]:
+    """A baseplate stud (`_seated_on`'s packed column index) in the table body's frame."""
+    p, cid = world.pybullet, world.client
+    ix, iy = divmod(int(column), 1 << 20)
+    point = _table_studs(world) + world.scene.unit * np.array([ix - (1 << 19), iy - (1 << 19), 0.0])
+    pos, orn = p.getBasePositionAndOrientation(world.table, physicsClientId=cid)
+    inv_pos, inv_orn = p.invertTransform(pos, orn)
+    local, _ = p.multiplyTransforms(inv_pos, inv_orn, point.tolist(), [0, 0, 0, 1])
+    return list(local)
+
+
 def _seated_on(world, block_id: str) -> dict[str, list[tuple[int, int]]]:
     """The bricks the brick's units sit on within `SEATED` of the lattice: other id -> [(unit of this
-    brick, unit of the other)]."""
+    brick, unit of the other)]; on a baseplate, `TABLE` -> [(unit, the stud's column packed as
+    `_in_table` reads it)] for its units seated on the table's studs."""
     mine = world.unit_centres(block_id)
     pitch = world.scene.pitch
     found: dict[str, list[tuple[int, int]]] = {}
+    studs = _table_studs(world)
+    if studs is not None:
+        steps = (mine - studs) / pitch - (0.0, 0.0, 0.5)       # a seated bottom unit: whole numbers, z 0
+        near = np.rint(steps)
+        seated = np.all(np.abs(steps - near) < SEATED, axis=1) & (near[:, 2] == 0)
+        if seated.any():
+            found[TABLE] = [(int(u), int((near[u, 0] + (1 << 19)) * (1 << 20) + near[u, 1] + (1 << 19)))
+                            for u in np.nonzero(seated)[0]]
     for other in world.blocks:
         if other == block_id or other in world.parked:
             continue

@@ -971,6 +971,7 @@ class Twin:
         speed = self.config.faults.knock_speed
         self._p.resetBaseVelocity(w.blocks[block_id], [speed * math.cos(angle), speed * math.sin(angle), 0.0],
                                   [0.0, 0.0, 0.0], physicsClientId=w.client)
+        w.wake(block_id)
         self._fault('knock', block=block_id)
 
     def _press_check(self) -> None:
@@ -983,6 +984,8 @@ class Twin:
         if body is None or self._pressed == block_id:
             return
         others = set(w.blocks.values()) - {body}
+        if w.scene.studs is not None and w.scene.studs.baseplate:
+            others.add(w.table)                         # the baseplate's studs take a press too
         if not any(c[2] in others and c[7][2] > 0.9       # the normal on B points up at the held brick
                    for c in p.getContactPoints(bodyA=body, physicsClientId=w.client)):
             return

@@ -93,9 +93,23 @@ class WorldConfig:
     rather than Bullet's ``numSubSteps`` set: with sub-steps Bullet caps a motor's force as an impulse
     over the whole step, which would make the arm's and the fingers' force limits 4 times their
     value (user constraints, the stud joints and the grasp, are capped per sub-step either way)."""
+    stud_sleep: float = 1e-2
+    """In a scene of studded bricks, a brick whose squared speeds (linear in m/s, angular in rad/s,
+    summed) stay under this for 2 s (Bullet's timeout) sleeps, with everything it touches or is joined
+    to, until something awake touches that group or the twin moves one of its bricks (`World.wake`);
+    0: never. Why: the built structure and the bricks waiting on the table are most of the bodies and
+    all of the stud joints, and at the studded scene's short steps the solver works on all of them
+    while the arm moves elsewhere (measured with the structures of benchmarks/bench_statics_twin.py
+    standing, arm away: the letter T of 26 bricks 27.8 ms a step awake, 0.5 asleep; the tower of 186
+    bricks 129 and 2.2 ms). Why so high: a joined brick at rest jitters (measured over 1 s: up to
+    3.8 mm/s and 4.3 deg/s, the stud joints being soft), so at 1e-3 a wall of 54 bricks never slept.
+    A brick that tips or slides speeds past it in a fraction of a second and stays awake; what the
+    threshold lets sleep is creep slower than 0.1 m/s and 5.7 deg/s held for 2 s."""
 
     def __post_init__(self):
         panda.check_effector(self.effector)
+        if not (math.isfinite(self.stud_sleep) and self.stud_sleep >= 0):
+            raise RadError(f'world config stud_sleep: expected a squared speed >= 0, got {self.stud_sleep!r}')
         if not (isinstance(self.stud_substeps, int) and self.stud_substeps >= 1
                 and isinstance(self.stud_solver_iterations, int) and self.stud_solver_iterations >= 1):
             raise RadError(f'world config stud_substeps, stud_solver_iterations: expected integers >= 1, got '
@@ -234,6 +248,9 @@ class World(ClientOwner):
                                         scene.clearance, None if scene.studs is None else scene.studs.mass)
             body = add_block_body(p, cid, shape, list(position), list(quaternion), self.config.physics)
             p.changeVisualShape(body, -1, rgbaColor=rgba or colour, physicsClientId=cid)
+            if scene.studs is not None and self.config.stud_sleep > 0:
+                p.changeDynamics(body, -1, activationState=p.ACTIVATION_STATE_ENABLE_SLEEPING,
+                                 sleepThreshold=self.config.stud_sleep, physicsClientId=cid)
             self._inertial[body] = (shape.com.tolist(), shape.axes)
             self._mass[body] = (shape.mass, tuple(shape.inertia))
             return body
@@ -310,6 +327,7 @@ class World(ClientOwner):
         """A parked feeder block becomes a body like any other (where it is; move it next)."""
         self._dynamic(self.blocks[block_id])
         self.parked.discard(block_id)
+        self.wake(block_id)
 
     def _dynamic(self, body: int) -> None:
         """A block body made static (mass 0) gets its mass and exact inertia back: Bullet recomputes the
@@ -395,6 +413,13 @@ class World(ClientOwner):
                                         *self._inertial[body])
         p.resetBasePositionAndOrientation(body, pos, orn, physicsClientId=cid)
         p.resetBaseVelocity(body, [0, 0, 0], [0, 0, 0], physicsClientId=cid)
+        self.wake(block_id)
+
+    def wake(self, block_id: str) -> None:
+        """Wake a block that may sleep (`WorldConfig.stud_sleep`), and with it what it touches: a body
+        teleported or pushed by the twin moves on the next step, not when something bumps it."""
+        self._p.changeDynamics(self._body(block_id), -1, activationState=self._p.ACTIVATION_STATE_WAKE_UP,
+                               physicsClientId=self.client)
 
     def in_inertial_frame(self, block_id: str, point) -> list[float]:
         """A point given in the block's own frame (its anchor unit's centre, its yaw) in the frame Bullet
@@ -487,6 +512,7 @@ class World(ClientOwner):
         for body, ((pos, orn), (lin, ang)) in bodies.items():
             p.resetBasePositionAndOrientation(body, pos, orn, physicsClientId=cid)
             p.resetBaseVelocity(body, lin, ang, physicsClientId=cid)
+            p.changeDynamics(body, -1, activationState=p.ACTIVATION_STATE_WAKE_UP, physicsClientId=cid)
         now = {p.getConstraintUniqueId(i, physicsClientId=cid)
                for i in range(p.getNumConstraints(physicsClientId=cid))}
         for c in now - constraints:
