@@ -4,6 +4,7 @@ with `rad scene from-bricks`, built by pressing each brick home onto the studs u
     python benchmarks/bench_bricks.py [--unit 0.03] [--effectors hand,suction] [--agent default]
                                       [--seeds 2] [--execution simulate] [--results docs/results]
                                       [--sets duplo,designs,lego] [--lego-unit 0.016] [--baseplate]
+                                      [--only NAMES] [--page bricks]
 
 Tasks: `rad_core.domain.brick_tasks.duplo_task(n, seed)` for n = 2..12, the first `--seeds` seeds
 of each n whose design stands with Duplo's clutch (`allocation.brick_scenes.design_verdict`; the
@@ -14,7 +15,7 @@ clutch), at `--lego-unit`, the system's proportions kept. Each becomes a scene a
 `rad scene from-bricks --unit U [--baseplate]` makes it
 (the design's own bricks laid out on the table, or waiting in a feeder where they do not fit) and is
 planned by the agent with the robot in the loop and built in a fresh twin, whose arm presses every
-brick home (`sim.clutch`). Writes docs/results/bricks.md and one row per design. Run it on a quiet
+brick home (`sim.clutch`). Writes docs/results/bricks.md (or `--page`) and one row per design. Run it on a quiet
 machine: planning stages have time budgets.
 """
 
@@ -140,6 +141,7 @@ def main() -> int:
                    'LEGO twice its size, the largest at which its designs fit the reach)')
     p.add_argument('--baseplate', action='store_true', help='build on a baseplate (studs.baseplate)')
     p.add_argument('--only', help='only the designs of these names, comma-separated (a subset while iterating)')
+    p.add_argument('--page', default='bricks', help='the page (and rows file) it writes (default bricks)')
     p.add_argument('--results', type=Path, default=RESULTS)
     args = p.parse_args()
     agent = get_agent(args.agent)
@@ -174,7 +176,7 @@ def main() -> int:
             'their places (each structure the robot built was one the statics stand under its press: a '
             'brick lost is a structure they disagree on); planning s: the plans of a design (its re-plans '
             'included), median and max over designs; s/design: planning and building, mean.')
-    page = write_page('bricks', 'Studded bricks pressed home by the robot',
+    page = write_page(args.page, 'Studded bricks pressed home by the robot',
                       ['effector', 'set', 'designs', 'needing clutch', 'coverage', 'whole',
                        'needing clutch whole', 'f', 'lost', 'planning s (median / max)', 's/design'],
                       table, note, rows=rows, results=args.results)
