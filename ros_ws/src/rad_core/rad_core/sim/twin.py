@@ -974,6 +974,17 @@ class Twin:
         w.wake(block_id)
         self._fault('knock', block=block_id)
 
+    def _over_target(self, block_id: str) -> bool:
+        """Whether the brick's units are all over a target region's footprint (not where it was picked)."""
+        w = self.world
+        xy = w.unit_centres(block_id)[:, :2]
+        for region in w.scene.targets:
+            lo = np.asarray(region.origin[:2]) - w.scene.unit / 2
+            hi = lo + w.scene.unit * np.asarray(region.size[:2])
+            if np.all((xy > lo) & (xy < hi)):
+                return True
+        return False
+
     def _press_check(self) -> None:
         """Whether the held brick has been pushed onto the blocks under it `press_travel` past where it
         first touched them (the hand's travel while in contact): then it is pressed home onto their
@@ -984,8 +995,8 @@ class Twin:
         if body is None or self._pressed == block_id:
             return
         others = set(w.blocks.values()) - {body}
-        if w.scene.studs is not None and w.scene.studs.baseplate:
-            others.add(w.table)                         # the baseplate's studs take a press too
+        if w.scene.studs is not None and w.scene.studs.baseplate and self._over_target(block_id):
+            others.add(w.table)         # the baseplate's studs take a press where the design stands
         if not any(c[2] in others and c[7][2] > 0.9       # the normal on B points up at the held brick
                    for c in p.getContactPoints(bodyA=body, physicsClientId=w.client)):
             return
