@@ -84,7 +84,7 @@ class StudJoints:
                 # not where they happen to be: the joint pulls a brick still pressed in, or a hair off,
                 # to its seat.
                 in_upper = world.in_inertial_frame(block_id, _offset(world, block_id, i) - half)
-                in_lower = (_in_table(world, j) if other == TABLE
+                in_lower = (_in_table(world, block_id, j) if other == TABLE
                             else world.in_inertial_frame(other, _offset(world, other, j) + half))
                 c = p.createConstraint(lower, -1, upper, -1, p.JOINT_POINT2POINT, [0, 0, 0],
                                        parentFramePosition=in_lower, childFramePosition=in_upper,
@@ -170,11 +170,24 @@ def _table_studs(world) -> np.ndarray | None:
     return np.array([*scene.targets[0].origin[:2], 0.0])
 
 
-def _in_table(world, column: int) -> list[float]:
-    """A baseplate stud (`_seated_on`'s packed column index) in the table body's frame."""
+def _table_seats(world, centres: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """(per unit centre, whether it is seated on a baseplate stud; the stud's world point), None
+    without a baseplate. A seated bottom unit lies within `SEATED` of a target lattice column at
+    the table's top."""
+    studs = _table_studs(world)
+    if studs is None:
+        return None
+    pitch = world.scene.pitch
+    steps = (centres - studs) / pitch - (0.0, 0.0, 0.5)
+    near = np.rint(steps)
+    seated = np.all(np.abs(steps - near) < SEATED, axis=1) & (near[:, 2] == 0)
+    return seated, studs + near * pitch
+
+
+def _in_table(world, block_id: str, unit: int) -> list[float]:
+    """The baseplate stud under a brick's unit, in the table body's frame."""
     p, cid = world.pybullet, world.client
-    ix, iy = divmod(int(column), 1 << 20)
-    point = _table_studs(world) + world.scene.unit * np.array([ix - (1 << 19), iy - (1 << 19), 0.0])
+    point = _table_seats(world, world.unit_centres(block_id))[1][unit]
     pos, orn = p.getBasePositionAndOrientation(world.table, physicsClientId=cid)
     inv_pos, inv_orn = p.invertTransform(pos, orn)
     local, _ = p.multiplyTransforms(inv_pos, inv_orn, point.tolist(), [0, 0, 0, 1])
@@ -183,19 +196,14 @@ def _in_table(world, column: int) -> list[float]:
 
 def _seated_on(world, block_id: str) -> dict[str, list[tuple[int, int]]]:
     """The bricks the brick's units sit on within `SEATED` of the lattice: other id -> [(unit of this
-    brick, unit of the other)]; on a baseplate, `TABLE` -> [(unit, the stud's column packed as
-    `_in_table` reads it)] for its units seated on the table's studs."""
+    brick, unit of the other)]; on a baseplate, `TABLE` -> [(unit, unit)] for its units seated on
+    the table's studs (`_table_seats`)."""
     mine = world.unit_centres(block_id)
     pitch = world.scene.pitch
     found: dict[str, list[tuple[int, int]]] = {}
-    studs = _table_studs(world)
-    if studs is not None:
-        steps = (mine - studs) / pitch - (0.0, 0.0, 0.5)       # a seated bottom unit: whole numbers, z 0
-        near = np.rint(steps)
-        seated = np.all(np.abs(steps - near) < SEATED, axis=1) & (near[:, 2] == 0)
-        if seated.any():
-            found[TABLE] = [(int(u), int((near[u, 0] + (1 << 19)) * (1 << 20) + near[u, 1] + (1 << 19)))
-                            for u in np.nonzero(seated)[0]]
+    seats = _table_seats(world, mine)
+    if seats is not None and seats[0].any():
+        found[TABLE] = [(int(u), int(u)) for u in np.nonzero(seats[0])[0]]
     for other in world.blocks:
         if other == block_id or other in world.parked:
             continue
